@@ -1,0 +1,220 @@
+"""Aircraft, fleet and sensor installations, as data.
+
+The TOML files beside this module are the data; this module reads them into immutable
+dataclasses and checks them. Positions are body axes (x forward, y right, z down), metres, from
+the airframe's reference point; angles are stored in radians (the files say ``_deg``).
+
+Example
+-------
+>>> from aircraft_models import load_fleet
+>>> fleet = load_fleet()
+>>> sorted(fleet.configurations)[:2]
+['PT1-BOOM', 'PT1-NP']
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Mapping
+
+import numpy as np
+
+DATA_DIR = Path(__file__).resolve().parent
+
+#: Sensors every configuration carries.
+COMMON_SENSORS = ("vane_left", "vane_right", "side_probe_left", "side_probe_right")
+#: What sits on the nose, by ``nose_sensor``.
+NOSE_SENSORS = {
+    "nose_probe": ("nose_probe",),
+    "boom": ("boom_alpha_vane", "boom_beta_upper_vane", "boom_beta_lower_vane"),
+}
+ALL_SENSORS = COMMON_SENSORS + NOSE_SENSORS["nose_probe"] + NOSE_SENSORS["boom"]
+#: Non-air-data installations whose position matters.
+INERTIAL_UNITS = ("imu", "ins")
+
+
+def _vec3(value, where: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{where}: expected three finite numbers [x, y, z] in metres, got {value!r}")
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True)
+class Airframe:
+    """The aircraft type: which JSBSim model flies it and where its sensors sit.
+
+    Attributes
+    ----------
+    name : airframe name.
+    jsbsim_model : JSBSim aircraft directory name (e.g. ``"f16"``).
+    reference_point : name of the JSBSim ``<location>`` used as the body-axis origin.
+    positions_body_m : installation name -> (3,) position, body axes, m, from the reference point.
+    """
+
+    name: str
+    jsbsim_model: str
+    reference_point: str
+    positions_body_m: Mapping[str, np.ndarray]
+
+    def position(self, name: str) -> np.ndarray:
+        try:
+            return self.positions_body_m[name]
+        except KeyError:
+            raise KeyError(
+                f"airframe {self.name!r} has no installation {name!r}; "
+                f"known: {sorted(self.positions_body_m)}"
+            ) from None
+
+
+@dataclass(frozen=True)
+class Aircraft:
+    """One tail number: its mass distribution and its sensors' installation biases.
+
+    Attributes
+    ----------
+    id : tail identifier.
+    fuel_kg : internal fuel at the start of every maneuver, kg (split equally left/right).
+    ballast_kg : extra point mass (instrumentation, boom counterweight), kg.
+    ballast_position_body_m : (3,) where the ballast sits, body axes, m.
+    installation_bias_rad : sensor name -> installation bias, rad.
+    """
+
+    id: str
+    fuel_kg: float
+    ballast_kg: float
+    ballast_position_body_m: np.ndarray
+    installation_bias_rad: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class Configuration:
+    """An aircraft with a given nose installation (nose probe or flight-test boom)."""
+
+    id: str
+    aircraft: Aircraft
+    nose_sensor: str
+
+    @property
+    def sensors(self) -> tuple[str, ...]:
+        """Flow-angle sensors fitted in this configuration."""
+        return COMMON_SENSORS + NOSE_SENSORS[self.nose_sensor]
+
+
+@dataclass(frozen=True)
+class Fleet:
+    airframe: Airframe
+    aircraft: Mapping[str, Aircraft]
+    configurations: Mapping[str, Configuration]
+    source: str
+
+    def configuration(self, config_id: str) -> Configuration:
+        try:
+            return self.configurations[config_id]
+        except KeyError:
+            raise KeyError(
+                f"{self.source}: no configuration {config_id!r}; "
+                f"known: {sorted(self.configurations)}"
+            ) from None
+
+
+def _read_toml(path: Path) -> dict:
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: not valid TOML: {exc}") from None
+
+
+def _resolve(name_or_path: str | Path) -> Path:
+    p = Path(name_or_path)
+    if p.suffix == ".toml" and p.exists():
+        return p
+    candidate = DATA_DIR / (p.name if p.suffix == ".toml" else f"{p.name}.toml")
+    if candidate.exists():
+        return candidate
+    raise FileNotFoundError(
+        f"{name_or_path}: neither a TOML file nor a model shipped in {DATA_DIR} "
+        f"(shipped: {sorted(q.stem for q in DATA_DIR.glob('*.toml'))})"
+    )
+
+
+def load_airframe(name_or_path: str | Path = "f16_testbed") -> Airframe:
+    """Load an airframe definition (shipped name such as ``"f16_testbed"`` or a TOML path)."""
+    path = _resolve(name_or_path)
+    raw = _read_toml(path)
+    try:
+        positions = {
+            k: _vec3(v, f"{path}: positions_body_m.{k}") for k, v in raw["positions_body_m"].items()
+        }
+        frame = Airframe(
+            name=raw["name"],
+            jsbsim_model=raw["jsbsim_model"],
+            reference_point=raw.get("reference_point", "VRP"),
+            positions_body_m=MappingProxyType(positions),
+        )
+    except KeyError as exc:
+        raise ValueError(f"{path}: missing key {exc}; see aircraft_models/f16_testbed.toml") from None
+    missing = [s for s in ALL_SENSORS + INERTIAL_UNITS if s not in positions]
+    if missing:
+        raise ValueError(f"{path}: positions_body_m lacks {missing}; every installation needs x, y, z")
+    return frame
+
+
+def load_fleet(name_or_path: str | Path = "fleet_default") -> Fleet:
+    """Load a fleet (shipped name such as ``"fleet_default"`` or a TOML path)."""
+    path = _resolve(name_or_path)
+    raw = _read_toml(path)
+    airframe_name = raw.get("airframe", "f16-testbed").replace("-", "_")
+    airframe = load_airframe(airframe_name)
+    aircraft: dict[str, Aircraft] = {}
+    for i, a in enumerate(raw.get("aircraft", [])):
+        where = f"{path}: aircraft[{i}]"
+        try:
+            biases_deg = dict(a.get("installation_bias_deg", {}))
+            unknown = set(biases_deg) - set(ALL_SENSORS)
+            if unknown:
+                raise ValueError(f"{where}: unknown sensors {sorted(unknown)}; known {ALL_SENSORS}")
+            ac = Aircraft(
+                id=a["id"],
+                fuel_kg=float(a.get("fuel_kg", 1360.0)),
+                ballast_kg=float(a.get("ballast_kg", 0.0)),
+                ballast_position_body_m=_vec3(
+                    a.get("ballast_position_body_m", [0.0, 0.0, 0.0]), f"{where}.ballast_position"
+                ),
+                installation_bias_rad=MappingProxyType(
+                    {s: math.radians(float(biases_deg.get(s, 0.0))) for s in ALL_SENSORS}
+                ),
+            )
+        except KeyError as exc:
+            raise ValueError(f"{where}: missing key {exc}") from None
+        if ac.id in aircraft:
+            raise ValueError(f"{where}: duplicate aircraft id {ac.id!r}")
+        aircraft[ac.id] = ac
+    configurations: dict[str, Configuration] = {}
+    for i, c in enumerate(raw.get("configuration", [])):
+        where = f"{path}: configuration[{i}]"
+        if c.get("aircraft") not in aircraft:
+            raise ValueError(f"{where}: aircraft {c.get('aircraft')!r} is not in the fleet {sorted(aircraft)}")
+        nose = c.get("nose_sensor", "nose_probe")
+        if nose not in NOSE_SENSORS:
+            raise ValueError(f"{where}: nose_sensor must be one of {sorted(NOSE_SENSORS)}, got {nose!r}")
+        cfg = Configuration(id=c["id"], aircraft=aircraft[c["aircraft"]], nose_sensor=nose)
+        if cfg.id in configurations:
+            raise ValueError(f"{where}: duplicate configuration id {cfg.id!r}")
+        configurations[cfg.id] = cfg
+    if not configurations:
+        raise ValueError(f"{path}: a fleet needs at least one [[configuration]]")
+    return Fleet(
+        airframe=airframe,
+        aircraft=MappingProxyType(aircraft),
+        configurations=MappingProxyType(configurations),
+        source=str(path),
+    )
