@@ -1,0 +1,466 @@
+"""Flight campaigns: a small TOML file says what to fly; this module flies it into a dataset.
+
+A campaign file::
+
+    name = "default"
+    description = "five aircraft, Mach 0.3-0.9, every maneuver type, gear-down maneuvers"
+    fleet = "fleet_default"          # shipped fleet name or path to a fleet TOML
+    seed = 2026                      # master seed: turbulence and every error source derive from it
+    common_rate_hz = 40.0            # the preprocessed common time base
+
+    [environment]                    # defaults for every maneuver (synth.environment.Environment)
+    planet = "flat"
+    wind_ned_mps = [6.0, -4.0, 0.0]
+    turbulence = "light"
+
+    [errors]                         # synth.errors.ErrorConfig.from_dict
+    preset = "typical"
+
+    [errors.aircraft.PV1]            # optional per-aircraft overrides, merged into [errors]
+    imu = { accel_bias_mps2 = [0.1, -0.05, 0.08] }
+
+    [[flights]]                      # a block: every configuration x Mach x maneuver kind
+    configurations = "all"           # or a list of configuration ids
+    mach = [0.3, 0.5, 0.7, 0.9]
+    maneuvers = ["pitch_doublet", "windup_turn"]   # or "all"
+    altitude_m = 6000.0
+    gear_down = false
+    [flights.maneuver]               # optional extra ManeuverSpec fields for this block
+    duration_s = 35.0
+
+Every maneuver gets a stable index in file order, from which its seeds derive, so the same file
+gives bit-identical data whatever the number of worker processes.
+"""
+
+from __future__ import annotations
+
+import copy
+import importlib.metadata
+import platform
+import sys
+import tomllib
+import traceback
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from aircraft_models import Fleet, load_fleet
+from synth.dataset import FORMAT, FORMAT_VERSION, prepare_directory, write_maneuver, write_manifest
+from synth.environment import Environment
+from synth.errors import ErrorConfig
+from synth.flight import FlightError, fly_maneuver
+from synth.instrument import instrument
+from synth.maneuvers import MANEUVER_KINDS, ManeuverSpec
+
+CAMPAIGN_DIR = Path(__file__).resolve().parent.parent / "campaigns"
+_TOP_KEYS = {
+    "name", "description", "fleet", "seed", "common_rate_hz", "environment", "errors", "flights",
+}
+_BLOCK_KEYS = {"configurations", "mach", "maneuvers", "altitude_m", "gear_down", "maneuver"}
+
+
+class CampaignError(ValueError):
+    """A campaign file that cannot be flown as written."""
+
+
+def _deep_merge(base: Mapping, override: Mapping) -> dict:
+    out = copy.deepcopy(dict(base))
+    for k, v in override.items():
+        if isinstance(v, Mapping) and isinstance(out.get(k), Mapping):
+            out[k] = _deep_merge(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+@dataclass(frozen=True)
+class Job:
+    """One maneuver to fly: everything a worker process needs, as plain data."""
+
+    index: int
+    configuration_id: str
+    maneuver: dict
+    environment: dict
+    errors: dict
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A parsed campaign file. ``jobs`` lists the maneuvers in their stable order."""
+
+    name: str
+    description: str
+    fleet: Fleet
+    seed: int
+    common_rate_hz: float
+    jobs: tuple[Job, ...]
+    source: str
+    raw: dict = field(repr=False, default_factory=dict)
+
+
+def resolve_campaign_path(name_or_path: str | Path) -> Path:
+    """A campaign file path, or the name of one shipped in ``campaigns/`` (e.g. ``default``)."""
+    p = Path(name_or_path)
+    if p.exists():
+        return p
+    shipped = CAMPAIGN_DIR / (p.name if p.suffix == ".toml" else f"{p.name}.toml")
+    if shipped.exists():
+        return shipped
+    raise FileNotFoundError(
+        f"{name_or_path}: no such campaign file, nor a campaign shipped in {CAMPAIGN_DIR} "
+        f"(shipped: {sorted(q.stem for q in CAMPAIGN_DIR.glob('*.toml'))})"
+    )
+
+
+def parse_campaign(raw: Mapping, source: str = "<dict>") -> Campaign:
+    """Validate a campaign mapping (as read from TOML) and expand it into jobs."""
+    unknown = set(raw) - _TOP_KEYS
+    if unknown:
+        raise CampaignError(f"{source}: unknown keys {sorted(unknown)}; valid: {sorted(_TOP_KEYS)}")
+    fleet = load_fleet(raw.get("fleet", "fleet_default"))
+    seed = int(raw.get("seed", 0))
+    env_base = dict(raw.get("environment", {}))
+    errors_raw = dict(raw.get("errors", {}))
+    per_aircraft = errors_raw.pop("aircraft", {})
+    bad = set(per_aircraft) - set(fleet.aircraft)
+    if bad:
+        raise CampaignError(
+            f"{source}: [errors.aircraft] names {sorted(bad)}, not in the fleet {sorted(fleet.aircraft)}"
+        )
+    blocks = raw.get("flights", [])
+    if not blocks:
+        raise CampaignError(f"{source}: no [[flights]] block; add one (see campaigns/default.toml)")
+    jobs: list[Job] = []
+    for b, block in enumerate(blocks):
+        where = f"{source}: flights[{b}]"
+        unknown = set(block) - _BLOCK_KEYS
+        if unknown:
+            raise CampaignError(f"{where}: unknown keys {sorted(unknown)}; valid: {sorted(_BLOCK_KEYS)}")
+        configs = block.get("configurations", "all")
+        configs = list(fleet.configurations) if configs == "all" else list(configs)
+        for c in configs:
+            fleet.configuration(c)  # raises with the list of known ids
+        kinds = block.get("maneuvers", "all")
+        kinds = list(MANEUVER_KINDS) if kinds == "all" else list(kinds)
+        bad = [k for k in kinds if k not in MANEUVER_KINDS]
+        if bad:
+            raise CampaignError(f"{where}: unknown maneuvers {bad}; valid: {list(MANEUVER_KINDS)}")
+        machs = block.get("mach")
+        if not machs:
+            raise CampaignError(f"{where}: give `mach = [...]`, the Mach numbers to fly")
+        extra = dict(block.get("maneuver", {}))
+        for cid in configs:
+            aircraft_id = fleet.configurations[cid].aircraft.id
+            errors = _deep_merge(errors_raw, per_aircraft.get(aircraft_id, {}))
+            for mach in machs:
+                for kind in kinds:
+                    spec = {
+                        "kind": kind,
+                        "mach": float(mach),
+                        "altitude_m": float(block.get("altitude_m", 6000.0)),
+                        "gear_down": bool(block.get("gear_down", False)),
+                        **extra,
+                    }
+                    index = len(jobs)
+                    env = dict(env_base)
+                    # each maneuver its own turbulence realisation, reproducible from the master seed
+                    env["turbulence_seed"] = int(env_base.get("turbulence_seed", seed)) + index
+                    jobs.append(Job(index, cid, spec, env, errors))
+    # validate every spec and error config up front: a typo fails before an hour of flying
+    for job in jobs:
+        try:
+            ManeuverSpec.from_dict(job.maneuver)
+            Environment.from_dict(job.environment)
+            ErrorConfig.from_dict(job.errors, seed=seed)
+        except (ValueError, KeyError, TypeError) as exc:
+            raise CampaignError(f"{source}: maneuver {job.index} ({job.configuration_id}, "
+                                f"{job.maneuver['kind']}, Mach {job.maneuver['mach']}): {exc}") from exc
+    return Campaign(
+        name=str(raw.get("name", Path(source).stem)),
+        description=str(raw.get("description", "")),
+        fleet=fleet,
+        seed=seed,
+        common_rate_hz=float(raw.get("common_rate_hz", 40.0)),
+        jobs=tuple(jobs),
+        source=source,
+        raw=dict(raw),
+    )
+
+
+def load_campaign(name_or_path: str | Path) -> Campaign:
+    """Read and validate a campaign TOML file (path or shipped name)."""
+    path = resolve_campaign_path(name_or_path)
+    try:
+        with open(path, "rb") as fh:
+            raw = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise CampaignError(f"{path}: not valid TOML: {exc}") from None
+    return parse_campaign(raw, source=str(path))
+
+
+def software_versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for pkg in ("fpr-testbed", "jsbsim", "numpy", "scipy", "pandas", "pyarrow"):
+        try:
+            out[pkg] = importlib.metadata.version(pkg)
+        except importlib.metadata.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+@dataclass(frozen=True)
+class JobResult:
+    index: int
+    entries: tuple[dict, ...]
+    error: str | None = None
+    elapsed_s: float = 0.0
+
+
+# The worker state: set once per process so the fleet is not pickled with every job.
+_WORKER: dict = {}
+
+
+def _init_worker(fleet_source: str, out_dir: str, common_rate_hz: float, seed: int) -> None:
+    _WORKER.update(
+        fleet=load_fleet(fleet_source), out_dir=Path(out_dir), rate=common_rate_hz, seed=seed
+    )
+
+
+def _run_job(job: Job) -> JobResult:
+    import time
+
+    t0 = time.perf_counter()
+    fleet: Fleet = _WORKER["fleet"]
+    cfg = fleet.configuration(job.configuration_id)
+    spec = ManeuverSpec.from_dict(job.maneuver)
+    env = Environment.from_dict(job.environment)
+    errors = ErrorConfig.from_dict(job.errors, seed=_WORKER["seed"])
+    try:
+        segments = fly_maneuver(spec, fleet.airframe, cfg.aircraft, env)
+    except FlightError as exc:
+        return JobResult(job.index, (), error=f"FlightError: {exc}", elapsed_s=time.perf_counter() - t0)
+    except Exception as exc:  # a bug or JSBSim failure: keep the traceback, keep the campaign going
+        return JobResult(
+            job.index, (), error=f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}",
+            elapsed_s=time.perf_counter() - t0,
+        )
+    entries = []
+    for seg_no, truth in enumerate(segments):
+        # stable seed key per (job, segment); 64 segments per job is far more than any maneuver has
+        key = job.index * 64 + seg_no
+        inst = instrument(truth, fleet.airframe, cfg, errors, maneuver_key=key,
+                          common_rate_hz=_WORKER["rate"])
+        mid = f"m{job.index:04d}" + (f"s{seg_no}" if len(segments) > 1 else "")
+        fname = f"maneuvers/{mid}.parquet"
+        data = inst.data
+        mach = truth.mach
+        entry = {
+            "id": mid,
+            "file": fname,
+            "job_index": job.index,
+            "configuration": cfg.id,
+            "aircraft": cfg.aircraft.id,
+            "nose_sensor": cfg.nose_sensor,
+            "sensors": list(cfg.sensors),
+            "kind": spec.kind,
+            "segment": seg_no,
+            "n_segments": len(segments),
+            "mach_nominal": spec.mach,
+            "mach_mean": float(np.mean(mach)),
+            "mach_min": float(np.min(mach)),
+            "mach_max": float(np.max(mach)),
+            "altitude_m": spec.altitude_m,
+            "gear_down": bool(spec.gear_down),
+            "duration_s": float(data["t_s"].iloc[-1] - data["t_s"].iloc[0]),
+            "n_samples": int(len(data)),
+            "sample_rate_hz": _WORKER["rate"],
+            "r_cg_body_m_mean": np.mean(truth.r_cg_body_m, axis=0).tolist(),
+            "maneuver": spec.to_dict(),
+            "environment": env.to_dict(),
+            "injected": inst.injected,
+            "channel_units": inst.channel_units,
+            "flight_meta": {k: v for k, v in truth.meta.items() if k != "spec"},
+        }
+        write_maneuver(_WORKER["out_dir"] / fname, data, entry)
+        entries.append(entry)
+    return JobResult(job.index, tuple(entries), elapsed_s=time.perf_counter() - t0)
+
+
+@dataclass(frozen=True)
+class FlyResult:
+    """What `fly_campaign` did: the dataset directory, its manifest, failures and timing."""
+
+    out_dir: Path
+    manifest: dict
+    failures: tuple[tuple[Job, str], ...]
+    wall_s: float
+
+    @property
+    def ok(self) -> bool:
+        return not self.failures
+
+
+def fly_campaign(
+    campaign: Campaign,
+    out_dir: str | Path,
+    *,
+    workers: int | None = None,
+    overwrite: bool = False,
+    progress: Callable[[int, int], None] | bool = False,
+) -> FlyResult:
+    """Fly every maneuver of a campaign and write the dataset.
+
+    Parameters
+    ----------
+    campaign : from :func:`load_campaign`.
+    out_dir : the dataset directory to create.
+    workers : worker processes (default: the number of CPUs; 1 runs in this process).
+    overwrite : replace an existing dataset at ``out_dir``.
+    progress : show a tqdm progress bar (True) or call ``progress(done, total)``.
+
+    Failed maneuvers (departure, controller could not hold its target) are listed in the
+    manifest's ``failures`` and in the result; the others are still written.
+    """
+    import os
+    import time
+
+    t0 = time.perf_counter()
+    out_dir = prepare_directory(Path(out_dir), overwrite=overwrite)
+    workers = workers or os.cpu_count() or 1
+    init_args = (campaign.fleet.source, str(out_dir), campaign.common_rate_hz, campaign.seed)
+    results: list[JobResult] = []
+    bar = None
+    if progress is True:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(campaign.jobs), unit="maneuver", desc=f"fly {campaign.name}",
+                   file=sys.stderr)
+
+    def _tick(res: JobResult) -> None:
+        results.append(res)
+        if bar is not None:
+            bar.update(1)
+            if res.error:
+                bar.write(f"maneuver {res.index} failed: {res.error.splitlines()[0]}")
+        elif callable(progress):
+            progress(len(results), len(campaign.jobs))
+
+    if workers == 1 or len(campaign.jobs) == 1:
+        _init_worker(*init_args)
+        for job in campaign.jobs:
+            _tick(_run_job(job))
+    else:
+        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
+                                 initargs=init_args) as pool:
+            for res in pool.map(_run_job, campaign.jobs, chunksize=1):
+                _tick(res)
+    if bar is not None:
+        bar.close()
+    results.sort(key=lambda r: r.index)
+    jobs = {j.index: j for j in campaign.jobs}
+    failures = tuple((jobs[r.index], r.error) for r in results if r.error)
+    manifest = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "campaign": {
+            "name": campaign.name,
+            "description": campaign.description,
+            "source": campaign.source,
+            "seed": campaign.seed,
+            "definition": campaign.raw,
+        },
+        "software": software_versions(),
+        "airframe": {
+            "name": campaign.fleet.airframe.name,
+            "jsbsim_model": campaign.fleet.airframe.jsbsim_model,
+            "reference_point": campaign.fleet.airframe.reference_point,
+            "positions_body_m": {k: v.tolist() for k, v in campaign.fleet.airframe.positions_body_m.items()},
+        },
+        "fleet": {
+            "source": campaign.fleet.source,
+            "aircraft": {
+                a.id: {
+                    "installation_bias_rad": dict(a.installation_bias_rad),
+                    "fuel_kg": a.fuel_kg,
+                    "ballast_kg": a.ballast_kg,
+                    "ballast_position_body_m": a.ballast_position_body_m.tolist(),
+                }
+                for a in campaign.fleet.aircraft.values()
+            },
+            "configurations": {
+                c.id: {"aircraft": c.aircraft.id, "nose_sensor": c.nose_sensor, "sensors": list(c.sensors)}
+                for c in campaign.fleet.configurations.values()
+            },
+        },
+        "common_rate_hz": campaign.common_rate_hz,
+        "maneuvers": [e for r in results for e in r.entries],
+        "failures": [
+            {"job_index": j.index, "configuration": j.configuration_id, "maneuver": j.maneuver,
+             "error": err}
+            for j, err in failures
+        ],
+        "timing": {"fly_s_per_job": [r.elapsed_s for r in results]},
+    }
+    # wall-clock timing would make two identical campaigns' manifests differ; keep it out of it
+    manifest.pop("timing")
+    write_manifest(out_dir, manifest)
+    return FlyResult(out_dir, manifest, failures, time.perf_counter() - t0)
+
+
+def summarize(manifest: Mapping) -> str:
+    """A short text summary of a dataset manifest: counts per kind, Mach, configuration."""
+    import pandas as pd
+
+    man = pd.DataFrame(manifest["maneuvers"])
+    lines = [f"dataset: {len(man)} maneuver files, "
+             f"{int(man['n_samples'].sum()) if len(man) else 0} samples, "
+             f"{man['duration_s'].sum() if len(man) else 0:.0f} s of flight"]
+    if len(man):
+        tab = pd.crosstab(man["kind"], man["mach_nominal"].round(2), margins=True, margins_name="all")
+        lines.append("maneuvers per kind and Mach:")
+        lines.append(tab.to_string())
+        lines.append("per configuration: " + ", ".join(
+            f"{k} {v}" for k, v in man.groupby("configuration").size().items()))
+        lines.append(f"gear-down maneuvers: {int(man['gear_down'].sum())}")
+    if manifest.get("failures"):
+        lines.append(f"FAILED: {len(manifest['failures'])} maneuver(s):")
+        for f in manifest["failures"]:
+            lines.append(f"  job {f['job_index']} {f['configuration']} {f['maneuver']['kind']} "
+                         f"Mach {f['maneuver']['mach']}: {f['error'].splitlines()[0]}")
+    return "\n".join(lines)
+
+
+def flags_campaign(
+    configurations: Sequence[str] | str = "all",
+    mach: Sequence[float] = (0.5,),
+    maneuvers: Sequence[str] | str = "all",
+    altitude_m: float = 6000.0,
+    gear_down: bool = False,
+    seed: int = 0,
+    errors_preset: str = "typical",
+    planet: str = "flat",
+    turbulence: str = "none",
+    wind_ned_mps: Sequence[float] = (0.0, 0.0, 0.0),
+    common_rate_hz: float = 40.0,
+    fleet: str = "fleet_default",
+) -> dict:
+    """A one-block campaign mapping built from command-line flags."""
+    return {
+        "name": "flags",
+        "description": "campaign given by command-line flags",
+        "fleet": fleet,
+        "seed": seed,
+        "common_rate_hz": common_rate_hz,
+        "environment": {"planet": planet, "turbulence": turbulence, "wind_ned_mps": list(wind_ned_mps)},
+        "errors": {"preset": errors_preset},
+        "flights": [{
+            "configurations": configurations if configurations == "all" else list(configurations),
+            "mach": list(mach),
+            "maneuvers": maneuvers if maneuvers == "all" else list(maneuvers),
+            "altitude_m": altitude_m,
+            "gear_down": gear_down,
+        }],
+    }
