@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
-from typing import Mapping
 
 import numpy as np
 
@@ -202,7 +202,9 @@ def load_fleet(name_or_path: str | Path = "fleet_default") -> Fleet:
     for i, c in enumerate(raw.get("configuration", [])):
         where = f"{path}: configuration[{i}]"
         if c.get("aircraft") not in aircraft:
-            raise ValueError(f"{where}: aircraft {c.get('aircraft')!r} is not in the fleet {sorted(aircraft)}")
+            raise ValueError(
+                f"{where}: aircraft {c.get('aircraft')!r} is not in the fleet {sorted(aircraft)}"
+            )
         nose = c.get("nose_sensor", "nose_probe")
         if nose not in NOSE_SENSORS:
             raise ValueError(f"{where}: nose_sensor must be one of {sorted(NOSE_SENSORS)}, got {nose!r}")

@@ -76,6 +76,8 @@ def integrate_rk4(
     accel_cg_body_mps2: np.ndarray,
     omega_body_rps: np.ndarray,
     g_mps2: float,
+    accel_mid_body_mps2: np.ndarray | None = None,
+    omega_mid_body_rps: np.ndarray | None = None,
 ) -> np.ndarray:
     """Integrate the state equations with RK4 on the sample grid ``t_s``.
 
@@ -86,6 +88,9 @@ def integrate_rk4(
     accel_cg_body_mps2 : (N, 3) specific force at the CG, body axes, m/s^2, at ``t_s``.
     omega_body_rps : (N, 3) body rates, rad/s, at ``t_s``.
     g_mps2 : gravity, m/s^2.
+    accel_mid_body_mps2, omega_mid_body_rps : (N-1, 3) inputs at the half steps, if known
+        (analytic inputs, or a recorder faster than the grid). Default: mean of the neighbours,
+        which limits the global error to second order in the step for curved inputs.
 
     Returns
     -------
@@ -101,8 +106,16 @@ def integrate_rk4(
     x = np.empty((n, 7))
     x[0] = x0
     dt = np.diff(t_s)
-    a_mid = 0.5 * (accel_cg_body_mps2[1:] + accel_cg_body_mps2[:-1])
-    w_mid = 0.5 * (omega_body_rps[1:] + omega_body_rps[:-1])
+    a_mid = (
+        0.5 * (accel_cg_body_mps2[1:] + accel_cg_body_mps2[:-1])
+        if accel_mid_body_mps2 is None
+        else accel_mid_body_mps2
+    )
+    w_mid = (
+        0.5 * (omega_body_rps[1:] + omega_body_rps[:-1])
+        if omega_mid_body_rps is None
+        else omega_mid_body_rps
+    )
     f = state_derivative
     for k in range(n - 1):
         h = dt[k]
