@@ -299,17 +299,22 @@ def set_initial_conditions(
     mach: float,
     wind_ned_mps=(0.0, 0.0, 0.0),
 ) -> None:
-    """Set JSBSim initial conditions: position first, then attitude, wind, speed (SPEC §7)."""
+    """Set JSBSim initial conditions: position first, then attitude, wind, speed (SPEC §7).
+
+    The vertical component of ``wind_ned_mps`` cannot be an initial condition in JSBSim; apply
+    it with :func:`set_wind_ned` after trimming.
+    """
     fdm["ic/lat-geod-rad"] = latitude_rad
     fdm["ic/long-gc-rad"] = longitude_rad
     fdm["ic/h-sl-ft"] = altitude_m / FT_TO_M
     fdm["ic/psi-true-rad"] = heading_rad
     fdm["ic/phi-rad"] = 0.0
     fdm["ic/gamma-rad"] = 0.0
-    n, e, d = (float(x) / FT_TO_M for x in wind_ned_mps)
-    fdm["atmosphere/wind-north-fps"] = n
-    fdm["atmosphere/wind-east-fps"] = e
-    fdm["atmosphere/wind-down-fps"] = d
+    # JSBSim's trim re-initializes the winds from the IC, so the steady horizontal wind must be
+    # an IC (blowing towards vw-dir); it must precede the speed so that Mach is air-relative.
+    n_mps, e_mps, _ = (float(x) for x in wind_ned_mps)
+    fdm["ic/vw-mag-fps"] = math.hypot(n_mps, e_mps) / FT_TO_M
+    fdm["ic/vw-dir-deg"] = math.degrees(math.atan2(e_mps, n_mps))
     fdm["ic/mach"] = mach
 
 
