@@ -1,0 +1,84 @@
+"""The dataset format: round trip, self-describing files, atomic writes, no clobbering."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from synth.dataset import (
+    FORMAT,
+    FORMAT_VERSION,
+    load_dataset,
+    prepare_directory,
+    read_maneuver_metadata,
+    write_maneuver,
+    write_manifest,
+)
+
+
+def _frame(seed=0, n=100):
+    rng = np.random.default_rng(seed)
+    return pd.DataFrame({
+        "t_s": np.arange(n) / 40.0,
+        "alpha_zl_rad": rng.normal(0.05, 0.01, n),
+        "true_alpha_cg_rad": rng.normal(0.05, 0.01, n),
+    })
+
+
+def _write(directory, frames):
+    prepare_directory(directory)
+    entries = []
+    for i, df in enumerate(frames):
+        entry = {"id": f"m{i:04d}", "file": f"maneuvers/m{i:04d}.parquet", "kind": "pitch_doublet",
+                 "configuration": "PV1-NP", "aircraft": "PV1", "mach_nominal": 0.5,
+                 "injected": {"imu.accel_bias_mps2": np.array([0.1, 0.0, -0.05])},
+                 "n_samples": len(df), "duration_s": float(df.t_s.iloc[-1])}
+        write_maneuver(directory / entry["file"], df, entry)
+        entries.append(entry)
+    write_manifest(directory, {"format": FORMAT, "format_version": FORMAT_VERSION, "maneuvers": entries})
+
+
+def test_round_trip(tmp_path):
+    frames = [_frame(0), _frame(1)]
+    _write(tmp_path / "ds", frames)
+    ds = load_dataset(tmp_path / "ds")
+    assert len(ds) == 2
+    assert list(ds.index.index) == ["m0000", "m0001"]
+    pd.testing.assert_frame_equal(ds.load("m0001"), frames[1])
+    meta = read_maneuver_metadata(tmp_path / "ds" / "maneuvers" / "m0000.parquet")
+    assert meta["injected"]["imu.accel_bias_mps2"] == [0.1, 0.0, -0.05]
+    for (entry, df), ref in zip(ds, frames, strict=True):
+        pd.testing.assert_frame_equal(df, ref)
+
+
+def test_same_data_same_bytes(tmp_path):
+    _write(tmp_path / "a", [_frame(3)])
+    _write(tmp_path / "b", [_frame(3)])
+    for name in ("manifest.json", "maneuvers/m0000.parquet"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+
+
+def test_refuses_to_overwrite(tmp_path):
+    _write(tmp_path / "ds", [_frame()])
+    with pytest.raises(FileExistsError, match="--overwrite"):
+        prepare_directory(tmp_path / "ds")
+    # a directory that is not a dataset is never deleted, even with overwrite
+    other = tmp_path / "precious"
+    other.mkdir()
+    (other / "flight_data.csv").write_text("t,alpha\n0,1\n")
+    with pytest.raises(FileExistsError, match="not an fpr dataset"):
+        prepare_directory(other, overwrite=True)
+    assert (other / "flight_data.csv").exists()
+
+
+def test_missing_file_is_reported(tmp_path):
+    _write(tmp_path / "ds", [_frame(), _frame(1)])
+    (tmp_path / "ds" / "maneuvers" / "m0001.parquet").unlink()
+    with pytest.raises(FileNotFoundError, match="m0001.parquet"):
+        load_dataset(tmp_path / "ds")
+
+
+def test_not_a_dataset(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no manifest"):
+        load_dataset(tmp_path)
