@@ -1,0 +1,184 @@
+"""The atmosphere a maneuver is flown in: planet model, steady wind, turbulence, a discrete gust.
+
+:class:`Environment` is plain data (SI units, radians); :mod:`synth.flight` applies it to JSBSim
+through :mod:`synth.jsbsim_io`. Turbulence is JSBSim's MIL-F-8785C / MIL-HDBK-1797 model; its
+random numbers come from ``turbulence_seed``, so one seed gives bit-identical runs.
+
+Example
+-------
+>>> env = Environment.from_dict({"wind_ned_mps": [5, -3, 0], "turbulence": "light",
+...                              "turbulence_seed": 7})
+>>> env.to_dict()["turbulence"]
+'light'
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+
+PLANETS = ("flat", "wgs84")
+
+#: turbulence level -> (JSBSim milspec probability-of-exceedance index, wind speed at 20 ft, m/s).
+#: MIL-F-8785C: light / moderate / severe are exceeded with probability 1e-2 / 1e-3 / 1e-5
+#: (indices 3 / 4 / 6) and correspond to 15 / 30 / 45 kt at 20 ft.
+TURBULENCE_LEVELS: dict[str, tuple[int, float]] = {
+    "none": (0, 0.0),
+    "light": (3, 7.717),
+    "moderate": (4, 15.433),
+    "severe": (6, 23.150),
+}
+
+
+@dataclass(frozen=True)
+class Gust:
+    """A discrete 1-cosine gust (JSBSim ``atmosphere/cosine-gust``).
+
+    Attributes
+    ----------
+    amplitude_mps : peak gust speed, m/s (> 0).
+    direction_ned : (3,) direction the gust air moves towards, NED (normalized by JSBSim);
+        ``(0, 0, -1)`` is an up-gust, which raises the angle of attack.
+    start_s : time after the start of the recorded maneuver when the gust begins, s.
+    duration_s : total rise-and-fall time, s.
+    """
+
+    amplitude_mps: float
+    direction_ned: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    start_s: float = 5.0
+    duration_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        d = tuple(float(x) for x in self.direction_ned)
+        if len(d) != 3 or not all(math.isfinite(x) for x in d) or math.hypot(*d) == 0.0:
+            raise ValueError(
+                f"gust.direction_ned must be three finite numbers, not all zero (NED), got "
+                f"{self.direction_ned!r}; e.g. [0, 0, -1] for an up-gust"
+            )
+        object.__setattr__(self, "direction_ned", d)
+        if not (0.0 < self.amplitude_mps <= 30.0):
+            raise ValueError(
+                f"gust.amplitude_mps must be in (0, 30] m/s, got {self.amplitude_mps}; "
+                "omit the gust for none"
+            )
+        if self.start_s < 0.0 or not (0.1 <= self.duration_s <= 30.0):
+            raise ValueError(
+                f"gust needs start_s >= 0 and duration_s in [0.1, 30] s, got start_s="
+                f"{self.start_s}, duration_s={self.duration_s}"
+            )
+
+
+@dataclass(frozen=True)
+class Environment:
+    """Planet, wind and turbulence for one flight.
+
+    Attributes
+    ----------
+    planet : ``"flat"`` (flat, non-rotating, constant g: the estimator's own earth, so the truth
+        satisfies its state equations to ~0.01 m/s) or ``"wgs84"`` (JSBSim's rotating ellipsoid).
+    wind_ned_mps : (3,) steady wind, NED, m/s (velocity of the air mass, i.e. where it blows to).
+    turbulence : ``"none"``, ``"light"``, ``"moderate"`` or ``"severe"``.
+    turbulence_seed : seed of JSBSim's random generator (``simulation/randomseed``).
+    gust : optional discrete 1-cosine gust.
+    latitude_rad, longitude_rad : where the flight starts (matters on ``"wgs84"`` only), rad.
+    """
+
+    planet: str = "flat"
+    wind_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    turbulence: str = "none"
+    turbulence_seed: int = 0
+    gust: Gust | None = None
+    latitude_rad: float = math.radians(13.0)
+    longitude_rad: float = math.radians(77.6)
+
+    def __post_init__(self) -> None:
+        if self.planet not in PLANETS:
+            raise ValueError(f"planet must be one of {PLANETS}, got {self.planet!r}")
+        w = tuple(float(x) for x in self.wind_ned_mps)
+        if len(w) != 3 or not all(math.isfinite(x) for x in w):
+            raise ValueError(f"wind_ned_mps must be three finite numbers [N, E, D] in m/s, got {w}")
+        if math.hypot(*w) > 40.0 or abs(w[2]) > 5.0:
+            raise ValueError(
+                f"wind_ned_mps {w} is outside what the testbed models (|wind| <= 40 m/s, "
+                "|vertical| <= 5 m/s); SPEC §6 uses up to 20 m/s"
+            )
+        object.__setattr__(self, "wind_ned_mps", w)
+        if self.turbulence not in TURBULENCE_LEVELS:
+            raise ValueError(
+                f"turbulence must be one of {sorted(TURBULENCE_LEVELS)}, got {self.turbulence!r}"
+            )
+        if not isinstance(self.turbulence_seed, int) or isinstance(self.turbulence_seed, bool):
+            raise ValueError(f"turbulence_seed must be an int, got {self.turbulence_seed!r}")
+        if not (0 <= self.turbulence_seed < 2**31):
+            raise ValueError(f"turbulence_seed must be in [0, 2**31), got {self.turbulence_seed}")
+        if not (abs(self.latitude_rad) < math.radians(85.0)):
+            raise ValueError(f"latitude_rad must be within +-85 deg, got {self.latitude_rad}")
+
+    @property
+    def turbulence_severity(self) -> int:
+        """JSBSim milspec probability-of-exceedance index for :attr:`turbulence`."""
+        return TURBULENCE_LEVELS[self.turbulence][0]
+
+    @property
+    def turbulence_w20_mps(self) -> float:
+        """Wind speed at 20 ft AGL that goes with :attr:`turbulence`, m/s."""
+        return TURBULENCE_LEVELS[self.turbulence][1]
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Environment:
+        """Build from a plain dict (e.g. a TOML table), checking keys and units.
+
+        Keys are the attribute names; ``gust`` is a nested table with :class:`Gust`'s keys.
+        Degrees are accepted only where the key says so (``latitude_deg``, ``longitude_deg``).
+        """
+        if not isinstance(d, dict):
+            raise TypeError(f"environment must be a table/dict, got {type(d).__name__}")
+        d = dict(d)
+        for deg_key, rad_key in (("latitude_deg", "latitude_rad"), ("longitude_deg", "longitude_rad")):
+            if deg_key in d:
+                if rad_key in d:
+                    raise ValueError(f"environment: give {deg_key} or {rad_key}, not both")
+                d[rad_key] = math.radians(float(d.pop(deg_key)))
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            hints = []
+            for k in sorted(unknown):
+                if k.startswith("wind") and k != "wind_ned_mps":
+                    hints.append(f"{k!r}: use wind_ned_mps = [north, east, down] in m/s")
+                else:
+                    hints.append(repr(k))
+            raise ValueError(
+                f"environment: unknown keys {', '.join(hints)}; known keys: {sorted(known)} "
+                "(plus latitude_deg, longitude_deg)"
+            )
+        gust = d.get("gust")
+        if gust is not None:
+            if not isinstance(gust, dict):
+                raise ValueError("environment.gust must be a table with amplitude_mps, ...")
+            gknown = {f.name for f in fields(Gust)}
+            gunknown = set(gust) - gknown
+            if gunknown:
+                raise ValueError(
+                    f"environment.gust: unknown keys {sorted(gunknown)}; known: {sorted(gknown)}"
+                )
+            if "amplitude_mps" not in gust:
+                raise ValueError("environment.gust needs amplitude_mps (m/s)")
+            d["gust"] = Gust(**{k: (tuple(v) if k == "direction_ned" else float(v))
+                                for k, v in gust.items()})
+        if "wind_ned_mps" in d:
+            d["wind_ned_mps"] = tuple(d["wind_ned_mps"])
+        return cls(**d)
+
+    def to_dict(self) -> dict:
+        """Plain-dict form (lists, floats, strings) that :meth:`from_dict` reads back."""
+        out = asdict(self)
+        out["wind_ned_mps"] = list(self.wind_ned_mps)
+        if self.gust is None:
+            del out["gust"]
+        else:
+            out["gust"]["direction_ned"] = list(self.gust.direction_ned)
+        return out
+
+
+__all__ = ["Environment", "Gust", "PLANETS", "TURBULENCE_LEVELS"]

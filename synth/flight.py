@@ -1,0 +1,290 @@
+"""Fly one scripted test maneuver in JSBSim and return its true flight history.
+
+:func:`fly_maneuver` builds the FDM (:mod:`synth.jsbsim_io`), loads the aircraft's fuel and ballast,
+trims at the requested Mach, altitude and gear, applies the :class:`~synth.environment.Environment`
+(wind, turbulence, gust), lets the aircraft settle, then lets the maneuver's controller
+(:mod:`synth.maneuvers`) fly while every truth signal is recorded at the simulation rate.
+
+Failure policy: a departure (alpha beyond 30 deg, |beta| > 15 deg, NaN, below 100 m above
+ground, Mach outside 0.25-0.95, load factor above 9.5), a controller that cannot hold its target,
+or a failed trim raises :class:`FlightError`, whose message names the maneuver, Mach, altitude,
+the time in the run, what went wrong, and what to try. No partial or silently bad data is returned.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import jsbsim
+import numpy as np
+
+from aircraft_models import Aircraft, Airframe
+from synth import jsbsim_io as io
+from synth.environment import Environment
+from synth.maneuvers import ManeuverFailure, ManeuverSpec, TrimPoint, make_controller
+from synth.truth import TruthTrajectory
+
+#: hands-off flight between trim (and wind/turbulence onset) and the start of recording, s
+SETTLE_S = 2.0
+
+ALPHA_LIMITS_RAD = (math.radians(-12.0), math.radians(30.0))
+BETA_LIMIT_RAD = math.radians(15.0)
+MIN_AGL_M = 100.0
+MACH_LIMITS = (0.25, 0.95)
+NZ_LIMIT = 9.5
+#: departure checks run every this many steps (and once on the whole record at the end)
+_CHECK_EVERY = 6
+
+
+class FlightError(RuntimeError):
+    """The maneuver could not be flown as specified; the message says why and what to try."""
+
+
+def _where(spec: ManeuverSpec) -> str:
+    return f"{spec.kind} at Mach {spec.mach:.2f}, {spec.altitude_m:.0f} m" + (
+        ", gear down" if spec.gear_down else ""
+    )
+
+
+def _trim(fdm: jsbsim.FGFDMExec, spec: ManeuverSpec) -> None:
+    try:
+        fdm.do_trim(1)
+    except Exception as exc:  # JSBSim raises its own TrimFailureException
+        raise FlightError(
+            f"{_where(spec)}: JSBSim trim failed ({exc}); try another Mach/altitude pair "
+            "(the f16 trims from Mach 0.3 to 0.9; with gear down prefer Mach <= 0.5 below 3 km)"
+        ) from None
+    bad = {
+        name: fdm[name]
+        for name in ("accelerations/udot-ft_sec2", "accelerations/wdot-ft_sec2",
+                     "accelerations/qdot-rad_sec2")
+    }
+    if (
+        abs(bad["accelerations/udot-ft_sec2"]) > 0.5
+        or abs(bad["accelerations/wdot-ft_sec2"]) > 0.5
+        or abs(bad["accelerations/qdot-rad_sec2"]) > 0.01
+        or abs(fdm["velocities/mach"] - spec.mach) > 0.005
+    ):
+        raise FlightError(
+            f"{_where(spec)}: trim did not converge (residual accelerations {bad}, Mach "
+            f"{fdm['velocities/mach']:.3f}); try another Mach/altitude pair"
+        )
+
+
+def _departure(si_row: np.ndarray) -> str | None:
+    C = io.COL
+    alpha, beta = si_row[C["alpha_rad"]], si_row[C["beta_rad"]]
+    if not np.all(np.isfinite(si_row)):
+        return "the state became NaN/infinite"
+    if not (ALPHA_LIMITS_RAD[0] <= alpha <= ALPHA_LIMITS_RAD[1]):
+        return f"departed: alpha {math.degrees(alpha):.1f} deg outside -12..30 deg"
+    if abs(beta) > BETA_LIMIT_RAD:
+        return f"departed: |beta| {math.degrees(abs(beta)):.1f} deg exceeds 15 deg"
+    if si_row[C["h_agl_m"]] < MIN_AGL_M:
+        return f"descended to {si_row[C['h_agl_m']]:.0f} m above ground (limit {MIN_AGL_M:.0f} m)"
+    mach = si_row[C["mach"]]
+    if not (MACH_LIMITS[0] <= mach <= MACH_LIMITS[1]):
+        return f"Mach {mach:.3f} left {MACH_LIMITS[0]}..{MACH_LIMITS[1]}"
+    nz = -si_row[C["fz_n"]] / (si_row[C["mass_kg"]] * si_row[C["g_mps2"]])
+    if nz > NZ_LIMIT:
+        return f"load factor {nz:.1f} exceeds {NZ_LIMIT}"
+    return None
+
+
+def _reinit_with_wind(fdm: jsbsim.FGFDMExec, reader: io.SampleReader, wind_ned_mps) -> None:
+    """Restart from the trimmed air-relative state with the earth velocity shifted by the wind.
+
+    JSBSim's trim re-initializes the winds from its IC, whose wind handling is inconsistent with
+    the atmosphere model in 1.3.3 (it subtracts the wind where the atmosphere adds it), so the
+    steady wind is applied here: same attitude and air-relative velocity, ground velocity
+    = air velocity + wind.
+    """
+    x = reader.read_si()
+    C = io.COL
+    phi, th, psi = x[C["phi_rad"]], x[C["theta_rad"]], x[C["psi_rad"]]
+    cph, sph, cth, sth, cps, sps = (math.cos(phi), math.sin(phi), math.cos(th), math.sin(th),
+                                    math.cos(psi), math.sin(psi))
+    ned_to_body = np.array([
+        [cth * cps, cth * sps, -sth],
+        [sph * sth * cps - cph * sps, sph * sth * sps + cph * cps, sph * cth],
+        [cph * sth * cps + sph * sps, cph * sth * sps - sph * cps, cph * cth],
+    ])
+    v_air = x[[C["u_air_mps"], C["v_air_mps"], C["w_air_mps"]]]
+    v_body = v_air + ned_to_body @ np.asarray(wind_ned_mps, dtype=float)
+    io.set_body_velocity_ic(fdm, v_body, (phi, th, psi))
+    fdm.run_ic()
+    io.set_wind_ned(fdm, wind_ned_mps)
+
+
+def fly_maneuver(
+    spec: ManeuverSpec,
+    airframe: Airframe,
+    aircraft: Aircraft,
+    env: Environment,
+    *,
+    dt_s: float = 1.0 / 120.0,
+) -> list[TruthTrajectory]:
+    """Fly ``spec`` with ``aircraft`` in ``env`` and return its truth.
+
+    Parameters
+    ----------
+    spec : the maneuver (kind, Mach, altitude, gear, excitation).
+    airframe : which JSBSim model flies and its reference point (body-axis origin).
+    aircraft : fuel (split equally between the two internal tanks) and ballast of the tail.
+    env : planet, steady wind, turbulence and its seed, gust.
+    dt_s : simulation step, s (default 1/120 s).
+
+    Returns
+    -------
+    One :class:`TruthTrajectory` per recorded piece: one, except SHSS, which returns its
+    ``spec.n_segments`` pieces, each with ``t_s`` starting at 0, ``meta['segment'] = i`` and
+    ``meta['segment_start_s']`` its start within the run.
+
+    Raises
+    ------
+    FlightError
+        If the trim fails, the aircraft departs, or the controller cannot hold its target.
+    """
+    wall0 = time.perf_counter()
+    where = _where(spec)
+    fdm, frame = io.create_fdm(airframe.jsbsim_model, env.planet, dt_s, airframe.reference_point)
+    fdm["simulation/randomseed"] = env.turbulence_seed
+    try:
+        io.set_mass(fdm, frame, aircraft.fuel_kg, aircraft.ballast_kg,
+                    aircraft.ballast_position_body_m)
+    except ValueError as exc:
+        raise FlightError(f"{where}: aircraft {aircraft.id}: {exc}") from None
+    io.set_initial_conditions(
+        fdm,
+        latitude_rad=env.latitude_rad,
+        longitude_rad=env.longitude_rad,
+        altitude_m=spec.altitude_m,
+        heading_rad=spec.heading_rad,
+        mach=spec.mach,
+    )
+    io.start_engines(fdm)
+    io.set_gear(fdm, spec.gear_down)
+    fdm.run_ic()
+    _trim(fdm, spec)
+    reader = io.SampleReader(fdm, frame)
+    x_trim = reader.read_si()
+    C = io.COL
+    trim = TrimPoint(
+        mach=float(x_trim[C["mach"]]),
+        altitude_m=float(x_trim[C["h_m"]]),
+        heading_rad=float(x_trim[C["psi_rad"]]),
+        alpha_rad=float(x_trim[C["alpha_rad"]]),
+        theta_rad=float(x_trim[C["theta_rad"]]),
+        throttle_cmd_norm=float(x_trim[C["throttle_cmd_norm"]]),
+        tas_mps=float(x_trim[C["tas_mps"]]),
+    )
+    trim_meta = {
+        "mach": trim.mach, "altitude_m": trim.altitude_m, "heading_rad": trim.heading_rad,
+        "alpha_rad": trim.alpha_rad, "theta_rad": trim.theta_rad,
+        "throttle_cmd_norm": trim.throttle_cmd_norm,
+        "elevator_pos_rad": float(x_trim[C["elevator_pos_rad"]]),
+        "mass_kg": float(x_trim[C["mass_kg"]]),
+        "r_cg_body_m": [float(x_trim[C[f"cg_{a}_m"]]) for a in "xyz"],
+        "gear_pos_norm": float(x_trim[C["gear_pos_norm"]]),
+    }
+    if any(env.wind_ned_mps):
+        _reinit_with_wind(fdm, reader, env.wind_ned_mps)
+    if env.turbulence != "none":
+        io.set_turbulence(fdm, severity=env.turbulence_severity,
+                          windspeed_at_20ft_mps=env.turbulence_w20_mps)
+    settle_steps = int(round(SETTLE_S / dt_s))
+    for _ in range(settle_steps):
+        fdm.run()
+
+    controller = make_controller(spec, trim, dt_s)
+    n = int(round(spec.duration_s / dt_s)) + 1
+    t_s = np.arange(n) * dt_s
+    raw = np.empty((n, reader.n_channels))
+    setters = io.InputSetter(fdm)
+    gust_step = (
+        int(round(env.gust.start_s / dt_s)) if env.gust is not None else -1
+    )
+    if env.gust is not None and gust_step >= n:
+        raise FlightError(
+            f"{where}: gust start_s {env.gust.start_s} s is after the end of the "
+            f"{spec.duration_s} s maneuver; start it earlier"
+        )
+    scale, offset = reader.scale, reader.offset
+    read_raw = reader.read_raw
+    run = fdm.run
+    t_fail = 0.0
+    try:
+        for i in range(n):
+            row = read_raw()
+            raw[i] = row
+            x = raw[i] * scale + offset
+            t = i * dt_s
+            t_fail = t
+            if i % _CHECK_EVERY == 0:
+                msg = _departure(x)
+                if msg is not None:
+                    raise ManeuverFailure(msg, t, _advice(spec))
+                controller.check(t, x)
+            if i == gust_step:
+                io.start_cosine_gust(fdm, amplitude_mps=env.gust.amplitude_mps,
+                                     direction_ned=env.gust.direction_ned,
+                                     duration_s=env.gust.duration_s)
+            if i < n - 1:
+                setters.set(*controller.inputs(t, x))
+                if not run():
+                    raise ManeuverFailure("JSBSim stopped the run", t, "check the JSBSim log")
+        si = reader.to_si(raw)
+        # the per-step checks sample every few steps; NaN and departures must not slip between
+        for k in np.flatnonzero(~np.all(np.isfinite(si), axis=1))[:1]:
+            raise ManeuverFailure("the state became NaN/infinite", float(t_s[k]), _advice(spec))
+        for k in range(1, n, _CHECK_EVERY):
+            for j in range(k, min(k + _CHECK_EVERY - 1, n)):
+                msg = _departure(si[j])
+                if msg is not None:
+                    raise ManeuverFailure(msg, float(t_s[j]), _advice(spec))
+        controller.finish(si, t_s)
+    except ManeuverFailure as exc:
+        raise FlightError(
+            f"{where} (aircraft {aircraft.id}), t = {exc.t_s if exc.t_s else t_fail:.2f} s into "
+            f"the maneuver: {exc.what}. Try: {exc.advice}."
+        ) from None
+
+    wall_s = time.perf_counter() - wall0
+    meta_common = {
+        "maneuver": spec.to_dict(),
+        "environment": env.to_dict(),
+        "trim": trim_meta,
+        "controller": dict(controller.notes),
+        "jsbsim_version": io.JSBSIM_VERSION,
+        "jsbsim_model": airframe.jsbsim_model,
+        "airframe": airframe.name,
+        "aircraft": aircraft.id,
+        "fuel_kg": aircraft.fuel_kg,
+        "ballast_kg": aircraft.ballast_kg,
+        "ballast_position_body_m": [float(v) for v in aircraft.ballast_position_body_m],
+        "dt_s": dt_s,
+        "settle_s": SETTLE_S,
+        "wall_time_s": wall_s,
+        "n_segments": spec.n_segments,
+    }
+    out = []
+    n_seg = spec.n_segments
+    bounds = np.linspace(0, n - 1, n_seg + 1).round().astype(int)
+    for k in range(n_seg):
+        lo, hi = bounds[k], bounds[k + 1] + (1 if k == n_seg - 1 else 0)
+        meta = dict(meta_common, segment=k, segment_start_s=float(t_s[lo]))
+        out.append(io.to_truth(si[lo:hi], t_s[lo:hi] - t_s[lo], planet=env.planet, meta=meta))
+    return out
+
+
+def _advice(spec: ManeuverSpec) -> str:
+    if spec.kind in ("pitch_doublet", "3211", "roller_coaster", "pullup_rudder_doublets"):
+        return "lower delta_nz, or fly faster / higher"
+    if spec.kind == "pullup_pushover":
+        return "reduce nz_max or raise nz_min, or fly faster / higher"
+    if spec.kind == "windup_turn":
+        return "lower alpha_max_rad, or fly higher / at lower Mach"
+    if spec.kind == "shss":
+        return "reduce beta_rad"
+    return "reduce delta_mach or fly higher"

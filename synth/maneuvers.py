@@ -1,0 +1,648 @@
+"""Flight-test maneuvers: what to fly (:class:`ManeuverSpec`) and the pilot that flies it.
+
+The pilot is a Python controller per maneuver kind, acting on the f16's fly-by-wire inputs:
+``fcs/elevator-cmd-norm`` (a load-factor command; negative pulls), ``fcs/aileron-cmd-norm`` (a
+roll-rate command), ``fcs/rudder-cmd-norm`` (positive gives positive sideslip), throttle and
+speedbrake. Controllers see the SI state row of :class:`synth.jsbsim_io.SampleReader` and return
+the five inputs for the next step. Closed loops hold what a test pilot holds: heading with bank,
+altitude with load factor, Mach with throttle (and, in the wind-up turn, with bank-induced dive),
+sideslip with rudder. When a loop cannot hold its target, the controller raises
+:class:`ManeuverFailure`; :mod:`synth.flight` turns that into a ``FlightError`` naming the run.
+
+Kinds and what they excite (SPEC §7, paper §3):
+
+=========================  ==========================================================
+``pitch_doublet``          load-factor doublets every 10 s -> alpha, q
+``3211``                   3-2-1-1 load-factor multisteps -> alpha, q over a wide band
+``pullup_pushover``        pull to ``nz_max``, push to ``nz_min``, twice -> large alpha range
+``roller_coaster``         sinusoidal load factor -> repeated nz / alpha cycles
+``windup_turn``            alpha ramp to ``alpha_max_rad`` in a turn at constant Mach
+``shss``                   steady-heading sideslip, alternating +-``beta_rad`` per segment
+``pullup_rudder_doublets`` slow pull-ups / push-overs with rudder doublets -> alpha x beta
+``level_accel``            full power at constant altitude -> Mach sweep up
+``level_decel``            idle and speedbrake at constant altitude -> Mach sweep down
+=========================  ==========================================================
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+
+from synth.jsbsim_io import COL
+
+KINDS = (
+    "pitch_doublet",
+    "3211",
+    "pullup_pushover",
+    "roller_coaster",
+    "windup_turn",
+    "shss",
+    "pullup_rudder_doublets",
+    "level_accel",
+    "level_decel",
+)
+
+#: Requested Mach range (SPEC §7: subsonic, Mach 0.3-0.9).
+MACH_RANGE = (0.3, 0.9)
+#: Requested altitude range, m.
+ALTITUDE_RANGE_M = (300.0, 12000.0)
+
+_DEG = math.pi / 180.0
+
+#: Per-kind defaults of the optional fields; a field not listed for a kind does not apply to it.
+DEFAULTS: dict[str, dict[str, float]] = {
+    "pitch_doublet": {"duration_s": 30.0, "delta_nz": 1.0, "pulse_s": 1.0},
+    "3211": {"duration_s": 30.0, "delta_nz": 0.8, "pulse_s": 0.6},
+    "pullup_pushover": {"duration_s": 30.0, "nz_max": 2.5, "nz_min": 0.0, "pulse_s": 3.0},
+    "roller_coaster": {"duration_s": 36.0, "delta_nz": 1.0, "period_s": 6.0},
+    "windup_turn": {"duration_s": 40.0, "alpha_max_rad": 14.0 * _DEG},
+    "shss": {"duration_s": 105.0, "beta_rad": 4.5 * _DEG, "segment_s": 35.0},
+    "pullup_rudder_doublets": {
+        "duration_s": 30.0,
+        "delta_nz": 1.0,
+        "period_s": 12.0,
+        "rudder_norm": 0.8,
+        "pulse_s": 1.0,
+    },
+    "level_accel": {"duration_s": 35.0, "delta_mach": 0.12},
+    "level_decel": {"duration_s": 35.0, "delta_mach": 0.12},
+}
+
+_FIELD_HELP = {
+    "delta_nz": "load-factor amplitude of the stick inputs (dimensionless, e.g. 1.0)",
+    "pulse_s": "width of one stick/rudder pulse, s",
+    "nz_max": "load factor at the top of the pull-up",
+    "nz_min": "load factor at the bottom of the push-over",
+    "period_s": "period of the load-factor cycle, s",
+    "alpha_max_rad": "angle of attack at the end of the wind-up, rad",
+    "beta_rad": "sideslip magnitude held in each SHSS segment, rad",
+    "segment_s": "length of the pieces the SHSS run is split into, s (30-40)",
+    "rudder_norm": "rudder doublet amplitude, normalized command (0-1)",
+    "delta_mach": "Mach change to reach in the level acceleration/deceleration",
+}
+
+_OPTIONAL = tuple(_FIELD_HELP)
+
+
+class ManeuverFailure(RuntimeError):
+    """A controller could not fly its maneuver. ``advice`` says what to change."""
+
+    def __init__(self, what: str, t_s: float, advice: str) -> None:
+        super().__init__(what)
+        self.what = what
+        self.t_s = t_s
+        self.advice = advice
+
+
+@dataclass(frozen=True)
+class ManeuverSpec:
+    """What to fly.
+
+    Attributes
+    ----------
+    kind : one of :data:`KINDS`.
+    mach : trim Mach number, 0.3-0.9.
+    altitude_m : trim altitude above mean sea level, m.
+    gear_down : landing gear extended (approach / take-off configuration).
+    duration_s : recorded length, s; default per kind (30-40 s, SHSS 105 s split in segments).
+    heading_rad : initial true heading, rad.
+    delta_nz, pulse_s, nz_max, nz_min, period_s, alpha_max_rad, beta_rad, segment_s,
+    rudder_norm, delta_mach : excitation settings; ``None`` takes the kind's default in
+        :data:`DEFAULTS`; setting one that does not apply to the kind is an error.
+    """
+
+    kind: str
+    mach: float
+    altitude_m: float
+    gear_down: bool = False
+    duration_s: float | None = None
+    heading_rad: float = 0.0
+    delta_nz: float | None = None
+    pulse_s: float | None = None
+    nz_max: float | None = None
+    nz_min: float | None = None
+    period_s: float | None = None
+    alpha_max_rad: float | None = None
+    beta_rad: float | None = None
+    segment_s: float | None = None
+    rudder_norm: float | None = None
+    delta_mach: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"maneuver kind {self.kind!r} is unknown; choose one of {KINDS}")
+        where = f"{self.kind} maneuver"
+        if not (MACH_RANGE[0] <= self.mach <= MACH_RANGE[1]):
+            raise ValueError(
+                f"{where}: mach {self.mach} is outside {MACH_RANGE}; the testbed flies subsonic "
+                "maneuvers between Mach 0.3 and 0.9"
+            )
+        if not (ALTITUDE_RANGE_M[0] <= self.altitude_m <= ALTITUDE_RANGE_M[1]):
+            raise ValueError(
+                f"{where}: altitude_m {self.altitude_m} is outside {ALTITUDE_RANGE_M} m (metres, "
+                "not feet)"
+            )
+        if not math.isfinite(self.heading_rad) or abs(self.heading_rad) > 2 * math.pi:
+            raise ValueError(f"{where}: heading_rad must be within +-2 pi rad, got {self.heading_rad}")
+        defaults = DEFAULTS[self.kind]
+        for name in _OPTIONAL:
+            value = getattr(self, name)
+            if value is None:
+                if name in defaults:
+                    object.__setattr__(self, name, float(defaults[name]))
+            elif name not in defaults:
+                applies = [k for k, d in DEFAULTS.items() if name in d]
+                raise ValueError(
+                    f"{where}: {name} ({_FIELD_HELP[name]}) does not apply to {self.kind}; it "
+                    f"is used by {applies}. Remove it."
+                )
+            elif not math.isfinite(value):
+                raise ValueError(f"{where}: {name} must be finite, got {value}")
+        if self.duration_s is None:
+            object.__setattr__(self, "duration_s", float(defaults["duration_s"]))
+        self._check_ranges(where)
+
+    def _check_ranges(self, where: str) -> None:
+        def need(ok: bool, msg: str) -> None:
+            if not ok:
+                raise ValueError(f"{where}: {msg}")
+
+        d = self.duration_s
+        if self.kind == "shss":
+            need(25.0 <= self.segment_s <= 45.0, f"segment_s {self.segment_s} must be 25-45 s "
+                 "(the paper splits SHSS runs into 30-40 s pieces)")
+            need(self.segment_s <= d <= 300.0, f"duration_s {d} must be between segment_s and 300 s")
+            need(1.0 * _DEG <= self.beta_rad <= 8.0 * _DEG,
+                 f"beta_rad {self.beta_rad} must be 1-8 deg in radians (e.g. {4.5 * _DEG:.4f})")
+        else:
+            need(10.0 <= d <= 60.0, f"duration_s {d} must be 10-60 s; FPR needs maneuvers of "
+                 "30-40 s so the free initial conditions absorb the mean wind")
+        if self.delta_nz is not None:
+            need(0.05 <= self.delta_nz <= 4.0, f"delta_nz {self.delta_nz} must be 0.05-4")
+        if self.pulse_s is not None:
+            need(0.2 <= self.pulse_s <= 6.0, f"pulse_s {self.pulse_s} must be 0.2-6 s")
+        if self.period_s is not None:
+            need(2.0 <= self.period_s <= d / 2, f"period_s {self.period_s} must be 2 s to "
+                 "duration_s/2 so at least two cycles are flown")
+        if self.nz_max is not None:
+            need(1.2 <= self.nz_max <= 7.0, f"nz_max {self.nz_max} must be 1.2-7")
+            need(-1.0 <= self.nz_min <= 0.8, f"nz_min {self.nz_min} must be -1 to 0.8")
+        if self.alpha_max_rad is not None:
+            need(4.0 * _DEG <= self.alpha_max_rad <= 25.0 * _DEG,
+                 f"alpha_max_rad {self.alpha_max_rad} must be 4-25 deg in radians")
+        if self.rudder_norm is not None:
+            need(0.05 <= self.rudder_norm <= 1.0, f"rudder_norm {self.rudder_norm} must be 0.05-1")
+        if self.delta_mach is not None:
+            need(0.02 <= self.delta_mach <= 0.3, f"delta_mach {self.delta_mach} must be 0.02-0.3")
+            if self.kind == "level_accel":
+                need(self.mach + self.delta_mach <= MACH_RANGE[1] + 1e-9,
+                     f"mach + delta_mach = {self.mach + self.delta_mach:.2f} exceeds "
+                     f"{MACH_RANGE[1]}; start slower or reduce delta_mach")
+            else:
+                need(self.mach - self.delta_mach >= MACH_RANGE[0] - 1e-9,
+                     f"mach - delta_mach = {self.mach - self.delta_mach:.2f} is below "
+                     f"{MACH_RANGE[0]}; start faster or reduce delta_mach")
+
+    @property
+    def n_segments(self) -> int:
+        """Number of recorded pieces the run is split into (1 except for SHSS)."""
+        if self.kind != "shss":
+            return 1
+        return max(1, int(round(self.duration_s / self.segment_s)))
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ManeuverSpec:
+        """Build from a plain dict; ``*_deg`` keys are accepted and converted to ``*_rad``."""
+        if not isinstance(d, dict):
+            raise TypeError(f"maneuver must be a table/dict, got {type(d).__name__}")
+        d = dict(d)
+        for key in list(d):
+            if key.endswith("_deg"):
+                rad_key = key[: -len("_deg")] + "_rad"
+                if rad_key in d:
+                    raise ValueError(f"maneuver: give {key} or {rad_key}, not both")
+                d[rad_key] = math.radians(float(d.pop(key)))
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            hints = [
+                f"{k!r} (did you mean altitude_m? altitudes are metres)" if "alt" in k else repr(k)
+                for k in unknown
+            ]
+            raise ValueError(f"maneuver: unknown keys {', '.join(hints)}; known: {sorted(known)}")
+        for req in ("kind", "mach", "altitude_m"):
+            if req not in d:
+                raise ValueError(f"maneuver: missing {req!r} (kind one of {KINDS})")
+        return cls(**d)
+
+    def to_dict(self) -> dict:
+        """Plain dict with every field resolved (defaults filled, ``None`` fields dropped)."""
+        return {k: v for k, v in asdict(self).items() if v is not None}
+
+
+# --- controllers ----------------------------------------------------------------------------------
+
+_U, _V, _W = COL["u_mps"], COL["v_mps"], COL["w_mps"]
+_P, _Q, _R = COL["p_rps"], COL["q_rps"], COL["r_rps"]
+_PHI, _THETA, _PSI = COL["phi_rad"], COL["theta_rad"], COL["psi_rad"]
+_ALPHA, _BETA = COL["alpha_rad"], COL["beta_rad"]
+_MACH, _TAS, _H = COL["mach"], COL["tas_mps"], COL["h_m"]
+_FY, _FZ, _MASS, _G = COL["fy_n"], COL["fz_n"], COL["mass_kg"], COL["g_mps2"]
+
+
+def _wrap(angle_rad: float) -> float:
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    return lo if x < lo else hi if x > hi else x
+
+
+@dataclass
+class TrimPoint:
+    """The trimmed state a maneuver starts from (SI)."""
+
+    mach: float
+    altitude_m: float
+    heading_rad: float
+    alpha_rad: float
+    theta_rad: float
+    throttle_cmd_norm: float
+    tas_mps: float
+
+
+class Controller:
+    """Base pilot: wings-level heading hold, altitude hold, Mach hold helpers.
+
+    Subclasses implement :meth:`inputs` returning ``(elevator, aileron, rudder, throttle,
+    speedbrake)`` normalized commands. The elevator command is built from a load-factor increment
+    through the f16 FCS's steady-state law (stick = -(6.2 g / V - 0.02) * delta_nz), so amplitudes
+    are in load factor whatever the Mach number.
+    """
+
+    #: seconds of hands-off trimmed flight recorded before the first input
+    lead_in_s = 2.0
+
+    def __init__(self, spec: ManeuverSpec, trim: TrimPoint, dt_s: float) -> None:
+        self.spec = spec
+        self.trim = trim
+        self.dt_s = dt_s
+        self.h_cmd_m = trim.altitude_m
+        self.psi_cmd_rad = trim.heading_rad
+        self.mach_cmd = trim.mach
+        self._mach_int = 0.0
+        self.notes: dict = {}
+
+    # building blocks -----------------------------------------------------------------------------
+    @staticmethod
+    def nz(x: np.ndarray) -> float:
+        """Load factor along -z body (1 in level flight)."""
+        return -x[_FZ] / (x[_MASS] * x[_G])
+
+    @staticmethod
+    def hdot_mps(x: np.ndarray) -> float:
+        """Climb rate, m/s (from earth-relative body velocity and attitude)."""
+        sth, cth = math.sin(x[_THETA]), math.cos(x[_THETA])
+        return x[_U] * sth - (x[_V] * math.sin(x[_PHI]) + x[_W] * math.cos(x[_PHI])) * cth
+
+    @staticmethod
+    def stick(delta_nz: float, x: np.ndarray) -> float:
+        """Elevator command giving a load-factor increment ``delta_nz`` in steady state."""
+        g = x[_G]
+        return -(6.2 * g / max(x[_TAS], 50.0) - 0.02) * delta_nz
+
+    @staticmethod
+    def aileron_for_bank(phi_cmd_rad: float, x: np.ndarray, k_per_s: float = 2.0) -> float:
+        """Roll-rate command holding a bank angle (0.318 normalizes rad/s for the f16 FCS)."""
+        return _clip(0.31821 * k_per_s * _wrap(phi_cmd_rad - x[_PHI]), -0.6, 0.6)
+
+    def bank_for_heading(self, x: np.ndarray, limit_rad: float = 20 * _DEG) -> float:
+        return _clip(2.5 * _wrap(self.psi_cmd_rad - x[_PSI]), -limit_rad, limit_rad)
+
+    def dnz_for_altitude(self, x: np.ndarray) -> float:
+        """Load-factor increment holding ``h_cmd_m`` (omega_n ~0.3 rad/s, zeta ~0.8)."""
+        return _clip(0.01 * (self.h_cmd_m - x[_H]) - 0.05 * self.hdot_mps(x), -1.5, 1.5)
+
+    def throttle_for_mach(self, x: np.ndarray, lo: float = 0.0, hi: float = 1.0) -> float:
+        err = self.mach_cmd - x[_MACH]
+        thr = self.trim.throttle_cmd_norm + 8.0 * err + self._mach_int
+        # anti-windup: integrate only while the throttle is not saturated in the error's direction
+        if lo < thr < hi or (thr >= hi and err < 0) or (thr <= lo and err > 0):
+            self._mach_int += 1.5 * err * self.dt_s
+        return _clip(thr, lo, hi)
+
+    # interface -----------------------------------------------------------------------------------
+    def inputs(self, t_s: float, x: np.ndarray) -> tuple[float, float, float, float, float]:
+        raise NotImplementedError
+
+    def check(self, t_s: float, x: np.ndarray) -> None:
+        """Raise :class:`ManeuverFailure` when the maneuver's own target is lost (per step)."""
+
+    def finish(self, si: np.ndarray, t_s: np.ndarray) -> None:
+        """Check the whole recorded run; raise :class:`ManeuverFailure` if it missed its goal."""
+
+
+class _WingsLevel(Controller):
+    """Stick program in load factor, wings level (gentle heading hold), throttle at trim."""
+
+    def dnz(self, t_s: float) -> float:
+        raise NotImplementedError
+
+    def rudder(self, t_s: float) -> float:
+        return 0.0
+
+    def inputs(self, t_s, x):
+        phi_cmd = self.bank_for_heading(x, limit_rad=5 * _DEG)
+        return (
+            self.stick(self.dnz(t_s), x),
+            self.aileron_for_bank(phi_cmd, x),
+            self.rudder(t_s),
+            self.trim.throttle_cmd_norm,
+            0.0,
+        )
+
+
+def _pulse_train(t_s: float, starts: list[float], widths: list[float], signs: list[float]) -> float:
+    for t0 in starts:
+        tau = t_s - t0
+        if tau < 0:
+            continue
+        edge = 0.0
+        for w, s in zip(widths, signs, strict=True):
+            if tau < edge + w:
+                return s
+            edge += w
+    return 0.0
+
+
+class PitchDoublet(_WingsLevel):
+    """Load-factor doublets (+, -) of ``pulse_s`` each, every 10 s."""
+
+    def __init__(self, spec, trim, dt_s):
+        super().__init__(spec, trim, dt_s)
+        w = spec.pulse_s
+        self.starts = [t for t in np.arange(self.lead_in_s, spec.duration_s - 2 * w - 3.0, 10.0)]
+        self.widths, self.signs = [w, w], [1.0, -1.0]
+
+    def dnz(self, t_s):
+        return self.spec.delta_nz * _pulse_train(t_s, self.starts, self.widths, self.signs)
+
+
+class Multistep3211(PitchDoublet):
+    """3-2-1-1 load-factor multisteps (unit ``pulse_s``), every 12 s."""
+
+    def __init__(self, spec, trim, dt_s):
+        super().__init__(spec, trim, dt_s)
+        w = spec.pulse_s
+        self.widths, self.signs = [3 * w, 2 * w, w, w], [1.0, -1.0, 1.0, -1.0]
+        self.starts = [t for t in np.arange(self.lead_in_s, spec.duration_s - 7 * w - 3.0, 12.0)]
+
+
+class PullupPushover(_WingsLevel):
+    """Pull to ``nz_max`` for ``pulse_s``, push to ``nz_min`` long enough to level off, twice."""
+
+    def __init__(self, spec, trim, dt_s):
+        super().__init__(spec, trim, dt_s)
+        up = spec.nz_max - 1.0
+        down = 1.0 - spec.nz_min
+        push_s = spec.pulse_s * up / down  # return the flight path to where it started
+        self.widths, self.signs = [spec.pulse_s, push_s], [up, -down]
+        cycle = spec.pulse_s + push_s + 5.0
+        self.starts = [t for t in np.arange(self.lead_in_s, spec.duration_s - cycle + 4.0, cycle)]
+
+    def dnz(self, t_s):
+        return _pulse_train(t_s, self.starts, self.widths, self.signs)
+
+
+class RollerCoaster(_WingsLevel):
+    """Sinusoidal load factor 1 +- ``delta_nz`` with period ``period_s``."""
+
+    def dnz(self, t_s):
+        tau = t_s - self.lead_in_s
+        n_cycles = math.floor((self.spec.duration_s - self.lead_in_s - 1.0) / self.spec.period_s)
+        if tau < 0 or tau > n_cycles * self.spec.period_s:
+            return 0.0
+        return self.spec.delta_nz * math.sin(2 * math.pi * tau / self.spec.period_s)
+
+
+class PullupRudderDoublets(RollerCoaster):
+    """Slow load-factor cycles with a rudder doublet at every peak and trough."""
+
+    def rudder(self, t_s):
+        tau = t_s - self.lead_in_s
+        quarter = self.spec.period_s / 4.0
+        starts = [quarter * (2 * k + 1) - self.spec.pulse_s for k in range(64)]
+        w = self.spec.pulse_s
+        return self.spec.rudder_norm * _pulse_train(tau, starts, [w, w], [1.0, -1.0])
+
+
+class WindupTurn(Controller):
+    """Constant-Mach turn with alpha ramped to ``alpha_max_rad``.
+
+    Alpha follows its ramp through an integrating load-factor loop. Mach is held with throttle;
+    once the throttle is at its limit the bank angle steepens beyond that of a level turn, trading
+    altitude for speed, as a test pilot does.
+    """
+
+    nz_limit = 8.0
+    mach_tolerance = 0.05
+
+    def __init__(self, spec, trim, dt_s):
+        super().__init__(spec, trim, dt_s)
+        self.ramp_end_s = spec.duration_s - 3.0
+        self._dnz_int = 0.0
+        self._gamma_int = 0.0
+        self.alpha_peak_rad = -1.0
+
+    def alpha_cmd(self, t_s: float) -> float:
+        a0 = self.trim.alpha_rad
+        if t_s < self.lead_in_s:
+            return a0
+        f = min(1.0, (t_s - self.lead_in_s) / (self.ramp_end_s - self.lead_in_s))
+        return a0 + f * (self.spec.alpha_max_rad - a0)
+
+    def inputs(self, t_s, x):
+        nz = self.nz(x)
+        err_a = self.alpha_cmd(t_s) - x[_ALPHA]
+        if nz < self.nz_limit or err_a < 0:
+            self._dnz_int += 25.0 * err_a * self.dt_s
+        dnz = self._dnz_int + 4.0 * err_a
+        self.alpha_peak_rad = max(self.alpha_peak_rad, x[_ALPHA])
+        thr = self.throttle_for_mach(x)
+        err_m = self.mach_cmd - x[_MACH]
+        # once the throttle is at its stop, speed is held by descending: integrate a dive angle
+        if (thr >= 1.0 and err_m > 0) or self._gamma_int < 0:
+            self._gamma_int = _clip(self._gamma_int - 2.0 * err_m * self.dt_s, -40 * _DEG, 0.0)
+        gamma_cmd = self._gamma_int - 3.0 * max(err_m, 0.0)
+        gamma = math.asin(_clip(self.hdot_mps(x) / max(x[_TAS], 50.0), -1.0, 1.0))
+        if t_s < self.lead_in_s:
+            phi_cmd = 0.0
+        else:
+            # bank of a level turn at this load factor, steepened to fly the commanded path
+            phi_lvl = math.acos(_clip(1.0 / max(nz, 1.0), 0.0, 1.0))
+            phi_cmd = _clip(phi_lvl + 2.0 * (gamma - gamma_cmd), 0.0, 85 * _DEG)
+        return (self.stick(dnz, x), self.aileron_for_bank(phi_cmd, x), 0.0, thr, 0.0)
+
+    def check(self, t_s, x):
+        if t_s > self.lead_in_s and abs(x[_MACH] - self.mach_cmd) > self.mach_tolerance:
+            raise ManeuverFailure(
+                f"Mach drifted to {x[_MACH]:.3f}, more than {self.mach_tolerance} from "
+                f"{self.mach_cmd:.3f} (alpha {math.degrees(x[_ALPHA]):.1f} deg, nz "
+                f"{self.nz(x):.1f})",
+                t_s,
+                "lower alpha_max_rad, lengthen duration_s, or fly higher / at lower Mach",
+            )
+
+    def finish(self, si, t_s):
+        reached = float(np.max(si[:, _ALPHA]))
+        self.notes["alpha_peak_rad"] = reached
+        self.notes["nz_peak"] = float(np.max(-si[:, _FZ] / (si[:, _MASS] * si[:, _G])))
+        if reached < self.spec.alpha_max_rad - 1.0 * _DEG:
+            raise ManeuverFailure(
+                f"alpha reached only {math.degrees(reached):.1f} deg of the requested "
+                f"{math.degrees(self.spec.alpha_max_rad):.1f} deg (load factor limited to "
+                f"{self.nz_limit} g)",
+                float(t_s[-1]),
+                "lower alpha_max_rad, or fly at lower Mach / higher altitude where that alpha "
+                "needs less load factor",
+            )
+
+
+class SteadyHeadingSideslip(Controller):
+    """Sideslip held with rudder, heading with bank, altitude with elevator, Mach with throttle.
+
+    The run is split into ``n_segments`` pieces; the sideslip alternates sign per piece and moves
+    between signs at 1 deg/s at the start of each piece.
+    """
+
+    heading_tolerance_rad = 5.0 * _DEG
+    altitude_tolerance_m = 150.0
+    beta_rate_rps = 1.0 * _DEG
+
+    def __init__(self, spec, trim, dt_s):
+        super().__init__(spec, trim, dt_s)
+        self.seg_len_s = spec.duration_s / spec.n_segments
+        self._beta_cmd = 0.0
+        self._rud_int = 0.0
+        self._psi_int = 0.0
+
+    def beta_target(self, t_s: float) -> float:
+        if t_s < self.lead_in_s:
+            return 0.0
+        seg = min(int(t_s / self.seg_len_s), self.spec.n_segments - 1)
+        return self.spec.beta_rad * (1.0 if seg % 2 == 0 else -1.0)
+
+    def inputs(self, t_s, x):
+        step = self.beta_rate_rps * self.dt_s
+        self._beta_cmd += _clip(self.beta_target(t_s) - self._beta_cmd, -step, step)
+        err_b = self._beta_cmd - x[_BETA]
+        rud_raw = 10.0 * err_b + self._rud_int
+        if abs(rud_raw) < 1.0 or rud_raw * err_b < 0:
+            self._rud_int += 8.0 * err_b * self.dt_s
+        rudder = _clip(rud_raw, -1.0, 1.0)
+        # the side force of the sideslip is balanced by bank: g cos(theta) sin(phi) = -a_y
+        ay = x[_FY] / x[_MASS]
+        phi_ff = math.asin(_clip(-ay / (x[_G] * math.cos(x[_THETA])), -0.6, 0.6))
+        err_psi = _wrap(self.psi_cmd_rad - x[_PSI])
+        self._psi_int = _clip(self._psi_int + 0.3 * err_psi * self.dt_s, -10 * _DEG, 10 * _DEG)
+        sph, cph = math.sin(x[_PHI]), math.cos(x[_PHI])
+        psidot = (x[_Q] * sph + x[_R] * cph) / math.cos(x[_THETA])
+        # heading-rate damping: the rudder reversals between segments kick the heading
+        phi_cmd = phi_ff + _clip(3.0 * err_psi - 4.0 * psidot, -12 * _DEG, 12 * _DEG)
+        phi_cmd += self._psi_int
+        dnz = self.dnz_for_altitude(x) + (1.0 / math.cos(x[_PHI]) - 1.0)
+        return (self.stick(dnz, x), self.aileron_for_bank(phi_cmd, x), rudder,
+                self.throttle_for_mach(x), 0.0)
+
+    def check(self, t_s, x):
+        if abs(_wrap(x[_PSI] - self.psi_cmd_rad)) > self.heading_tolerance_rad:
+            raise ManeuverFailure(
+                f"heading drifted {math.degrees(_wrap(x[_PSI] - self.psi_cmd_rad)):.1f} deg "
+                f"(sideslip {math.degrees(x[_BETA]):.1f} deg)",
+                t_s, "reduce beta_rad")
+        if abs(x[_H] - self.h_cmd_m) > self.altitude_tolerance_m:
+            raise ManeuverFailure(
+                f"altitude drifted {x[_H] - self.h_cmd_m:+.0f} m", t_s, "reduce beta_rad")
+
+    def finish(self, si, t_s):
+        n = self.spec.n_segments
+        peaks = []
+        for i in range(n):
+            sl = (t_s >= i * self.seg_len_s) & (t_s < (i + 1) * self.seg_len_s)
+            peak = float(np.max(np.abs(si[sl, _BETA])))
+            peaks.append(peak)
+            if peak < self.spec.beta_rad - 0.5 * _DEG:
+                raise ManeuverFailure(
+                    f"segment {i} reached |beta| {math.degrees(peak):.2f} deg of the requested "
+                    f"{math.degrees(self.spec.beta_rad):.2f} deg (rudder authority)",
+                    float(i * self.seg_len_s),
+                    "reduce beta_rad; the f16's rudder gives about 5 deg of sideslip",
+                )
+        self.notes["beta_peak_rad_per_segment"] = peaks
+
+
+class LevelSpeedChange(Controller):
+    """Level acceleration (full power) or deceleration (idle + speedbrake) at constant altitude.
+
+    Once the target Mach (trim Mach +- ``delta_mach``) is reached the throttle holds it.
+    """
+
+    altitude_tolerance_m = 150.0
+
+    def __init__(self, spec, trim, dt_s):
+        super().__init__(spec, trim, dt_s)
+        self.sign = 1.0 if spec.kind == "level_accel" else -1.0
+        self.target_mach = trim.mach + self.sign * spec.delta_mach
+        self.reached = False
+
+    def inputs(self, t_s, x):
+        phi_cmd = self.bank_for_heading(x, limit_rad=5 * _DEG)
+        speedbrake = 0.0
+        if t_s < self.lead_in_s:
+            thr = self.trim.throttle_cmd_norm
+        elif not self.reached and self.sign * (self.target_mach - x[_MACH]) > 0:
+            thr = 1.0 if self.sign > 0 else 0.0
+            speedbrake = 0.0 if self.sign > 0 else 1.0
+        else:
+            if not self.reached:
+                self.reached = True
+                self.mach_cmd = self.target_mach
+                self._mach_int = (1.0 if self.sign > 0 else 0.0) - self.trim.throttle_cmd_norm
+            thr = self.throttle_for_mach(x)
+        dnz = self.dnz_for_altitude(x)
+        return (self.stick(dnz, x), self.aileron_for_bank(phi_cmd, x), 0.0, thr, speedbrake)
+
+    def check(self, t_s, x):
+        if abs(x[_H] - self.h_cmd_m) > self.altitude_tolerance_m:
+            raise ManeuverFailure(
+                f"altitude drifted {x[_H] - self.h_cmd_m:+.0f} m from {self.h_cmd_m:.0f} m",
+                t_s, "reduce delta_mach or fly at a Mach where the f16 has more excess power")
+
+    def finish(self, si, t_s):
+        dm = float(np.ptp(si[:, _MACH]))
+        self.notes["mach_change"] = dm
+        if dm < 0.75 * self.spec.delta_mach:
+            raise ManeuverFailure(
+                f"Mach changed by only {dm:.3f} of the requested {self.spec.delta_mach:.3f}",
+                float(t_s[-1]), "lengthen duration_s or reduce delta_mach")
+
+
+CONTROLLERS: dict[str, type[Controller]] = {
+    "pitch_doublet": PitchDoublet,
+    "3211": Multistep3211,
+    "pullup_pushover": PullupPushover,
+    "roller_coaster": RollerCoaster,
+    "windup_turn": WindupTurn,
+    "shss": SteadyHeadingSideslip,
+    "pullup_rudder_doublets": PullupRudderDoublets,
+    "level_accel": LevelSpeedChange,
+    "level_decel": LevelSpeedChange,
+}
+
+
+def make_controller(spec: ManeuverSpec, trim: TrimPoint, dt_s: float) -> Controller:
+    """The pilot for ``spec`` starting from ``trim`` with step ``dt_s``."""
+    return CONTROLLERS[spec.kind](spec, trim, dt_s)
