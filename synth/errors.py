@@ -1,0 +1,614 @@
+"""Injected instrumentation errors, as data.
+
+Every error the instrumentation half of ``synth`` injects is an explicit value here (not a
+distribution): biases, scale factors, noise standard deviations, quantization steps, delays,
+recorder rates and clock offsets, on/off switches for the local-flow truth, the airdata computer's
+baseline mismatch, the fleet's installation biases and the nose-probe high-AOA irregularity, and one
+seed per random source. Campaigns draw values; this module only holds and checks them.
+
+Units are SI and radians inside (SPEC §2). At the dict/TOML edge a key may instead carry an edge
+unit, converted here and nowhere else:
+
+========================  ===========================  ===========
+field suffix (SI)         accepted edge suffix          factor
+========================  ===========================  ===========
+``_rad``                  ``_deg``                     pi / 180
+``_rps``                  ``_deg_s``                   pi / 180
+``_rad_per_rad``          ``_deg_per_deg``             1
+``_s``                    ``_ms``                      1e-3
+========================  ===========================  ===========
+
+Dict / TOML form (``ErrorConfig.from_dict``; ``to_dict`` writes the SI form)::
+
+    preset = "typical"              # start from "none" (default) or "typical", then override
+    local_flow = true               # local-flow truth model on (off: sensors see free stream)
+    baseline_mismatch = true        # ADC tables from the nominal model (off: ADC inverts the truth)
+    installation_biases = true      # add the fleet's per-aircraft installation biases
+    nose_probe_irregularity = true  # deterministic irregular nose-probe error at high AOA
+
+    [imu]                           # IMU on the DRU: specific force and rates, body axes
+    accel_bias_mps2 = [0.1, -0.08, 0.15]
+    gyro_bias_deg_s = [0.2, -0.3, 0.15]
+    accel_noise_mps2 = 0.02         # std per axis
+    gyro_noise_deg_s = 0.01
+    accel_quant_mps2 = 0.005        # quantization step (0 = none)
+    gyro_quant_deg_s = 0.005
+    delay_ms = 0.0                  # extra lag of the IMU channels on the DRU
+
+    [ins]                           # INS Euler angles and NED velocities (INS recorder)
+    euler_bias_deg = [0.0, 0.0, 0.0]
+    euler_noise_deg = 0.03
+    velocity_bias_mps = [0.0, 0.0, 0.0]
+    velocity_noise_mps = 0.05
+
+    [airdata]                       # impact pressure, static pressure, total temperature (DRU)
+    qc_bias_pa = 0.0
+    qc_noise_pa = 15.0
+    ps_noise_pa = 10.0
+    tt_noise_k = 0.2
+
+    [dgps]
+    h_noise_m = 0.3
+
+    [sensors.vane_left]             # one table per flow-angle sensor (aircraft_models.ALL_SENSORS)
+    scale = 0.0                     # output = (1 + scale) * sensed
+    noise_deg = 0.07                # vanes: angle noise and quantization
+    quant_deg = 0.05
+    delay_ms = 30.0
+    [sensors.side_probe_left]
+    noise_pa = 20.0                 # probes: pressure noise and quantization
+    quant_pa = 1.0
+    [sensors.nose_probe]
+    high_alpha_noise_deg_per_deg = 0.02   # extra angle-noise std per unit AOA above the onset
+    high_alpha_onset_deg = 10.0
+
+    [recorders.dru]                 # dru, ins, dgps; rate_hz absent = ideal (on the common base)
+    rate_hz = 64.0
+    delay_ms = 20.0                 # latency: the value stamped t is the signal at t - delay
+    clock_offset_ms = 0.0           # the recorder's clock reads true time + offset
+
+    [channel_delays_ms]             # extra lag of single non-flow channels, by column name
+    phi_rad = 40.0
+
+    [seeds]                         # one integer per random source
+    imu_noise = 11
+
+``from_dict(d, seed=S)`` derives every seed not given in ``[seeds]`` from the master seed ``S``.
+Random draws for maneuver ``k`` use ``np.random.default_rng([seed_source, k, channel_index])``
+(see :func:`channel_rng`), so the same seeds give bit-identical data and maneuvers differ.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from aircraft_models import ALL_SENSORS
+
+Vec3 = tuple[float, float, float]
+_ZERO3: Vec3 = (0.0, 0.0, 0.0)
+
+#: Sensors whose output is an angle (noise and quantization in rad); the others are pressure probes.
+VANE_SENSORS = ("vane_left", "vane_right", "boom_alpha_vane", "boom_beta_upper_vane",
+                "boom_beta_lower_vane")
+PROBE_SENSORS = ("side_probe_left", "side_probe_right", "nose_probe")
+RECORDERS = ("dru", "ins", "dgps")
+
+#: Non-flow channels that may carry an extra per-channel delay (``channel_delays_s``), and the
+#: recorder each is on. Flow sensors take their delay from ``sensors.<name>.delay_s``.
+DIRECT_CHANNELS: Mapping[str, str] = MappingProxyType({
+    "ax_imu_mps2": "dru", "ay_imu_mps2": "dru", "az_imu_mps2": "dru",
+    "p_rps": "dru", "q_rps": "dru", "r_rps": "dru",
+    "qc_pa": "dru", "ps_pa": "dru", "tt_k": "dru", "gear_down": "dru",
+    "phi_rad": "ins", "theta_rad": "ins", "psi_rad": "ins",
+    "vn_mps": "ins", "ve_mps": "ins", "vd_mps": "ins",
+    "h_dgps_m": "dgps",
+})
+
+#: Random sources, each with its own seed.
+SEED_SOURCES = ("imu_noise", "vane_noise", "probe_noise", "nose_probe_irregularity", "ins_noise",
+                "airdata_noise", "dgps_noise")
+
+
+def _vec3(value: Any, where: str) -> Vec3:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{where}: expected three finite numbers [x, y, z], got {value!r}")
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+def _check_nonneg(obj: Any, where: str) -> None:
+    """Noise, quantization and rates must be finite and >= 0."""
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if isinstance(v, float) and not math.isfinite(v):
+            raise ValueError(f"{where}.{f.name} = {v!r} is not finite")
+        if any(k in f.name for k in ("noise", "quant")) and isinstance(v, float) and v < 0:
+            raise ValueError(f"{where}.{f.name} = {v} must be >= 0 (a standard deviation or step)")
+
+
+@dataclass(frozen=True)
+class ImuErrors:
+    """IMU errors (recorded on the DRU). Body axes x fwd / y right / z down.
+
+    Attributes
+    ----------
+    accel_bias_mps2 : (3,) accelerometer bias, m/s^2, added to the specific force at the IMU.
+    gyro_bias_rps : (3,) gyro bias, rad/s, added to p, q, r.
+    accel_noise_mps2, gyro_noise_rps : white-noise std per axis per recorded sample.
+    accel_quant_mps2, gyro_quant_rps : quantization step (0 = none).
+    delay_s : lag of every IMU channel on top of the DRU's latency, s.
+    """
+
+    accel_bias_mps2: Vec3 = _ZERO3
+    gyro_bias_rps: Vec3 = _ZERO3
+    accel_noise_mps2: float = 0.0
+    gyro_noise_rps: float = 0.0
+    accel_quant_mps2: float = 0.0
+    gyro_quant_rps: float = 0.0
+    delay_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "accel_bias_mps2", _vec3(self.accel_bias_mps2, "imu.accel_bias_mps2"))
+        object.__setattr__(self, "gyro_bias_rps", _vec3(self.gyro_bias_rps, "imu.gyro_bias_rps"))
+        _check_nonneg(self, "imu")
+
+
+@dataclass(frozen=True)
+class InsErrors:
+    """INS errors (INS recorder): Euler angles (phi, theta, psi) and NED inertial velocity.
+
+    Attributes
+    ----------
+    euler_bias_rad : (3,) bias of phi, theta, psi, rad.
+    euler_noise_rad : noise std of each Euler angle, rad.
+    velocity_bias_mps : (3,) bias of vn, ve, vd, m/s.
+    velocity_noise_mps : noise std of each velocity component, m/s.
+    """
+
+    euler_bias_rad: Vec3 = _ZERO3
+    euler_noise_rad: float = 0.0
+    velocity_bias_mps: Vec3 = _ZERO3
+    velocity_noise_mps: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "euler_bias_rad", _vec3(self.euler_bias_rad, "ins.euler_bias_rad"))
+        object.__setattr__(self, "velocity_bias_mps",
+                           _vec3(self.velocity_bias_mps, "ins.velocity_bias_mps"))
+        _check_nonneg(self, "ins")
+
+
+@dataclass(frozen=True)
+class AirdataErrors:
+    """Errors of the pressure and temperature transducers (DRU): qc = pt - ps, ps, total temp.
+
+    TAS, Mach and pressure altitude are computed from these measured values, so they inherit them.
+    """
+
+    qc_bias_pa: float = 0.0
+    qc_noise_pa: float = 0.0
+    qc_quant_pa: float = 0.0
+    ps_bias_pa: float = 0.0
+    ps_noise_pa: float = 0.0
+    ps_quant_pa: float = 0.0
+    tt_bias_k: float = 0.0
+    tt_noise_k: float = 0.0
+    delay_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check_nonneg(self, "airdata")
+
+
+@dataclass(frozen=True)
+class DgpsErrors:
+    """Post-processed DGPS geometric height errors (DGPS recorder)."""
+
+    h_bias_m: float = 0.0
+    h_noise_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check_nonneg(self, "dgps")
+
+
+@dataclass(frozen=True)
+class FlowSensorErrors:
+    """Transduction errors of one flow-angle sensor.
+
+    Vanes (``VANE_SENSORS``) use ``noise_rad``/``quant_rad``; pressure probes (``PROBE_SENSORS``)
+    use ``noise_pa``/``quant_pa`` on their differential pressure, so their angle noise grows as the
+    dynamic pressure falls. The nose probe alone has the high-AOA noise, whose angle std is
+    ``high_alpha_noise_rad_per_rad * max(0, alpha - high_alpha_onset_rad)`` (paper §4.2).
+
+    Attributes
+    ----------
+    scale : scale-factor error; a vane outputs (1 + scale) * sensed angle, a probe
+        (1 + scale) * differential pressure.
+    delay_s : lag of this sensor's raw channel on top of the DRU's latency, s.
+    """
+
+    scale: float = 0.0
+    noise_rad: float = 0.0
+    quant_rad: float = 0.0
+    noise_pa: float = 0.0
+    quant_pa: float = 0.0
+    high_alpha_noise_rad_per_rad: float = 0.0
+    high_alpha_onset_rad: float = 0.0
+    delay_s: float = 0.0
+
+    def check(self, sensor: str) -> None:
+        where = f"sensors.{sensor}"
+        _check_nonneg(self, where)
+        if sensor in VANE_SENSORS and (self.noise_pa or self.quant_pa):
+            raise ValueError(f"{where}: a vane has angle noise; use noise_deg/quant_deg, not _pa")
+        if sensor in PROBE_SENSORS and (self.noise_rad or self.quant_rad):
+            raise ValueError(f"{where}: a pressure probe has pressure noise; use noise_pa/quant_pa "
+                             "(the angle noise then follows from the dynamic pressure)")
+        if sensor != "nose_probe" and self.high_alpha_noise_rad_per_rad:
+            raise ValueError(f"{where}: high_alpha_noise applies to the nose probe only")
+        if self.high_alpha_noise_rad_per_rad < 0:
+            raise ValueError(f"{where}.high_alpha_noise_rad_per_rad must be >= 0")
+
+
+@dataclass(frozen=True)
+class RecorderErrors:
+    """One recorder (DRU, INS or DGPS).
+
+    Attributes
+    ----------
+    rate_hz : sample rate, Hz; ``None`` = an ideal recorder that samples exactly on the common
+        time base (so resampling is the identity).
+    delay_s : latency; the sample stamped t holds the signal at (t - clock_offset_s) - delay_s.
+    clock_offset_s : the recorder's clock reads true time + offset.
+    """
+
+    rate_hz: float | None = None
+    delay_s: float = 0.0
+    clock_offset_s: float = 0.0
+
+    def check(self, name: str) -> None:
+        if self.rate_hz is not None and not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise ValueError(f"recorders.{name}.rate_hz = {self.rate_hz!r} must be > 0 "
+                             "(or absent for an ideal recorder)")
+        for f in ("delay_s", "clock_offset_s"):
+            if not math.isfinite(getattr(self, f)):
+                raise ValueError(f"recorders.{name}.{f} must be finite")
+
+
+@dataclass(frozen=True)
+class Seeds:
+    """One seed per random source (see :data:`SEED_SOURCES`)."""
+
+    imu_noise: int = 101
+    vane_noise: int = 102
+    probe_noise: int = 103
+    nose_probe_irregularity: int = 104
+    ins_noise: int = 105
+    airdata_noise: int = 106
+    dgps_noise: int = 107
+
+    @classmethod
+    def from_master(cls, master: int) -> Seeds:
+        """Derive every source's seed from one master seed (stable, documented order)."""
+        state = np.random.SeedSequence(int(master)).generate_state(len(SEED_SOURCES))
+        return cls(**{s: int(v) for s, v in zip(SEED_SOURCES, state, strict=True)})
+
+
+def channel_rng(seed: int, maneuver_key: int, channel_index: int) -> np.random.Generator:
+    """The generator for one channel of one maneuver: ``default_rng([seed, key, channel])``."""
+    return np.random.default_rng([int(seed), int(maneuver_key), int(channel_index)])
+
+
+def _default_sensors() -> Mapping[str, FlowSensorErrors]:
+    return MappingProxyType({s: FlowSensorErrors() for s in ALL_SENSORS})
+
+
+def _default_recorders() -> Mapping[str, RecorderErrors]:
+    return MappingProxyType({r: RecorderErrors() for r in RECORDERS})
+
+
+@dataclass(frozen=True)
+class ErrorConfig:
+    """Every injected instrumentation error of a maneuver (SI, radians).
+
+    ``ErrorConfig()`` equals :meth:`none`. See the module docstring for the dict/TOML form.
+    """
+
+    local_flow: bool = False
+    baseline_mismatch: bool = False
+    installation_biases: bool = False
+    nose_probe_irregularity: bool = False
+    imu: ImuErrors = field(default_factory=ImuErrors)
+    ins: InsErrors = field(default_factory=InsErrors)
+    airdata: AirdataErrors = field(default_factory=AirdataErrors)
+    dgps: DgpsErrors = field(default_factory=DgpsErrors)
+    sensors: Mapping[str, FlowSensorErrors] = field(default_factory=_default_sensors)
+    recorders: Mapping[str, RecorderErrors] = field(default_factory=_default_recorders)
+    channel_delays_s: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
+    seeds: Seeds = field(default_factory=Seeds)
+
+    def __post_init__(self) -> None:
+        unknown = set(self.sensors) - set(ALL_SENSORS)
+        if unknown:
+            raise ValueError(f"sensors: unknown {sorted(unknown)}; valid: {list(ALL_SENSORS)}")
+        sensors = {s: self.sensors.get(s, FlowSensorErrors()) for s in ALL_SENSORS}
+        for s, e in sensors.items():
+            e.check(s)
+        object.__setattr__(self, "sensors", MappingProxyType(sensors))
+        unknown = set(self.recorders) - set(RECORDERS)
+        if unknown:
+            raise ValueError(f"recorders: unknown {sorted(unknown)}; valid: {list(RECORDERS)}")
+        recorders = {r: self.recorders.get(r, RecorderErrors()) for r in RECORDERS}
+        for r, e in recorders.items():
+            e.check(r)
+        object.__setattr__(self, "recorders", MappingProxyType(recorders))
+        unknown = set(self.channel_delays_s) - set(DIRECT_CHANNELS)
+        if unknown:
+            raise ValueError(
+                f"channel_delays: unknown channels {sorted(unknown)}; valid: {sorted(DIRECT_CHANNELS)}"
+                " (a flow sensor's delay is sensors.<name>.delay_s)")
+        delays = {k: float(v) for k, v in self.channel_delays_s.items()}
+        if not all(math.isfinite(v) for v in delays.values()):
+            raise ValueError(f"channel_delays: every delay must be finite, got {delays}")
+        object.__setattr__(self, "channel_delays_s", MappingProxyType(delays))
+
+    # ------------------------------------------------------------------ presets
+    @classmethod
+    def none(cls) -> ErrorConfig:
+        """Everything off, ideal recorders: each channel carries the truth at its sensor."""
+        return cls()
+
+    @classmethod
+    def typical(cls) -> ErrorConfig:
+        """SPEC §6 typical magnitudes, every switch on, DRU 64 Hz / INS 50 Hz / DGPS 10 Hz."""
+        d2r = math.pi / 180.0
+        vane = dict(noise_rad=0.07 * d2r, quant_rad=0.05 * d2r)
+        probe = dict(noise_pa=20.0, quant_pa=1.0)
+        sensors = {
+            "vane_left": FlowSensorErrors(delay_s=0.030, **vane),
+            "vane_right": FlowSensorErrors(delay_s=0.045, **vane),
+            "side_probe_left": FlowSensorErrors(delay_s=0.080, **probe),
+            "side_probe_right": FlowSensorErrors(delay_s=0.080, **probe),
+            "nose_probe": FlowSensorErrors(delay_s=0.060, high_alpha_noise_rad_per_rad=0.02,
+                                           high_alpha_onset_rad=10.0 * d2r, **probe),
+            "boom_alpha_vane": FlowSensorErrors(scale=0.01, delay_s=0.020, **vane),
+            "boom_beta_upper_vane": FlowSensorErrors(scale=-0.015, delay_s=0.020, **vane),
+            "boom_beta_lower_vane": FlowSensorErrors(scale=0.012, delay_s=0.020, **vane),
+        }
+        return cls(
+            local_flow=True,
+            baseline_mismatch=True,
+            installation_biases=True,
+            nose_probe_irregularity=True,
+            imu=ImuErrors(
+                accel_bias_mps2=(0.10, -0.08, 0.15),
+                gyro_bias_rps=(0.2 * d2r, -0.3 * d2r, 0.15 * d2r),
+                accel_noise_mps2=0.02,
+                gyro_noise_rps=0.01 * d2r,
+                accel_quant_mps2=0.005,
+                gyro_quant_rps=0.005 * d2r,
+            ),
+            ins=InsErrors(euler_noise_rad=0.03 * d2r, velocity_noise_mps=0.05),
+            airdata=AirdataErrors(qc_noise_pa=15.0, ps_noise_pa=10.0, tt_noise_k=0.2),
+            dgps=DgpsErrors(h_noise_m=0.3),
+            sensors=MappingProxyType(sensors),
+            recorders=MappingProxyType({
+                "dru": RecorderErrors(rate_hz=64.0, delay_s=0.020, clock_offset_s=0.0),
+                "ins": RecorderErrors(rate_hz=50.0, delay_s=0.0, clock_offset_s=0.030),
+                "dgps": RecorderErrors(rate_hz=10.0, delay_s=0.0, clock_offset_s=-0.050),
+            }),
+            channel_delays_s=MappingProxyType({"phi_rad": 0.010, "theta_rad": 0.010,
+                                               "psi_rad": 0.010}),
+        )
+
+    # ------------------------------------------------------------------ dict form
+    def to_dict(self) -> dict:
+        """Nested plain dict in SI key names (TOML/JSON-ready; ``rate_hz`` omitted when ideal)."""
+        out: dict[str, Any] = {
+            "local_flow": self.local_flow,
+            "baseline_mismatch": self.baseline_mismatch,
+            "installation_biases": self.installation_biases,
+            "nose_probe_irregularity": self.nose_probe_irregularity,
+        }
+        for group in ("imu", "ins", "airdata", "dgps", "seeds"):
+            out[group] = _plain(getattr(self, group))
+        out["sensors"] = {s: _plain(e) for s, e in self.sensors.items()}
+        out["recorders"] = {r: _plain(e) for r, e in self.recorders.items()}
+        out["channel_delays_s"] = dict(self.channel_delays_s)
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], *, seed: int | None = None) -> ErrorConfig:
+        """Build from the nested dict/TOML form (see the module docstring).
+
+        Parameters
+        ----------
+        d : mapping; ``preset`` ("none", the default, or "typical") is the starting point, every
+            other key overrides it. Edge units (``_deg``, ``_deg_s``, ``_ms``) are converted to SI.
+        seed : master seed; every source seed not given in ``d["seeds"]`` derives from it. Without
+            it, seeds not given keep the preset's.
+
+        Raises
+        ------
+        ValueError
+            On an unknown key (the message lists the valid ones) or a bad value.
+        """
+        d = dict(d)
+        preset = d.pop("preset", "none")
+        presets = {"none": cls.none, "typical": cls.typical}
+        if preset not in presets:
+            raise ValueError(f"errors.preset = {preset!r}; valid: {sorted(presets)}")
+        base = presets[preset]()
+        changes: dict[str, Any] = {}
+        switches = ("local_flow", "baseline_mismatch", "installation_biases",
+                    "nose_probe_irregularity")
+        groups = ("imu", "ins", "airdata", "dgps")
+        valid_top = sorted((*switches, *groups, "sensors", "recorders", "channel_delays_s",
+                            "channel_delays_ms", "seeds", "preset"))
+        unknown = set(d) - set(valid_top)
+        if unknown:
+            raise ValueError(f"errors: unknown keys {sorted(unknown)}; valid: {valid_top}")
+        for s in switches:
+            if s in d:
+                if not isinstance(d[s], bool):
+                    raise ValueError(f"errors.{s} must be true or false, got {d[s]!r}")
+                changes[s] = d[s]
+        for g in groups:
+            if g in d:
+                changes[g] = _update(getattr(base, g), d[g], f"errors.{g}")
+        if "sensors" in d:
+            sensors = dict(base.sensors)
+            for s, sd in _mapping(d["sensors"], "errors.sensors").items():
+                if s not in ALL_SENSORS:
+                    raise ValueError(f"errors.sensors.{s}: unknown sensor; valid: {list(ALL_SENSORS)}")
+                sensors[s] = _update(sensors[s], sd, f"errors.sensors.{s}")
+            changes["sensors"] = MappingProxyType(sensors)
+        if "recorders" in d:
+            recorders = dict(base.recorders)
+            for r, rd in _mapping(d["recorders"], "errors.recorders").items():
+                if r not in RECORDERS:
+                    raise ValueError(f"errors.recorders.{r}: unknown recorder; valid: {list(RECORDERS)}")
+                recorders[r] = _update(recorders[r], rd, f"errors.recorders.{r}")
+            changes["recorders"] = MappingProxyType(recorders)
+        if "channel_delays_s" in d and "channel_delays_ms" in d:
+            raise ValueError("errors: give channel_delays_s or channel_delays_ms, not both")
+        for key, factor in (("channel_delays_s", 1.0), ("channel_delays_ms", 1e-3)):
+            if key in d:
+                delays = dict(base.channel_delays_s)
+                delays.update({k: float(v) * factor
+                               for k, v in _mapping(d[key], f"errors.{key}").items()})
+                changes["channel_delays_s"] = MappingProxyType(delays)
+        seeds = Seeds.from_master(seed) if seed is not None else base.seeds
+        if "seeds" in d:
+            seeds = _update(seeds, d["seeds"], "errors.seeds")
+        changes["seeds"] = seeds
+        return dataclasses.replace(base, **changes)
+
+    # ------------------------------------------------------------------ one-at-a-time
+    def with_values(self, values: Mapping[str, Any]) -> ErrorConfig:
+        """Copy with some values replaced, by dotted SI path.
+
+        Example: ``cfg.with_values({"imu.accel_bias_mps2": (0.1, 0, 0),
+        "sensors.vane_left.delay_s": 0.05, "recorders.ins.clock_offset_s": 0.02})``.
+        """
+        nested: dict[str, Any] = {}
+        for path, value in values.items():
+            parts = path.split(".")
+            node = nested
+            for p in parts[:-1]:
+                node = node.setdefault(p, {})
+            node[parts[-1]] = list(value) if isinstance(value, tuple) else value
+        d = self.to_dict()
+        _deep_update(d, nested, "errors")
+        return ErrorConfig.from_dict(d)
+
+    @classmethod
+    def with_only(cls, path: str, value: Any = None) -> ErrorConfig:
+        """Every error off but one: ``path`` (dotted SI, as in :meth:`with_values`) set to
+        ``value``, or to its :meth:`typical` value when ``value`` is None. Recorders stay ideal
+        unless ``path`` names a recorder field. For tests of one error source at a time.
+        """
+        if value is None:
+            node: Any = cls.typical().to_dict()
+            for p in path.split("."):
+                if not isinstance(node, Mapping) or p not in node:
+                    raise ValueError(f"with_only: no typical value at {path!r}")
+                node = node[p]
+            value = node
+        return cls.none().with_values({path: value})
+
+    # ------------------------------------------------------------------ bookkeeping
+    def flat(self) -> dict[str, float | list]:
+        """Flat SI names as stored with the data: ``imu.accel_bias_mps2``,
+        ``vane_left.noise_rad``, ``dru.delay_s``, ``seeds.imu_noise``, switches as 0.0/1.0."""
+        d = self.to_dict()
+        out: dict[str, float | list] = {}
+        for k in ("local_flow", "baseline_mismatch", "installation_biases",
+                  "nose_probe_irregularity"):
+            out[k] = float(d[k])
+        for g in ("imu", "ins", "airdata", "dgps", "seeds"):
+            for k, v in d[g].items():
+                out[f"{g}.{k}"] = v
+        for s, sd in d["sensors"].items():
+            for k, v in sd.items():
+                out[f"{s}.{k}"] = v
+        for r, rd in d["recorders"].items():
+            for k, v in rd.items():
+                out[f"{r}.{k}"] = v
+        for k, v in d["channel_delays_s"].items():
+            out[f"channel_delay.{k}_s"] = v
+        return out
+
+
+# ---------------------------------------------------------------------- helpers
+def _plain(obj: Any) -> dict:
+    out = {}
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if v is None:
+            continue
+        out[f.name] = list(v) if isinstance(v, tuple) else v
+    return out
+
+
+def _mapping(value: Any, where: str) -> Mapping:
+    if not isinstance(value, Mapping):
+        raise ValueError(f"{where} must be a table/dict, got {type(value).__name__}")
+    return value
+
+
+def _edge_aliases(name: str) -> dict[str, float]:
+    """Accepted keys for SI field ``name`` and their factor to SI."""
+    out = {name: 1.0}
+    if name.endswith("_rad_per_rad"):
+        out[name[: -len("_rad_per_rad")] + "_deg_per_deg"] = 1.0
+    elif name.endswith("_rad"):
+        out[name[:-4] + "_deg"] = math.pi / 180.0
+    elif name.endswith("_rps"):
+        out[name[:-4] + "_deg_s"] = math.pi / 180.0
+    elif name.endswith("_s"):
+        out[name[:-2] + "_ms"] = 1e-3
+    return out
+
+
+def _update(obj: Any, d: Any, where: str) -> Any:
+    """``dataclasses.replace(obj, ...)`` from a dict whose keys may carry edge units."""
+    d = _mapping(d, where)
+    alias: dict[str, tuple[str, float]] = {}
+    for f in fields(obj):
+        for key, factor in _edge_aliases(f.name).items():
+            alias[key] = (f.name, factor)
+    changes: dict[str, Any] = {}
+    for key, value in d.items():
+        if key not in alias:
+            raise ValueError(f"{where}: unknown key {key!r}; valid: {sorted(alias)}")
+        name, factor = alias[key]
+        if name in changes:
+            raise ValueError(f"{where}: {name} given twice (as {key!r} and another unit)")
+        if isinstance(value, bool) or value is None:
+            raise ValueError(f"{where}.{key}: expected a number, got {value!r}")
+        try:
+            if isinstance(value, (list, tuple)):
+                changes[name] = tuple(float(x) * factor for x in value)
+            elif isinstance(getattr(obj, name), int) and not isinstance(getattr(obj, name), bool):
+                if isinstance(value, float) and not value.is_integer():
+                    raise ValueError("an integer is required")
+                changes[name] = int(value)
+            else:
+                changes[name] = float(value) * factor
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{where}.{key}: bad value {value!r} ({exc})") from None
+    return dataclasses.replace(obj, **changes)
+
+
+def _deep_update(base: dict, new: Mapping, where: str) -> None:
+    for k, v in new.items():
+        if isinstance(v, Mapping) and isinstance(base.get(k), dict):
+            _deep_update(base[k], v, f"{where}.{k}")
+        else:
+            base[k] = v

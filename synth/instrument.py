@@ -1,0 +1,543 @@
+"""Instrumentation: what the aircraft's sensors and recorders record of a true flight history.
+
+Pipeline (SPEC §6, paper Eq. 2 and §3), for one maneuver
+--------------------------------------------------------
+1. Flow at each sensor from the exact rigid-body air velocity ``V + omega x (r_s - r_cg)``
+   (:mod:`synth.local_flow`), its free-stream alpha, beta, flank.
+2. Local-flow truth per sensor type (upwash, sidewash, gear, nose-probe irregularity) and the
+   installation bias of the aircraft: the angle each sensor physically senses, at the truth rate.
+3. Recorders (:mod:`synth.recorders`): each channel sampled at its recorder's stamps, lagged by
+   the recorder's latency and clock offset plus the channel's delay, interpolated from the truth.
+4. Transduction (:mod:`synth.sensors`): vanes output the angle (scale, noise, quantization);
+   probes output Pa1 - Pa2 / Pb1 - Pb2 by the hemispherical-head law with pressure noise;
+   IMU, INS, pressures, temperature and DGPS height with their biases and noise.
+5. The airdata computer (:mod:`synth.airdata_computer`), on the DRU's samples: Mach, TAS and
+   pressure altitude from the measured pressures; the baseline corrections f_v, f_sp, f_np.
+6. Preprocessing: every recorder's stream resampled by its own stamps onto one common time base
+   (the overlap of all streams), with the truth interpolated beside it at true time.
+
+Use :func:`instrument`; :func:`channel_response` evaluates the noise-free calibration relationship
+(what the estimator's tables f1..f5 should find).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from aircraft_models import ALL_SENSORS, Airframe, Configuration
+from synth.airdata_computer import (
+    AirdataComputer,
+    build_airdata_computer,
+    impact_pressure_pa,
+    mach_from_pressures,
+    pressure_altitude_m,
+    tas_from_mach_mps,
+    total_temperature_k,
+)
+from synth.errors import PROBE_SENSORS, RECORDERS, ErrorConfig, channel_rng
+from synth.local_flow import (
+    LocalFlowModel,
+    TableGrid,
+    air_velocity_at_sensor_body_mps,
+    flow_angles_rad,
+    irregularity_rad,
+    load_adc_baseline,
+    load_local_flow_truth,
+)
+from synth.recorders import (
+    allowed_stamp_interval_s,
+    grid_in_interval_s,
+    resample_hold,
+    resample_linear,
+    sample_at,
+)
+from synth.sensors import imu_specific_force_body_mps2, ned_velocity_mps, transduce
+from synth.truth import TruthTrajectory
+
+#: The raw channel each flow sensor records (vanes: angle, probes: differential pressure).
+SENSOR_RAW_CHANNEL: Mapping[str, str] = {
+    "vane_left": "alpha_lm_rad",
+    "vane_right": "alpha_rm_rad",
+    "side_probe_left": "dp_alpha_lsp_pa",
+    "side_probe_right": "dp_alpha_rsp_pa",
+    "nose_probe": "dp_beta_np_pa",
+    "boom_alpha_vane": "alpha_zb_rad",
+    "boom_beta_upper_vane": "beta_zbu_rad",
+    "boom_beta_lower_vane": "beta_zbl_rad",
+}
+
+#: Each calibrated channel and the truth column it estimates (the true flow angle at its sensor).
+CHANNEL_TRUTH: Mapping[str, str] = {
+    "alpha_zl_rad": "true_alpha_vane_left_rad",
+    "alpha_zr_rad": "true_alpha_vane_right_rad",
+    "alpha_zsp_rad": "true_alpha_sp_rad",
+    "beta_zsp_rad": "true_beta_sp_rad",
+    "beta_znp_rad": "true_beta_nose_probe_rad",
+    "alpha_zb_rad": "true_alpha_boom_alpha_vane_rad",
+    "beta_zbu_rad": "true_flank_boom_beta_upper_vane_rad",
+    "beta_zbl_rad": "true_flank_boom_beta_lower_vane_rad",
+}
+
+_IMU_COLUMNS = ("ax_imu_mps2", "ay_imu_mps2", "az_imu_mps2", "p_rps", "q_rps", "r_rps")
+_AIRDATA_COLUMNS = ("qc_pa", "ps_pa", "tt_k")
+_INS_COLUMNS = ("phi_rad", "theta_rad", "psi_rad", "vn_mps", "ve_mps", "vd_mps")
+#: Stable index of every random channel (part of its generator's seed): never reorder, only append.
+_RNG_INDEX = {name: i for i, name in enumerate(
+    (*_IMU_COLUMNS, *_AIRDATA_COLUMNS, *_INS_COLUMNS, "h_dgps_m", *ALL_SENSORS,
+     "nose_probe_high_alpha"))}
+
+
+@dataclass(frozen=True)
+class InstrumentedManeuver:
+    """What the recorders captured of one maneuver, preprocessed, with the truth beside it.
+
+    Attributes
+    ----------
+    data : one row per common-time-base sample: ``t_s``, measured channels, raw sensor outputs
+        and ``true_*`` columns (see :func:`instrument`).
+    injected : every injected value, SI, flat names (``imu.accel_bias_mps2``,
+        ``vane_left.installation_bias_rad``, ``dru.delay_s``, ``seeds.imu_noise``,
+        ``time_shift_s.<column>`` = total lag of a measured column against the truth, ...).
+    channel_units : column -> unit.
+    streams : recorder -> its raw stream (``t_s`` = its stamps) before resampling.
+    """
+
+    data: pd.DataFrame
+    injected: dict[str, float | list]
+    channel_units: dict[str, str]
+    streams: dict[str, pd.DataFrame] = field(default_factory=dict)
+
+
+# ------------------------------------------------------------------ sensing kernels (shared)
+
+
+def _side_sign(airframe: Airframe, sensor: str) -> float:
+    y = float(airframe.position(sensor)[1])
+    if y == 0.0:
+        raise ValueError(f"airframe {airframe.name!r}: {sensor} sits at y = 0; a fuselage-side "
+                         "sensor needs its side (y < 0 left, y > 0 right) in positions_body_m")
+    return math.copysign(1.0, y)
+
+
+def _sensed_local_rad(sensor: str, model: LocalFlowModel, side_sign: float, alpha_rad, beta_rad,
+                      flank_rad, mach, gear) -> dict[str, np.ndarray]:
+    """The local angle(s) a sensor senses for the free-stream angles at its position.
+
+    Returns ``{"sensed": ...}`` plus the intermediate local angles for the truth columns.
+    """
+    if sensor in ("vane_left", "vane_right"):
+        loc = model.vane_local_alpha_rad(alpha_rad, beta_rad, mach, gear, side_sign)
+        return {"sensed": loc, "local_alpha": loc}
+    if sensor in ("side_probe_left", "side_probe_right"):
+        a_loc, b_loc = model.side_probe_local_rad(alpha_rad, beta_rad, mach, gear)
+        theta = model.side_probe_port_angle_rad(a_loc, b_loc, side_sign)
+        return {"sensed": theta, "local_alpha": a_loc, "local_beta": b_loc, "port_angle": theta}
+    if sensor == "nose_probe":
+        loc = model.nose_probe_local_flank_rad(alpha_rad, beta_rad, flank_rad, mach, None)
+        return {"sensed": loc, "local_flank": loc}
+    if sensor == "boom_alpha_vane":
+        loc = model.boom_local_alpha_rad(alpha_rad, mach)
+        return {"sensed": loc, "local_alpha": loc}
+    loc = model.boom_local_flank_rad(sensor, alpha_rad, flank_rad, mach)
+    return {"sensed": loc, "local_flank": loc}
+
+
+def _models(errors: ErrorConfig, truth_model: LocalFlowModel | None,
+            adc_baseline: tuple[LocalFlowModel, TableGrid] | None
+            ) -> tuple[LocalFlowModel, LocalFlowModel, AirdataComputer]:
+    """(truth model, model the sensors see, airdata computer) for the error switches."""
+    truth_model = truth_model or load_local_flow_truth()
+    nominal, grid = adc_baseline or load_adc_baseline()
+    sensing = truth_model if errors.local_flow else truth_model.without_local_flow()
+    adc = build_airdata_computer(nominal if errors.baseline_mismatch else sensing, grid)
+    return truth_model, sensing, adc
+
+
+def channel_response(
+    channel: str,
+    alpha_rad: np.ndarray,
+    beta_rad: np.ndarray,
+    mach: np.ndarray,
+    gear_down: float | np.ndarray = 0.0,
+    *,
+    local_flow: bool = True,
+    baseline_mismatch: bool = True,
+    truth_model: LocalFlowModel | None = None,
+    adc_baseline: tuple[LocalFlowModel, TableGrid] | None = None,
+) -> np.ndarray:
+    """The noise-free calibration relationship of one ADC output channel.
+
+    Every flow sensor is taken ideal (no installation bias, scale, noise, quantization, delay)
+    and to see the same free-stream ``alpha_rad``, ``beta_rad`` at its position (no rotation);
+    the value returned is what the ADC outputs on that channel (with its tables, so including
+    interpolation error). The nose-probe irregularity is excluded (it is not a function an
+    estimator can find). This is the "true table" the estimator should recover; e.g. at Mach M
+    the paper's ``f1(alpha) = channel_response("alpha_zl_rad", alpha, 0, M)`` and
+    ``f2(alpha) ~ d channel_response("alpha_zl_rad", alpha, beta, M) / d beta`` (opposite signs
+    left and right: the vane sidewash coupling is antisymmetric).
+
+    Parameters
+    ----------
+    channel : one of :data:`CHANNEL_TRUTH`'s keys (``alpha_zl_rad``, ..., ``beta_zbl_rad``).
+    alpha_rad, beta_rad : free-stream angle of attack and aerodynamic sideslip at the sensor, rad.
+    mach : free-stream Mach number (also taken as the ADC's measured Mach).
+    gear_down : gear position 0..1 for the truth; the ADC's flag is ``gear_down >= 0.5``.
+    local_flow, baseline_mismatch : the :class:`~synth.errors.ErrorConfig` switches.
+
+    Returns
+    -------
+    The channel's value, rad (beta channels of the boom: the flank-angle measurement).
+    """
+    if channel not in CHANNEL_TRUTH:
+        raise ValueError(f"channel_response: unknown channel {channel!r}; valid: {list(CHANNEL_TRUTH)}")
+    switches = ErrorConfig(local_flow=local_flow, baseline_mismatch=baseline_mismatch)
+    _, sensing, adc = _models(switches, truth_model, adc_baseline)
+    alpha, beta, mach, gear = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in
+                                                    (alpha_rad, beta_rad, mach, gear_down)))
+    flank = np.arctan2(np.sin(beta), np.cos(beta) * np.cos(alpha))
+    flag = (gear >= 0.5).astype(float)
+
+    def sensed(sensor: str, sign: float = 1.0) -> np.ndarray:
+        return _sensed_local_rad(sensor, sensing, sign, alpha, beta, flank, mach, gear)["sensed"]
+
+    def vane(sign: float) -> np.ndarray:
+        return adc.f_v(sensed("vane_left" if sign < 0 else "vane_right", sign), mach, flag)
+
+    if channel in ("alpha_zl_rad", "alpha_zr_rad"):
+        return vane(-1.0 if channel == "alpha_zl_rad" else 1.0)
+    if channel in ("alpha_zsp_rad", "beta_zsp_rad"):
+        law = sensing.side_probe_pressure
+        lsp, rsp = (adc.side_probe_angle_rad(law.dp_pa(sensed(s, sg), 1.0, mach), 1.0, mach)
+                    for s, sg in (("side_probe_left", -1.0), ("side_probe_right", 1.0)))
+        a, b = adc.f_sp(lsp, rsp, mach, flag)
+        return a if channel == "alpha_zsp_rad" else b
+    if channel == "beta_znp_rad":
+        dp = sensing.nose_probe_pressure.dp_pa(sensed("nose_probe"), 1.0, mach)
+        return adc.f_np(adc.nose_probe_flank_rad(dp, 1.0, mach), vane(-1.0), vane(1.0), mach)
+    sensor = {"alpha_zb_rad": "boom_alpha_vane", "beta_zbu_rad": "boom_beta_upper_vane",
+              "beta_zbl_rad": "boom_beta_lower_vane"}[channel]
+    return sensed(sensor)
+
+
+# ------------------------------------------------------------------ instrument
+
+
+def _check_truth(truth: TruthTrajectory, common_rate_hz: float) -> None:
+    t = truth.t_s
+    if truth.n_samples < 2 or np.any(np.diff(t) <= 0):
+        raise ValueError("instrument: truth.t_s needs >= 2 strictly increasing samples")
+    if not (math.isfinite(common_rate_hz) and common_rate_hz > 0):
+        raise ValueError(f"instrument: common_rate_hz = {common_rate_hz!r} must be > 0")
+    bad = np.flatnonzero(~(truth.mach < 1.0))
+    if bad.size:
+        raise ValueError(f"instrument: truth.mach = {truth.mach[bad[0]]:.3f} at t = {t[bad[0]]:.3f} s;"
+                         " the airdata and local-flow models are subsonic (Mach < 1)")
+
+
+def _units(column: str) -> str:
+    if column in ("t_s",) or column.startswith("time_shift"):
+        return "s"
+    if column in ("mach", "true_mach", "true_gear_pos_norm"):
+        return "1"
+    if column == "gear_down":
+        return "bool"
+    for suffix, unit in (("_rps2", "rad/s^2"), ("_rps", "rad/s"), ("_rad", "rad"),
+                         ("_mps2", "m/s^2"), ("_mps", "m/s"), ("_kgpm3", "kg/m^3"), ("_kg", "kg"),
+                         ("_pa", "Pa"), ("_k", "K"), ("_m", "m")):
+        if column.endswith(suffix):
+            return unit
+    raise AssertionError(f"no unit for column {column!r}")  # every column name carries its unit
+
+
+def instrument(
+    truth: TruthTrajectory,
+    airframe: Airframe,
+    configuration: Configuration,
+    errors: ErrorConfig,
+    *,
+    maneuver_key: int = 0,
+    common_rate_hz: float = 40.0,
+    truth_model: LocalFlowModel | None = None,
+    adc_baseline: tuple[LocalFlowModel, TableGrid] | None = None,
+) -> InstrumentedManeuver:
+    """Record a true flight history as the aircraft's sensors and recorders would, preprocessed.
+
+    Parameters
+    ----------
+    truth : the flown maneuver at the simulation rate (SI, body axes, origin at the reference point).
+    airframe : sensor, IMU and INS positions.
+    configuration : which sensors are fitted and the aircraft's installation biases.
+    errors : every injected error (:class:`~synth.errors.ErrorConfig`).
+    maneuver_key : index of the maneuver in its campaign; every random draw of channel ``c`` uses
+        ``default_rng([seed_source, maneuver_key, c])``.
+    common_rate_hz : rate of the common time base, Hz.
+    truth_model, adc_baseline : override the shipped local-flow truth / ADC baseline models.
+
+    Returns
+    -------
+    InstrumentedManeuver
+        ``data`` columns: ``t_s``; measured ``ax_imu_mps2 ay_imu_mps2 az_imu_mps2 p_rps q_rps
+        r_rps phi_rad theta_rad psi_rad vn_mps ve_mps vd_mps tas_mps h_baro_m mach h_dgps_m
+        gear_down`` and the calibrated flow channels present (``alpha_zl_rad alpha_zr_rad
+        alpha_zsp_rad beta_zsp_rad`` + ``beta_znp_rad`` or ``alpha_zb_rad beta_zbu_rad
+        beta_zbl_rad``); raw ``alpha_lm_rad alpha_rm_rad dp_alpha_lsp_pa dp_alpha_rsp_pa
+        alpha_lsp_rad alpha_rsp_rad [dp_beta_np_pa flank_np_rad] qc_pa ps_pa tt_k``; and the
+        ``true_*`` columns (CG state, winds, Euler angles, forces, CG position, atmosphere, and
+        per sensor ``true_{alpha,beta,flank}_<sensor>_rad`` and ``true_local_*_<sensor>_rad``;
+        ``true_alpha_sp_rad``/``true_beta_sp_rad`` at the side probes' mean position).
+        ``psi`` is continuous (unwrapped) within the maneuver.
+    """
+    _check_truth(truth, common_rate_hz)
+    truth_model, sensing, adc = _models(errors, truth_model, adc_baseline)
+    sensors = configuration.sensors
+    aircraft = configuration.aircraft
+    t = truth.t_s
+    r_cg = truth.r_cg_body_m
+    mach = truth.mach
+    gear = truth.gear_pos_norm
+    qc_true = impact_pressure_pa(mach, truth.p_static_pa)
+    tt_true = total_temperature_k(truth.t_static_k, mach)
+    euler = truth.euler_rad.copy()
+    euler[:, 2] = np.unwrap(euler[:, 2])
+    seeds = errors.seeds
+
+    # ---- truth-rate signals: flow at each sensor, what it senses ------------------------------
+    truth_cols: dict[str, np.ndarray] = {}
+    sensed: dict[str, np.ndarray] = {}
+    free: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    bias_rad: dict[str, float] = {}
+    for s in sensors:
+        v_s = air_velocity_at_sensor_body_mps(truth.v_air_body_mps, truth.omega_body_rps,
+                                              airframe.position(s), r_cg)
+        reverse = np.flatnonzero(v_s[:, 0] <= 0.0)
+        if reverse.size:
+            raise ValueError(f"instrument: the flow at {s} comes from behind (u = "
+                             f"{v_s[reverse[0], 0]:.2f} m/s) at t = {t[reverse[0]]:.3f} s")
+        a, b, f = flow_angles_rad(v_s)
+        free[s] = (a, b, f)
+        sign = _side_sign(airframe, s) if s in ("vane_left", "vane_right", "side_probe_left",
+                                                  "side_probe_right") else 1.0
+        loc = _sensed_local_rad(s, sensing, sign, a, b, f, mach, gear)
+        if s == "nose_probe" and errors.nose_probe_irregularity:
+            irr = irregularity_rad(a, b, truth_model.nose_probe_irregularity,
+                                   seeds.nose_probe_irregularity)
+            loc = {"sensed": loc["sensed"] + irr, "local_flank": loc["local_flank"] + irr}
+        bias_rad[s] = float(aircraft.installation_bias_rad[s]) if errors.installation_biases else 0.0
+        sensed[s] = loc.pop("sensed") + bias_rad[s]
+        truth_cols[f"true_alpha_{s}_rad"] = a
+        truth_cols[f"true_beta_{s}_rad"] = b
+        truth_cols[f"true_flank_{s}_rad"] = f
+        for k, v in loc.items():
+            truth_cols[f"true_{k}_{s}_rad"] = v
+    r_sp = 0.5 * (airframe.position("side_probe_left") + airframe.position("side_probe_right"))
+    a_sp, b_sp, _ = flow_angles_rad(air_velocity_at_sensor_body_mps(
+        truth.v_air_body_mps, truth.omega_body_rps, r_sp, r_cg))
+    r_imu_cg = airframe.position("imu") - r_cg
+    f_imu = imu_specific_force_body_mps2(truth.specific_force_cg_body_mps2, truth.omega_body_rps,
+                                         truth.omega_dot_body_rps2, r_imu_cg)
+    v_ned = ned_velocity_mps(truth.v_body_mps, euler)
+    direct = {  # continuous signal behind each non-flow raw channel
+        "ax_imu_mps2": f_imu[:, 0], "ay_imu_mps2": f_imu[:, 1], "az_imu_mps2": f_imu[:, 2],
+        "p_rps": truth.omega_body_rps[:, 0], "q_rps": truth.omega_body_rps[:, 1],
+        "r_rps": truth.omega_body_rps[:, 2],
+        "qc_pa": qc_true, "ps_pa": truth.p_static_pa, "tt_k": tt_true, "gear_down": gear,
+        "phi_rad": euler[:, 0], "theta_rad": euler[:, 1], "psi_rad": euler[:, 2],
+        "vn_mps": v_ned[:, 0], "ve_mps": v_ned[:, 1], "vd_mps": v_ned[:, 2],
+        "h_dgps_m": truth.h_m,
+    }
+
+    # ---- recorder plan: each raw channel's recorder and lag -------------------------------------
+    rec = errors.recorders
+    chd = errors.channel_delays_s
+    group_delay = {**{c: errors.imu.delay_s for c in _IMU_COLUMNS},
+                   **{c: errors.airdata.delay_s for c in _AIRDATA_COLUMNS}}
+    plan: dict[str, dict[str, float]] = {r: {} for r in RECORDERS}
+    for c in direct:
+        r = "dru" if c in (*_IMU_COLUMNS, *_AIRDATA_COLUMNS, "gear_down") else (
+            "ins" if c in _INS_COLUMNS else "dgps")
+        plan[r][c] = rec[r].delay_s + group_delay.get(c, 0.0) + chd.get(c, 0.0)
+    for s in sensors:
+        plan["dru"][s] = rec["dru"].delay_s + errors.sensors[s].delay_s
+    t0, t1 = float(t[0]), float(t[-1])
+    intervals = {}
+    for r in RECORDERS:
+        lo, hi = allowed_stamp_interval_s(t0, t1, rec[r].clock_offset_s, list(plan[r].values()))
+        if rec[r].rate_hz is not None:
+            stamps = grid_in_interval_s(lo, hi, rec[r].rate_hz)
+            if len(stamps) < 2:
+                raise ValueError(f"instrument: recorder {r} at {rec[r].rate_hz} Hz records fewer "
+                                 f"than 2 samples of this {t1 - t0:.2f} s maneuver with lags up to "
+                                 f"{max(plan[r].values()):.3f} s; lower its delays or fly longer")
+            intervals[r] = (stamps, float(stamps[0]), float(stamps[-1]))
+        else:
+            intervals[r] = (None, lo, hi)
+    lo = max(v[1] for v in intervals.values())
+    hi = min(v[2] for v in intervals.values())
+    t_common = grid_in_interval_s(lo, hi, common_rate_hz)
+    if len(t_common) < 2:
+        raise ValueError(f"instrument: the recorders' streams overlap on [{lo:.3f}, {hi:.3f}] s only; "
+                         "reduce delays/clock offsets or fly a longer maneuver")
+    stamps = {r: (v[0] if v[0] is not None else t_common) for r, v in intervals.items()}
+
+    def at(r: str, channel: str, signal: np.ndarray) -> np.ndarray:
+        return sample_at(t, signal, stamps[r] - rec[r].clock_offset_s - plan[r][channel])
+
+    def rng(seed: int, name: str) -> np.random.Generator:
+        return channel_rng(seed, maneuver_key, _RNG_INDEX[name])
+
+    # ---- DRU: IMU, airdata, gear, flow sensors, ADC -------------------------------------------
+    dru: dict[str, np.ndarray] = {}
+    imu = errors.imu
+    for i, c in enumerate(_IMU_COLUMNS):
+        accel = i < 3
+        dru[c] = transduce(
+            at("dru", c, direct[c]),
+            bias=(imu.accel_bias_mps2 if accel else imu.gyro_bias_rps)[i % 3],
+            noise_std=imu.accel_noise_mps2 if accel else imu.gyro_noise_rps,
+            quant_step=imu.accel_quant_mps2 if accel else imu.gyro_quant_rps,
+            rng=rng(seeds.imu_noise, c))
+    ad = errors.airdata
+    for c, bias, noise, quant in (("qc_pa", ad.qc_bias_pa, ad.qc_noise_pa, ad.qc_quant_pa),
+                                  ("ps_pa", ad.ps_bias_pa, ad.ps_noise_pa, ad.ps_quant_pa),
+                                  ("tt_k", ad.tt_bias_k, ad.tt_noise_k, 0.0)):
+        dru[c] = transduce(at("dru", c, direct[c]), bias=bias, noise_std=noise, quant_step=quant,
+                           rng=rng(seeds.airdata_noise, c))
+    mach_m = mach_from_pressures(dru["qc_pa"], dru["ps_pa"])
+    dru["mach"] = mach_m
+    dru["tas_mps"] = tas_from_mach_mps(mach_m, dru["tt_k"])
+    dru["h_baro_m"] = pressure_altitude_m(dru["ps_pa"])
+    flag = (at("dru", "gear_down", gear) >= 0.5)
+    dru["gear_down"] = flag
+    gear_m = flag.astype(float)
+
+    for s in sensors:
+        e = errors.sensors[s]
+        raw = SENSOR_RAW_CHANNEL[s]
+        theta = at("dru", s, sensed[s])
+        if s not in PROBE_SENSORS:
+            dru[raw] = transduce(theta, scale=e.scale, noise_std=e.noise_rad,
+                                 quant_step=e.quant_rad, rng=rng(seeds.vane_noise, s))
+            continue
+        qc_s, m_s = at("dru", s, qc_true), at("dru", s, mach)
+        law = sensing.side_probe_pressure if s != "nose_probe" else sensing.nose_probe_pressure
+        if s == "nose_probe" and e.high_alpha_noise_rad_per_rad > 0.0:
+            alpha_s = at("dru", s, free[s][0])
+            std = e.high_alpha_noise_rad_per_rad * np.maximum(alpha_s - e.high_alpha_onset_rad, 0.0)
+            theta = theta + std * rng(seeds.probe_noise, "nose_probe_high_alpha").standard_normal(
+                theta.shape)
+        dru[raw] = transduce(law.dp_pa(theta, qc_s, m_s), scale=e.scale, noise_std=e.noise_pa,
+                             quant_step=e.quant_pa, rng=rng(seeds.probe_noise, s))
+    # the airdata computer on the DRU's samples (paper Eq. 2)
+    dru["alpha_zl_rad"] = adc.f_v(dru["alpha_lm_rad"], mach_m, gear_m)
+    dru["alpha_zr_rad"] = adc.f_v(dru["alpha_rm_rad"], mach_m, gear_m)
+    dru["alpha_lsp_rad"] = adc.side_probe_angle_rad(dru["dp_alpha_lsp_pa"], dru["qc_pa"], mach_m)
+    dru["alpha_rsp_rad"] = adc.side_probe_angle_rad(dru["dp_alpha_rsp_pa"], dru["qc_pa"], mach_m)
+    dru["alpha_zsp_rad"], dru["beta_zsp_rad"] = adc.f_sp(dru["alpha_lsp_rad"], dru["alpha_rsp_rad"],
+                                                         mach_m, gear_m)
+    if "nose_probe" in sensors:
+        dru["flank_np_rad"] = adc.nose_probe_flank_rad(dru["dp_beta_np_pa"], dru["qc_pa"], mach_m)
+        dru["beta_znp_rad"] = adc.f_np(dru["flank_np_rad"], dru["alpha_zl_rad"],
+                                       dru["alpha_zr_rad"], mach_m)
+
+    # ---- INS, DGPS ------------------------------------------------------------------------------
+    ins_e = errors.ins
+    ins: dict[str, np.ndarray] = {}
+    for i, c in enumerate(_INS_COLUMNS):
+        euler_ch = i < 3
+        ins[c] = transduce(at("ins", c, direct[c]),
+                           bias=(ins_e.euler_bias_rad if euler_ch else ins_e.velocity_bias_mps)[i % 3],
+                           noise_std=ins_e.euler_noise_rad if euler_ch else ins_e.velocity_noise_mps,
+                           rng=rng(seeds.ins_noise, c))
+    dgps = {"h_dgps_m": transduce(at("dgps", "h_dgps_m", truth.h_m), bias=errors.dgps.h_bias_m,
+                                  noise_std=errors.dgps.h_noise_m, rng=rng(seeds.dgps_noise, "h_dgps_m"))}
+
+    # ---- preprocessing onto the common time base ------------------------------------------------
+    streams = {"dru": dru, "ins": ins, "dgps": dgps}
+    common: dict[str, np.ndarray] = {}
+    for r, cols in streams.items():
+        for c, v in cols.items():
+            if v.dtype == bool:
+                common[c] = resample_hold(stamps[r], v, t_common)
+            else:
+                common[c] = resample_linear(stamps[r], v, t_common)
+
+    measured_order = (
+        "ax_imu_mps2", "ay_imu_mps2", "az_imu_mps2", "p_rps", "q_rps", "r_rps",
+        "phi_rad", "theta_rad", "psi_rad", "vn_mps", "ve_mps", "vd_mps",
+        "tas_mps", "h_baro_m", "mach", "h_dgps_m", "gear_down",
+        "alpha_zl_rad", "alpha_zr_rad", "alpha_zsp_rad", "beta_zsp_rad", "beta_znp_rad",
+        "alpha_zb_rad", "beta_zbu_rad", "beta_zbl_rad",
+        "alpha_lm_rad", "alpha_rm_rad", "alpha_lsp_rad", "alpha_rsp_rad",
+        "dp_alpha_lsp_pa", "dp_alpha_rsp_pa", "dp_beta_np_pa", "flank_np_rad",
+        "qc_pa", "ps_pa", "tt_k",
+    )
+    columns: dict[str, np.ndarray] = {"t_s": t_common}
+    columns.update({c: common[c] for c in measured_order if c in common})
+
+    # ---- truth beside it, at true time = t_common, no delay -------------------------------------
+    tr = {
+        "true_alpha_cg_rad": truth.alpha_rad, "true_beta_cg_rad": truth.beta_rad,
+        "true_tas_mps": truth.tas_mps, "true_mach": mach,
+        "true_u_air_mps": truth.v_air_body_mps[:, 0], "true_v_air_mps": truth.v_air_body_mps[:, 1],
+        "true_w_air_mps": truth.v_air_body_mps[:, 2],
+        "true_u_mps": truth.v_body_mps[:, 0], "true_v_mps": truth.v_body_mps[:, 1],
+        "true_w_mps": truth.v_body_mps[:, 2],
+        "true_vn_mps": v_ned[:, 0], "true_ve_mps": v_ned[:, 1], "true_vd_mps": v_ned[:, 2],
+        "true_wind_n_mps": truth.wind_ned_mps[:, 0], "true_wind_e_mps": truth.wind_ned_mps[:, 1],
+        "true_wind_d_mps": truth.wind_ned_mps[:, 2],
+        "true_phi_rad": euler[:, 0], "true_theta_rad": euler[:, 1], "true_psi_rad": euler[:, 2],
+        "true_h_m": truth.h_m, "true_h_pressure_m": pressure_altitude_m(truth.p_static_pa),
+        "true_p_rps": truth.omega_body_rps[:, 0], "true_q_rps": truth.omega_body_rps[:, 1],
+        "true_r_rps": truth.omega_body_rps[:, 2],
+        "true_pdot_rps2": truth.omega_dot_body_rps2[:, 0],
+        "true_qdot_rps2": truth.omega_dot_body_rps2[:, 1],
+        "true_rdot_rps2": truth.omega_dot_body_rps2[:, 2],
+        "true_ax_cg_mps2": truth.specific_force_cg_body_mps2[:, 0],
+        "true_ay_cg_mps2": truth.specific_force_cg_body_mps2[:, 1],
+        "true_az_cg_mps2": truth.specific_force_cg_body_mps2[:, 2],
+        "true_ax_imu_mps2": f_imu[:, 0], "true_ay_imu_mps2": f_imu[:, 1],
+        "true_az_imu_mps2": f_imu[:, 2],
+        "true_r_cg_x_m": r_cg[:, 0], "true_r_cg_y_m": r_cg[:, 1], "true_r_cg_z_m": r_cg[:, 2],
+        "true_mass_kg": truth.mass_kg, "true_gear_pos_norm": gear,
+        "true_p_static_pa": truth.p_static_pa, "true_t_static_k": truth.t_static_k,
+        "true_rho_kgpm3": truth.rho_kgpm3, "true_qbar_pa": truth.qbar_pa, "true_qc_pa": qc_true,
+        "true_alpha_sp_rad": a_sp, "true_beta_sp_rad": b_sp,
+        **truth_cols,
+    }
+    for c, v in tr.items():
+        columns[c] = sample_at(t, v, t_common)
+    data = pd.DataFrame(columns)
+
+    # ---- what was injected ---------------------------------------------------------------------
+    injected: dict[str, float | list] = dict(errors.flat())
+    injected["maneuver_key"] = float(maneuver_key)
+    injected["common_rate_hz"] = float(common_rate_hz)
+    for r in RECORDERS:
+        injected[f"{r}.rate_hz"] = float(rec[r].rate_hz if rec[r].rate_hz is not None
+                                         else common_rate_hz)
+    for s in sensors:
+        injected[f"{s}.installation_bias_rad"] = bias_rad[s]
+    shift = {c: rec[r].clock_offset_s + lag for r in RECORDERS for c, lag in plan[r].items()}
+    sources = {"alpha_zl_rad": "vane_left", "alpha_zr_rad": "vane_right",
+               "alpha_lsp_rad": "side_probe_left", "alpha_rsp_rad": "side_probe_right",
+               "beta_znp_rad": "nose_probe", "flank_np_rad": "nose_probe",
+               "mach": "qc_pa", "tas_mps": "qc_pa", "h_baro_m": "ps_pa",
+               **{raw: s for s, raw in SENSOR_RAW_CHANNEL.items()}}
+    for c in columns:
+        if c in shift:
+            injected[f"time_shift_s.{c}"] = shift[c]
+        elif c in sources and sources[c] in shift:
+            injected[f"time_shift_s.{c}"] = shift[sources[c]]
+    if "side_probe_left" in shift:
+        for c in ("alpha_zsp_rad", "beta_zsp_rad"):
+            injected[f"time_shift_s.{c}"] = 0.5 * (shift["side_probe_left"]
+                                                   + shift["side_probe_right"])
+    units = {c: _units(c) for c in columns}
+    stream_frames = {r: pd.DataFrame({"t_s": stamps[r], **cols}) for r, cols in streams.items()}
+    return InstrumentedManeuver(data=data, injected=injected, channel_units=units,
+                                streams=stream_frames)
