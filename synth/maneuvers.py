@@ -17,10 +17,10 @@ Kinds and what they excite (SPEC §7, paper §3):
 ``pullup_pushover``        pull to ``nz_max``, push to ``nz_min``, twice -> large alpha range
 ``roller_coaster``         sinusoidal load factor -> repeated nz / alpha cycles
 ``windup_turn``            alpha ramp to ``alpha_max_rad`` in a turn at constant Mach
-``shss``                   steady-heading sideslip, alternating +-``beta_rad`` per segment
+``shss``                   steady-heading sideslip at ``beta_rad``, split into segments
 ``pullup_rudder_doublets`` slow pull-ups / push-overs with rudder doublets -> alpha x beta
 ``level_accel``            full power at constant altitude -> Mach sweep up
-``level_decel``            idle and speedbrake at constant altitude -> Mach sweep down
+``level_decel``            idle power at constant altitude -> Mach sweep down
 =========================  ==========================================================
 """
 
@@ -78,7 +78,7 @@ _FIELD_HELP = {
     "nz_min": "load factor at the bottom of the push-over",
     "period_s": "period of the load-factor cycle, s",
     "alpha_max_rad": "angle of attack at the end of the wind-up, rad",
-    "beta_rad": "sideslip magnitude held in each SHSS segment, rad",
+    "beta_rad": "sideslip held through the SHSS run, rad (sign = side)",
     "segment_s": "length of the pieces the SHSS run is split into, s (30-40)",
     "rudder_norm": "rudder doublet amplitude, normalized command (0-1)",
     "delta_mach": "Mach change to reach in the level acceleration/deceleration",
@@ -175,8 +175,9 @@ class ManeuverSpec:
             need(25.0 <= self.segment_s <= 45.0, f"segment_s {self.segment_s} must be 25-45 s "
                  "(the paper splits SHSS runs into 30-40 s pieces)")
             need(self.segment_s <= d <= 300.0, f"duration_s {d} must be between segment_s and 300 s")
-            need(1.0 * _DEG <= self.beta_rad <= 8.0 * _DEG,
-                 f"beta_rad {self.beta_rad} must be 1-8 deg in radians (e.g. {4.5 * _DEG:.4f})")
+            need(1.0 * _DEG <= abs(self.beta_rad) <= 8.0 * _DEG,
+                 f"|beta_rad| {self.beta_rad} must be 1-8 deg in radians (e.g. {4.5 * _DEG:.4f};"
+                 " negative for left sideslip)")
         else:
             need(10.0 <= d <= 60.0, f"duration_s {d} must be 10-60 s; FPR needs maneuvers of "
                  "30-40 s so the free initial conditions absorb the mean wind")
@@ -514,8 +515,10 @@ class WindupTurn(Controller):
 class SteadyHeadingSideslip(Controller):
     """Sideslip held with rudder, heading with bank, altitude with elevator, Mach with throttle.
 
-    The run is split into ``n_segments`` pieces; the sideslip alternates sign per piece and moves
-    between signs at 1 deg/s at the start of each piece.
+    The sideslip ramps in smoothly (peak 1.6 deg/s) after the lead-in and is then held for the
+    rest of the run, which is split into ``n_segments`` pieces of about ``segment_s``. With the
+    heading held, the flight path must turn by the sideslip change (track = heading + beta); the
+    bank for that turn rate is fed forward.
     """
 
     heading_tolerance_rad = 5.0 * _DEG
@@ -529,15 +532,20 @@ class SteadyHeadingSideslip(Controller):
         self._rud_int = 0.0
         self._psi_int = 0.0
 
-    def beta_target(self, t_s: float) -> float:
-        if t_s < self.lead_in_s:
-            return 0.0
-        seg = min(int(t_s / self.seg_len_s), self.spec.n_segments - 1)
-        return self.spec.beta_rad * (1.0 if seg % 2 == 0 else -1.0)
+    def beta_cmd(self, t_s: float) -> tuple[float, float]:
+        """Commanded sideslip, rad, and its rate, rad/s: a smooth (1 - cos) ramp, then held."""
+        ramp_s = 1.5 * abs(self.spec.beta_rad) / self.beta_rate_rps
+        tau = t_s - self.lead_in_s
+        if tau <= 0.0:
+            return 0.0, 0.0
+        if tau >= ramp_s:
+            return self.spec.beta_rad, 0.0
+        w = math.pi / ramp_s
+        return (0.5 * self.spec.beta_rad * (1.0 - math.cos(w * tau)),
+                0.5 * self.spec.beta_rad * w * math.sin(w * tau))
 
     def inputs(self, t_s, x):
-        step = self.beta_rate_rps * self.dt_s
-        self._beta_cmd += _clip(self.beta_target(t_s) - self._beta_cmd, -step, step)
+        self._beta_cmd, beta_rate = self.beta_cmd(t_s)
         err_b = self._beta_cmd - x[_BETA]
         rud_raw = 10.0 * err_b + self._rud_int
         if abs(rud_raw) < 1.0 or rud_raw * err_b < 0:
@@ -553,6 +561,8 @@ class SteadyHeadingSideslip(Controller):
         # heading-rate damping: the rudder reversals between segments kick the heading
         phi_cmd = phi_ff + _clip(3.0 * err_psi - 4.0 * psidot, -12 * _DEG, 12 * _DEG)
         phi_cmd += self._psi_int
+        # track = heading + beta: a sideslip ramp at constant heading needs a turn
+        phi_cmd += math.atan(x[_TAS] * beta_rate / x[_G])
         dnz = self.dnz_for_altitude(x) + (1.0 / math.cos(x[_PHI]) - 1.0)
         return (self.stick(dnz, x), self.aileron_for_bank(phi_cmd, x), rudder,
                 self.throttle_for_mach(x), 0.0)
@@ -574,10 +584,10 @@ class SteadyHeadingSideslip(Controller):
             sl = (t_s >= i * self.seg_len_s) & (t_s < (i + 1) * self.seg_len_s)
             peak = float(np.max(np.abs(si[sl, _BETA])))
             peaks.append(peak)
-            if peak < self.spec.beta_rad - 0.5 * _DEG:
+            if peak < abs(self.spec.beta_rad) - 0.5 * _DEG:
                 raise ManeuverFailure(
                     f"segment {i} reached |beta| {math.degrees(peak):.2f} deg of the requested "
-                    f"{math.degrees(self.spec.beta_rad):.2f} deg (rudder authority)",
+                    f"{math.degrees(abs(self.spec.beta_rad)):.2f} deg (rudder authority)",
                     float(i * self.seg_len_s),
                     "reduce beta_rad; the f16's rudder gives about 5 deg of sideslip",
                 )
@@ -585,32 +595,45 @@ class SteadyHeadingSideslip(Controller):
 
 
 class LevelSpeedChange(Controller):
-    """Level acceleration (full power) or deceleration (idle + speedbrake) at constant altitude.
+    """Level acceleration (full power) or deceleration (idle) at constant altitude.
 
     Once the target Mach (trim Mach +- ``delta_mach``) is reached the throttle holds it.
     """
 
     altitude_tolerance_m = 150.0
+    #: throttle command of maximum dry thrust (the f16 doubles it; above 1.0 is afterburner);
+    #: afterburner would reach the target in a few seconds and leave little of the sweep
+    MIL_POWER = 0.5
 
     def __init__(self, spec, trim, dt_s):
         super().__init__(spec, trim, dt_s)
         self.sign = 1.0 if spec.kind == "level_accel" else -1.0
         self.target_mach = trim.mach + self.sign * spec.delta_mach
         self.reached = False
+        self._mach_prev = trim.mach
+        self._mach_rate = 0.0
+
+    def _mach_lead(self, x: np.ndarray) -> float:
+        """Mach predicted 4 s ahead: the engine spools down slowly, so switch early."""
+        rate = (x[_MACH] - self._mach_prev) / self.dt_s
+        self._mach_prev = x[_MACH]
+        self._mach_rate += (rate - self._mach_rate) * self.dt_s / 1.0
+        return x[_MACH] + 4.0 * self._mach_rate
 
     def inputs(self, t_s, x):
         phi_cmd = self.bank_for_heading(x, limit_rad=5 * _DEG)
         speedbrake = 0.0
         if t_s < self.lead_in_s:
             thr = self.trim.throttle_cmd_norm
-        elif not self.reached and self.sign * (self.target_mach - x[_MACH]) > 0:
-            thr = 1.0 if self.sign > 0 else 0.0
-            speedbrake = 0.0 if self.sign > 0 else 1.0
+        elif not self.reached and self.sign * (self.target_mach - self._mach_lead(x)) > 0:
+            # no speedbrake: the f16 model's speedbrake shifts trim alpha by about -5 deg,
+            # which would make the deceleration useless for alpha calibration
+            thr = self.MIL_POWER if self.sign > 0 else 0.0
         else:
             if not self.reached:
                 self.reached = True
                 self.mach_cmd = self.target_mach
-                self._mach_int = (1.0 if self.sign > 0 else 0.0) - self.trim.throttle_cmd_norm
+                self._mach_int = 0.0
             thr = self.throttle_for_mach(x)
         dnz = self.dnz_for_altitude(x)
         return (self.stick(dnz, x), self.aileron_for_bank(phi_cmd, x), 0.0, thr, speedbrake)
