@@ -1,0 +1,172 @@
+r"""RK4 integration of the FPR state equations together with their forward sensitivities.
+
+States ``x = [u, v, w, phi, theta, psi, h]`` obey ``x' = f(x, a, omega)`` (SPEC §3, see
+:mod:`estimator.core.kinematics`) with the bias- and lever-arm-corrected inputs::
+
+    omega = omega_m - d_omega
+    a     = a_m - d_a - omega_dot x r - omega x (omega x r),      r = r_imu - r_cg
+
+The sensitivities ``S = dx/dp`` with respect to ``p = [x0 (7), d_a (3), d_omega (3)]`` obey the
+variational equations (Jategaonkar 2006, §4.6)::
+
+    S' = A S + F,   A = df/dx,   S(0) = [I_7 | 0 | 0]
+    F[:, 7:10]  = -df/da
+    F[:, 10:13] = df/da L - df/domega,   L = d(omega x (omega x r))/domega
+                                           = (omega.r) I + omega r^T - 2 r omega^T
+
+Both are stepped with the same classical RK4 scheme as the states (inputs at the half step: the
+mean of the neighbouring samples), so ``S`` is the exact derivative of the *discrete* solution up
+to the interpolation of the inputs: Gauss-Newton sees the gradient of the cost it minimises.
+Compiled with numba (cached on disk): the per-sample loop is the estimator's hot path.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+N_STATE = 7
+N_SENS = 13  # x0 (7), accelerometer biases (3), gyro biases (3)
+SENS_NAMES = ("u0", "v0", "w0", "phi0", "theta0", "psi0", "h0",
+              "dax", "day", "daz", "dp", "dq", "dr")
+
+
+@njit(cache=True, fastmath=False)
+def _rhs(x, S, a_m, om_m, omd, r, da, dw, g, xd, Sd):
+    p = om_m[0] - dw[0]
+    q = om_m[1] - dw[1]
+    rr = om_m[2] - dw[2]
+    # lever arm: a = a_m - da - omd x r - om x (om x r)
+    odr = p * r[0] + q * r[1] + rr * r[2]
+    oo = p * p + q * q + rr * rr
+    ax = a_m[0] - da[0] - (omd[1] * r[2] - omd[2] * r[1]) - (p * odr - r[0] * oo)
+    ay = a_m[1] - da[1] - (omd[2] * r[0] - omd[0] * r[2]) - (q * odr - r[1] * oo)
+    az = a_m[2] - da[2] - (omd[0] * r[1] - omd[1] * r[0]) - (rr * odr - r[2] * oo)
+    u, v, w, phi, th = x[0], x[1], x[2], x[3], x[4]
+    sph, cph = np.sin(phi), np.cos(phi)
+    sth, cth = np.sin(th), np.cos(th)
+    tth = sth / cth
+    qs_rc = q * sph + rr * cph
+    qc_rs = q * cph - rr * sph
+    xd[0] = rr * v - q * w - g * sth + ax
+    xd[1] = p * w - rr * u + g * cth * sph + ay
+    xd[2] = q * u - p * v + g * cth * cph + az
+    xd[3] = p + qs_rc * tth
+    xd[4] = qc_rs
+    xd[5] = qs_rc / cth
+    xd[6] = u * sth - v * cth * sph - w * cth * cph
+
+    # S' = A S + F with A = df/dx written out by its non-zeros (psi and h never feed back)
+    gc, gs = g * cth, g * sth
+    a33 = qc_rs * tth
+    a34 = qs_rc / (cth * cth)
+    a53 = qc_rs / cth
+    a54 = qs_rc * sth / (cth * cth)
+    a63 = -v * cth * cph + w * cth * sph
+    a64 = u * cth + v * sth * sph + w * sth * cph
+    for j in range(N_SENS):
+        s0, s1, s2, s3, s4 = S[0, j], S[1, j], S[2, j], S[3, j], S[4, j]
+        Sd[0, j] = rr * s1 - q * s2 - gc * s4
+        Sd[1, j] = -rr * s0 + p * s2 + gc * cph * s3 - gs * sph * s4
+        Sd[2, j] = q * s0 - p * s1 - gc * sph * s3 - gs * cph * s4
+        Sd[3, j] = a33 * s3 + a34 * s4
+        Sd[4, j] = -qs_rc * s3
+        Sd[5, j] = a53 * s3 + a54 * s4
+        Sd[6, j] = sth * s0 - cth * sph * s1 - cth * cph * s2 + a63 * s3 + a64 * s4
+    # accelerometer biases: -df/da
+    Sd[0, 7] -= 1.0
+    Sd[1, 8] -= 1.0
+    Sd[2, 9] -= 1.0
+    # gyro biases: df/da L - df/domega, L = (om.r) I + om r^T - 2 r om^T
+    om0, om1, om2 = p, q, rr
+    for i in range(3):
+        omi = om0 if i == 0 else (om1 if i == 1 else om2)
+        Sd[i, 10] += (odr if i == 0 else 0.0) + omi * r[0] - 2.0 * r[i] * om0
+        Sd[i, 11] += (odr if i == 1 else 0.0) + omi * r[1] - 2.0 * r[i] * om1
+        Sd[i, 12] += (odr if i == 2 else 0.0) + omi * r[2] - 2.0 * r[i] * om2
+    # - df/domega
+    Sd[0, 11] += w
+    Sd[0, 12] -= v
+    Sd[1, 10] -= w
+    Sd[1, 12] += u
+    Sd[2, 10] += v
+    Sd[2, 11] -= u
+    Sd[3, 10] -= 1.0
+    Sd[3, 11] -= sph * tth
+    Sd[3, 12] -= cph * tth
+    Sd[4, 11] -= cph
+    Sd[4, 12] += sph
+    Sd[5, 11] -= sph / cth
+    Sd[5, 12] -= cph / cth
+
+
+@njit(cache=True)
+def integrate_sensitivities(t_s, x0, a_m, om_m, omd, r_imu_cg, da, dw, g):
+    """RK4 of the states and their sensitivities.
+
+    Parameters
+    ----------
+    t_s : (N,) sample times, s.
+    x0 : (7,) initial state.
+    a_m : (N, 3) measured specific force at the IMU, body, m/s^2.
+    om_m : (N, 3) measured body rates, rad/s.
+    omd : (N, 3) angular acceleration (smoothed derivative of om_m), rad/s^2.
+    r_imu_cg : (3,) IMU position minus CG position, body, m.
+    da, dw : (3,) accelerometer (m/s^2) and gyro (rad/s) biases, subtracted from the measurements.
+    g : gravity, m/s^2.
+
+    Returns
+    -------
+    X : (N, 7) states; S : (N, 7, 13) sensitivities dX/d[x0, da, dw].
+    """
+    n = t_s.shape[0]
+    X = np.empty((n, 7))
+    S = np.empty((n, 7, N_SENS))
+    X[0] = x0
+    S[0] = 0.0
+    for i in range(7):
+        S[0, i, i] = 1.0
+    k1x = np.empty(7)
+    k2x = np.empty(7)
+    k3x = np.empty(7)
+    k4x = np.empty(7)
+    k1s = np.empty((7, N_SENS))
+    k2s = np.empty((7, N_SENS))
+    k3s = np.empty((7, N_SENS))
+    k4s = np.empty((7, N_SENS))
+    xs = np.empty(7)
+    Ss = np.empty((7, N_SENS))
+    am = np.empty(3)
+    wm = np.empty(3)
+    wdm = np.empty(3)
+    for k in range(n - 1):
+        h = t_s[k + 1] - t_s[k]
+        for i in range(3):
+            am[i] = 0.5 * (a_m[k, i] + a_m[k + 1, i])
+            wm[i] = 0.5 * (om_m[k, i] + om_m[k + 1, i])
+            wdm[i] = 0.5 * (omd[k, i] + omd[k + 1, i])
+        xk = X[k]
+        Sk = S[k]
+        _rhs(xk, Sk, a_m[k], om_m[k], omd[k], r_imu_cg, da, dw, g, k1x, k1s)
+        for i in range(7):
+            xs[i] = xk[i] + 0.5 * h * k1x[i]
+            for j in range(N_SENS):
+                Ss[i, j] = Sk[i, j] + 0.5 * h * k1s[i, j]
+        _rhs(xs, Ss, am, wm, wdm, r_imu_cg, da, dw, g, k2x, k2s)
+        for i in range(7):
+            xs[i] = xk[i] + 0.5 * h * k2x[i]
+            for j in range(N_SENS):
+                Ss[i, j] = Sk[i, j] + 0.5 * h * k2s[i, j]
+        _rhs(xs, Ss, am, wm, wdm, r_imu_cg, da, dw, g, k3x, k3s)
+        for i in range(7):
+            xs[i] = xk[i] + h * k3x[i]
+            for j in range(N_SENS):
+                Ss[i, j] = Sk[i, j] + h * k3s[i, j]
+        _rhs(xs, Ss, a_m[k + 1], om_m[k + 1], omd[k + 1], r_imu_cg, da, dw, g, k4x, k4s)
+        h6 = h / 6.0
+        for i in range(7):
+            X[k + 1, i] = xk[i] + h6 * (k1x[i] + 2.0 * k2x[i] + 2.0 * k3x[i] + k4x[i])
+            for j in range(N_SENS):
+                S[k + 1, i, j] = Sk[i, j] + h6 * (k1s[i, j] + 2.0 * k2s[i, j] + 2.0 * k3s[i, j]
+                                                  + k4s[i, j])
+    return X, S
