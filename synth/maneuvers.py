@@ -16,7 +16,7 @@ Kinds and what they excite (SPEC §7, paper §3):
 ``3211``                   3-2-1-1 load-factor multisteps -> alpha, q over a wide band
 ``pullup_pushover``        pull to ``nz_max``, push to ``nz_min``, twice -> large alpha range
 ``roller_coaster``         sinusoidal load factor -> repeated nz / alpha cycles
-``windup_turn``            alpha ramp to ``alpha_max_rad`` in a turn at constant Mach
+``windup_turn``            alpha ramp to ``alpha_max_rad`` (or ``nz_max``) at constant Mach
 ``shss``                   steady-heading sideslip at ``beta_rad``, split into segments
 ``pullup_rudder_doublets`` slow pull-ups / push-overs with rudder doublets -> alpha x beta
 ``level_accel``            full power at constant altitude -> Mach sweep up
@@ -58,7 +58,7 @@ DEFAULTS: dict[str, dict[str, float]] = {
     "3211": {"duration_s": 30.0, "delta_nz": 0.8, "pulse_s": 0.6},
     "pullup_pushover": {"duration_s": 30.0, "nz_max": 2.5, "nz_min": 0.0, "pulse_s": 3.0},
     "roller_coaster": {"duration_s": 36.0, "delta_nz": 1.0, "period_s": 6.0},
-    "windup_turn": {"duration_s": 40.0, "alpha_max_rad": 14.0 * _DEG},
+    "windup_turn": {"duration_s": 40.0, "alpha_max_rad": 14.0 * _DEG, "nz_max": 6.0},
     "shss": {"duration_s": 105.0, "beta_rad": 4.5 * _DEG, "segment_s": 35.0},
     "pullup_rudder_doublets": {
         "duration_s": 30.0,
@@ -71,10 +71,31 @@ DEFAULTS: dict[str, dict[str, float]] = {
     "level_decel": {"duration_s": 35.0, "delta_mach": 0.12},
 }
 
+#: Defaults at Mach 0.3 where they differ: at low dynamic pressure the same load factor needs
+#: twice the alpha and bleeds speed below the Mach range. Interpolated linearly in Mach up to
+#: :data:`FULL_DEFAULTS_FROM_MACH`, above which :data:`DEFAULTS` apply.
+LOW_SPEED_DEFAULTS: dict[str, dict[str, float]] = {
+    "pitch_doublet": {"delta_nz": 0.5},
+    "3211": {"delta_nz": 0.4},
+    "pullup_pushover": {"nz_max": 1.8, "nz_min": 0.4},
+    "roller_coaster": {"delta_nz": 0.5},
+    "pullup_rudder_doublets": {"delta_nz": 0.5},
+}
+FULL_DEFAULTS_FROM_MACH = 0.5
+
+
+def default_value(kind: str, name: str, mach: float) -> float:
+    """Default of field ``name`` for ``kind`` at ``mach`` (see :data:`LOW_SPEED_DEFAULTS`)."""
+    hi = DEFAULTS[kind][name]
+    lo = LOW_SPEED_DEFAULTS.get(kind, {}).get(name, hi)
+    f = min(1.0, max(0.0, (mach - MACH_RANGE[0]) / (FULL_DEFAULTS_FROM_MACH - MACH_RANGE[0])))
+    return float(lo + f * (hi - lo))
+
+
 _FIELD_HELP = {
     "delta_nz": "load-factor amplitude of the stick inputs (dimensionless, e.g. 1.0)",
     "pulse_s": "width of one stick/rudder pulse, s",
-    "nz_max": "load factor at the top of the pull-up",
+    "nz_max": "load factor at the top of the pull-up / where a wind-up turn stops",
     "nz_min": "load factor at the bottom of the push-over",
     "period_s": "period of the load-factor cycle, s",
     "alpha_max_rad": "angle of attack at the end of the wind-up, rad",
@@ -111,7 +132,8 @@ class ManeuverSpec:
     heading_rad : initial true heading, rad.
     delta_nz, pulse_s, nz_max, nz_min, period_s, alpha_max_rad, beta_rad, segment_s,
     rudder_norm, delta_mach : excitation settings; ``None`` takes the kind's default in
-        :data:`DEFAULTS`; setting one that does not apply to the kind is an error.
+        :data:`DEFAULTS` (reduced towards Mach 0.3 per :data:`LOW_SPEED_DEFAULTS`); setting one
+        that does not apply to the kind is an error.
     """
 
     kind: str
@@ -152,7 +174,7 @@ class ManeuverSpec:
             value = getattr(self, name)
             if value is None:
                 if name in defaults:
-                    object.__setattr__(self, name, float(defaults[name]))
+                    object.__setattr__(self, name, default_value(self.kind, name, self.mach))
             elif name not in defaults:
                 applies = [k for k, d in DEFAULTS.items() if name in d]
                 raise ValueError(
@@ -189,7 +211,9 @@ class ManeuverSpec:
             need(2.0 <= self.period_s <= d / 2, f"period_s {self.period_s} must be 2 s to "
                  "duration_s/2 so at least two cycles are flown")
         if self.nz_max is not None:
-            need(1.2 <= self.nz_max <= 7.0, f"nz_max {self.nz_max} must be 1.2-7")
+            need(1.2 <= self.nz_max <= 8.0, f"nz_max {self.nz_max} must be 1.2-8 (the f16 FCS "
+                 "limits load factor to 9)")
+        if self.nz_min is not None:
             need(-1.0 <= self.nz_min <= 0.8, f"nz_min {self.nz_min} must be -1 to 0.8")
         if self.alpha_max_rad is not None:
             need(4.0 * _DEG <= self.alpha_max_rad <= 25.0 * _DEG,
@@ -441,14 +465,13 @@ class PullupRudderDoublets(RollerCoaster):
 
 
 class WindupTurn(Controller):
-    """Constant-Mach turn with alpha ramped to ``alpha_max_rad``.
+    """Constant-Mach turn with alpha ramped to ``alpha_max_rad``, stopping early at ``nz_max``.
 
     Alpha follows its ramp through an integrating load-factor loop. Mach is held with throttle;
     once the throttle is at its limit the bank angle steepens beyond that of a level turn, trading
     altitude for speed, as a test pilot does.
     """
 
-    nz_limit = 8.0
     mach_tolerance = 0.05
 
     def __init__(self, spec, trim, dt_s):
@@ -468,9 +491,13 @@ class WindupTurn(Controller):
     def inputs(self, t_s, x):
         nz = self.nz(x)
         err_a = self.alpha_cmd(t_s) - x[_ALPHA]
-        if nz < self.nz_limit or err_a < 0:
+        if nz < self.spec.nz_max:
             self._dnz_int += 25.0 * err_a * self.dt_s
-        dnz = self._dnz_int + 4.0 * err_a
+            dnz = self._dnz_int + 4.0 * err_a
+        else:
+            # at the load-factor stop: back off instead of following the alpha ramp
+            self._dnz_int -= 2.0 * (nz - self.spec.nz_max) * self.dt_s
+            dnz = self._dnz_int + 4.0 * min(err_a, 0.0)
         self.alpha_peak_rad = max(self.alpha_peak_rad, x[_ALPHA])
         thr = self.throttle_for_mach(x)
         err_m = self.mach_cmd - x[_MACH]
@@ -501,14 +528,16 @@ class WindupTurn(Controller):
         reached = float(np.max(si[:, _ALPHA]))
         self.notes["alpha_peak_rad"] = reached
         self.notes["nz_peak"] = float(np.max(-si[:, _FZ] / (si[:, _MASS] * si[:, _G])))
-        if reached < self.spec.alpha_max_rad - 1.0 * _DEG:
+        # a wind-up turn ends at alpha_max or nz_max, whichever comes first
+        if (reached < self.spec.alpha_max_rad - 1.0 * _DEG
+                and self.notes["nz_peak"] < self.spec.nz_max - 0.3):
             raise ManeuverFailure(
-                f"alpha reached only {math.degrees(reached):.1f} deg of the requested "
-                f"{math.degrees(self.spec.alpha_max_rad):.1f} deg (load factor limited to "
-                f"{self.nz_limit} g)",
+                f"reached neither alpha {math.degrees(self.spec.alpha_max_rad):.1f} deg (got "
+                f"{math.degrees(reached):.1f}) nor load factor {self.spec.nz_max:.1f} (got "
+                f"{self.notes['nz_peak']:.1f})",
                 float(t_s[-1]),
-                "lower alpha_max_rad, or fly at lower Mach / higher altitude where that alpha "
-                "needs less load factor",
+                "lower alpha_max_rad or nz_max, or lengthen duration_s (the f16 FCS limits "
+                "alpha to about 25 deg and load factor to 9)",
             )
 
 

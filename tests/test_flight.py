@@ -363,11 +363,20 @@ def test_same_seed_bit_identical_other_seed_different():
 
 
 def test_impossible_windup_raises_helpful_error():
+    # the f16's FCS limits alpha well below 25 deg and at Mach 0.3 8 g is out of reach
     with pytest.raises(FlightError) as info:
-        _fly(kind="windup_turn", mach=0.9, altitude_m=3000.0, alpha_max_rad=20 * DEG)
+        _fly(kind="windup_turn", mach=0.3, altitude_m=1000.0, alpha_max_rad=25 * DEG, nz_max=8.0,
+             duration_s=25.0)
     msg = str(info.value)
-    assert "windup_turn" in msg and "Mach 0.90" in msg and "3000 m" in msg
+    assert "windup_turn" in msg and "Mach 0.30" in msg and "1000 m" in msg
     assert "t = " in msg and "alpha_max_rad" in msg
+
+
+def test_windup_stops_at_load_factor_limit():
+    tr = _one(kind="windup_turn", mach=0.9, altitude_m=3000.0, alpha_max_rad=20 * DEG, nz_max=6.0,
+              duration_s=20.0)
+    assert tr.meta["controller"]["nz_peak"] == pytest.approx(6.0, abs=0.8)
+    assert tr.alpha_rad.max() < 20 * DEG
 
 
 def test_departure_raises_helpful_error():
