@@ -48,8 +48,9 @@ model"): a deterministic but irregular function of (alpha, beta) added to the lo
 
     e(alpha, beta) = a_irr * max(0, alpha - alpha_on) * sqrt(2/n) * sum_k sin(w_k alpha + v_k beta + phi_k)
 
-with wavenumbers ``w_k, v_k`` of hundreds per radian and phases drawn once from the irregularity
-seed (a property of the probe type, the same for the whole fleet).
+with wavenumbers ``w_k, v_k`` of thousands per radian (periods of a few tenths of a degree) and
+phases drawn once from the irregularity seed (a property of the probe type, the same for the whole
+fleet).
 
 Every function here is a pure numerical kernel: arrays in SI / radians, no I/O, no state.
 """
@@ -209,10 +210,10 @@ class IrregularityLaw:
     onset_rad: float = math.radians(8.0)
     amplitude_per_rad: float = 0.0
     n_terms: int = 12
-    alpha_wavenumber_min_per_rad: float = 150.0
-    alpha_wavenumber_max_per_rad: float = 600.0
-    beta_wavenumber_min_per_rad: float = 100.0
-    beta_wavenumber_max_per_rad: float = 500.0
+    alpha_wavenumber_min_per_rad: float = 800.0
+    alpha_wavenumber_max_per_rad: float = 3000.0
+    beta_wavenumber_min_per_rad: float = 500.0
+    beta_wavenumber_max_per_rad: float = 2000.0
 
 
 def irregularity_rad(alpha_rad, beta_rad, law: IrregularityLaw | None, seed: int) -> np.ndarray:
