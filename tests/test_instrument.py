@@ -625,3 +625,47 @@ def test_bad_input_names_what_and_when():
     short = FLIGHT.truth(duration_s=0.1)
     with pytest.raises(ValueError, match="recorder dru at 64.0 Hz"):
         instrument(short, AIRFRAME, CFG_NP, ErrorConfig.typical())
+
+
+def _leaf_paths(d: dict, prefix: str = "") -> list[tuple[str, object]]:
+    out = []
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out += _leaf_paths(v, f"{prefix}{k}.")
+        else:
+            out.append((f"{prefix}{k}", v))
+    return out
+
+
+TYPICAL_NONZERO = [(p, v) for p, v in _leaf_paths(ErrorConfig.typical().to_dict())
+                   if not p.startswith("seeds.") and v is not False and np.any(np.asarray(v) != 0)
+                   and not p.endswith("high_alpha_onset_rad")]  # a parameter of the noise above
+
+
+@pytest.mark.parametrize("path, value", TYPICAL_NONZERO, ids=[p for p, _ in TYPICAL_NONZERO])
+def test_every_typical_error_alone_changes_the_data(path, value):
+    """No dead configuration: each typical error switched on alone leaves a trace in the data."""
+    cfg = CFG_BOOM if "boom" in path else CFG_NP
+    base = NONE_BOOM if cfg is CFG_BOOM else NONE
+    df = run(ErrorConfig.with_only(path), cfg)
+    common = np.intersect1d(df["t_s"], base["t_s"])
+    a = base.set_index("t_s").loc[common]
+    b = df.set_index("t_s").loc[common]
+    changed = [c for c in a.columns if not np.array_equal(a[c].to_numpy(), b[c].to_numpy())]
+    assert changed or len(df) != len(base), f"{path} = {value} changed nothing"
+    assert not any(c.startswith("true_") and "local" not in c and "port" not in c
+                   for c in changed), f"{path} must not change the truth: {changed}"
+
+
+def test_the_documented_toml_example_parses():
+    import inspect
+    import textwrap
+    import tomllib
+
+    import synth.errors
+
+    doc = inspect.getdoc(synth.errors)
+    block = doc.split("Dict / TOML form")[1].split("::", 1)[1].split("``from_dict(d, seed=S)``")[0]
+    cfg = ErrorConfig.from_dict(tomllib.loads(textwrap.dedent(block)))
+    assert cfg.imu.gyro_bias_rps[1] == pytest.approx(-0.3 * DEG)
+    assert cfg.recorders["dru"].rate_hz == 64.0 and cfg.channel_delays_s["phi_rad"] == 0.040
