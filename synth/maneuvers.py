@@ -27,6 +27,7 @@ Kinds and what they excite (SPEC §7, paper §3):
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass, fields
 
 import numpy as np
@@ -299,7 +300,7 @@ class TrimPoint:
     tas_mps: float
 
 
-class Controller:
+class Controller(ABC):
     """Base pilot: wings-level heading hold, altitude hold, Mach hold helpers.
 
     Subclasses implement :meth:`inputs` returning ``(elevator, aileron, rudder, throttle,
@@ -360,21 +361,31 @@ class Controller:
         return _clip(thr, lo, hi)
 
     # interface -----------------------------------------------------------------------------------
-    def inputs(self, t_s: float, x: np.ndarray) -> tuple[float, float, float, float, float]:
-        raise NotImplementedError
+    @abstractmethod
+    def inputs(self, t_s: float, x) -> tuple[float, float, float, float, float]:
+        """Pilot inputs for the next step from the SI state row ``x`` (indexed by ``COL``)."""
 
     def check(self, t_s: float, x: np.ndarray) -> None:
-        """Raise :class:`ManeuverFailure` when the maneuver's own target is lost (per step)."""
+        """Raise :class:`ManeuverFailure` when the maneuver's own target is lost (per step).
+
+        The default has no target beyond the departure limits that :mod:`synth.flight` checks.
+        """
+        return None
 
     def finish(self, si: np.ndarray, t_s: np.ndarray) -> None:
-        """Check the whole recorded run; raise :class:`ManeuverFailure` if it missed its goal."""
+        """Check the whole recorded run; raise :class:`ManeuverFailure` if it missed its goal.
+
+        The default accepts any run that stayed within the departure limits.
+        """
+        return None
 
 
-class _WingsLevel(Controller):
+class _WingsLevel(Controller, ABC):
     """Stick program in load factor, wings level (gentle heading hold), throttle at trim."""
 
+    @abstractmethod
     def dnz(self, t_s: float) -> float:
-        raise NotImplementedError
+        """Load-factor increment commanded at ``t_s``."""
 
     def rudder(self, t_s: float) -> float:
         return 0.0
@@ -457,11 +468,20 @@ class PullupRudderDoublets(RollerCoaster):
     """Slow load-factor cycles with a rudder doublet at every peak and trough."""
 
     def rudder(self, t_s):
+        # a (+, -) doublet centred on every peak and trough of the load-factor sine
         tau = t_s - self.lead_in_s
-        quarter = self.spec.period_s / 4.0
-        starts = [quarter * (2 * k + 1) - self.spec.pulse_s for k in range(64)]
         w = self.spec.pulse_s
-        return self.spec.rudder_norm * _pulse_train(tau, starts, [w, w], [1.0, -1.0])
+        half = 0.5 * self.spec.period_s
+        n_cycles = math.floor((self.spec.duration_s - self.lead_in_s - 1.0) / self.spec.period_s)
+        first = 0.5 * half - w
+        if tau < first or tau >= n_cycles * self.spec.period_s:
+            return 0.0
+        phase = (tau - first) % half
+        if phase < w:
+            return self.spec.rudder_norm
+        if phase < 2 * w:
+            return -self.spec.rudder_norm
+        return 0.0
 
 
 class WindupTurn(Controller):
