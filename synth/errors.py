@@ -593,8 +593,8 @@ def _update(obj: Any, d: Any, where: str) -> Any:
         if isinstance(value, bool) or value is None:
             raise ValueError(f"{where}.{key}: expected a number, got {value!r}")
         try:
-            if isinstance(value, (list, tuple)):
-                changes[name] = tuple(float(x) * factor for x in value)
+            if isinstance(value, (list, tuple, np.ndarray)):
+                changes[name] = tuple(float(x) * factor for x in np.ravel(value))
             elif isinstance(getattr(obj, name), int) and not isinstance(getattr(obj, name), bool):
                 if isinstance(value, float) and not value.is_integer():
                     raise ValueError("an integer is required")

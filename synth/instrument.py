@@ -351,7 +351,8 @@ def instrument(
         "h_dgps_m": truth.h_m,
     }
 
-    # ---- recorder plan: each raw channel's recorder and lag -------------------------------------
+    # ---- recorder plan: recorder -> {raw channel (column name, or sensor name for a flow sensor):
+    #      its lag behind true time on that recorder's clock (latency + group/sensor/channel delay)}
     rec = errors.recorders
     chd = errors.channel_delays_s
     group_delay = {**{c: errors.imu.delay_s for c in _IMU_COLUMNS},
