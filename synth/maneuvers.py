@@ -45,6 +45,8 @@ KINDS = (
     "level_accel",
     "level_decel",
 )
+#: Alias used by campaigns and benchmarks.
+MANEUVER_KINDS = KINDS
 
 #: Requested Mach range (SPEC §7: subsonic, Mach 0.3-0.9).
 MACH_RANGE = (0.3, 0.9)
@@ -493,12 +495,14 @@ class WindupTurn(Controller):
     """
 
     mach_tolerance = 0.05
+    bank_rate_rps = 15.0 * _DEG
 
     def __init__(self, spec, trim, dt_s):
         super().__init__(spec, trim, dt_s)
         self.ramp_end_s = spec.duration_s - 3.0
         self._dnz_int = 0.0
         self._gamma_int = 0.0
+        self._phi_cmd = 0.0
         self.alpha_peak_rad = -1.0
 
     def alpha_cmd(self, t_s: float) -> float:
@@ -532,7 +536,11 @@ class WindupTurn(Controller):
             # bank of a level turn at this load factor, steepened to fly the commanded path
             phi_lvl = math.acos(_clip(1.0 / max(nz, 1.0), 0.0, 1.0))
             phi_cmd = _clip(phi_lvl + 2.0 * (gamma - gamma_cmd), 0.0, 85 * _DEG)
-        return (self.stick(dnz, x), self.aileron_for_bank(phi_cmd, x), 0.0, thr, 0.0)
+        # roll in and adjust bank smoothly, as a pilot does (and as IMU lever-arm corrections,
+        # which need angular accelerations, prefer)
+        step = self.bank_rate_rps * self.dt_s
+        self._phi_cmd += _clip(phi_cmd - self._phi_cmd, -step, step)
+        return (self.stick(dnz, x), self.aileron_for_bank(self._phi_cmd, x), 0.0, thr, 0.0)
 
     def check(self, t_s, x):
         if t_s > self.lead_in_s and abs(x[_MACH] - self.mach_cmd) > self.mach_tolerance:

@@ -374,7 +374,7 @@ def test_impossible_windup_raises_helpful_error():
 
 def test_windup_stops_at_load_factor_limit():
     tr = _one(kind="windup_turn", mach=0.9, altitude_m=3000.0, alpha_max_rad=20 * DEG, nz_max=6.0,
-              duration_s=20.0)
+              duration_s=30.0)
     assert tr.meta["controller"]["nz_peak"] == pytest.approx(6.0, abs=0.8)
     assert tr.alpha_rad.max() < 20 * DEG
 
