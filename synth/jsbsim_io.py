@@ -154,6 +154,7 @@ def patched_root_dir(model: str) -> Path:
     final.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".build-", dir=final.parent))
     try:
+        tmp.chmod(0o755)  # mkdtemp makes it private; the cache may be shared
         ac_dir = tmp / "aircraft" / model
         ac_dir.mkdir(parents=True)
         for item in (src_root / "aircraft" / model).iterdir():
@@ -300,12 +301,13 @@ def set_initial_conditions(
     altitude_m: float,
     heading_rad: float,
     mach: float,
-    wind_ned_mps=(0.0, 0.0, 0.0),
 ) -> None:
-    """Set JSBSim initial conditions: position first, then attitude, wind, speed (SPEC §7).
+    """Set JSBSim initial conditions in still air: position first, then attitude, then speed.
 
-    The vertical component of ``wind_ned_mps`` cannot be an initial condition in JSBSim; apply
-    it with :func:`set_wind_ned` after trimming.
+    The order matters (SPEC §7): the speed conversion uses the atmosphere at the IC position.
+    Steady wind is not an IC here: JSBSim 1.3.3's IC treats the wind with the opposite sign to
+    its atmosphere model (an IC Mach of 0.6 in a 11 m/s tailwind flies at Mach 0.53), so
+    :mod:`synth.flight` trims in still air and then restarts with :func:`set_body_velocity_ic`.
     """
     fdm["ic/lat-geod-rad"] = latitude_rad
     fdm["ic/long-gc-rad"] = longitude_rad
@@ -313,12 +315,30 @@ def set_initial_conditions(
     fdm["ic/psi-true-rad"] = heading_rad
     fdm["ic/phi-rad"] = 0.0
     fdm["ic/gamma-rad"] = 0.0
-    # JSBSim's trim re-initializes the winds from the IC, so the steady horizontal wind must be
-    # an IC (blowing towards vw-dir); it must precede the speed so that Mach is air-relative.
-    n_mps, e_mps, _ = (float(x) for x in wind_ned_mps)
-    fdm["ic/vw-mag-fps"] = math.hypot(n_mps, e_mps) / FT_TO_M
-    fdm["ic/vw-dir-deg"] = math.degrees(math.atan2(e_mps, n_mps))
+    fdm["ic/vw-mag-fps"] = 0.0
     fdm["ic/mach"] = mach
+
+
+def trim(fdm: jsbsim.FGFDMExec) -> dict[str, float]:
+    """Run JSBSim's full trim and return the residual accelerations in SI.
+
+    Returns
+    -------
+    ``{"udot_mps2", "vdot_mps2", "wdot_mps2", "pdot_rps2", "qdot_rps2", "rdot_rps2", "mach"}``.
+
+    Raises
+    ------
+    RuntimeError
+        If JSBSim reports that the trim failed (its message is kept).
+    """
+    try:
+        fdm.do_trim(1)
+    except Exception as exc:  # JSBSim raises its own TrimFailureException
+        raise RuntimeError(f"JSBSim trim failed: {exc}") from None
+    out = {f"{a}dot_mps2": fdm[f"accelerations/{a}dot-ft_sec2"] * FT_TO_M for a in "uvw"}
+    out.update({f"{a}dot_rps2": fdm[f"accelerations/{a}dot-rad_sec2"] for a in "pqr"})
+    out["mach"] = fdm["velocities/mach"]
+    return out
 
 
 def start_engines(fdm: jsbsim.FGFDMExec) -> None:
