@@ -454,3 +454,19 @@ def test_structural_frame_round_trip():
                                [-1.0, 1.0, -1.0])
     r = np.array([[8.5, 0.3, 0.2], [-3.0, -1.0, 0.5]])
     np.testing.assert_allclose(frame.to_body_m(frame.to_structural_in(r)), r)
+
+
+def test_cosine_gust_shape_and_timing():
+    gust = Gust(amplitude_mps=5.0, direction_ned=(0.0, 0.0, -1.0), start_s=3.0, duration_s=2.0)
+    tr = _one(env=Environment(gust=gust), kind="pitch_doublet", mach=0.6, altitude_m=5000.0,
+              duration_s=10.0, delta_nz=0.05)
+    w_down = tr.wind_ned_mps[:, 2]
+    t = tr.t_s
+    assert np.all(np.abs(w_down[t < 3.0 - 1e-9]) < 1e-9), "the gust must not start before start_s"
+    k_peak = int(np.argmin(w_down))
+    assert t[k_peak] == pytest.approx(4.0, abs=0.1), "1-cosine peak at start + duration/2"
+    assert w_down[k_peak] == pytest.approx(-5.0, abs=0.05)
+    assert np.all(np.abs(w_down[t > 5.2]) < 0.05), "and gone after start + duration"
+    assert np.all(np.abs(tr.wind_ned_mps[:, :2]) < 1e-9)
+    # an up-gust raises the angle of attack
+    assert tr.alpha_rad[k_peak] - tr.alpha_rad[0] > 0.5 * DEG
