@@ -14,9 +14,9 @@ variational equations (Jategaonkar 2006, §4.6)::
     F[:, 10:13] = df/da L - df/domega,   L = d(omega x (omega x r))/domega
                                            = (omega.r) I + omega r^T - 2 r omega^T
 
-Both are stepped with the same classical RK4 scheme as the states (inputs at the half step: the
-mean of the neighbouring samples), so ``S`` is the exact derivative of the *discrete* solution up
-to the interpolation of the inputs: Gauss-Newton sees the gradient of the cost it minimises.
+Both are stepped with the same classical RK4 scheme as the states (inputs at the half step from
+:func:`estimator.core.kinematics.midpoints`, four-point cubic by default), so ``S`` is the exact
+derivative of the discrete solution: Gauss-Newton sees the gradient of the cost it minimises.
 Compiled with numba (cached on disk): the per-sample loop is the estimator's hot path.
 """
 
@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from estimator.core.kinematics import midpoints
 
 N_STATE = 7
 N_SENS = 13  # x0 (7), accelerometer biases (3), gyro biases (3)
@@ -100,8 +102,7 @@ def _rhs(x, S, a_m, om_m, omd, r, da, dw, g, xd, Sd):
     Sd[5, 12] -= cph / cth
 
 
-@njit(cache=True)
-def integrate_sensitivities(t_s, x0, a_m, om_m, omd, r_imu_cg, da, dw, g):
+def integrate_sensitivities(t_s, x0, a_m, om_m, omd, r_imu_cg, da, dw, g, midpoint="cubic"):
     """RK4 of the states and their sensitivities.
 
     Parameters
@@ -114,11 +115,24 @@ def integrate_sensitivities(t_s, x0, a_m, om_m, omd, r_imu_cg, da, dw, g):
     r_imu_cg : (3,) IMU position minus CG position, body, m.
     da, dw : (3,) accelerometer (m/s^2) and gyro (rad/s) biases, subtracted from the measurements.
     g : gravity, m/s^2.
+    midpoint : half-step input interpolation, "cubic" or "linear" (see ``midpoints``).
 
     Returns
     -------
     X : (N, 7) states; S : (N, 7, 13) sensitivities dX/d[x0, da, dw].
     """
+    f64 = np.float64
+    a_m, om_m, omd = (np.ascontiguousarray(v, dtype=f64) for v in (a_m, om_m, omd))
+    return _integrate(
+        np.ascontiguousarray(t_s, dtype=f64), np.ascontiguousarray(x0, dtype=f64), a_m, om_m, omd,
+        midpoints(a_m, midpoint), midpoints(om_m, midpoint), midpoints(omd, midpoint),
+        np.ascontiguousarray(r_imu_cg, dtype=f64), np.ascontiguousarray(da, dtype=f64),
+        np.ascontiguousarray(dw, dtype=f64), float(g),
+    )
+
+
+@njit(cache=True)
+def _integrate(t_s, x0, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, da, dw, g):
     n = t_s.shape[0]
     X = np.empty((n, 7))
     S = np.empty((n, 7, N_SENS))
@@ -142,9 +156,9 @@ def integrate_sensitivities(t_s, x0, a_m, om_m, omd, r_imu_cg, da, dw, g):
     for k in range(n - 1):
         h = t_s[k + 1] - t_s[k]
         for i in range(3):
-            am[i] = 0.5 * (a_m[k, i] + a_m[k + 1, i])
-            wm[i] = 0.5 * (om_m[k, i] + om_m[k + 1, i])
-            wdm[i] = 0.5 * (omd[k, i] + omd[k + 1, i])
+            am[i] = a_mid[k, i]
+            wm[i] = om_mid[k, i]
+            wdm[i] = omd_mid[k, i]
         xk = X[k]
         Sk = S[k]
         _rhs(xk, Sk, a_m[k], om_m[k], omd[k], r_imu_cg, da, dw, g, k1x, k1s)
