@@ -90,6 +90,10 @@ FULL_DEFAULTS_FROM_MACH = 0.5
 def default_value(kind: str, name: str, mach: float) -> float:
     """Default of field ``name`` for ``kind`` at ``mach`` (see :data:`LOW_SPEED_DEFAULTS`)."""
     hi = DEFAULTS[kind][name]
+    if name == "delta_mach":
+        # sweep as far as the default, but not out of the Mach range
+        room = MACH_RANGE[1] - mach if kind == "level_accel" else mach - MACH_RANGE[0]
+        return float(round(min(hi, max(room, 0.0)), 6))
     lo = LOW_SPEED_DEFAULTS.get(kind, {}).get(name, hi)
     f = min(1.0, max(0.0, (mach - MACH_RANGE[0]) / (FULL_DEFAULTS_FROM_MACH - MACH_RANGE[0])))
     return float(lo + f * (hi - lo))
@@ -224,15 +228,16 @@ class ManeuverSpec:
         if self.rudder_norm is not None:
             need(0.05 <= self.rudder_norm <= 1.0, f"rudder_norm {self.rudder_norm} must be 0.05-1")
         if self.delta_mach is not None:
-            need(0.02 <= self.delta_mach <= 0.3, f"delta_mach {self.delta_mach} must be 0.02-0.3")
             if self.kind == "level_accel":
-                need(self.mach + self.delta_mach <= MACH_RANGE[1] + 1e-9,
-                     f"mach + delta_mach = {self.mach + self.delta_mach:.2f} exceeds "
-                     f"{MACH_RANGE[1]}; start slower or reduce delta_mach")
+                need(self.mach + self.delta_mach <= MACH_RANGE[1] + 1e-9 and self.mach <= 0.88,
+                     f"mach {self.mach} + delta_mach {self.delta_mach:.2f} leaves the Mach range "
+                     f"(<= {MACH_RANGE[1]}); start slower (at most Mach 0.88) or reduce delta_mach")
             else:
-                need(self.mach - self.delta_mach >= MACH_RANGE[0] - 1e-9,
-                     f"mach - delta_mach = {self.mach - self.delta_mach:.2f} is below "
-                     f"{MACH_RANGE[0]}; start faster or reduce delta_mach")
+                need(self.mach - self.delta_mach >= MACH_RANGE[0] - 1e-9 and self.mach >= 0.32,
+                     f"mach {self.mach} - delta_mach {self.delta_mach:.2f} leaves the Mach range "
+                     f"(>= {MACH_RANGE[0]}); start faster (at least Mach 0.32) or reduce "
+                     "delta_mach")
+            need(0.02 <= self.delta_mach <= 0.3, f"delta_mach {self.delta_mach} must be 0.02-0.3")
 
     @property
     def n_segments(self) -> int:

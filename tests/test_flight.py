@@ -409,7 +409,9 @@ def test_spec_defaults_and_round_trip(kind):
         ({"kind": "shss", "mach": 0.6, "altitude_ft": 5000}, "altitude_m"),
         ({"kind": "pitch_doublet", "mach": 0.6, "altitude_m": 5000, "beta_rad": 0.1},
          "does not apply"),
-        ({"kind": "level_accel", "mach": 0.85, "altitude_m": 5000}, "exceeds"),
+        ({"kind": "level_accel", "mach": 0.9, "altitude_m": 5000}, "start slower"),
+        ({"kind": "level_decel", "mach": 0.5, "altitude_m": 5000, "delta_mach": 0.25},
+         "start faster"),
         ({"kind": "shss", "mach": 0.6, "altitude_m": 5000, "beta_deg": 20}, "1-8 deg"),
     ],
 )
