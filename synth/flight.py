@@ -14,7 +14,6 @@ the time in the run, what went wrong, and what to try. No partial or silently ba
 from __future__ import annotations
 
 import math
-import time
 
 import jsbsim
 import numpy as np
@@ -42,7 +41,8 @@ class FlightError(RuntimeError):
 
 
 def _where(spec: ManeuverSpec) -> str:
-    return f"{spec.kind} at Mach {spec.mach:.2f}, {spec.altitude_m:.0f} m" + (
+    start = f" (from Mach {spec.trim_mach:.2f})" if spec.trim_mach != spec.mach else ""
+    return f"{spec.kind} at Mach {spec.mach:.2f}{start}, {spec.altitude_m:.0f} m" + (
         ", gear down" if spec.gear_down else ""
     )
 
@@ -62,7 +62,7 @@ def _trim(fdm: jsbsim.FGFDMExec, spec: ManeuverSpec) -> dict[str, float]:
         abs(res["udot_mps2"]) > 0.15
         or abs(res["wdot_mps2"]) > 0.15
         or abs(res["qdot_rps2"]) > 0.01
-        or abs(res["mach"] - spec.mach) > 0.005
+        or abs(res["mach"] - spec.trim_mach) > 0.005
     ):
         raise FlightError(
             f"{_where(spec)}: trim did not converge (residuals {res}); {advice}"
@@ -163,7 +163,6 @@ def fly_maneuver(
     FlightError
         If the trim fails, the aircraft departs, or the controller cannot hold its target.
     """
-    wall0 = time.perf_counter()
     where = _where(spec)
     fdm, frame = io.create_fdm(airframe.jsbsim_model, env.planet, dt_s, airframe.reference_point)
     fdm["simulation/randomseed"] = env.turbulence_seed
@@ -178,7 +177,7 @@ def fly_maneuver(
         longitude_rad=env.longitude_rad,
         altitude_m=spec.altitude_m,
         heading_rad=spec.heading_rad,
-        mach=spec.mach,
+        mach=spec.trim_mach,
     )
     io.start_engines(fdm)
     io.set_gear(fdm, spec.gear_down)
@@ -265,7 +264,8 @@ def fly_maneuver(
             f"the maneuver: {exc.what}. Try: {exc.advice}."
         ) from None
 
-    wall_s = time.perf_counter() - wall0
+    # meta holds only facts that the inputs determine (no wall time, no paths): datasets written
+    # from it must be bit-identical for one seed
     meta_common = {
         "maneuver": spec.to_dict(),
         "environment": env.to_dict(),
@@ -280,7 +280,6 @@ def fly_maneuver(
         "ballast_position_body_m": [float(v) for v in aircraft.ballast_position_body_m],
         "dt_s": dt_s,
         "settle_s": SETTLE_S,
-        "wall_time_s": wall_s,
         "n_segments": spec.n_segments,
     }
     out = []
