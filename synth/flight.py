@@ -112,10 +112,11 @@ def _first_departure(si: np.ndarray) -> int | None:
 def _reinit_with_wind(fdm: jsbsim.FGFDMExec, reader: io.SampleReader, wind_ned_mps) -> None:
     """Restart from the trimmed air-relative state with the earth velocity shifted by the wind.
 
-    JSBSim's trim re-initializes the winds from its IC, whose wind handling is inconsistent with
-    the atmosphere model in 1.3.3 (it subtracts the wind where the atmosphere adds it), so the
-    steady wind is applied here: same attitude and air-relative velocity, ground velocity
-    = air velocity + wind.
+    JSBSim's trim re-initializes the winds from its IC, and in 1.3.3 the IC takes airspeed as
+    ground speed + wind where the atmosphere model uses ground speed - wind (measured: an IC Mach
+    0.6 in an 11 m/s tailwind flies at Mach 0.53). So the aircraft is trimmed in still air and
+    restarted here with the same attitude and air-relative velocity and with ground velocity =
+    air velocity + wind.
     """
     x = reader.read_si()
     C = io.COL
@@ -230,7 +231,6 @@ def fly_maneuver(
     scale, offset = reader.scale, reader.offset
     read_raw = reader.read_raw
     run = fdm.run
-    t_fail = 0.0
     try:
         for i in range(n):
             row = read_raw()
@@ -238,7 +238,6 @@ def fly_maneuver(
             # plain floats: the controllers' scalar math is several times faster than on numpy
             x = (raw[i] * scale + offset).tolist()
             t = i * dt_s
-            t_fail = t
             if i % _CHECK_EVERY == 0:
                 msg = _departure(x)
                 if msg is not None:
@@ -260,7 +259,7 @@ def fly_maneuver(
         controller.finish(si, t_s)
     except ManeuverFailure as exc:
         raise FlightError(
-            f"{where} (aircraft {aircraft.id}), t = {exc.t_s if exc.t_s else t_fail:.2f} s into "
+            f"{where} (aircraft {aircraft.id}), t = {exc.t_s:.2f} s into "
             f"the maneuver: {exc.what}. Try: {exc.advice}."
         ) from None
 
