@@ -33,7 +33,7 @@ def twin_runs(tmp_path_factory):
     for name, seed in (("a", 11), ("b", 11), ("c", 12)):
         raw = copy.deepcopy(SMALL)
         raw["seed"] = seed
-        res = fly_campaign(parse_campaign(raw, source=name), base / name, workers=1)
+        res = fly_campaign(parse_campaign(raw, source="small.toml"), base / name, workers=1)
         assert res.ok, res.failures
         out[name] = base / name
     return out
