@@ -40,6 +40,8 @@ class ParameterSpec:
     kind : one of :data:`KINDS`.
     breakpoints : for tables, the breakpoints (SI units of the table's argument).
     per_instance : start values or fixed values for particular instances (scope key -> value).
+    free_instances : free/fixed status of particular instances, overriding ``free``.
+    fixed_elements : table elements held at their value even when the table is free.
     display_scale, display_unit : how reports show it (e.g. 57.2958, "deg").
     """
 
@@ -53,6 +55,7 @@ class ParameterSpec:
     breakpoints: tuple[float, ...] | None = None
     per_instance: Mapping[str, float | Sequence[float]] = field(default_factory=dict)
     free_instances: Mapping[str, bool] = field(default_factory=dict)
+    fixed_elements: tuple[int, ...] = ()
     display_scale: float = 1.0
     display_unit: str = ""
 
@@ -162,7 +165,8 @@ class ParameterSet:
                     el = None if spec.breakpoints is None else k
                     params.append(Parameter(
                         key=make_key(spec.name, inst, el), name=spec.name, instance=inst, element=el,
-                        unit=spec.unit, value=float(v), free=bool(free), scope=spec.scope,
+                        unit=spec.unit, value=float(v),
+                        free=bool(free) and k not in spec.fixed_elements, scope=spec.scope,
                         bounds=spec.bounds, kind=spec.kind, display_scale=spec.display_scale,
                         display_unit=spec.display_unit,
                     ))

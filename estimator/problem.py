@@ -1,0 +1,176 @@
+"""What the estimator is asked to do: maneuvers of data, channel models, sensors, parameters.
+
+Everything here is plain, immutable data in SI units. :mod:`estimator.io` builds a
+:class:`Problem` from a problem file (TOML) or from a dataset written by ``fpr fly``;
+:mod:`estimator.model` evaluates it and :mod:`estimator.solver` estimates its free parameters.
+
+Channel models are text (:mod:`estimator.core.expressions`) over these signals:
+
+==================  ==========================================================================
+``alpha_s``         angle of attack at the channel's sensor, atan2(w_s, u_s), rad
+``beta_s``          aerodynamic sideslip at the sensor, asin(v_s / |V_s|), rad
+``flank_s``         flank angle at the sensor, atan2(v_s, u_s), rad (what a sideslip vane senses)
+``alpha_t``         angle of attack at the CG, rad
+``beta_t``          sideslip at the CG, rad
+``tas_t``           true airspeed at the CG, m/s
+``phi``, ``theta``, ``psi``, ``h``  reconstructed Euler angles (rad) and altitude (m)
+``z``               the channel's own measurement (SPEC §5: f3, f4 take a measured argument)
+any data column     e.g. ``gear`` (1 = gear down), ``mach``, another channel's measurement
+==================  ==========================================================================
+
+with ``V_s = V + omega x (r_sensor - r_cg)``, the exact rigid-body velocity (SPEC §3).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from estimator.core.expressions import Expression, parse
+from estimator.parameters import ParameterSet, ParameterSpec
+
+#: Signals computed from the reconstructed states (their derivatives are chained to the states).
+STATE_SIGNALS = frozenset(
+    {"alpha_s", "beta_s", "flank_s", "alpha_t", "beta_t", "tas_t", "phi", "theta", "psi", "h"}
+)
+#: Signals that need a sensor position.
+SENSOR_SIGNALS = frozenset({"alpha_s", "beta_s", "flank_s"})
+#: Names of the 13 state-equation parameter families, in kernel order.
+STATE_PARAMS = ("u0", "v0", "w0", "phi0", "theta0", "psi0", "h0",
+                "dax", "day", "daz", "dp", "dq", "dr")
+
+
+@dataclass(frozen=True)
+class ChannelSpec:
+    """One observed channel.
+
+    Attributes
+    ----------
+    name : channel name (``alpha_zl``).
+    column : the data column holding its measurement, SI (``alpha_zl_rad``).
+    model : observation model text, e.g. ``"f1(alpha_s) - f2(alpha_t) * beta_s + b_l"``.
+    sensor : sensor name whose position defines ``alpha_s``/``beta_s``/``flank_s`` (flow channels).
+    delay : parameter family of the channel's time shift ``y(t - tau)``, or None.
+    recorder : recorder the channel comes from (for recorder-scoped parameters).
+    unit : SI unit of the measurement.
+    display_scale, display_unit : for reports (57.29578, "deg").
+    """
+
+    name: str
+    column: str
+    model: str
+    sensor: str | None = None
+    delay: str | None = None
+    recorder: str = "dru"
+    unit: str = "rad"
+    display_scale: float = 1.0
+    display_unit: str = ""
+    expression: Expression = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        expr = parse(self.model, where=f"channel {self.name}")
+        object.__setattr__(self, "expression", expr)
+        if (expr.names & SENSOR_SIGNALS) and not self.sensor:
+            raise ValueError(
+                f"channel {self.name}: model {self.model!r} uses a sensor signal "
+                f"({sorted(expr.names & SENSOR_SIGNALS)}) but declares no sensor; add sensor = \"...\""
+            )
+        if not self.display_unit:
+            object.__setattr__(self, "display_unit", self.unit)
+
+
+@dataclass(frozen=True)
+class ManeuverData:
+    """One maneuver's data on a uniform time base, SI units.
+
+    Attributes
+    ----------
+    id : maneuver id (unique in the problem).
+    t_s : (N,) uniform, strictly increasing sample times, s.
+    accel_imu_mps2 : (N, 3) specific force measured at the IMU, body axes, m/s^2.
+    omega_rps : (N, 3) body rates measured by the IMU, rad/s.
+    measurements : channel column -> (N,) measured values (SI), NaN-free.
+    signals : other data columns the models may use (``gear``, ``mach``), (N,) each.
+    r_cg_body_m : (3,) CG position, body axes, m (reference-point origin).
+    aircraft, configuration : for aircraft- and configuration-scoped parameters.
+    source : where the data came from (file and time range), for error messages.
+    meta : anything else (manifest entry, Mach, gear).
+    """
+
+    id: str
+    t_s: np.ndarray
+    accel_imu_mps2: np.ndarray
+    omega_rps: np.ndarray
+    measurements: Mapping[str, np.ndarray]
+    r_cg_body_m: np.ndarray
+    aircraft: str = "aircraft"
+    configuration: str = ""
+    signals: Mapping[str, np.ndarray] = field(default_factory=dict)
+    source: str = ""
+    meta: Mapping = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return len(self.t_s)
+
+    @property
+    def dt_s(self) -> float:
+        return float((self.t_s[-1] - self.t_s[0]) / (len(self.t_s) - 1))
+
+
+@dataclass(frozen=True)
+class Problem:
+    """An estimation problem.
+
+    Attributes
+    ----------
+    maneuvers : the data.
+    channels : the observed channels (a channel absent from a maneuver is skipped there).
+    sensors : sensor name -> (3,) position, body axes, m.
+    imu_position_body_m : (3,) accelerometer position, body axes, m.
+    parameters : the expanded parameter set (start values, free/fixed, bounds).
+    g_mps2 : gravity used by the flat-earth state equations.
+    source : problem file or dataset path.
+    """
+
+    maneuvers: tuple[ManeuverData, ...]
+    channels: tuple[ChannelSpec, ...]
+    sensors: Mapping[str, np.ndarray]
+    imu_position_body_m: np.ndarray
+    parameters: ParameterSet
+    g_mps2: float = 9.80665
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        ids = [m.id for m in self.maneuvers]
+        if len(set(ids)) != len(ids):
+            dup = sorted({i for i in ids if ids.count(i) > 1})
+            raise ValueError(f"{self.source}: duplicate maneuver ids {dup}")
+        for ch in self.channels:
+            if ch.sensor and ch.sensor not in self.sensors:
+                raise ValueError(
+                    f"{self.source}: channel {ch.name} uses sensor {ch.sensor!r}, which has no "
+                    f"position; declare it under [sensors] (known: {sorted(self.sensors)})"
+                )
+
+    def instances(self) -> dict[str, list[str]]:
+        """Scope -> instance ids present (for :meth:`ParameterSet.expand`)."""
+        return {
+            "aircraft": sorted({m.aircraft for m in self.maneuvers}),
+            "configuration": sorted({m.configuration for m in self.maneuvers}),
+            "recorder": sorted({c.recorder for c in self.channels}),
+            "maneuver": [m.id for m in self.maneuvers],
+        }
+
+
+def expand_parameters(specs: list[ParameterSpec], maneuvers, channels) -> ParameterSet:
+    """Expand parameter families over the instances present in the maneuvers and channels."""
+    inst = {
+        "aircraft": sorted({m.aircraft for m in maneuvers}),
+        "configuration": sorted({m.configuration for m in maneuvers}),
+        "recorder": sorted({c.recorder for c in channels}),
+        "maneuver": [m.id for m in maneuvers],
+    }
+    return ParameterSet.expand(specs, inst)
