@@ -1,0 +1,512 @@
+r"""Maximum-likelihood output-error estimation for many maneuvers at once.
+
+Cost (Jategaonkar 2006, §4.3), residuals ``e = z - y`` of channel ``c`` at sample ``i``::
+
+    J(theta, R) = 1/2 sum_c sum_i e_ci^2 / R_c + 1/2 sum_c N_c ln R_c
+
+``R`` (diagonal, one variance per channel) is estimated in closed form from the residuals between
+Gauss-Newton steps, ``R_c = sum_i e_ci^2 / N_c`` (relaxation strategy, §4.10). For fixed ``R`` the
+Gauss-Newton step solves ``M dtheta = g`` with::
+
+    M = sum J^T R^-1 J,     g = sum J^T R^-1 e
+
+Parameters are *global* (any scope but per maneuver) or *local* (one maneuver's initial conditions,
+IMU biases, ...). Local parameters touch only their maneuver's rows, so ``M`` has an arrow
+structure; the local blocks are eliminated maneuver by maneuver (Schur complement)::
+
+    S  = M_GG - sum_k M_GLk M_LLk^-1 M_LkG,       S dG = g_G - sum_k M_GLk M_LLk^-1 g_Lk
+    dL_k = M_LLk^-1 (g_Lk - M_LkG dG)
+
+so an iteration costs time linear in the number of maneuvers and no Jacobian of everything is
+ever formed. A Levenberg-Marquardt damping ``lambda diag(M)`` keeps a bad start from diverging;
+bounds are enforced by projection.
+
+Standard deviations: Cramér-Rao, ``sqrt(diag(M^-1))``; and corrected for coloured residuals
+(Morelli & Klein 1997, "Accuracy of aircraft parameter estimates from flight test data")::
+
+    Cov = M^-1 [ sum_i sum_j J_i^T R^-1 r(i - j) R^-1 J_j ] M^-1
+
+with ``r`` the residual autocorrelation of each channel and maneuver, evaluated by FFT
+convolution. Rank deficiency of ``S`` or of a local block (a free table offset beside a free
+bias, a time shift with no excitation) is detected on the scaled matrix and reported with the
+parameters involved; the step then uses the pseudo-inverse and their deviations are NaN.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import fftconvolve
+
+from estimator.model import ManeuverEval, Model
+from estimator.problem import Problem
+from estimator.result import Confounding, EstimationResult, ResidualStats
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Solver settings.
+
+    Attributes
+    ----------
+    max_iterations : Gauss-Newton iterations at most.
+    rtol_cost : converged when the relative cost decrease of an accepted step is below this ...
+    step_tol_sigma : ... and no parameter moved by more than this many Cramér-Rao deviations.
+    lm_lambda0 : initial Levenberg-Marquardt damping (relative to diag M).
+    rank_rtol : eigenvalues of the scaled information matrix below ``rank_rtol * max`` are treated
+        as zero (unidentifiable directions).
+    min_support_samples : a parameter that fewer samples depend on (a table breakpoint at the edge
+        of the flown range) is held at its start value and reported: a handful of samples would
+        set it to fit their noise.
+    correlation_warn : |correlation| above this is reported as a confounded pair.
+    colored : compute the Morelli-Klein coloured-residual deviations.
+    verbose : print one line per iteration.
+    """
+
+    max_iterations: int = 40
+    rtol_cost: float = 1e-7
+    step_tol_sigma: float = 0.01
+    lm_lambda0: float = 1e-4
+    rank_rtol: float = 1e-10
+    correlation_warn: float = 0.995
+    min_support_samples: int = 40
+    colored: bool = True
+    verbose: bool = False
+
+
+class _Structure:
+    """Which free parameters are global and which belong to which maneuver."""
+
+    def __init__(self, problem: Problem, free: np.ndarray):
+        ps = problem.parameters
+        self.free = free
+        self.lo = np.array([p.bounds[0] for p in ps])
+        self.hi = np.array([p.bounds[1] for p in ps])
+        man_index = {m.id: k for k, m in enumerate(problem.maneuvers)}
+        n = len(ps)
+        self.gpos = np.full(n, -1)
+        self.lpos = np.full(n, -1)
+        self.local_of: list[list[int]] = [[] for _ in problem.maneuvers]
+        glob: list[int] = []
+        for i, p in enumerate(ps):
+            if not free[i]:
+                continue
+            if p.scope == "maneuver":
+                k = man_index[p.instance]
+                self.lpos[i] = len(self.local_of[k])
+                self.local_of[k].append(i)
+            else:
+                self.gpos[i] = len(glob)
+                glob.append(i)
+        self.glob = np.array(glob, dtype=int)
+        self.local_of_arr = [np.array(v, dtype=int) for v in self.local_of]
+
+
+class _Normal:
+    """Arrow-structured normal equations: global block, per-maneuver local and coupling blocks."""
+
+    def __init__(self, st: _Structure):
+        ng = st.glob.size
+        self.st = st
+        self.HGG = np.zeros((ng, ng))
+        self.gG = np.zeros(ng)
+        self.HLL = [np.zeros((v.size, v.size)) for v in st.local_of_arr]
+        self.HGL = [np.zeros((ng, v.size)) for v in st.local_of_arr]
+        self.gL = [np.zeros(v.size) for v in st.local_of_arr]
+        self.support = np.zeros(st.free.size, dtype=np.int64)
+
+    def add(self, k: int, J: np.ndarray, cols: np.ndarray, e: np.ndarray, w: float) -> None:
+        st = self.st
+        np.add.at(self.support, cols, np.count_nonzero(J, axis=0))
+        keep = st.free[cols]
+        if not keep.any():
+            return
+        J = J[:, keep]
+        cols = cols[keep]
+        uc, inv = np.unique(cols, return_inverse=True)
+        if uc.size < cols.size:  # the same parameter reached twice: add its columns
+            J2 = np.zeros((J.shape[0], uc.size))
+            np.add.at(J2.T, inv, J.T)
+            J, cols = J2, uc
+        H = (J.T @ J) * w
+        g = (J.T @ e) * w
+        gp, lp = st.gpos[cols], st.lpos[cols]
+        gi, li = np.nonzero(gp >= 0)[0], np.nonzero(lp >= 0)[0]
+        if gi.size:
+            self.HGG[np.ix_(gp[gi], gp[gi])] += H[np.ix_(gi, gi)]
+            self.gG[gp[gi]] += g[gi]
+        if li.size:
+            self.HLL[k][np.ix_(lp[li], lp[li])] += H[np.ix_(li, li)]
+            self.gL[k][lp[li]] += g[li]
+            if gi.size:
+                self.HGL[k][np.ix_(gp[gi], lp[li])] += H[np.ix_(gi, li)]
+
+
+def _build_normal(st: _Structure, evals: list[ManeuverEval], R: np.ndarray) -> _Normal:
+    N = _Normal(st)
+    for ev in evals:
+        for b in ev.blocks:
+            N.add(ev.maneuver, b.J, b.cols, b.z - b.y, 1.0 / R[b.channel])
+    return N
+
+
+def _sym_inverse(H: np.ndarray, rtol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pseudo-inverse of a symmetric PSD matrix via the scaled eigen-decomposition.
+
+    Returns the inverse and the null-space directions (columns, in the unscaled coordinates'
+    scaled form, i.e. of ``D^-1/2 H D^-1/2``) whose eigenvalues fall below ``rtol * max``.
+    """
+    n = H.shape[0]
+    if n == 0:
+        return np.zeros((0, 0)), np.zeros((0, 0))
+    diag = np.diag(H)
+    live = diag > 1e-300 * max(diag.max(), 1e-300)
+    # rows with no information at all get a zero inverse (no step) and count as null directions
+    d = np.where(live, np.sqrt(np.where(live, diag, 1.0)), 1.0)
+    Hs = H / d[:, None] / d[None, :]
+    Hs[~live, :] = 0.0
+    Hs[:, ~live] = 0.0
+    lam, V = np.linalg.eigh(Hs)
+    thr = rtol * max(lam[-1], 1e-300)
+    ok = lam > thr
+    inv_s = (V[:, ok] / lam[ok]) @ V[:, ok].T
+    return inv_s / d[:, None] / d[None, :], V[:, ~ok]
+
+
+def _confounded_sets(null: np.ndarray, keys: list[str], where: str) -> list[Confounding]:
+    out = []
+    for j in range(null.shape[1]):
+        v = null[:, j]
+        big = np.argsort(-np.abs(v))
+        members = [keys[i] for i in big if abs(v[i]) > 0.15 * np.abs(v).max()][:8]
+        out.append(Confounding(
+            parameters=tuple(members),
+            kind="unidentifiable",
+            detail=(f"{where}: the data cannot tell these parameters apart (a combination of them "
+                    "leaves every output unchanged); fix all but one of them, or add maneuvers that "
+                    "excite them differently"),
+        ))
+    return out
+
+
+def _lm_solve(N: _Normal, lam: float, rtol: float):
+    """Damped Schur-complement solve. Returns (delta_G, [delta_L_k], S, factors, null info)."""
+    ng = N.HGG.shape[0]
+    S = N.HGG.copy()
+    S[np.diag_indices(ng)] *= 1.0 + lam
+    r = N.gG.copy()
+    Ainv = []
+    for k, A in enumerate(N.HLL):
+        if A.shape[0] == 0:
+            Ainv.append(np.zeros((0, 0)))
+            continue
+        A = A.copy()
+        A[np.diag_indices(A.shape[0])] *= 1.0 + lam
+        Ai, _ = _sym_inverse(A, rtol)
+        Ainv.append(Ai)
+        B = N.HGL[k] @ Ai
+        S -= B @ N.HGL[k].T
+        r -= B @ N.gL[k]
+    Sinv, _ = _sym_inverse(S, rtol)
+    dG = Sinv @ r
+    dL = [Ai @ (gl - hgl.T @ dG) for Ai, gl, hgl in zip(Ainv, N.gL, N.HGL, strict=True)]
+    return dG, dL, Sinv, Ainv
+
+
+def _residuals(evals: list[ManeuverEval], n_channels: int):
+    sse = np.zeros(n_channels)
+    cnt = np.zeros(n_channels)
+    for ev in evals:
+        for b in ev.blocks:
+            e = b.z - b.y
+            sse[b.channel] += e @ e
+            cnt[b.channel] += e.size
+    return sse, cnt
+
+
+def _cost(sse, cnt, R):
+    used = cnt > 0
+    return 0.5 * np.sum(sse[used] / R[used]) + 0.5 * np.sum(cnt[used] * np.log(R[used]))
+
+
+def _screen(problem, st: _Structure, evals, R, opt: SolverOptions):
+    """Hold parameters the data do not determine; returns the new structure and the reports.
+
+    Parameters no sample depends on (a table breakpoint beyond the flown range, a bias of a sensor
+    an aircraft does not carry), and combinations the data cannot separate (a free table offset
+    beside a free bias), are held at their start values and reported instead of "estimated".
+    """
+    keys = problem.parameters.keys
+    found: list[Confounding] = []
+    for _ in range(6):
+        N = _build_normal(st, evals, R)
+        info = np.zeros(len(keys))
+        info[st.glob] = np.diag(N.HGG)
+        for k, idx in enumerate(st.local_of_arr):
+            info[idx] = np.diag(N.HLL[k])
+        no_data = st.free & ~((info > 0.0) & (N.support >= opt.min_support_samples))
+        if no_data.any():
+            found.append(Confounding(
+                parameters=tuple(keys[i] for i in np.nonzero(no_data)[0]), kind="no_data",
+                detail=(f"fewer than {opt.min_support_samples} samples depend on these parameters "
+                        "(e.g. a table breakpoint outside the flown range, or a sensor this aircraft "
+                        "does not carry); held at their start values"),
+            ))
+            st = _Structure(problem, st.free & ~no_data)
+            continue
+        _, _, conf = _covariance(N, st, keys, problem, opt)
+        conf = [c for c in conf if c.kind == "unidentifiable"]
+        if not conf:
+            break
+        free = st.free.copy()
+        for c in conf:
+            free[[problem.parameters.index(k) for k in c.parameters]] = False
+            found.append(Confounding(c.parameters, c.kind,
+                                     c.detail + "; all of them were held at their start values"))
+        st = _Structure(problem, free)
+    return st, found
+
+
+def estimate(problem: Problem, options: SolverOptions | None = None) -> EstimationResult:
+    """Estimate the free parameters of ``problem`` by maximum likelihood (output error).
+
+    Parameters
+    ----------
+    problem : the problem (data, channel models, parameters with start values).
+    options : solver settings.
+
+    Returns
+    -------
+    EstimationResult with estimates, Cramér-Rao and coloured-residual deviations, correlations,
+    residual statistics, iterations, status and message.
+    """
+    opt = options or SolverOptions()
+    t0 = time.perf_counter()
+    model = Model(problem)
+    ps = problem.parameters
+    keys = ps.keys
+    nch = len(problem.channels)
+    st = _Structure(problem, ps.free_mask)
+    start = np.clip(ps.values, st.lo, st.hi)
+    if not st.free.any():
+        raise ValueError(f"{problem.source}: no free parameters; free some in the problem file")
+
+    def evaluate_all(th, jac):
+        return [model.evaluate(th, k, jacobian=jac) for k in range(len(problem.maneuvers))]
+
+    def variances(sse, cnt):
+        return np.maximum(np.where(cnt > 0, sse / np.maximum(cnt, 1), 1.0), 1e-16)
+
+    theta = start.copy()
+    evals = evaluate_all(theta, True)
+    sse, cnt = _residuals(evals, nch)
+    if not cnt.any():
+        raise ValueError(f"{problem.source}: no channel has data in any maneuver")
+    st, confounding = _screen(problem, st, evals, variances(sse, cnt), opt)
+    lam = opt.lm_lambda0
+    history: list[float] = []
+    it_total = 0
+    for _round in range(3):
+        if not st.free.any():
+            raise ValueError(f"{problem.source}: no identifiable free parameter left; see the "
+                             "confounding report: " + "; ".join(", ".join(c.parameters) for c in confounding))
+        status, message = 0, f"iteration limit ({opt.max_iterations}) reached before convergence"
+        for _it in range(opt.max_iterations):
+            it_total += 1
+            # relaxation: R from the current residuals, then a Gauss-Newton step for theta
+            R = variances(sse, cnt)
+            cost0 = _cost(sse, cnt, R)
+            history.append(cost0)
+            N = _build_normal(st, evals, R)
+            accepted = False
+            for _ in range(12):
+                dG, dL, Sinv, Ainv = _lm_solve(N, lam, opt.rank_rtol)
+                step = np.zeros_like(theta)
+                step[st.glob] = dG
+                for k, idx in enumerate(st.local_of_arr):
+                    step[idx] = dL[k]
+                trial = np.clip(theta + step, st.lo, st.hi)
+                sse_t, cnt_t = _residuals(evaluate_all(trial, False), nch)
+                cost_t = _cost(sse_t, cnt_t, R)
+                if np.isfinite(cost_t) and cost_t <= cost0:
+                    accepted = True
+                    break
+                lam = max(lam, 1e-6) * 10.0
+            if not accepted:
+                status, message = 2, ("no step decreases the cost any further (damping grew to "
+                                      f"{lam:.1e}): a minimum, or the model cannot fit the data better")
+                break
+            # convergence: small relative decrease and steps small against their deviations
+            sig = np.sqrt(np.maximum(np.concatenate(
+                [np.diag(Sinv)] + [np.diag(a) for a in Ainv if a.size]), 1e-300))
+            moved = np.abs(np.concatenate([dG] + [d for d in dL if d.size])) / sig
+            theta = trial
+            lam = max(lam * 0.1, 1e-9)
+            evals = evaluate_all(theta, True)
+            sse, cnt = _residuals(evals, nch)
+            rel = (cost0 - _cost(sse, cnt, R)) / max(abs(cost0), 1e-300)
+            if opt.verbose:
+                print(f"iteration {it_total:3d}: cost {cost0: .6e}, rel. decrease {rel:.2e}, "
+                      f"max step {moved.max():.2e} sigma, lambda {lam:.1e}")
+            if rel < opt.rtol_cost and moved.max() < opt.step_tol_sigma:
+                status, message = 1, (f"converged: relative cost decrease {rel:.1e} < "
+                                      f"{opt.rtol_cost:.0e} and largest step {moved.max():.1e} "
+                                      f"sigma < {opt.step_tol_sigma}")
+                break
+        # the trajectory moved: a breakpoint may have lost its data, or a combination its
+        # excitation; hold those, restore their start values, and iterate again
+        st_new, found = _screen(problem, st, evals, variances(sse, cnt), opt)
+        if not found:
+            break
+        confounding += found
+        newly_held = st.free & ~st_new.free
+        theta[newly_held] = start[newly_held]
+        st = st_new
+        evals = evaluate_all(theta, True)
+        sse, cnt = _residuals(evals, nch)
+
+    # final R and undamped information matrix at the estimate
+    R = variances(sse, cnt)
+    history.append(_cost(sse, cnt, R))
+    N = _build_normal(st, evals, R)
+    cov_G, cov_L, final_conf = _covariance(N, st, keys, problem, opt)
+    confounding += final_conf
+    std = np.full(len(keys), np.nan)
+    std[st.glob] = np.sqrt(np.maximum(np.diag(cov_G), 0.0))
+    for k, idx in enumerate(st.local_of_arr):
+        if idx.size:
+            std[idx] = np.sqrt(np.maximum(np.diag(cov_L[k]), 0.0))
+    for c in final_conf:
+        std[[ps.index(k) for k in c.parameters]] = np.nan
+    dg = np.sqrt(np.maximum(np.diag(cov_G), 1e-300))
+    corr_G = cov_G / np.outer(dg, dg)
+    confounding += _high_correlations(corr_G, [keys[i] for i in st.glob], opt.correlation_warn)
+    std_col = np.full(len(keys), np.nan)
+    if opt.colored:
+        std_col = _colored_std(model, evals, N, st, R, cov_G, len(keys), opt)
+    if any(c.kind in ("unidentifiable", "no_data") for c in confounding):
+        message += "; some parameters were held because the data do not determine them (see confounding)"
+    return EstimationResult.build(
+        problem=problem, values=theta, std_crb=std, std_colored=std_col,
+        correlation_keys=tuple(keys[i] for i in st.glob), correlation=corr_G,
+        R=dict(zip((c.name for c in problem.channels), R, strict=True)),
+        residuals=_stats(problem, evals), iterations=it_total, cost_history=tuple(history),
+        status=status, message=message, confounding=tuple(confounding),
+        elapsed_s=time.perf_counter() - t0, free_estimated=st.free.copy(),
+    )
+
+
+def _covariance(N: _Normal, st: _Structure, keys, problem: Problem, opt: SolverOptions):
+    """Undamped Cramér-Rao covariance of the global block and of each local block."""
+    dG, dL, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol)
+    confounding: list[Confounding] = []
+    # rank checks: the Schur complement (globals) and each local block
+    ng = N.HGG.shape[0]
+    S = N.HGG.copy()
+    for k, Ai in enumerate(Ainv):
+        if Ai.size:
+            S -= N.HGL[k] @ Ai @ N.HGL[k].T
+    _, null = _sym_inverse(S, opt.rank_rtol)
+    confounding += _confounded_sets(null, [keys[i] for i in st.glob], "global parameters")
+    cov_L = []
+    for k, Ai in enumerate(Ainv):
+        idx = st.local_of_arr[k]
+        if not idx.size:
+            cov_L.append(np.zeros((0, 0)))
+            continue
+        _, nullk = _sym_inverse(N.HLL[k], opt.rank_rtol)
+        confounding += _confounded_sets(nullk, [keys[i] for i in idx],
+                                        f"maneuver {problem.maneuvers[k].id}")
+        B = Ai @ N.HGL[k].T
+        cov_L.append(Ai + B @ Sinv @ B.T)
+    del ng, dG, dL
+    return Sinv, cov_L, confounding
+
+
+def _high_correlations(corr: np.ndarray, keys: list[str], thr: float) -> list[Confounding]:
+    out = []
+    n = corr.shape[0]
+    iu = np.triu_indices(n, 1)
+    vals = corr[iu]
+    for a, b, r in zip(iu[0], iu[1], vals, strict=True):
+        if np.isfinite(r) and abs(r) > thr:
+            out.append(Confounding(
+                parameters=(keys[a], keys[b]), kind="correlated",
+                detail=(f"correlation {r:+.4f}: the data barely separate {keys[a]} from {keys[b]}; "
+                        "their individual values are uncertain even if their deviations look small"),
+            ))
+    return out
+
+
+def _autocorr(e: np.ndarray) -> np.ndarray:
+    """Biased autocorrelation at lags -(n-1)..(n-1)."""
+    n = e.size
+    return fftconvolve(e, e[::-1], mode="full") / n
+
+
+def _colored_std(model: Model, evals, N: _Normal, st: _Structure, R, cov_G, nparam, opt) -> np.ndarray:
+    """Morelli-Klein standard deviations for every free parameter (sandwich covariance)."""
+    ng = st.glob.size
+    CGG = np.zeros((ng, ng))
+    per_k = []
+    _, _, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol)
+    for ev in evals:
+        k = ev.maneuver
+        lidx = st.local_of_arr[k]
+        nl = lidx.size
+        Bk = Ainv[k] @ N.HGL[k].T if nl else np.zeros((0, ng))  # (L, G) = A^-1 M_LG
+        CLL = np.zeros((nl, nl))
+        CLG = np.zeros((nl, ng))
+        for b in ev.blocks:
+            cols = b.cols
+            keep = st.free[cols]
+            if not keep.any():
+                continue
+            J = b.J[:, keep]
+            cols = cols[keep]
+            n = J.shape[0]
+            JG = np.zeros((n, ng))
+            JL = np.zeros((n, nl))
+            gp, lp = st.gpos[cols], st.lpos[cols]
+            for j in range(cols.size):
+                if gp[j] >= 0:
+                    JG[:, gp[j]] += J[:, j]
+                else:
+                    JL[:, lp[j]] += J[:, j]
+            Jt = JG - JL @ Bk if nl else JG  # Schur-projected sensitivities of the globals
+            w = 1.0 / R[b.channel]
+            r = _autocorr(b.z - b.y)
+            both = np.hstack([Jt, JL])
+            conv = fftconvolve(both, r[:, None], mode="full", axes=0)[n - 1:2 * n - 1]
+            C = both.T @ conv * w * w
+            CGG += C[:ng, :ng]
+            CLL += C[ng:, ng:]
+            CLG += C[ng:, :ng]
+        per_k.append((Bk, CLL, CLG))
+    covG = Sinv @ CGG @ Sinv
+    std = np.full(nparam, np.nan)
+    std[st.glob] = np.sqrt(np.maximum(np.diag(covG), 0.0))
+    for k, (Bk, CLL, CLG) in enumerate(per_k):
+        lidx = st.local_of_arr[k]
+        if not lidx.size:
+            continue
+        Ai = Ainv[k]
+        cross = Ai @ CLG @ Sinv @ Bk.T
+        cov = Ai @ CLL @ Ai - cross - cross.T + Bk @ covG @ Bk.T
+        std[lidx] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    return std
+
+
+def _stats(problem: Problem, evals) -> tuple[ResidualStats, ...]:
+    out = []
+    for ev in evals:
+        mid = problem.maneuvers[ev.maneuver].id
+        for b in ev.blocks:
+            e = b.z - b.y
+            out.append(ResidualStats(
+                maneuver=mid, channel=problem.channels[b.channel].name, n=int(e.size),
+                mean=float(e.mean()), std=float(e.std()), rms=float(np.sqrt(np.mean(e * e))),
+            ))
+    return tuple(out)
