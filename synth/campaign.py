@@ -278,6 +278,7 @@ def _run_job(job: Job) -> JobResult:
             "n_samples": int(len(data)),
             "sample_rate_hz": _WORKER["rate"],
             "r_cg_body_m_mean": np.mean(truth.r_cg_body_m, axis=0).tolist(),
+            "g_mps2_mean": float(np.mean(truth.g_mps2)),
             "maneuver": spec.to_dict(),
             "environment": env.to_dict(),
             "injected": inst.injected,
@@ -337,7 +338,7 @@ def fly_campaign(
         from tqdm import tqdm
 
         bar = tqdm(total=len(campaign.jobs), unit="maneuver", desc=f"fly {campaign.name}",
-                   file=sys.stderr)
+                   file=sys.stderr, mininterval=0.5 if sys.stderr.isatty() else 10.0)
 
     def _tick(res: JobResult) -> None:
         results.append(res)
