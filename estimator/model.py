@@ -100,7 +100,7 @@ class Model:
         if missing:
             raise ValueError(f"the state-equation parameters {missing} are not declared")
         for ch in problem.channels:
-            for name in ch.expression.names - STATE_SIGNALS - {"z"}:
+            for name in ch.expression.names - STATE_SIGNALS - {"z", "zhat"}:
                 if name in ps.specs:
                     continue
                 if not all(name in m.signals or name in m.measurements or name in self._channel_columns
@@ -140,6 +140,37 @@ class Model:
     def guard_samples(self, k: int, c: int) -> int:
         m = self.problem.maneuvers[k]
         return int(np.ceil(self._guard_s[c] / m.dt_s)) + 1 if self._guard_s[c] > 0 else 0
+
+    @staticmethod
+    def _implicit(expr, signals, params, tables, state, z, ch: ChannelSpec, iterations: int = 30):
+        """Solve ``y = F(y, ...)`` for a model whose argument ``zhat`` is its own output.
+
+        ``zhat`` is the noise-free model of the measurement: a table of the measured angle,
+        evaluated at the *modelled* angle, avoids the errors-in-variables bias that the noisy
+        measurement ``z`` as argument causes (SPEC §5). Fixed-point iteration from ``z``; the
+        derivatives follow from ``dy = dF + F_zhat dy``, i.e. ``dy = dF / (1 - F_zhat)``.
+        """
+        sig = dict(signals)
+        y = np.asarray(z, dtype=float)
+        for _ in range(iterations):
+            sig["zhat"] = y
+            y_new = np.broadcast_to(expr.evaluate(sig, params, tables).value, y.shape)
+            if np.max(np.abs(y_new - y)) < 1e-13:
+                y = y_new
+                break
+            y = y_new
+        else:
+            raise ValueError(
+                f"channel {ch.name}: the implicit model {ch.model!r} does not converge (its "
+                "dependence on zhat must be weaker than 1:1); use z instead of zhat or bound the tables"
+            )
+        sig["zhat"] = y
+        dual = expr.evaluate(sig, params, tables, state | {"zhat"})
+        f_z = np.broadcast_to(dual.dsignal.pop("zhat", 0.0), y.shape)
+        factor = 1.0 / (1.0 - f_z)
+        out = dual.scaled(factor)
+        out.value = dual.value
+        return out
 
     # ------------------------------------------------------------------ evaluation
     def integrate(self, values: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -208,7 +239,7 @@ class Model:
                     dtau[name] = -(val[i0 + 1] - val[i0]) / m.dt_s
             z = m.measurements[ch.column]
             signals["z"] = z
-            for name in expr.names - STATE_SIGNALS - {"z"}:
+            for name in expr.names - STATE_SIGNALS - {"z", "zhat"}:
                 if name in p.parameters.specs:
                     continue
                 if name in m.signals:
@@ -223,7 +254,10 @@ class Model:
             for t in expr.tables:
                 keys = [self.key(t, k, ch, e) for e in range(self._tables[t].breakpoints.size)]
                 tables[t] = (self._tables[t], values[[p.parameters.index(kk) for kk in keys]])
-            dual = expr.evaluate(signals, params, tables, frozenset(dstate))
+            if "zhat" in expr.names:
+                dual = self._implicit(expr, signals, params, tables, frozenset(dstate), z, ch)
+            else:
+                dual = expr.evaluate(signals, params, tables, frozenset(dstate))
             y = np.broadcast_to(dual.value, (n,))
             g = self.guard_samples(k, c)
             rows = np.arange(g, n - g)

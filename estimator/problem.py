@@ -15,6 +15,9 @@ Channel models are text (:mod:`estimator.core.expressions`) over these signals:
 ``tas_t``           true airspeed at the CG, m/s
 ``phi``, ``theta``, ``psi``, ``h``  reconstructed Euler angles (rad) and altitude (m)
 ``z``               the channel's own measurement (SPEC §5: f3, f4 take a measured argument)
+``zhat``            the channel's own *modelled* measurement: ``y = F(zhat)`` is solved as an implicit
+                    equation. As a table argument it is the measured-angle table of the paper without
+                    the errors-in-variables bias that noise in ``z`` causes
 any data column     e.g. ``gear`` (1 = gear down), ``mach``, another channel's measurement
 ==================  ==========================================================================
 
