@@ -1,0 +1,168 @@
+r"""Import flight data into an estimation :class:`~estimator.problem.Problem`.
+
+Two ways in, one set of checks:
+
+- :func:`load_problem` reads a **problem file** (TOML, below) that points at your flight data
+  (CSV, whitespace-separated text, Parquet) or at a dataset written by ``fpr fly``;
+- :func:`problem_from_dataset` does the same for an ``fpr fly`` dataset from Python.
+
+The problem file
+----------------
+
+Everything the estimator needs to know about your aircraft, your files and your model, in one
+place. Paths are relative to the problem file. Positions are body axes (x forward, y right,
+z down) from the aircraft's reference point::
+
+    title = "PV1 vane calibration, flight 421"
+    g_mps2 = 9.80665          # gravity of the flat-earth state equations (default 9.80665)
+    model = "tejas"           # model set: a shipped name (estimator/models/*.toml) or a path
+    channels = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr"]
+                              # optional: the channels to fit; default: every channel of the
+                              # model set that has data (the others are left out with a warning)
+    resample_hz = 40.0        # optional, for every file: see "Sampling" below
+
+    [sensors]                 # metres; a key ending _in or _ft gives inches or feet instead
+    imu = [1.80, 0.10, 0.20]  # required: the accelerometer position (lever-arm correction)
+    vane_left = [6.20, -0.45, 0.25]
+    vane_right = [6.20, 0.45, 0.25]
+    side_probe = [6.60, 0.0, 0.05]   # if absent, the mean of side_probe_left and side_probe_right
+    # every sensor a channel of the model set names (tejas: vane_left, vane_right, side_probe,
+    # nose_probe, boom_alpha_vane, boom_beta_upper_vane, boom_beta_lower_vane) needs a position
+
+    [aircraft.PV1]            # one table per aircraft (tail number)
+    r_cg_body_m = [0.33, 0.0, 0.13]  # CG (or r_cg_body_in / r_cg_body_ft); may be overridden
+                                     # per [[files]] entry or per maneuver
+
+    [columns]                 # canonical name -> source column (name or 0-based index) and unit
+    t = { column = "Time", unit = "s" }
+    ax = { column = "AX", unit = "g" }     # ax, ay, az: specific force at the IMU, body axes
+    ay = { column = "AY", unit = "g" }
+    az = { column = "AZ", unit = "g" }
+    p = { column = "P", unit = "deg/s" }   # p, q, r: IMU body rates
+    q = { column = "Q", unit = "deg/s" }
+    r = { column = "R", unit = "deg/s" }
+    phi = { column = "PHI", unit = "deg" } # Euler angles (INS)
+    theta = { column = "THETA", unit = "deg" }
+    psi = { column = "PSI", unit = "deg" } # heading may wrap (0/360 or +-180): it is unwrapped
+    tas = { column = "TAS", unit = "kt" }  # true airspeed
+    h = { column = "HP", unit = "ft" }     # pressure altitude
+    alpha_zl = { column = 7, unit = "deg" }
+    alpha_zr = { column = "AOA_R", unit = "deg", optional = true }
+                              # optional: a file without this column simply has no such channel
+    gear = { column = "GEAR", unit = "1" } # any other data signal a model uses (1 = gear down)
+    mach = { column = "MACH", unit = "1" }
+
+    [[files]]                 # one entry per file
+    path = "flight421.csv"
+    format = "csv"            # csv | whitespace | parquet; default from the extension
+                              # (.csv; .txt .dat .asc; .parquet .pq)
+    header = true             # text files: first line names the columns; false: by index only
+    delimiter = ","           # csv only (default ",")
+    skip_rows = 0             # text files: lines before the header (e.g. a title block)
+    aircraft = "PV1"          # default: the only [aircraft.*] table
+    configuration = "PV1-NP"  # default: the aircraft id
+    resample_hz = 40.0        # overrides the top-level value for this file
+    columns = { alpha_zl = { column = "AOA_L", unit = "deg" } }  # per-file column changes
+    maneuvers = [             # time ranges (s, the file's time base); omit: the whole file is
+                              # one maneuver whose id is the file name without extension
+      { id = "pd1", t_start_s = 120.0, t_end_s = 155.0 },
+      { id = "wut1", t_start_s = 300.0, t_end_s = 340.0, configuration = "PV1-NP" },
+    ]
+
+    [parameter.b_l]           # change any parameter of the model set; the keys are the model-set
+    free = true               # format's (estimator/modelfile.py) and merge into its declaration:
+    bounds_deg = [-3.0, 3.0]  # value_deg replaces value, bounds replaces bounds_deg, ...
+    [parameter.u0]
+    values = { pd1 = 152.0 }  # start values of particular instances (here: maneuver pd1, m/s)
+
+    [[channel]]               # channels of your own, same format as the model set; a channel
+    name = "alpha_5h"         # with a model-set channel's name replaces it
+    sensor = "five_hole"
+    model = "alpha_s + k_5h * alpha_s + b_5h"
+    delay = "tau_5h"
+    [parameter.b_5h]          # ... and its parameters
+    unit = "rad"
+    kind = "bias"
+    scope = "aircraft"
+
+Instead of ``[[files]]``, ``[columns]`` and ``[aircraft]``, a dataset written by ``fpr fly``::
+
+    [data]
+    dataset = "data/small"    # the directory holding manifest.json
+    select = { kind = ["pitch_doublet", "3211"], configuration = ["PV1-NP"], aircraft = ["PV1"],
+               mach_min = 0.45, mach_max = 0.55, gear_down = false, ids = ["m0000"] }
+
+Its columns are known by their SI names (``alpha_zl_rad`` -> ``alpha_zl``, ``gear_down`` ->
+``gear``, ``mach``, ...), sensor positions come from the manifest's airframe (``[sensors]`` may
+add or replace some), each maneuver's CG from its ``r_cg_body_m_mean``, aircraft and
+configuration from its entry. The truth (``true_*`` columns) is not part of the problem; each
+maneuver's ``meta`` keeps its manifest entry and the dataset path, and :func:`load_truth` reads
+the truth for the comparison afterwards.
+
+Canonical names. ``t``, ``ax``, ``ay``, ``az``, ``p``, ``q``, ``r`` are required. A name that
+is the ``column`` of a model-set channel (tejas: ``phi theta psi tas h alpha_zl alpha_zr
+alpha_zsp beta_zsp beta_znp alpha_zb beta_zbu beta_zbl``) is that channel's measurement; any
+other name is a data signal the channel models may use (``gear``, ``mach``). A channel without
+data in some maneuvers (a nose probe on one aircraft, a boom on another) is simply not fitted
+there; its aircraft- or configuration-scoped parameters are held fixed for the aircraft that have
+no data for them.
+
+Units (``value_SI = value * factor + offset``): time ``s ms``; angle ``rad deg mrad``; angular
+rate ``rad/s deg/s``; acceleration ``m/s^2 g ft/s^2`` (g = 9.80665 m/s^2); speed ``m/s kt ft/s
+km/h``; length ``m ft in``; dimensionless ``1 bool``; pressure ``Pa hPa kPa mbar psf``;
+temperature ``K degC``. A unit must fit the quantity (``t`` a time, ``p`` an angular rate, a
+channel its model set's unit).
+
+What is checked
+---------------
+
+Bad input raises :class:`DataError` naming the file, maneuver, time range, channel and source
+column, the time and data row (0-based, after the header) of the first bad sample, and the fix:
+
+- a missing file, an unknown key, an unknown unit (the valid ones are listed), a unit of the
+  wrong dimension, a column the file does not have (its columns are listed);
+- no data for a required input; a channel listed in ``channels`` that no maneuver has data for
+  (unlisted channels without data are left out with a :class:`DataWarning`); a channel model
+  using a data signal a maneuver lacks; a sensor without a position;
+- time not strictly increasing (duplicated or going back) anywhere in a file; a maneuver's time
+  range outside the file's span;
+- NaN, empty or non-numeric cells in any mapped column inside a maneuver;
+- gaps: a step longer than :data:`~estimator.io.timebase.GAP_FACTOR` (1.5) times the median step;
+- non-uniform sampling: a step off the median by more than
+  :data:`~estimator.io.timebase.JITTER_FRACTION` (1 %) is an error unless ``resample_hz`` is
+  given, in which case the maneuver is linearly interpolated onto ``t_start + k / resample_hz``
+  (no anti-aliasing filter; downsampling by more than 2 gives a warning);
+- units that cannot be right: values far outside what an aircraft does in the declared unit
+  (angles declared rad beyond ~1.6 rad, rates beyond 6 rad/s, a mean specific force outside
+  0.4 to 4 g, airspeed outside 15 to 700 m/s, altitude outside -500 to 25 000 m, ...); the
+  message gives the observed value and suggests the unit that fits (see
+  :mod:`estimator.io.plausibility`);
+- a maneuver shorter than :data:`~estimator.io.modelset.MIN_DURATION_S` (5 s) or with fewer than
+  :data:`~estimator.io.modelset.MIN_SAMPLES_PER_FREE_PARAMETER` (10) samples per free
+  per-maneuver parameter: those parameters (initial conditions, IMU biases) are estimated from
+  that maneuver alone;
+- duplicate maneuver ids; a g_mps2 that is not an Earth gravity in m/s^2.
+
+Start values of the initial conditions ``u0 v0 w0 phi0 theta0 psi0 h0`` come from the first
+:data:`~estimator.io.modelset.IC_AVERAGE_SAMPLES` samples of each maneuver (measured TAS, the first
+measured flow angles, Euler angles, altitude); values given in the problem file win.
+"""
+
+from estimator.io.dataset_problem import load_dataset_maneuvers, problem_from_dataset
+from estimator.io.errors import DataError, DataWarning
+from estimator.io.fprdataset import DATASET_COLUMNS, load_truth
+from estimator.io.modelset import (
+    IC_AVERAGE_SAMPLES,
+    MIN_DURATION_S,
+    MIN_SAMPLES_PER_FREE_PARAMETER,
+    initial_condition_starts,
+)
+from estimator.io.problemfile import load_problem
+from estimator.io.timebase import GAP_FACTOR, JITTER_FRACTION
+from estimator.io.units import UNITS, to_si
+
+__all__ = [
+    "DATASET_COLUMNS", "GAP_FACTOR", "IC_AVERAGE_SAMPLES", "JITTER_FRACTION", "MIN_DURATION_S",
+    "MIN_SAMPLES_PER_FREE_PARAMETER", "UNITS", "DataError", "DataWarning", "initial_condition_starts",
+    "load_dataset_maneuvers", "load_problem", "load_truth", "problem_from_dataset", "to_si",
+]

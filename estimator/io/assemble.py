@@ -1,0 +1,176 @@
+"""From raw tables (file units, canonical column names) to checked SI :class:`ManeuverData`.
+
+Both import paths meet here: a problem file's ``[[files]]`` and an ``fpr fly`` dataset are read
+into :class:`SourceTable` objects and cut into maneuvers by :class:`ManeuverRequest` objects;
+:func:`build_maneuver` applies every data check of :mod:`estimator.io`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from estimator.io.errors import DataError, Where, warn
+from estimator.io.plausibility import check_plausible, check_tas_against_mach
+from estimator.io.timebase import check_finite, check_sampling, check_time, resample, select_range
+from estimator.io.units import UNITS, get_unit, to_si
+from estimator.problem import ManeuverData
+
+#: Inputs every maneuver needs: time, IMU specific force (at the IMU, body axes) and body rates.
+REQUIRED = ("t", "ax", "ay", "az", "p", "q", "r")
+#: Dimension of the canonical names the estimator itself knows.
+DIMENSIONS: dict[str, str] = {
+    "t": "time", "ax": "acceleration", "ay": "acceleration", "az": "acceleration",
+    "p": "angular rate", "q": "angular rate", "r": "angular rate",
+    "phi": "angle", "theta": "angle", "psi": "angle", "tas": "speed", "h": "length",
+    "gear": "dimensionless", "mach": "dimensionless",
+}
+
+
+@dataclass
+class SourceTable:
+    """One data file mapped to canonical names, values still in the file's units.
+
+    Attributes
+    ----------
+    path : the file.
+    values : canonical name -> (N,) float values (NaN where missing or not a number).
+    not_numeric : canonical name -> (N,) mask of cells that held text.
+    raw_text : canonical name -> (N,) original cells, kept only for columns with text cells.
+    units : canonical name -> declared unit.
+    labels : canonical name -> how messages name it (``"channel ax (column 'AX')"``).
+    rows : (N,) data row of each sample (0-based after the header).
+    """
+
+    path: Path
+    values: dict[str, np.ndarray]
+    units: dict[str, str]
+    labels: dict[str, str]
+    not_numeric: dict[str, np.ndarray] = field(default_factory=dict)
+    raw_text: dict[str, np.ndarray] = field(default_factory=dict)
+    rows: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        missing = [c for c in REQUIRED if c not in self.values]
+        if missing:
+            raise DataError(
+                f"{self.path}: no data for the required input(s) {missing}; every maneuver needs "
+                "t (time), ax, ay, az (IMU specific force) and p, q, r (IMU body rates): map them "
+                "under [columns]"
+            )
+        n = len(self.values["t"])
+        if self.rows is None:
+            self.rows = np.arange(n)
+        t = to_si(self.values["t"], self.units["t"], f"{self.path}: {self.labels['t']}")
+        check_time(t, self.rows, Where(str(self.path)), self.labels["t"])
+        self.t_s = t
+
+
+@dataclass(frozen=True)
+class ManeuverRequest:
+    """A maneuver to cut out of a :class:`SourceTable`.
+
+    Attributes
+    ----------
+    id : maneuver id.
+    t_start_s, t_end_s : time range in the file's time base, s (None: start/end of the file).
+    aircraft, configuration : ids for aircraft- and configuration-scoped parameters.
+    r_cg_body_m : (3,) CG position, body axes, m.
+    resample_hz : resample onto a uniform grid at this rate (None: the data must be uniform).
+    meta : carried into :attr:`ManeuverData.meta`.
+    """
+
+    id: str
+    t_start_s: float | None
+    t_end_s: float | None
+    aircraft: str
+    configuration: str
+    r_cg_body_m: np.ndarray
+    resample_hz: float | None = None
+    meta: Mapping = field(default_factory=dict)
+
+
+def check_dimensions(table: SourceTable, expected: Mapping[str, str]) -> None:
+    """Each column's declared unit must be of the dimension its canonical name needs."""
+    for name, unit in table.units.items():
+        u = get_unit(unit, f"{table.path}: {table.labels[name]}")
+        dim = expected.get(name, DIMENSIONS.get(name))
+        if dim is not None and u.dimension != dim:
+            raise DataError(
+                f"{table.path}: {table.labels[name]} is declared in {unit!r} ({u.dimension}) but "
+                f"{name} is {'an' if dim[0] in 'aeiou' else 'a'} {dim}; declare one of "
+                f"{[x for x, v in UNITS.items() if v.dimension == dim]}"
+            )
+
+
+def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: set[str]) -> ManeuverData:
+    """Cut one maneuver out of a table, check it, convert it to SI.
+
+    Parameters
+    ----------
+    table : the file's data.
+    req : which time range and which aircraft.
+    channel_columns : canonical names that are channel measurements (the rest, other than the
+        required inputs, become :attr:`ManeuverData.signals`).
+    """
+    where = Where(str(table.path), req.id, None if req.t_start_s is None and req.t_end_s is None else (
+        req.t_start_s if req.t_start_s is not None else float(table.t_s[0]),
+        req.t_end_s if req.t_end_s is not None else float(table.t_s[-1])))
+    idx = select_range(table.t_s, req.t_start_s, req.t_end_s, where)
+    t_s = table.t_s[idx]
+    rows = table.rows[idx]
+    for name, v in table.values.items():
+        check_finite(v[idx], table.not_numeric.get(name, np.zeros(len(v), bool))[idx],
+                     table.raw_text[name][idx] if name in table.raw_text else None, t_s, rows, where,
+                     table.labels[name])
+    check_sampling(t_s, rows, where, req.resample_hz)
+    si = {name: to_si(v[idx], table.units[name], table.labels[name])
+          for name, v in table.values.items() if name != "t"}
+    check_plausible("t", table.labels["t"], t_s, table.units["t"], t_s, rows, where)
+    for name, v in si.items():
+        if name not in ("ax", "ay", "az"):
+            check_plausible(name, table.labels[name], v, table.units[name], t_s, rows, where)
+    _check_accel(table, si, t_s, rows, where)
+    if "tas" in si and "mach" in si:
+        check_tas_against_mach(si["tas"], si["mach"], table.units["tas"], table.labels["tas"], where)
+    if req.resample_hz is not None:
+        step = float(np.median(np.diff(t_s)))
+        if req.resample_hz * step < 0.5:
+            warn(f"{where}: resampling from {1 / step:.4g} Hz down to {req.resample_hz:.4g} Hz by linear "
+                 "interpolation without an anti-aliasing filter; filter the data first if it is noisy")
+        t_s, si = resample(t_s, si, float(req.resample_hz), where)
+    if "psi" in si:  # heading wraps at +-180 deg or 0/360 deg; the reconstruction does not
+        si["psi"] = np.unwrap(si["psi"])
+    ids = set(REQUIRED)
+    return ManeuverData(
+        id=req.id, t_s=t_s,
+        accel_imu_mps2=np.column_stack([si["ax"], si["ay"], si["az"]]),
+        omega_rps=np.column_stack([si["p"], si["q"], si["r"]]),
+        measurements={k: v for k, v in si.items() if k in channel_columns},
+        signals={k: v for k, v in si.items() if k not in channel_columns and k not in ids},
+        r_cg_body_m=np.asarray(req.r_cg_body_m, dtype=float),
+        aircraft=req.aircraft, configuration=req.configuration,
+        source=f"{table.path} t = {t_s[0]:.3f} to {t_s[-1]:.3f} s",
+        meta=dict(req.meta),
+    )
+
+
+def _check_accel(table: SourceTable, si: Mapping[str, np.ndarray], t_s, rows, where: Where) -> None:
+    units = [table.units[c] for c in ("ax", "ay", "az")]
+    acc = np.column_stack([si["ax"], si["ay"], si["az"]])
+    label = "the IMU specific force (" + ", ".join(table.labels[c] for c in ("ax", "ay", "az")) + ")"
+    if len(set(units)) == 1:
+        check_plausible("accel", label, acc, units[0], t_s, rows, where)
+        return
+    try:
+        check_plausible("accel", label, acc, "m/s^2", t_s, rows, where)
+    except DataError:
+        mean_g = float(np.mean(np.linalg.norm(acc, axis=1))) / 9.80665
+        raise DataError(
+            f"{where}: {label} has a mean magnitude of {mean_g:.3g} g after conversion from the "
+            f"declared units {units}; in flight it stays near 1 g (0.4 to 4 g on average). Check "
+            "the units of ax, ay, az under [columns]"
+        ) from None

@@ -1,0 +1,102 @@
+"""Assemble a :class:`Problem` from source tables, maneuver requests, channels and parameters."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from estimator.io.assemble import ManeuverRequest, SourceTable, build_maneuver, check_dimensions
+from estimator.io.errors import DataError, warn
+from estimator.io.modelset import (
+    check_data_names,
+    check_maneuver_lengths,
+    finalize_parameters,
+)
+from estimator.io.units import UNITS
+from estimator.parameters import ParameterSpec
+from estimator.problem import ChannelSpec, Problem, expand_parameters
+
+
+def select_channels(channels: Sequence[ChannelSpec], explicit: Sequence[str] | None,
+                    where: str) -> list[ChannelSpec]:
+    """The channels the problem asks for (``channels = [...]``), or all of them."""
+    if explicit is None:
+        return list(channels)
+    by_name = {c.name: c for c in channels}
+    if isinstance(explicit, str) or not all(isinstance(n, str) for n in explicit):
+        raise DataError(f"{where}: channels must be a list of channel names, e.g. [\"phi\", \"alpha_zl\"]")
+    unknown = [n for n in explicit if n not in by_name]
+    if unknown:
+        raise DataError(f"{where}: channels {unknown} are not in the model set (it has {list(by_name)}); "
+                        "fix the names or declare them with [[channel]]")
+    return [by_name[n] for n in dict.fromkeys(explicit)]
+
+
+def build_problem(
+    pairs: Sequence[tuple[SourceTable, ManeuverRequest]],
+    channels: Sequence[ChannelSpec],
+    specs: Sequence[ParameterSpec],
+    *,
+    user_declared: set[str],
+    explicit_channels: Sequence[str] | None,
+    sensors: Mapping[str, np.ndarray],
+    imu_position_body_m: np.ndarray,
+    g_mps2: float,
+    source: str,
+) -> Problem:
+    """Check and assemble the problem.
+
+    Parameters
+    ----------
+    pairs : (table, maneuver request) per maneuver.
+    channels, specs : the model set with the problem's changes.
+    user_declared : parameter names the problem file declared or changed (warned about if unused).
+    explicit_channels : the problem's ``channels`` list, or None for "every channel with data".
+    sensors : sensor positions, body axes, m.
+    imu_position_body_m : accelerometer position, body axes, m.
+    g_mps2 : gravity of the flat-earth equations.
+    source : problem file or dataset, for messages.
+    """
+    if not 9.7 <= g_mps2 <= 9.9:
+        raise DataError(f"{source}: g_mps2 = {g_mps2} is not an Earth gravity in m/s^2 (9.78 to 9.83); "
+                        "give it in m/s^2, e.g. 9.80665")
+    chans = select_channels(channels, explicit_channels, source)
+    expected = {c.column: UNITS[c.unit].dimension for c in chans if c.unit in UNITS}
+    for table in {id(t): t for t, _ in pairs}.values():
+        check_dimensions(table, expected)
+    columns = {c.column for c in chans}
+    maneuvers = [build_maneuver(t, r, columns) for t, r in pairs]
+    seen: dict[str, str] = {}
+    for m in maneuvers:
+        if m.id in seen:
+            raise DataError(f"{source}: maneuver id {m.id!r} is used twice ({seen[m.id]} and {m.source}); "
+                            "give each maneuver its own id")
+        seen[m.id] = m.source
+    absent = [c.name for c in chans if not any(c.column in m.measurements for m in maneuvers)]
+    if absent and explicit_channels is not None:
+        raise DataError(f"{source}: channels {absent} are listed in channels = [...] but no maneuver has "
+                        "data for them; map their columns under [columns] or take them off the list")
+    if absent:
+        warn(f"{source}: channel(s) {absent} of the model set have no data in any maneuver and are left out")
+        chans = [c for c in chans if c.name not in absent]
+    if not chans:
+        raise DataError(f"{source}: no channel has data; map at least the measured channels under [columns]")
+    for c in chans:
+        if c.sensor and c.sensor not in sensors:
+            raise DataError(
+                f"{source}: channel {c.name} is measured at sensor {c.sensor!r}, which has no "
+                f"position; add {c.sensor} = [x, y, z] under [sensors] (known: {sorted(sensors)})"
+            )
+    check_data_names(chans, specs, maneuvers)
+    final = finalize_parameters(specs, user_declared, chans, maneuvers, source)
+    check_maneuver_lengths(final, maneuvers)
+    try:
+        params = expand_parameters(final, maneuvers, chans)
+        return Problem(maneuvers=tuple(maneuvers), channels=tuple(chans), sensors=dict(sensors),
+                       imu_position_body_m=np.asarray(imu_position_body_m, dtype=float),
+                       parameters=params, g_mps2=float(g_mps2), source=source)
+    except DataError:
+        raise
+    except ValueError as exc:
+        raise DataError(f"{source}: {exc}") from None

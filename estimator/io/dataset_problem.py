@@ -1,0 +1,95 @@
+"""A :class:`Problem` from a dataset written by ``fpr fly`` (the same checks as a problem file)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from estimator.io.assemble import ManeuverRequest, SourceTable
+from estimator.io.build import build_problem
+from estimator.io.errors import DataError
+from estimator.io.fprdataset import (
+    DATASET_COLUMNS,
+    column_unit,
+    dataset_sensors,
+    read_maneuver,
+    read_manifest,
+    select_entries,
+)
+from estimator.io.modelset import merge_model_set, read_model_set
+from estimator.io.tables import numeric
+from estimator.problem import Problem
+
+
+def load_dataset_maneuvers(path: str | Path, select: Mapping | None = None
+                           ) -> tuple[list[tuple[SourceTable, ManeuverRequest]], dict[str, np.ndarray]]:
+    """The selected maneuvers of a dataset as (table, request) pairs, and the sensor positions.
+
+    Truth columns (``true_*``) are not read; each request's ``meta`` is the manifest entry plus
+    ``dataset`` (the directory) so that :func:`~estimator.io.fprdataset.load_truth` finds them.
+    """
+    directory, manifest = read_manifest(path)
+    entries = select_entries(manifest, select, str(directory))
+    pairs = []
+    for e in entries:
+        df = read_maneuver(directory, e)
+        file = directory / e["file"]
+        values, bad, text = {}, {}, {}
+        for col in df.columns:
+            canon = DATASET_COLUMNS[col]
+            values[canon], bad[canon] = numeric(df[col])
+            if bad[canon].any():
+                text[canon] = df[col].to_numpy()
+        table = SourceTable(
+            path=file, values=values, not_numeric=bad, raw_text=text,
+            units={DATASET_COLUMNS[c]: column_unit(c) for c in df.columns},
+            labels={DATASET_COLUMNS[c]: f"{DATASET_COLUMNS[c]} (column {c!r})" for c in df.columns},
+        )
+        if e.get("r_cg_body_m_mean") is None:
+            raise DataError(f"{directory}: manifest entry {e['id']} has no r_cg_body_m_mean (the CG)")
+        aircraft = str(e.get("aircraft") or "aircraft")
+        pairs.append((table, ManeuverRequest(
+            id=str(e["id"]), t_start_s=None, t_end_s=None, aircraft=aircraft,
+            configuration=str(e.get("configuration") or aircraft),
+            r_cg_body_m=np.asarray(e["r_cg_body_m_mean"], dtype=float),
+            meta={**e, "dataset": str(directory)},
+        )))
+    return pairs, dataset_sensors(manifest)
+
+
+def problem_from_dataset(
+    path: str | Path,
+    select: Mapping | None = None,
+    model: str | Path = "tejas",
+    channels: Sequence[str] | None = None,
+    overrides: Mapping[str, Mapping] | None = None,
+    *,
+    extra_channels: Sequence[Mapping] | None = None,
+    sensors: Mapping[str, Sequence[float]] | None = None,
+    g_mps2: float = 9.80665,
+) -> Problem:
+    """The estimation problem of (a selection of) an ``fpr fly`` dataset.
+
+    Parameters
+    ----------
+    path : the dataset directory (or its manifest.json).
+    select : which maneuvers: ``kind``, ``configuration``, ``aircraft``, ``ids`` (value or list),
+        ``mach_min``, ``mach_max`` (on the mean Mach), ``gear_down`` (bool). None: all.
+    model : model set, a shipped name or a TOML path.
+    channels : channel names to use; None: every channel of the model set with data.
+    overrides : parameter name -> keys as in ``[parameter.NAME]`` (e.g. ``{"b_l": {"free": False}}``).
+    extra_channels : channel tables as in ``[[channel]]``.
+    sensors : sensor positions (body axes, m) added to or replacing the manifest's airframe ones.
+    g_mps2 : gravity of the flat-earth equations.
+    """
+    raw, msource = read_model_set(model)
+    chans, specs, declared = merge_model_set(raw, overrides, extra_channels, msource, str(path))
+    pairs, pos = load_dataset_maneuvers(path, select)
+    pos.update({k: np.asarray(v, dtype=float) for k, v in (sensors or {}).items()})
+    if "imu" not in pos:
+        raise DataError(f"{path}: the manifest's airframe has no imu position; "
+                        "pass sensors={'imu': [x, y, z]}")
+    return build_problem(pairs, chans, specs, user_declared=declared, explicit_channels=channels,
+                         sensors=pos, imu_position_body_m=pos["imu"], g_mps2=g_mps2, source=str(path))

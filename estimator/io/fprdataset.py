@@ -1,0 +1,163 @@
+"""Read datasets written by ``fpr fly`` (manifest.json + maneuvers/*.parquet) without ``synth``.
+
+The estimator must run on real flight data alone, so this module reads the documented format
+(README, "The dataset format") with json and pyarrow directly.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+
+from estimator.io.errors import DataError
+
+FORMAT = "fpr-dataset"
+MANIFEST = "manifest.json"
+#: Dataset column -> canonical name. Everything is SI already; units follow the name suffix.
+DATASET_COLUMNS: dict[str, str] = {
+    "t_s": "t",
+    "ax_imu_mps2": "ax", "ay_imu_mps2": "ay", "az_imu_mps2": "az",
+    "p_rps": "p", "q_rps": "q", "r_rps": "r",
+    "phi_rad": "phi", "theta_rad": "theta", "psi_rad": "psi",
+    "tas_mps": "tas", "h_baro_m": "h",
+    "alpha_zl_rad": "alpha_zl", "alpha_zr_rad": "alpha_zr",
+    "alpha_zsp_rad": "alpha_zsp", "beta_zsp_rad": "beta_zsp", "beta_znp_rad": "beta_znp",
+    "alpha_zb_rad": "alpha_zb", "beta_zbu_rad": "beta_zbu", "beta_zbl_rad": "beta_zbl",
+    "gear_down": "gear", "mach": "mach",
+}
+_SUFFIX_UNITS = (("_mps2", "m/s^2"), ("_rps", "rad/s"), ("_rad", "rad"), ("_mps", "m/s"), ("_m", "m"),
+                 ("_s", "s"))
+#: Keys of a ``select`` table.
+SELECT_KEYS = ("kind", "configuration", "aircraft", "mach_min", "mach_max", "gear_down", "ids")
+
+
+def column_unit(column: str) -> str:
+    """SI unit of a dataset column from its name suffix (``gear_down`` and ``mach``: "1")."""
+    for suffix, unit in _SUFFIX_UNITS:
+        if column.endswith(suffix):
+            return unit
+    return "1"
+
+
+def read_manifest(path: str | Path) -> tuple[Path, dict]:
+    """The dataset directory and its parsed manifest."""
+    path = Path(path)
+    if path.name == MANIFEST:
+        path = path.parent
+    mpath = path / MANIFEST
+    if not mpath.exists():
+        raise DataError(
+            f"{mpath}: no manifest; a dataset written by `fpr fly` is a directory holding "
+            f"{MANIFEST} and maneuvers/*.parquet. Check [data] dataset = ... (relative to the problem file)"
+        )
+    try:
+        manifest = json.loads(mpath.read_text())
+    except json.JSONDecodeError as exc:
+        raise DataError(f"{mpath}: not valid JSON ({exc}); the dataset is damaged") from None
+    if manifest.get("format") != FORMAT:
+        raise DataError(f"{mpath}: format is {manifest.get('format')!r}, expected {FORMAT!r}")
+    if not manifest.get("maneuvers"):
+        raise DataError(f"{mpath}: the manifest lists no maneuvers")
+    return path, manifest
+
+
+def _as_list(v) -> list:
+    return list(v) if isinstance(v, (list, tuple)) else [v]
+
+
+def select_entries(manifest: Mapping, select: Mapping | None, where: str) -> list[dict]:
+    """Manifest entries that pass every criterion of ``select``.
+
+    Parameters
+    ----------
+    manifest : the parsed manifest.
+    select : ``kind``, ``configuration``, ``aircraft``, ``ids`` (a value or a list each),
+        ``mach_min``, ``mach_max`` (on the entry's ``mach_mean``), ``gear_down`` (bool).
+    where : for messages.
+    """
+    entries = list(manifest["maneuvers"])
+    select = dict(select or {})
+    unknown = set(select) - set(SELECT_KEYS)
+    if unknown:
+        raise DataError(f"{where}: unknown select keys {sorted(unknown)}; valid: {list(SELECT_KEYS)}")
+    for key, field in (("kind", "kind"), ("configuration", "configuration"), ("aircraft", "aircraft"),
+                       ("ids", "id")):
+        if key in select:
+            wanted = [str(x) for x in _as_list(select[key])]
+            have = sorted({str(e.get(field)) for e in manifest["maneuvers"]})
+            missing = [w for w in wanted if w not in have]
+            if missing:
+                shown = have if len(have) <= 30 else have[:30] + ["..."]
+                raise DataError(
+                    f"{where}: select {key} = {missing} matches nothing in the dataset; it has {shown}"
+                )
+            entries = [e for e in entries if str(e.get(field)) in wanted]
+    lo = float(select.get("mach_min", -math.inf))
+    hi = float(select.get("mach_max", math.inf))
+    entries = [e for e in entries if lo <= float(e.get("mach_mean", np.nan)) <= hi
+               or (lo == -math.inf and hi == math.inf)]
+    if "gear_down" in select:
+        entries = [e for e in entries if bool(e.get("gear_down")) == bool(select["gear_down"])]
+    if not entries:
+        raise DataError(
+            f"{where}: the selection {select} leaves no maneuvers (the dataset has "
+            f"{len(manifest['maneuvers'])}); widen it"
+        )
+    return entries
+
+
+def read_maneuver(directory: Path, entry: Mapping, columns: Sequence[str] | None = None) -> pd.DataFrame:
+    """The columns of one maneuver (default: the measured ones :data:`DATASET_COLUMNS` present)."""
+    path = directory / entry["file"]
+    if not path.exists():
+        raise DataError(f"{path}: maneuver {entry['id']} listed in the manifest but its file is missing")
+    names = pq.read_schema(path).names
+    wanted = [c for c in (columns or DATASET_COLUMNS) if c in names]
+    return pq.read_table(path, columns=wanted).to_pandas()
+
+
+def dataset_sensors(manifest: Mapping) -> dict[str, np.ndarray]:
+    """Sensor positions from the manifest's airframe; ``side_probe`` = mean of left and right."""
+    table = manifest.get("airframe", {}).get("positions_body_m", {})
+    pos = {k: np.asarray(v, dtype=float) for k, v in table.items()}
+    if "side_probe" not in pos and "side_probe_left" in pos and "side_probe_right" in pos:
+        pos["side_probe"] = 0.5 * (pos["side_probe_left"] + pos["side_probe_right"])
+    return pos
+
+
+def load_truth(problem_or_dataset, maneuver_id: str) -> pd.DataFrame:
+    """The truth of one maneuver of a dataset: ``t_s`` and every ``true_*`` column.
+
+    Parameters
+    ----------
+    problem_or_dataset : a :class:`~estimator.problem.Problem` whose maneuvers came from a
+        dataset (their ``meta`` holds ``dataset`` and ``file``), or a dataset directory.
+    maneuver_id : the maneuver id (manifest ``id``).
+    """
+    if isinstance(problem_or_dataset, (str, Path)):
+        directory, manifest = read_manifest(problem_or_dataset)
+        entry = next((e for e in manifest["maneuvers"] if e["id"] == maneuver_id), None)
+        if entry is None:
+            raise DataError(f"{directory}: no maneuver {maneuver_id!r} in the manifest")
+    else:
+        man = {m.id: m for m in problem_or_dataset.maneuvers}
+        if maneuver_id not in man:
+            raise DataError(
+                f"{problem_or_dataset.source}: no maneuver {maneuver_id!r} (have {sorted(man)[:20]})"
+            )
+        meta = man[maneuver_id].meta
+        if "dataset" not in meta:
+            raise DataError(
+                f"{problem_or_dataset.source}: maneuver {maneuver_id} came from {man[maneuver_id].source}, "
+                "not from an fpr dataset; only synthetic datasets carry the truth"
+            )
+        directory, entry = Path(meta["dataset"]), meta
+    path = directory / entry["file"]
+    names = [n for n in pq.read_schema(path).names if n == "t_s" or n.startswith("true_")]
+    return pq.read_table(path, columns=names).to_pandas()

@@ -1,0 +1,206 @@
+"""Read a problem file (TOML) into a :class:`Problem`; the schema is in :mod:`estimator.io`."""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from estimator.io.assemble import ManeuverRequest, SourceTable
+from estimator.io.build import build_problem
+from estimator.io.dataset_problem import load_dataset_maneuvers
+from estimator.io.errors import DataError
+from estimator.io.modelset import merge_model_set, read_model_set
+from estimator.io.tables import infer_format, numeric, pick_column, read_table
+from estimator.problem import Problem
+
+TOP_KEYS = ("title", "g_mps2", "model", "channels", "resample_hz", "sensors", "aircraft", "columns",
+            "files", "data", "parameter", "channel")
+FILE_KEYS = ("path", "format", "header", "delimiter", "skip_rows", "aircraft", "configuration",
+             "maneuvers", "resample_hz", "columns", "r_cg_body_m", "r_cg_body_in", "r_cg_body_ft")
+MANEUVER_KEYS = ("id", "t_start_s", "t_end_s", "configuration", "r_cg_body_m", "r_cg_body_in",
+                 "r_cg_body_ft")
+COLUMN_KEYS = ("column", "unit", "optional")
+_LENGTH_SUFFIXES = (("_m", 1.0), ("_in", 0.0254), ("_ft", 0.3048))
+
+
+def _keys(d: Mapping, valid, where: str) -> None:
+    unknown = sorted(set(d) - set(valid))
+    if unknown:
+        raise DataError(f"{where}: unknown key(s) {unknown}; valid: {list(valid)}")
+
+
+def _vector(v, where: str) -> np.ndarray:
+    if (not isinstance(v, list) or len(v) != 3
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+        raise DataError(f"{where}: must be [x, y, z] (three numbers, body axes x fwd, y right, "
+                        f"z down), got {v!r}")
+    return np.asarray(v, dtype=float)
+
+
+def parse_positions(table: Mapping, where: str) -> dict[str, np.ndarray]:
+    """``name = [x, y, z]`` in metres, or ``name_in``/``name_ft`` in inches/feet (``name_m`` too)."""
+    out: dict[str, np.ndarray] = {}
+    for key, v in table.items():
+        name, factor = key, 1.0
+        for suffix, f in _LENGTH_SUFFIXES:
+            if key.endswith(suffix):
+                name, factor = key[: -len(suffix)], f
+                break
+        if name in out:
+            raise DataError(f"{where}: position of {name!r} given twice (as {key} and in another unit); "
+                            "keep one")
+        out[name] = _vector(v, f"{where}: {key}") * factor
+    if "side_probe" not in out and "side_probe_left" in out and "side_probe_right" in out:
+        out["side_probe"] = 0.5 * (out["side_probe_left"] + out["side_probe_right"])
+    return out
+
+
+def _cg(d: Mapping, where: str) -> np.ndarray | None:
+    got = {k: v for k, v in d.items() if k.startswith("r_cg_body_")}
+    if len(got) > 1:
+        raise DataError(f"{where}: give the CG once (one of r_cg_body_m, r_cg_body_in, r_cg_body_ft)")
+    if not got:
+        return None
+    (key, v), = got.items()
+    return parse_positions({key.replace("r_cg_body", "cg"): v}, where)["cg"]
+
+
+def _column_specs(table: Mapping, where: str) -> dict[str, dict]:
+    out = {}
+    for name, spec in table.items():
+        w = f"{where}.{name}"
+        if not isinstance(spec, Mapping):
+            raise DataError(f"{w}: must be a table {{ column = \"NAME\" or index, unit = \"...\" }}, "
+                            f"got {spec!r}")
+        _keys(spec, COLUMN_KEYS, w)
+        if "column" not in spec or "unit" not in spec:
+            raise DataError(f"{w}: needs column (name or 0-based index) and unit, e.g. "
+                            f"{name} = {{ column = \"{name.upper()}\", unit = \"deg\" }}")
+        out[name] = dict(spec)
+    return out
+
+
+def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: str) -> SourceTable:
+    path = (base / entry["path"]).resolve() if not Path(entry["path"]).is_absolute() else Path(entry["path"])
+    fmt = infer_format(path, entry.get("format"), where)
+    header = bool(entry.get("header", True))
+    df = read_table(path, fmt, header=header, delimiter=entry.get("delimiter"),
+                    skip_rows=int(entry.get("skip_rows", 0)))
+    values, bad, text, units, labels = {}, {}, {}, {}, {}
+    for name, spec in columns.items():
+        src = spec["column"]
+        present = (isinstance(src, int) and 0 <= src < df.shape[1]) or (
+            isinstance(src, str) and src in df.columns)
+        if spec.get("optional", False) and not present:
+            continue
+        series = pick_column(df, src, name, path, header)
+        values[name], bad[name] = numeric(series)
+        if bad[name].any():
+            text[name] = series.to_numpy()
+        units[name] = spec["unit"]
+        labels[name] = f"{name} (column {src!r})"
+    return SourceTable(path=path, values=values, not_numeric=bad, raw_text=text, units=units, labels=labels)
+
+
+def _file_pairs(raw: Mapping, base: Path, where: str) -> tuple[list, dict]:
+    files = raw.get("files")
+    if not files:
+        raise DataError(f"{where}: no data: add [[files]] entries (path = ...) or [data] dataset = ...")
+    aircraft = raw.get("aircraft", {})
+    cgs = {}
+    for ac, d in aircraft.items():
+        if not isinstance(d, Mapping):
+            raise DataError(f"{where}: [aircraft.{ac}] must be a table with r_cg_body_m = [x, y, z]")
+        _keys(d, ("r_cg_body_m", "r_cg_body_in", "r_cg_body_ft"), f"{where}: [aircraft.{ac}]")
+        cgs[ac] = _cg(d, f"{where}: [aircraft.{ac}]")
+    global_cols = _column_specs(raw.get("columns", {}), f"{where}: [columns]")
+    pairs = []
+    for i, entry in enumerate(files):
+        w = f"{where}: [[files]] #{i + 1}"
+        _keys(entry, FILE_KEYS, w)
+        if "path" not in entry:
+            raise DataError(f"{w}: needs path = \"...\" (relative to the problem file)")
+        w = f"{where}: [[files]] {entry['path']}"
+        cols = {**global_cols, **_column_specs(entry.get("columns", {}), f"{w} columns")}
+        table = _read_file(entry, cols, base, w)
+        if "aircraft" in entry:
+            ac = str(entry["aircraft"])
+        elif len(cgs) == 1:
+            ac = next(iter(cgs))
+        elif not cgs:
+            ac = "aircraft"
+        else:
+            raise DataError(f"{w}: say which aircraft flew it: aircraft = one of {sorted(cgs)}")
+        file_cg = _cg(entry, w)
+        if ac not in cgs and file_cg is None:
+            raise DataError(f"{w}: no CG for aircraft {ac!r}: add [aircraft.{ac}] r_cg_body_m = [x, y, z] "
+                            "(or r_cg_body_m under this [[files]] entry or its maneuvers)")
+        rate = entry.get("resample_hz", raw.get("resample_hz"))
+        mans = entry.get("maneuvers") or [{"id": Path(entry["path"]).stem}]
+        for j, man in enumerate(mans):
+            mw = f"{w} maneuvers[{j}]"
+            if not isinstance(man, Mapping) or "id" not in man:
+                raise DataError(f"{mw}: each maneuver needs id = \"...\" (and t_start_s, t_end_s)")
+            _keys(man, MANEUVER_KEYS, mw)
+            cg = _cg(man, mw)
+            cg = cg if cg is not None else file_cg if file_cg is not None else cgs[ac]
+            t0, t1 = man.get("t_start_s"), man.get("t_end_s")
+            pairs.append((table, ManeuverRequest(
+                id=str(man["id"]), t_start_s=None if t0 is None else float(t0),
+                t_end_s=None if t1 is None else float(t1), aircraft=ac,
+                configuration=str(man.get("configuration", entry.get("configuration", ac))),
+                r_cg_body_m=cg, resample_hz=None if rate is None else float(rate),
+                meta={"file": str(table.path), "t_start_s": t0, "t_end_s": t1},
+            )))
+    return pairs, {}
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Read a problem file (TOML; schema in :mod:`estimator.io`) and the data it points at.
+
+    Raises
+    ------
+    DataError
+        For anything wrong in the file or the data; the message names the file, channel, column,
+        maneuver and time and says how to fix it.
+    """
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            raw = tomllib.load(fh)
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such problem file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise DataError(f"{path}: not valid TOML: {exc}") from None
+    where = str(path)
+    _keys(raw, TOP_KEYS, where)
+    base = path.resolve().parent
+    raw_model, msource = read_model_set(raw.get("model", "tejas"), base)
+    chans, specs, declared = merge_model_set(raw_model, raw.get("parameter"), raw.get("channel"),
+                                             msource, where)
+    sensors = parse_positions(raw.get("sensors", {}), f"{where}: [sensors]")
+    data = raw.get("data")
+    if data is not None:
+        _keys(data, ("dataset", "select"), f"{where}: [data]")
+        clash = [k for k in ("files", "columns", "aircraft") if k in raw]
+        if clash:
+            raise DataError(f"{where}: [data] dataset = ... reads everything from the dataset; "
+                            f"remove {clash}")
+        if "dataset" not in data:
+            raise DataError(f"{where}: [data] needs dataset = \"path/to/dataset\"")
+        ds = Path(data["dataset"])
+        pairs, pos = load_dataset_maneuvers(ds if ds.is_absolute() else base / ds, data.get("select"))
+        sensors = {**pos, **sensors}
+    else:
+        pairs, _ = _file_pairs(raw, base, where)
+    if "imu" not in sensors:
+        raise DataError(f"{where}: [sensors] needs imu = [x, y, z], the accelerometer position (body axes, "
+                        "m from the reference point): the lever-arm correction depends on it")
+    g = raw.get("g_mps2", 9.80665)
+    if isinstance(g, bool) or not isinstance(g, (int, float)):
+        raise DataError(f"{where}: g_mps2 must be a number (m/s^2), got {g!r}")
+    return build_problem(pairs, chans, specs, user_declared=declared, explicit_channels=raw.get("channels"),
+                         sensors=sensors, imu_position_body_m=sensors["imu"], g_mps2=float(g), source=where)
