@@ -321,8 +321,17 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
             history.append(cost0)
             N = _build_normal(st, evals, R)
             accepted = False
-            for _ in range(12):
+            for attempt in range(12):
                 dG, dL, Sinv, Ainv = _lm_solve(N, lam, opt.rank_rtol)
+                sig = np.sqrt(np.maximum(np.concatenate(
+                    [np.diag(Sinv)] + [np.diag(a) for a in Ainv if a.size]), 1e-300))
+                moved = np.abs(np.concatenate([dG] + [d for d in dL if d.size])) / sig
+                if attempt == 0:
+                    moved_first = moved.max()
+                if moved_first < opt.step_tol_sigma:
+                    # the Gauss-Newton step is already negligible against the parameters'
+                    # deviations: at the minimum (round-off may keep the cost from decreasing)
+                    break
                 step = np.zeros_like(theta)
                 step[st.glob] = dG
                 for k, idx in enumerate(st.local_of_arr):
@@ -335,13 +344,15 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
                     break
                 lam = max(lam, 1e-6) * 10.0
             if not accepted:
-                status, message = 2, ("no step decreases the cost any further (damping grew to "
-                                      f"{lam:.1e}): a minimum, or the model cannot fit the data better")
+                if moved_first < opt.step_tol_sigma:
+                    status, message = 1, (f"converged: the Gauss-Newton step ({moved_first:.1e} "
+                                          f"sigma) is below {opt.step_tol_sigma} sigma")
+                else:
+                    status, message = 2, ("no step decreases the cost any further (damping grew to "
+                                          f"{lam:.1e}): a minimum, or the model cannot fit the data "
+                                          "better")
                 break
             # convergence: small relative decrease and steps small against their deviations
-            sig = np.sqrt(np.maximum(np.concatenate(
-                [np.diag(Sinv)] + [np.diag(a) for a in Ainv if a.size]), 1e-300))
-            moved = np.abs(np.concatenate([dG] + [d for d in dL if d.size])) / sig
             theta = trial
             lam = max(lam * 0.1, 1e-9)
             evals = evaluate_all(theta, True)
