@@ -14,9 +14,9 @@ The manifest is JSON (``format = "fpr-dataset"``, ``format_version = 1``). Its `
 has one entry per Parquet file with: ``id``, ``file``, ``configuration``, ``aircraft``,
 ``nose_sensor``, ``kind``, ``segment``, ``mach_nominal``, ``mach_mean``, ``mach_min``,
 ``mach_max``, ``altitude_m``, ``gear_down``, ``duration_s``, ``n_samples``, ``sample_rate_hz``,
-``r_cg_body_m_mean``, ``g_mps2_mean`` (gravity JSBSim used), ``environment``, ``injected`` (every injected error value, SI) and
-``channel_units``. The same entry is stored in each Parquet file's key-value metadata under
-``fpr.maneuver`` so a single file stays self-describing.
+``r_cg_body_m_mean``, ``g_mps2_mean`` (gravity JSBSim used), ``environment``, ``injected``
+(every injected error value, SI) and ``channel_units``. The same entry is stored in each
+Parquet file's key-value metadata under ``fpr.maneuver`` so a single file stays self-describing.
 
 Files are written to a temporary name and renamed into place, so an interrupted run never leaves
 a truncated file behind; an existing dataset is never overwritten unless asked.

@@ -289,7 +289,9 @@ def instrument(
         alpha_lsp_rad alpha_rsp_rad [dp_beta_np_pa flank_np_rad] qc_pa ps_pa tt_k``; and the
         ``true_*`` columns (CG state, winds, Euler angles, forces, CG position, atmosphere, and
         per sensor ``true_{alpha,beta,flank}_<sensor>_rad`` and ``true_local_*_<sensor>_rad``;
-        ``true_alpha_sp_rad``/``true_beta_sp_rad`` at the side probes' mean position).
+        ``true_alpha_sp_rad``/``true_beta_sp_rad`` at the side probes' mean position;
+        ``true_clean_<channel>`` for each calibrated flow channel: its value with every
+        deterministic error and no noise, quantization or delay).
         ``psi`` is continuous (unwrapped) within the maneuver.
     """
     _check_truth(truth, common_rate_hz)
@@ -445,6 +447,30 @@ def instrument(
         dru["beta_znp_rad"] = adc.f_np(dru["flank_np_rad"], dru["alpha_zl_rad"],
                                        dru["alpha_zr_rad"], mach_m)
 
+    # ---- the clean channels: every deterministic error (local flow, installation bias, scale,
+    #      the ADC's tables), no noise, no quantization, no delay, true Mach and impact pressure.
+    #      What an ideal recorder of this airdata system would show: the truth a calibration model
+    #      is fitted to, without the noise it must average out.
+    clean: dict[str, np.ndarray] = {}
+    gear_t = (gear >= 0.5).astype(float)
+    for s in sensors:
+        e = errors.sensors[s]
+        raw = SENSOR_RAW_CHANNEL[s]
+        if s not in PROBE_SENSORS:
+            clean[raw] = transduce(sensed[s], scale=e.scale)
+            continue
+        law = sensing.side_probe_pressure if s != "nose_probe" else sensing.nose_probe_pressure
+        clean[raw] = transduce(law.dp_pa(sensed[s], qc_true, mach), scale=e.scale)
+    clean["alpha_zl_rad"] = adc.f_v(clean["alpha_lm_rad"], mach, gear_t)
+    clean["alpha_zr_rad"] = adc.f_v(clean["alpha_rm_rad"], mach, gear_t)
+    a_l = adc.side_probe_angle_rad(clean["dp_alpha_lsp_pa"], qc_true, mach)
+    a_r = adc.side_probe_angle_rad(clean["dp_alpha_rsp_pa"], qc_true, mach)
+    clean["alpha_zsp_rad"], clean["beta_zsp_rad"] = adc.f_sp(a_l, a_r, mach, gear_t)
+    if "nose_probe" in sensors:
+        flank_np = adc.nose_probe_flank_rad(clean["dp_beta_np_pa"], qc_true, mach)
+        clean["beta_znp_rad"] = adc.f_np(flank_np, clean["alpha_zl_rad"], clean["alpha_zr_rad"], mach)
+    clean_cols = {f"true_clean_{c}": v for c, v in clean.items() if c.startswith(("alpha_z", "beta_z"))}
+
     # ---- INS, DGPS ------------------------------------------------------------------------------
     ins_e = errors.ins
     ins: dict[str, np.ndarray] = {}
@@ -509,6 +535,7 @@ def instrument(
         "true_rho_kgpm3": truth.rho_kgpm3, "true_qbar_pa": truth.qbar_pa, "true_qc_pa": qc_true,
         "true_alpha_sp_rad": a_sp, "true_beta_sp_rad": b_sp,
         **truth_cols,
+        **clean_cols,
     }
     for c, v in tr.items():
         columns[c] = sample_at(t, v, t_common)
