@@ -67,16 +67,27 @@ ENG_UNITS = {
 }
 
 
-def flight_frame(duration_s: float = 60.0, t0_s: float = 100.0, seed: int = 0) -> pd.DataFrame:
-    """A smooth, plausible flight record in SI units, uniformly sampled at RATE_HZ."""
+def flight_frame(duration_s: float = 60.0, t0_s: float = 100.0, seed: int = 0, phi_amp_rad: float = 0.3,
+                 theta_amp_rad: float = 0.05, theta_w_rps: float = 0.7) -> pd.DataFrame:
+    """A smooth, plausible flight record in SI units, uniformly sampled at RATE_HZ.
+
+    The body rates follow from the Euler angles by the Euler kinematics (the import checks that).
+    """
     rng = np.random.default_rng(seed)
     t = t0_s + np.arange(int(round(duration_s * RATE_HZ)) + 1) / RATE_HZ
-    s = np.sin(0.7 * (t - t0_s))
+    tau = t - t0_s
+    s = np.sin(0.7 * tau)
+    phi, phi_dot = phi_amp_rad * np.sin(0.5 * tau), 0.5 * phi_amp_rad * np.cos(0.5 * tau)
+    theta = 0.06 + theta_amp_rad * np.sin(theta_w_rps * tau)
+    theta_dot = theta_amp_rad * theta_w_rps * np.cos(theta_w_rps * tau)
+    psi, psi_dot = 1.0 + 0.002 * tau, np.full(len(t), 0.002)
     return pd.DataFrame({
         "time": t,
         "ax": 0.4 + 0.3 * s, "ay": 0.1 * s, "az": -G - 2.0 * s,
-        "p": 0.05 * s, "q": 0.08 * np.cos(0.7 * (t - t0_s)), "r": 0.01 * s,
-        "phi": 0.2 * s, "theta": 0.06 + 0.05 * s, "psi": 1.0 + 0.002 * (t - t0_s),
+        "p": phi_dot - psi_dot * np.sin(theta),
+        "q": theta_dot * np.cos(phi) + psi_dot * np.cos(theta) * np.sin(phi),
+        "r": -theta_dot * np.sin(phi) + psi_dot * np.cos(theta) * np.cos(phi),
+        "phi": phi, "theta": theta, "psi": psi,
         "tas": 150.0 + 3.0 * s, "h": 6000.0 + 20.0 * s,
         "alpha_zl": 0.07 + 0.03 * s + rng.normal(0, 1e-4, len(t)),
         "alpha_zr": 0.07 + 0.03 * s + rng.normal(0, 1e-4, len(t)),
@@ -178,6 +189,46 @@ def test_parquet_and_time_ranges(tmp_path):
     np.testing.assert_allclose(wut1.r_cg_body_m, [0.35, 0.0, 0.13])
     np.testing.assert_allclose(pd1.r_cg_body_m, [0.33, 0.0, 0.13])
     assert pd1.meta["t_start_s"] == 10.0 and pd1.meta["file"].endswith("flight.parquet")
+
+
+def test_two_files_two_aircraft_per_file_columns(tmp_path):
+    """Per-file column names; a sensor one aircraft lacks; its bias is held for that aircraft."""
+    a = flight_frame(seed=1)
+    b = flight_frame(seed=2).rename(columns={"alpha_zl": "AOA_L"}).drop(columns=["alpha_zr"])
+    b["gear"] = 1.0
+    a.to_csv(tmp_path / "pv1.csv", index=False)
+    b.to_csv(tmp_path / "pt1.csv", index=False)
+    cols = SI_COLUMNS.replace('alpha_zr = { column = "alpha_zr", unit = "rad" }',
+                              'alpha_zr = { column = "alpha_zr", unit = "rad", optional = true }')
+    files = ('[aircraft.PT1]\nr_cg_body_m = [0.30, 0.0, 0.12]\n'
+             '[[files]]\npath = "pv1.csv"\naircraft = "PV1"\n'
+             '[[files]]\npath = "pt1.csv"\naircraft = "PT1"\n'
+             'columns = { alpha_zl = { column = "AOA_L", unit = "rad" } }\n')
+    prob = load_problem(write_problem(tmp_path, f'channels = ["theta", "alpha_zl", "alpha_zr"]\n'
+                                                f"{SENSORS}{cols}{files}"))
+    pv1, pt1 = prob.maneuvers
+    assert (pv1.id, pt1.id) == ("pv1", "pt1")
+    np.testing.assert_allclose(pt1.measurements["alpha_zl"], b["AOA_L"])
+    assert "alpha_zr" not in pt1.measurements
+    np.testing.assert_allclose(pt1.r_cg_body_m, [0.30, 0.0, 0.12])
+    ps = prob.parameters
+    assert ps["b_r[PV1]"].free and not ps["b_r[PT1]"].free  # PT1 has no right vane data
+    assert ps["b_l[PT1]"].free
+    assert pt1.meta["gear_down"] and not pv1.meta["gear_down"]
+    assert pv1.meta["mach_mean"] == pytest.approx(a["mach"].mean())
+
+
+def test_whitespace_with_header_and_preamble(tmp_path):
+    frame = flight_frame()
+    text = "FLIGHT 421 DRU export\nrecorded 2024-05-01\n" + frame.to_string(index=False)
+    (tmp_path / "flight.log").write_text(text)
+    files = '[[files]]\npath = "flight.log"\nskip_rows = 2\n'
+    path = si_problem(tmp_path, files=files)
+    raises(path, "flight.log", "cannot tell the format", 'format = "csv"')
+    path.write_text(path.read_text().replace("skip_rows = 2", 'skip_rows = 2\nformat = "whitespace"'))
+    m = load_problem(path).maneuvers[0]
+    np.testing.assert_allclose(m.measurements["tas"], frame["tas"], rtol=1e-5)
+    assert m.n == len(frame)
 
 
 def test_engineering_units_give_the_si_maneuver(tmp_path):
@@ -444,6 +495,33 @@ def test_acceleration_in_g_declared_as_mps2_and_vice_versa(tmp_path):
     path = si_problem(tmp_path, frame)
     path.write_text(path.read_text().replace('unit = "m/s^2"', 'unit = "g"'))
     raises(path, "IMU specific force", "declared in 'g'", 'set unit = "m/s^2"')
+
+
+def test_clean_data_pass_the_euler_rate_check():
+    from estimator.io.consistency import euler_slopes
+
+    f = flight_frame()
+    slopes = euler_slopes({c: f[c].to_numpy() for c in ("p", "q", "r", "phi", "theta", "psi")},
+                          f["time"].to_numpy())
+    assert set(slopes) == {"phi", "theta"}  # psi: 0.002 rad/s is too little to tell
+    assert all(abs(v - 1.0) < 0.02 for v in slopes.values()), slopes
+
+
+def test_small_angle_in_deg_declared_rad(tmp_path):
+    """1.1 deg of pitch read as 1.1 rad passes the range check; the Euler kinematics catch it."""
+    frame = flight_frame(theta_amp_rad=0.02, theta_w_rps=2.0)
+    frame["theta"] = (frame["theta"] - 0.06) / DEG
+    raises(si_problem(tmp_path, frame), "flight.csv", "maneuver flight", "Euler angles disagree",
+           "theta (column 'theta')", "changes 57", "declared in 'rad' but looks like deg")
+
+
+def test_rates_in_deg_per_s_declared_rad_per_s(tmp_path):
+    frame = flight_frame(phi_amp_rad=0.05, theta_amp_rad=0.02, theta_w_rps=1.5)
+    for c in ("p", "q", "r"):
+        frame[c] = frame[c] / DEG
+    assert frame[["p", "q", "r"]].abs().max().max() < 6.0  # the range check cannot see it
+    raises(si_problem(tmp_path, frame), "flight.csv", "Euler angles disagree", "p (column 'p')",
+           "body rates are likely in the wrong unit", "look like deg/s")
 
 
 def test_time_in_ms_declared_as_s(tmp_path):

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimator.io.consistency import check_euler_rates
 from estimator.io.errors import DataError, Where, warn
 from estimator.io.plausibility import check_plausible, check_tas_against_mach
 from estimator.io.timebase import check_finite, check_sampling, check_time, resample, select_range
@@ -80,7 +81,8 @@ class ManeuverRequest:
     aircraft, configuration : ids for aircraft- and configuration-scoped parameters.
     r_cg_body_m : (3,) CG position, body axes, m.
     resample_hz : resample onto a uniform grid at this rate (None: the data must be uniform).
-    meta : carried into :attr:`ManeuverData.meta`.
+    meta : carried into :attr:`ManeuverData.meta`, where ``mach_mean``, ``mach_min``,
+        ``mach_max`` and ``gear_down`` are added from the data if absent.
     """
 
     id: str
@@ -136,6 +138,7 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
     _check_accel(table, si, t_s, rows, where)
     if "tas" in si and "mach" in si:
         check_tas_against_mach(si["tas"], si["mach"], table.units["tas"], table.labels["tas"], where)
+    check_euler_rates(si, t_s, table.units, table.labels, where)
     if req.resample_hz is not None:
         step = float(np.median(np.diff(t_s)))
         if req.resample_hz * step < 0.5:
@@ -145,6 +148,12 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
     if "psi" in si:  # heading wraps at +-180 deg or 0/360 deg; the reconstruction does not
         si["psi"] = np.unwrap(si["psi"])
     ids = set(REQUIRED)
+    meta = dict(req.meta)  # the same summary keys as an fpr manifest entry, for Mach binning
+    if "mach" in si:
+        for key, fn in (("mach_mean", np.mean), ("mach_min", np.min), ("mach_max", np.max)):
+            meta.setdefault(key, float(fn(si["mach"])))
+    if "gear" in si:
+        meta.setdefault("gear_down", bool(np.mean(si["gear"]) >= 0.5))
     return ManeuverData(
         id=req.id, t_s=t_s,
         accel_imu_mps2=np.column_stack([si["ax"], si["ay"], si["az"]]),
@@ -153,8 +162,8 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
         signals={k: v for k, v in si.items() if k not in channel_columns and k not in ids},
         r_cg_body_m=np.asarray(req.r_cg_body_m, dtype=float),
         aircraft=req.aircraft, configuration=req.configuration,
-        source=f"{table.path} t = {t_s[0]:.3f} to {t_s[-1]:.3f} s",
-        meta=dict(req.meta),
+        source=f"{table.path}, maneuver {req.id} (t = {t_s[0]:.3f} to {t_s[-1]:.3f} s)",
+        meta=meta,
     )
 
 

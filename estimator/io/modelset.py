@@ -120,7 +120,7 @@ def check_data_names(channels: Sequence[ChannelSpec], specs: Sequence[ParameterS
                 if name in m.signals or name in m.measurements or col.get(name) in m.measurements:
                     continue
                 raise DataError(
-                    f"{m.source}, maneuver {m.id}: channel {ch.name}'s model {ch.model!r} uses "
+                    f"{m.source}: channel {ch.name}'s model {ch.model!r} uses "
                     f"{name!r}, which is neither a declared parameter nor a data column of this "
                     f"maneuver (it has {sorted([*m.measurements, *m.signals])}); map {name} under "
                     f"[columns], declare [parameter.{name}], or leave channel {ch.name} out"
@@ -218,7 +218,7 @@ def _with_initial_conditions(specs: list[ParameterSpec], maneuvers, where: str) 
             if lacking and spec.name in ("u0", "v0", "w0"):
                 m = lacking[0]
                 raise DataError(
-                    f"{m.source}, maneuver {m.id}: no true airspeed (tas) to start {spec.name} from; "
+                    f"{m.source}: no true airspeed (tas) to start {spec.name} from; "
                     f"map tas under [columns] or give [parameter.{spec.name}] values = {{{m.id} = ...}} (m/s)"
                 )
             spec = replace(spec, per_instance={**computed, **given})
@@ -235,7 +235,7 @@ def check_maneuver_lengths(specs: Sequence[ParameterSpec], maneuvers: Sequence[M
         dur = float(m.t_s[-1] - m.t_s[0])
         if m.n < need or dur < MIN_DURATION_S:
             raise DataError(
-                f"{m.source}, maneuver {m.id}: too short to estimate its {n_free} free per-maneuver "
+                f"{m.source}: too short to estimate its {n_free} free per-maneuver "
                 f"parameters (initial conditions, IMU biases): {m.n} samples over {dur:.2f} s; "
                 f"needs at least {need} samples ({MIN_SAMPLES_PER_FREE_PARAMETER} per free parameter) "
                 f"and {MIN_DURATION_S:.0f} s. Widen its time range, or hold some of its parameters "

@@ -5,7 +5,9 @@ not crash anything: the estimator would converge to nonsense. These checks catch
 that leave values far outside what an aircraft can do, name the channel and the observed range,
 and suggest the unit in which the values would be plausible. They cannot catch every mistake:
 values plausible in both units (an airspeed of 150 read as kt or m/s; small angles in degrees
-declared as radians) pass.
+declared as radians) pass. Two cross-checks add to them: true airspeed / Mach must be a speed of
+sound (:func:`check_tas_against_mach`), and the Euler angles must change as the body rates say
+(:mod:`estimator.io.consistency`; the heading, which may be unwrapped, is checked only that way).
 
 =====================  ===============================  =========================================
 quantity (channels)    statistic                        plausible (SI)
@@ -14,8 +16,7 @@ time step (t)          median step                      1e-4 to 2 s
 flow angle (alpha_*,   max abs                          <= 1.6 rad (92 deg)
 beta_*), theta
 bank angle (phi)       max abs                          <= pi (+0.05) rad
-heading (psi), other   max abs                          <= 2 pi (+0.05) rad
-angles
+other angles but psi   max abs                           <= 2 pi (+0.05) rad
 body rate (p, q, r)    max abs                          <= 6 rad/s (344 deg/s)
 IMU acceleration       mean of the norm of (ax, ay, az) 0.4 g to 4 g (1 g in steady flight)
 true airspeed (tas)    median                           15 to 700 m/s
@@ -64,11 +65,10 @@ _CHECKS: dict[str, Check] = {
     "t": Check("a sample time step", "median_step", 1e-4, 2.0, typical=0.025, prefer=("s", "ms")),
     "theta": Check("a pitch angle", "maxabs", 0.0, 1.6, prefer=("deg", "mrad")),
     "phi": Check("a bank angle", "maxabs", 0.0, math.pi + 0.05, prefer=("deg", "mrad")),
-    "psi": Check("a heading", "maxabs", 0.0, 2 * math.pi + 0.05, prefer=("deg", "mrad")),
     "p": Check("a body rate", "maxabs", 0.0, 6.0, prefer=("deg/s",)),
     "q": Check("a body rate", "maxabs", 0.0, 6.0, prefer=("deg/s",)),
     "r": Check("a body rate", "maxabs", 0.0, 6.0, prefer=("deg/s",)),
-    "accel": Check("the IMU specific force", "mean_norm", 0.4 * _G, 4.0 * _G, typical=_G),
+    "accel": Check("a specific force in flight", "mean_norm", 0.4 * _G, 4.0 * _G, typical=_G),
     "tas": Check("a true airspeed", "median", 15.0, 700.0, typical=150.0),
     "h": Check("a pressure altitude", "median", -500.0, 25000.0, typical=5000.0),
     "gear": Check("a gear-down flag", "minmax", 0.0, 1.0),
@@ -84,6 +84,8 @@ def check_for(name: str, dimension: str) -> Check | None:
     """The check of a canonical column name (``alpha_*``/``beta_*`` are flow angles), or None."""
     if name in _CHECKS:
         return _CHECKS[name]
+    if name == "psi":  # may be unwrapped over several turns: see estimator.io.consistency
+        return None
     if dimension == "angle" and (name.startswith("alpha") or name.startswith("beta")):
         return _FLOW
     return _BY_DIMENSION.get(dimension)
@@ -159,14 +161,14 @@ def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s
         "maxabs": "largest |value|", "median": "median", "median_step": "median time step",
         "mean_norm": "mean magnitude", "minmax": "value",
     }[check.statistic]
-    place = "" if check.statistic in ("median", "median_step") else f" {at_row(t_s[i], int(rows[i]))}"
+    place = f" {at_row(t_s[i], int(rows[i]))}" if check.statistic in ("maxabs", "minmax") else ""
+    si_text = "" if UNITS[unit].factor == 1.0 and not UNITS[unit].offset else f" (= {stat:.6g} in SI)"
     lo, hi = check.low, check.high
-    hint = (f"the values look like {cands[0]}" + (f" (or {', '.join(cands[1:])})" if cands[1:] else "")
-            + f": set unit = \"{cands[0]}\" for it under [columns]") if cands else (
-        "check that the column is the right one and that its unit is declared correctly")
+    hint = (f"the values look like {cands[0]}: set unit = \"{cands[0]}\" for it under [columns]"
+            if cands else "check that the column is the right one and that its unit is declared correctly")
     raise DataError(
         f"{where}: {label} is declared in {unit!r} but its {stat_text} is {raw_stat:.6g} {unit}"
-        f"{place} (= {stat:.6g} in SI), which cannot be {check.what} (plausible: {lo:.4g} to "
+        f"{place}{si_text}, which cannot be {check.what} (plausible: {lo:.4g} to "
         f"{hi:.4g} in SI); {hint}"
     )
 

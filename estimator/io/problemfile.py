@@ -105,7 +105,7 @@ def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: s
     return SourceTable(path=path, values=values, not_numeric=bad, raw_text=text, units=units, labels=labels)
 
 
-def _file_pairs(raw: Mapping, base: Path, where: str) -> tuple[list, dict]:
+def _file_pairs(raw: Mapping, base: Path, where: str) -> list[tuple[SourceTable, ManeuverRequest]]:
     files = raw.get("files")
     if not files:
         raise DataError(f"{where}: no data: add [[files]] entries (path = ...) or [data] dataset = ...")
@@ -155,7 +155,7 @@ def _file_pairs(raw: Mapping, base: Path, where: str) -> tuple[list, dict]:
                 r_cg_body_m=cg, resample_hz=None if rate is None else float(rate),
                 meta={"file": str(table.path), "t_start_s": t0, "t_end_s": t1},
             )))
-    return pairs, {}
+    return pairs
 
 
 def load_problem(path: str | Path) -> Problem:
@@ -195,7 +195,7 @@ def load_problem(path: str | Path) -> Problem:
         pairs, pos = load_dataset_maneuvers(ds if ds.is_absolute() else base / ds, data.get("select"))
         sensors = {**pos, **sensors}
     else:
-        pairs, _ = _file_pairs(raw, base, where)
+        pairs = _file_pairs(raw, base, where)
     if "imu" not in sensors:
         raise DataError(f"{where}: [sensors] needs imu = [x, y, z], the accelerometer position (body axes, "
                         "m from the reference point): the lever-arm correction depends on it")

@@ -51,8 +51,8 @@ def select_range(t_s: np.ndarray, t_start_s: float | None, t_end_s: float | None
     tol = 0.5 * step
     if t0 < t_s[0] - tol or t1 > t_s[-1] + tol:
         raise DataError(
-            f"{where}: the requested range t = {t0:.3f} to {t1:.3f} s is outside the file's time "
-            f"span t = {t_s[0]:.3f} to {t_s[-1]:.3f} s; fix t_start_s/t_end_s (are they in the "
+            f"{where}: the requested range is outside the file's time span t = {t_s[0]:.3f} to "
+            f"{t_s[-1]:.3f} s; fix t_start_s/t_end_s (are they in the "
             "file's time base, in seconds?)"
         )
     idx = np.flatnonzero((t_s >= t0 - 1e-9 * max(1.0, abs(t0))) & (t_s <= t1 + 1e-9 * max(1.0, abs(t1))))
