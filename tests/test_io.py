@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-import json
 import math
+import subprocess
+import sys
+import textwrap
 import warnings
 
 import numpy as np
@@ -18,6 +20,7 @@ from estimator.io import (
     load_truth,
     problem_from_dataset,
 )
+from synth.dataset import prepare_directory, write_maneuver, write_manifest
 
 G = 9.80665
 KT = 1852.0 / 3600.0
@@ -301,8 +304,8 @@ def test_psi_wrap_is_unwrapped(tmp_path):
 
 # ------------------------------------------------------------------------------------ datasets
 def write_dataset(directory, n_maneuvers=3, with_boom=False):
-    """A tiny dataset in the layout of synth/dataset.py (manifest.json + maneuvers/*.parquet)."""
-    (directory / "maneuvers").mkdir(parents=True)
+    """A tiny dataset written by synth/dataset.py's own writers (manifest.json + maneuvers/*.parquet)."""
+    prepare_directory(directory)
     entries = []
     for i in range(n_maneuvers):
         f = flight_frame(duration_s=10.0, t0_s=0.0, seed=i)
@@ -323,14 +326,14 @@ def write_dataset(directory, n_maneuvers=3, with_boom=False):
                  "configuration": "PV1-NP" if i < 2 else "PT1-NP", "aircraft": "PV1" if i < 2 else "PT1",
                  "mach_mean": mach, "gear_down": False, "r_cg_body_m_mean": [0.33, 0.0, 0.13 + 0.01 * i],
                  "injected": {"imu.accel_bias_mps2": [0.1, 0.0, -0.05]}}
-        df.to_parquet(directory / entry["file"])
+        write_maneuver(directory / entry["file"], df, entry)
         entries.append(entry)
     positions = {"imu": [1.8, 0.1, 0.2], "vane_left": [6.2, -0.45, 0.25], "vane_right": [6.2, 0.45, 0.25],
                  "side_probe_left": [6.6, -0.52, 0.05], "side_probe_right": [6.6, 0.52, 0.05],
                  "nose_probe": [8.3, 0.0, 0.22], "boom_alpha_vane": [9.4, 0.0, 0.22]}
     manifest = {"format": "fpr-dataset", "format_version": 1, "maneuvers": entries,
                 "airframe": {"positions_body_m": positions}}
-    (directory / "manifest.json").write_text(json.dumps(manifest))
+    write_manifest(directory, manifest)
     return directory
 
 
@@ -599,3 +602,39 @@ def test_unused_user_parameter_warns(tmp_path):
         prob = load_problem(path)
     assert any(issubclass(w.category, DataWarning) and "b_n" in str(w.message) for w in caught)
     assert "b_n[PV1]" not in prob.parameters
+
+
+# ---------------------------------------------------------------------------------- documentation
+def test_documented_problem_file_example_works(tmp_path):
+    """The schema example of estimator.io's docstring (copied into the README) loads as documented."""
+    import estimator.io
+
+    doc = estimator.io.__doc__
+    block = doc.split("from the aircraft's reference point::\n")[1].split("\nInstead of")[0]
+    (tmp_path / "problem.toml").write_text(textwrap.dedent(block))
+    f = flight_frame(duration_s=400.0, t0_s=0.0)
+    eng = pd.DataFrame({
+        "Time": f["time"], "AX": f["ax"] / G, "AY": f["ay"] / G, "AZ": f["az"] / G,
+        "P": f["p"] / DEG, "Q": f["q"] / DEG, "R": f["r"] / DEG, "SPARE": 0.0,
+        "PHI": f["phi"] / DEG, "THETA": f["theta"] / DEG, "PSI": np.mod(f["psi"] / DEG, 360.0),
+        "TAS": f["tas"] / KT, "HP": f["h"] / FT, "AOA_R": f["alpha_zr"] / DEG, "GEAR": f["gear"],
+        "MACH": f["mach"], "AOA_L": f["alpha_zl"] / DEG,
+    })
+    eng.to_csv(tmp_path / "flight421.csv", index=False)
+    with pytest.warns(DataWarning, match="b_5h"):  # declared for the example channel, which is not listed
+        prob = load_problem(tmp_path / "problem.toml")
+    pd1, wut1 = prob.maneuvers
+    assert (pd1.id, wut1.id, pd1.aircraft, pd1.configuration) == ("pd1", "wut1", "PV1", "PV1-NP")
+    assert pd1.t_s[0] == pytest.approx(120.0) and wut1.t_s[-1] == pytest.approx(340.0)
+    sel = (f["time"] >= 120.0 - 1e-9) & (f["time"] <= 155.0 + 1e-9)
+    np.testing.assert_allclose(pd1.measurements["alpha_zl"], f.loc[sel, "alpha_zl"], rtol=1e-9)
+    np.testing.assert_allclose(pd1.measurements["tas"], f.loc[sel, "tas"], rtol=1e-9)
+    assert prob.parameters["u0[pd1]"].value == 152.0
+    assert prob.parameters["b_l[PV1]"].bounds == pytest.approx((-3 * DEG, 3 * DEG))
+
+
+def test_estimator_io_imports_neither_synth_nor_jsbsim():
+    code = ("import sys, estimator.io, estimator.problem; "
+            "print([m for m in sys.modules if m.split('.')[0] in ('synth', 'jsbsim')])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

@@ -63,7 +63,8 @@ z down) from the aircraft's reference point::
     configuration = "PV1-NP"  # default: the aircraft id
     resample_hz = 40.0        # overrides the top-level value for this file
     columns = { alpha_zl = { column = "AOA_L", unit = "deg" } }  # per-file column changes
-    maneuvers = [             # time ranges (s, the file's time base); omit: the whole file is
+    maneuvers = [             # time ranges (s, in the file's time base after converting t to
+                              # seconds), both ends included; omit: the whole file is
                               # one maneuver whose id is the file name without extension
       { id = "pd1", t_start_s = 120.0, t_end_s = 155.0 },
       { id = "wut1", t_start_s = 300.0, t_end_s = 340.0, configuration = "PV1-NP" },
@@ -134,14 +135,20 @@ column, the time and data row (0-based, after the header) of the first bad sampl
   (no anti-aliasing filter; downsampling by more than 2 gives a warning);
 - units that cannot be right: values far outside what an aircraft does in the declared unit
   (angles declared rad beyond ~1.6 rad, rates beyond 6 rad/s, a mean specific force outside
-  0.4 to 4 g, airspeed outside 15 to 700 m/s, altitude outside -500 to 25 000 m, ...); the
-  message gives the observed value and suggests the unit that fits (see
-  :mod:`estimator.io.plausibility`);
+  0.4 to 4 g, airspeed outside 15 to 700 m/s, altitude outside -500 to 25 000 m, a time step
+  outside 0.1 ms to 2 s, ...); true airspeed / Mach that is not a speed of sound; Euler angles
+  that change 57 times faster or slower than the body rates say (a degree/radian mistake of
+  that angle, or of the rates if all angles disagree alike). The message gives the observed
+  value and suggests the unit that fits (:mod:`estimator.io.plausibility`,
+  :mod:`estimator.io.consistency`);
 - a maneuver shorter than :data:`~estimator.io.modelset.MIN_DURATION_S` (5 s) or with fewer than
   :data:`~estimator.io.modelset.MIN_SAMPLES_PER_FREE_PARAMETER` (10) samples per free
   per-maneuver parameter: those parameters (initial conditions, IMU biases) are estimated from
   that maneuver alone;
 - duplicate maneuver ids; a g_mps2 that is not an Earth gravity in m/s^2.
+
+Each maneuver's ``meta`` holds its file and time range (or its manifest entry) and, from the
+data, ``mach_mean``, ``mach_min``, ``mach_max`` and ``gear_down`` when Mach and gear are mapped.
 
 Start values of the initial conditions ``u0 v0 w0 phi0 theta0 psi0 h0`` come from the first
 :data:`~estimator.io.modelset.IC_AVERAGE_SAMPLES` samples of each maneuver (measured TAS, the first
