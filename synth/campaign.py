@@ -5,6 +5,8 @@ A campaign file::
     name = "default"
     description = "five aircraft, Mach 0.3-0.9, every maneuver type, gear-down maneuvers"
     fleet = "fleet_default"          # shipped fleet name or path to a fleet TOML
+    local_flow_truth = "local_flow_truth"   # optional: the local-flow truth model (aircraft_models/)
+    adc_baseline = "adc_baseline"           # optional: the airdata computer's baseline model
     seed = 2026                      # master seed: turbulence and every error source derive from it
     common_rate_hz = 40.0            # the preprocessed common time base
 
@@ -53,11 +55,13 @@ from synth.environment import Environment
 from synth.errors import ErrorConfig
 from synth.flight import FlightError, fly_maneuver
 from synth.instrument import instrument
+from synth.local_flow import load_adc_baseline, load_local_flow_truth
 from synth.maneuvers import MANEUVER_KINDS, ManeuverSpec
 
 CAMPAIGN_DIR = Path(__file__).resolve().parent.parent / "campaigns"
 _TOP_KEYS = {
     "name", "description", "fleet", "seed", "common_rate_hz", "environment", "errors", "flights",
+    "local_flow_truth", "adc_baseline",
 }
 _BLOCK_KEYS = {"configurations", "mach", "maneuvers", "altitude_m", "gear_down", "maneuver"}
 
@@ -98,6 +102,8 @@ class Campaign:
     common_rate_hz: float
     jobs: tuple[Job, ...]
     source: str
+    local_flow_truth: str = "local_flow_truth"
+    adc_baseline: str = "adc_baseline"
     raw: dict = field(repr=False, default_factory=dict)
 
 
@@ -178,7 +184,14 @@ def parse_campaign(raw: Mapping, source: str = "<dict>") -> Campaign:
         except (ValueError, KeyError, TypeError) as exc:
             raise CampaignError(f"{source}: maneuver {job.index} ({job.configuration_id}, "
                                 f"{job.maneuver['kind']}, Mach {job.maneuver['mach']}): {exc}") from exc
+    models = {k: str(raw.get(k, k)) for k in ("local_flow_truth", "adc_baseline")}
+    try:
+        load_local_flow_truth(models["local_flow_truth"])
+        load_adc_baseline(models["adc_baseline"])
+    except (FileNotFoundError, ValueError) as exc:
+        raise CampaignError(f"{source}: {exc}") from None
     return Campaign(
+        **models,
         name=str(raw.get("name", Path(source).stem)),
         description=str(raw.get("description", "")),
         fleet=fleet,
@@ -223,9 +236,11 @@ class JobResult:
 _WORKER: dict = {}
 
 
-def _init_worker(fleet_source: str, out_dir: str, common_rate_hz: float, seed: int) -> None:
+def _init_worker(fleet_source: str, out_dir: str, common_rate_hz: float, seed: int,
+                 local_flow_truth: str, adc_baseline: str) -> None:
     _WORKER.update(
-        fleet=load_fleet(fleet_source), out_dir=Path(out_dir), rate=common_rate_hz, seed=seed
+        fleet=load_fleet(fleet_source), out_dir=Path(out_dir), rate=common_rate_hz, seed=seed,
+        truth_model=load_local_flow_truth(local_flow_truth), adc=load_adc_baseline(adc_baseline),
     )
 
 
@@ -252,7 +267,8 @@ def _run_job(job: Job) -> JobResult:
         # stable seed key per (job, segment); 64 segments per job is far more than any maneuver has
         key = job.index * 64 + seg_no
         inst = instrument(truth, fleet.airframe, cfg, errors, maneuver_key=key,
-                          common_rate_hz=_WORKER["rate"])
+                          common_rate_hz=_WORKER["rate"], truth_model=_WORKER["truth_model"],
+                          adc_baseline=_WORKER["adc"])
         mid = f"m{job.index:04d}" + (f"s{seg_no}" if len(segments) > 1 else "")
         fname = f"maneuvers/{mid}.parquet"
         data = inst.data
@@ -331,7 +347,8 @@ def fly_campaign(
     t0 = time.perf_counter()
     out_dir = prepare_directory(Path(out_dir), overwrite=overwrite)
     workers = workers or os.cpu_count() or 1
-    init_args = (campaign.fleet.source, str(out_dir), campaign.common_rate_hz, campaign.seed)
+    init_args = (campaign.fleet.source, str(out_dir), campaign.common_rate_hz, campaign.seed,
+                 campaign.local_flow_truth, campaign.adc_baseline)
     results: list[JobResult] = []
     bar = None
     if progress is True:
@@ -372,6 +389,8 @@ def fly_campaign(
             "source": campaign.source,
             "seed": campaign.seed,
             "definition": campaign.raw,
+            "local_flow_truth": campaign.local_flow_truth,
+            "adc_baseline": campaign.adc_baseline,
         },
         "software": software_versions(),
         "airframe": {

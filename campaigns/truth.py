@@ -1,0 +1,219 @@
+"""The true value of every estimator parameter of a problem built from a synthetic dataset.
+
+This joins the two halves (the dataset's truth, the estimator's parameters), which is why it
+lives in ``campaigns/``. What "true" means, per kind:
+
+- **initial conditions**: the true air-relative velocity and Euler angles at the maneuver's first
+  sample, taken at the IMU's time (the model's time axis is the IMU's: its channels lag by the
+  DRU delay);
+- **IMU biases**: the injected ``imu.accel_bias_mps2`` / ``imu.gyro_bias_rps``;
+- **time shifts**: the injected total lag of the channel minus that of the IMU (the reference);
+- **calibration parameters** (tables, biases, scale factors): the injected errors are physical
+  (local flow, installation biases, the airdata computer's tables), not values of the model's
+  parameters, so their truth is the *projection* of the true system onto the model structure:
+  the least-squares fit of each channel's model to its clean channel (``true_clean_<channel>``:
+  every deterministic error, no noise, no delay) with the true flow at the sensor as input, over
+  the problem's own samples. It is what the estimator would find with perfect IMU, perfect
+  initial conditions and no noise; any difference beyond the Cramér-Rao bound is estimation
+  error, and the fit's own residual (reported) is the model-structure error.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from estimator.core.expressions import Table
+from estimator.io import load_truth
+from estimator.parameters import make_key
+from estimator.problem import Problem
+from estimator.result import EstimationResult
+
+IMU_REFERENCE = "ax_imu_mps2"
+
+
+def _sensor_col(kind: str, sensor: str) -> str:
+    """The true column of a sensor signal; the side-probe pair is at the probes' mean position."""
+    return f"true_{kind}_sp_rad" if sensor == "side_probe" else f"true_{kind}_{sensor}_rad"
+
+
+@dataclass(frozen=True)
+class TruthProjection:
+    """True parameter values and how well the model structure can represent the truth.
+
+    Attributes
+    ----------
+    values : parameter key -> true value (SI); parameters without a truth are absent.
+    structure_rms : channel -> rms of the clean channel minus the best-fitting model, SI.
+    """
+
+    values: Mapping[str, float]
+    structure_rms: Mapping[str, float]
+
+
+def _interp_truth(tr: pd.DataFrame, col: str, t: np.ndarray) -> np.ndarray:
+    return np.interp(t, tr["t_s"].to_numpy(), tr[col].to_numpy())
+
+
+def true_parameters(problem: Problem) -> TruthProjection:
+    """True values of the problem's parameters (see the module docstring)."""
+    ps = problem.parameters
+    specs = ps.specs
+    values: dict[str, float] = {}
+    truths = {m.id: load_truth(problem, m.id) for m in problem.maneuvers}
+    chan_col = {c.name: c.column for c in problem.channels}
+
+    def lag(inj: Mapping, column: str) -> float | None:
+        v = inj.get(f"time_shift_s.{column}")
+        return None if v is None else float(v) - float(inj.get(f"time_shift_s.{IMU_REFERENCE}", 0.0))
+
+    for m in problem.maneuvers:
+        inj = m.meta.get("injected", {})
+        tr = truths[m.id]
+        # the model's clock is the IMU's: its sample at t shows the flight at t - (IMU lag)
+        t_imu = m.t_s[:1] - float(inj.get(f"time_shift_s.{IMU_REFERENCE}", 0.0))
+        ic = {"u0": "true_u_air_mps", "v0": "true_v_air_mps", "w0": "true_w_air_mps",
+              "phi0": "true_phi_rad", "theta0": "true_theta_rad", "psi0": "true_psi_rad"}
+        for name, col in ic.items():
+            if name in specs:
+                values[make_key(name, m.id)] = float(_interp_truth(tr, col, t_imu)[0])
+        acc = inj.get("imu.accel_bias_mps2")
+        gyr = inj.get("imu.gyro_bias_rps")
+        for i, name in enumerate(("dax", "day", "daz")):
+            if acc is not None and name in specs:
+                values[_key(problem, name, m)] = float(acc[i])
+        for i, name in enumerate(("dp", "dq", "dr")):
+            if gyr is not None and name in specs:
+                values[_key(problem, name, m)] = float(gyr[i])
+        for ch in problem.channels:
+            if ch.delay and ch.column in m.measurements:
+                d = lag(inj, _dataset_column(ch.column))
+                if d is not None:
+                    values[_key(problem, ch.delay, m, ch)] = d
+    structure = _project_calibration(problem, truths, values, chan_col)
+    return TruthProjection(values=values, structure_rms=structure)
+
+
+_DATASET_COLUMNS = {"phi": "phi_rad", "theta": "theta_rad", "psi": "psi_rad", "tas": "tas_mps",
+                    "h": "h_baro_m"}
+
+
+def _dataset_column(canonical: str) -> str:
+    return _DATASET_COLUMNS.get(canonical, f"{canonical}_rad")
+
+
+def _key(problem: Problem, name: str, m, channel=None, element=None) -> str:
+    spec = problem.parameters.specs[name]
+    inst = {"global": "", "aircraft": m.aircraft, "configuration": m.configuration,
+            "maneuver": m.id, "recorder": channel.recorder if channel is not None else ""}[spec.scope]
+    return make_key(name, inst, element)
+
+
+def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> dict[str, float]:
+    """Least-squares fit of the calibration parameters to the clean channels (module docstring)."""
+    ps = problem.parameters
+    calib_kinds = ("table", "bias", "scale")
+    tables = {n: Table(n, np.asarray(s.breakpoints)) for n, s in ps.specs.items() if s.breakpoints}
+    rows: list[tuple[np.ndarray, dict[str, np.ndarray], np.ndarray, str]] = []
+    structure: dict[str, float] = {}
+    keys_used: list[str] = []
+    for ch in problem.channels:
+        if ch.sensor is None:
+            continue
+        expr = ch.expression
+        for m in problem.maneuvers:
+            if ch.column not in m.measurements:
+                continue
+            tr = truths[m.id]
+            clean_col = f"true_clean_{_dataset_column(ch.column)}"
+            if clean_col not in tr:
+                continue
+            t = tr["t_s"].to_numpy()
+            y = tr[clean_col].to_numpy()
+            sig = {
+                name: tr[_sensor_col(kind, ch.sensor)].to_numpy()
+                for name, kind in (("alpha_s", "alpha"), ("beta_s", "beta"), ("flank_s", "flank"))
+                if _sensor_col(kind, ch.sensor) in tr
+            }
+            sig |= {
+                "alpha_t": tr["true_alpha_cg_rad"].to_numpy(),
+                "beta_t": tr["true_beta_cg_rad"].to_numpy(),
+                "tas_t": tr["true_tas_mps"].to_numpy(),
+                "z": y, "zhat": y,
+            }
+            for name in expr.names - set(sig):
+                if name in ps.specs:
+                    continue
+                clean_other = f"true_clean_{_dataset_column(chan_col.get(name, name))}"
+                if clean_other in tr:
+                    sig[name] = tr[clean_other].to_numpy()
+                elif name in m.signals:
+                    sig[name] = np.interp(t, m.t_s, m.signals[name])
+            params = {n: 0.0 for n in expr.names if n in ps.specs}
+            tabs = {n: (tables[n], np.zeros(tables[n].breakpoints.size)) for n in expr.tables}
+            # every calibration model here is affine in its calibration parameters once z and zhat
+            # are the clean values: evaluate at zero for the offset, derivatives for the regressors
+            dual = expr.evaluate(sig, params, tabs)
+            cols: dict[str, np.ndarray] = {}
+            for n, d in dual.dparam.items():
+                if ps.specs[n].kind in calib_kinds:
+                    cols[_key(problem, n, m, ch)] = np.broadcast_to(d, y.shape).astype(float)
+            for n, terms in dual.dtable.items():
+                for idx, coef in terms:
+                    idx = np.broadcast_to(idx, y.shape)
+                    coef = np.broadcast_to(coef, y.shape)
+                    for e in np.unique(idx):
+                        k = _key(problem, n, m, ch, int(e))
+                        cols[k] = cols.get(k, 0.0) + np.where(idx == e, coef, 0.0)
+            offset = np.broadcast_to(dual.value, y.shape)
+            # the non-calibration parameters (none in the shipped models) enter at zero: add them
+            rows.append((y - offset, cols, t, ch.name))
+            keys_used += list(cols)
+    keys = list(dict.fromkeys(k for k in keys_used if k in ps))
+    index = {k: i for i, k in enumerate(keys)}
+    fixed = {k for k in keys if not ps[k].free}
+    A_blocks, b_blocks, names = [], [], []
+    for target, cols, _t, cname in rows:
+        A = np.zeros((target.size, len(keys)))
+        rhs = target.copy()
+        for k, v in cols.items():
+            if k in fixed:
+                rhs -= v * ps[k].value
+            elif k in index:
+                A[:, index[k]] = v
+        A_blocks.append(A)
+        b_blocks.append(rhs)
+        names.append(cname)
+    if not keys:
+        return structure
+    A = np.vstack(A_blocks)
+    b = np.concatenate(b_blocks)
+    live = np.array([k not in fixed for k in keys]) & (np.abs(A).sum(axis=0) > 0)
+    sol, *_ = np.linalg.lstsq(A[:, live], b, rcond=None)
+    full = np.zeros(len(keys))
+    full[live] = sol
+    for k, v, ok in zip(keys, full, live, strict=True):
+        if ok:
+            values[k] = float(v)
+    sq: dict[str, list[float]] = {}
+    for Ab, bb, cname in zip(A_blocks, b_blocks, names, strict=True):
+        r = bb - Ab[:, live] @ sol
+        sq.setdefault(cname, []).extend((r * r).tolist())
+    structure.update({c: float(np.sqrt(np.mean(v))) for c, v in sq.items()})
+    return structure
+
+
+def recovery_table(result: EstimationResult, truth: TruthProjection) -> pd.DataFrame:
+    """Estimate, truth, Cramér-Rao and coloured deviations and z-scores of every free parameter
+    that has a truth, in display units."""
+    df = result.to_pandas()
+    df = df[df["free"] & df.index.isin(list(truth.values))].copy()
+    df["truth_display"] = [truth.values[k] * result.parameters[k].display_scale for k in df.index]
+    df["error_display"] = df["value_display"] - df["truth_display"]
+    df["z_crb"] = df["error_display"] / df["std_crb_display"]
+    df["z_colored"] = df["error_display"] / df["std_colored_display"]
+    return df[["kind", "value_display", "truth_display", "error_display", "std_crb_display",
+               "std_colored_display", "z_crb", "z_colored", "display_unit"]]
