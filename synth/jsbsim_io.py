@@ -238,6 +238,11 @@ def create_fdm(
     if not (0.0 < dt_s <= 0.05):
         raise ValueError(f"dt_s must be in (0, 0.05] s, got {dt_s}; JSBSim models need >= 20 Hz")
     root = patched_root_dir(model)
+    # JSBSim prints its banner to stdout when the first FGFDMExec of a process is built at a
+    # debug level above 0. The level is a process-wide static (FGJSBBase::debug_lvl); setting it
+    # first silences the banner in every process, pool workers included, without touching the
+    # C-level stdout. (JSBSIM_DEBUG, if set, still overrides it during construction.)
+    jsbsim.FGJSBBase().debug_lvl = 0
     fdm = jsbsim.FGFDMExec(str(root), None)
     fdm.set_debug_level(0)
     fdm.disable_output()

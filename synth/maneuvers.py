@@ -16,7 +16,7 @@ Kinds and what they excite (SPEC §7, paper §3):
 ``3211``                   3-2-1-1 load-factor multisteps -> alpha, q over a wide band
 ``pullup_pushover``        pull to ``nz_max``, push to ``nz_min``, twice -> large alpha range
 ``roller_coaster``         sinusoidal load factor -> repeated nz / alpha cycles
-``windup_turn``            alpha ramp to ``alpha_max_rad`` (or ``nz_max``) at constant Mach
+``windup_turn``            alpha ramp to ``alpha_max_rad`` or g ramp to ``nz_max`` at constant Mach
 ``shss``                   steady-heading sideslip at ``beta_rad``, split into segments
 ``pullup_rudder_doublets`` slow pull-ups / push-overs with rudder doublets -> alpha x beta
 ``level_accel``            full dry power at constant altitude -> Mach sweep up, centred on
@@ -87,13 +87,31 @@ LOW_SPEED_DEFAULTS: dict[str, dict[str, float]] = {
 }
 FULL_DEFAULTS_FROM_MACH = 0.5
 
+#: Defaults at Mach 0.9 where they differ: at high Mach a wind-up turn is limited by load factor,
+#: not alpha. The f16's FCS runs out of stick (the command saturates) at about 4.9-5.4 g at Mach
+#: 0.9 and 8000 m, at alpha 9.5-11 deg, so the turn winds up to 4.5 g. Interpolated linearly in
+#: Mach from :data:`FULL_DEFAULTS_UP_TO_MACH`, below which :data:`DEFAULTS` apply.
+HIGH_SPEED_DEFAULTS: dict[str, dict[str, float]] = {
+    "windup_turn": {"nz_max": 4.5},
+}
+FULL_DEFAULTS_UP_TO_MACH = 0.7
+
 
 def default_value(kind: str, name: str, mach: float) -> float:
-    """Default of field ``name`` for ``kind`` at ``mach`` (see :data:`LOW_SPEED_DEFAULTS`)."""
-    hi = DEFAULTS[kind][name]
-    lo = LOW_SPEED_DEFAULTS.get(kind, {}).get(name, hi)
+    """Default of field ``name`` for ``kind`` at ``mach``.
+
+    :data:`DEFAULTS` between Mach :data:`FULL_DEFAULTS_FROM_MACH` and
+    :data:`FULL_DEFAULTS_UP_TO_MACH`, interpolated linearly towards :data:`LOW_SPEED_DEFAULTS` at
+    Mach 0.3 and towards :data:`HIGH_SPEED_DEFAULTS` at Mach 0.9.
+    """
+    mid = DEFAULTS[kind][name]
+    if mach >= FULL_DEFAULTS_UP_TO_MACH:
+        hi = HIGH_SPEED_DEFAULTS.get(kind, {}).get(name, mid)
+        f = min(1.0, (mach - FULL_DEFAULTS_UP_TO_MACH) / (MACH_RANGE[1] - FULL_DEFAULTS_UP_TO_MACH))
+        return float(mid + f * (hi - mid))
+    lo = LOW_SPEED_DEFAULTS.get(kind, {}).get(name, mid)
     f = min(1.0, max(0.0, (mach - MACH_RANGE[0]) / (FULL_DEFAULTS_FROM_MACH - MACH_RANGE[0])))
-    return float(lo + f * (hi - lo))
+    return float(lo + f * (mid - lo))
 
 
 _FIELD_HELP = {
@@ -137,8 +155,9 @@ class ManeuverSpec:
     heading_rad : initial true heading, rad.
     delta_nz, pulse_s, nz_max, nz_min, period_s, alpha_max_rad, beta_rad, segment_s,
     rudder_norm, delta_mach : excitation settings; ``None`` takes the kind's default in
-        :data:`DEFAULTS` (reduced towards Mach 0.3 per :data:`LOW_SPEED_DEFAULTS`); setting one
-        that does not apply to the kind is an error.
+        :data:`DEFAULTS` (reduced towards Mach 0.3 per :data:`LOW_SPEED_DEFAULTS` and towards
+        Mach 0.9 per :data:`HIGH_SPEED_DEFAULTS`); setting one that does not apply to the kind is
+        an error.
     """
 
     kind: str
@@ -497,15 +516,24 @@ class PullupRudderDoublets(RollerCoaster):
 
 
 class WindupTurn(Controller):
-    """Constant-Mach turn with alpha ramped to ``alpha_max_rad``, stopping early at ``nz_max``.
+    """Constant-Mach turn winding up to ``alpha_max_rad`` or ``nz_max``, whichever comes first.
 
-    Alpha follows its ramp through an integrating load-factor loop. Mach is held with throttle;
-    once the throttle is at its limit the bank angle steepens beyond that of a level turn, trading
-    altitude for speed, as a test pilot does.
+    Alpha and load factor are ramped together, from trim to their targets over the run (less
+    the last 3 s, which hold them): a pull follows the alpha ramp unless that would exceed the
+    load-factor ramp, in which case it follows the load-factor ramp (one integrating loop on the
+    smaller of the two errors, the load-factor error converted to alpha by
+    :attr:`ALPHA_PER_G_RAD`). Where alpha binds (low Mach), g rises as alpha is swept; where load
+    factor binds (high Mach), the turn still winds up steadily and ends on ``nz_max`` rather than
+    reaching it early and holding it. Mach is held with throttle; once the throttle is at its
+    limit the bank angle steepens beyond that of a level turn, trading altitude for speed, as a
+    test pilot does.
     """
 
     mach_tolerance = 0.05
     bank_rate_rps = 15.0 * _DEG
+    #: load-factor error -> alpha-error units of the pull loop, rad per g (loop gain in g: an
+    #: integral of 25 x 0.08 = 2 per s)
+    ALPHA_PER_G_RAD = 0.08
 
     def __init__(self, spec, trim, dt_s):
         super().__init__(spec, trim, dt_s)
@@ -515,23 +543,26 @@ class WindupTurn(Controller):
         self._phi_cmd = 0.0
         self.alpha_peak_rad = -1.0
 
+    def _ramp(self, t_s: float) -> float:
+        """Fraction 0..1 of the wind-up reached at ``t_s``."""
+        if t_s < self.lead_in_s:
+            return 0.0
+        return min(1.0, (t_s - self.lead_in_s) / (self.ramp_end_s - self.lead_in_s))
+
     def alpha_cmd(self, t_s: float) -> float:
         a0 = self.trim.alpha_rad
-        if t_s < self.lead_in_s:
-            return a0
-        f = min(1.0, (t_s - self.lead_in_s) / (self.ramp_end_s - self.lead_in_s))
-        return a0 + f * (self.spec.alpha_max_rad - a0)
+        return a0 + self._ramp(t_s) * (self.spec.alpha_max_rad - a0)
+
+    def nz_cmd(self, t_s: float) -> float:
+        return 1.0 + self._ramp(t_s) * (self.spec.nz_max - 1.0)
 
     def inputs(self, t_s, x):
         nz = self.nz(x)
-        err_a = self.alpha_cmd(t_s) - x[_ALPHA]
-        if nz < self.spec.nz_max:
-            self._dnz_int += 25.0 * err_a * self.dt_s
-            dnz = self._dnz_int + 4.0 * err_a
-        else:
-            # at the load-factor stop: back off instead of following the alpha ramp
-            self._dnz_int -= 2.0 * (nz - self.spec.nz_max) * self.dt_s
-            dnz = self._dnz_int + 4.0 * min(err_a, 0.0)
+        # pull on the smaller of the alpha error and the load-factor error (in alpha units)
+        err = min(self.alpha_cmd(t_s) - x[_ALPHA],
+                  self.ALPHA_PER_G_RAD * (self.nz_cmd(t_s) - nz))
+        self._dnz_int += 25.0 * err * self.dt_s
+        dnz = self._dnz_int + 4.0 * err
         self.alpha_peak_rad = max(self.alpha_peak_rad, x[_ALPHA])
         thr = self.throttle_for_mach(x)
         err_m = self.mach_cmd - x[_MACH]
@@ -575,7 +606,8 @@ class WindupTurn(Controller):
                 f"{self.notes['nz_peak']:.1f})",
                 float(t_s[-1]),
                 "lower alpha_max_rad or nz_max, or lengthen duration_s (the f16 FCS limits "
-                "alpha to about 25 deg and load factor to 9)",
+                "alpha to about 25 deg and load factor to 9; at Mach 0.9 and 8000 m it runs out "
+                "of stick near 5 g, and higher up at less)",
             )
 
 
@@ -586,11 +618,29 @@ class SteadyHeadingSideslip(Controller):
     rest of the run, which is split into ``n_segments`` pieces of about ``segment_s``. With the
     heading held, the flight path must turn by the sideslip change (track = heading + beta); the
     bank for that turn rate is fed forward.
+
+    Lateral loops, as a test pilot flies an SHSS:
+
+    * rudder: proportional-integral on the sideslip error (the integral is the rudder trim);
+    * bank: the f16's roll channel is a proportional roll-rate command, so holding a bank
+      against the sideslip's rolling moment (dihedral effect) needs a standing aileron command;
+      an integrator on the bank error supplies it (the aileron trim), so the bank follows its
+      command with no steady error;
+    * heading: the bank command is the bank that balances the side force (fed forward from the
+      measured lateral acceleration, low-pass filtered against turbulence) plus a
+      proportional-integral-rate heading correction.
+
+    The heading loop's gains are in turn rate: a bank change of ``dphi`` turns the flight path at
+    ``g tan(dphi) / V``, so they scale with the true airspeed to keep the loop's bandwidth.
     """
 
     heading_tolerance_rad = 5.0 * _DEG
     altitude_tolerance_m = 150.0
     beta_rate_rps = 1.0 * _DEG
+    #: aileron command saturating the f16's ailerons in a steady bank (FCS: surface = 4 x command)
+    AILERON_FULL = 0.25
+    #: time constant of the side-force feedforward's low-pass filter, s
+    ff_tau_s = 0.5
 
     def __init__(self, spec, trim, dt_s):
         super().__init__(spec, trim, dt_s)
@@ -598,6 +648,8 @@ class SteadyHeadingSideslip(Controller):
         self._beta_cmd = 0.0
         self._rud_int = 0.0
         self._psi_int = 0.0
+        self._ail_int = 0.0
+        self._phi_ff = 0.0
 
     def beta_cmd(self, t_s: float) -> tuple[float, float]:
         """Commanded sideslip, rad, and its rate, rad/s: a smooth (1 - cos) ramp, then held."""
@@ -612,27 +664,38 @@ class SteadyHeadingSideslip(Controller):
                 0.5 * self.spec.beta_rad * w * math.sin(w * tau))
 
     def inputs(self, t_s, x):
+        dt = self.dt_s
         self._beta_cmd, beta_rate = self.beta_cmd(t_s)
         err_b = self._beta_cmd - x[_BETA]
         rud_raw = 10.0 * err_b + self._rud_int
         if abs(rud_raw) < 1.0 or rud_raw * err_b < 0:
-            self._rud_int += 8.0 * err_b * self.dt_s
+            self._rud_int += 8.0 * err_b * dt
         rudder = _clip(rud_raw, -1.0, 1.0)
         # the side force of the sideslip is balanced by bank: g cos(theta) sin(phi) = -a_y
         ay = x[_FY] / x[_MASS]
         phi_ff = math.asin(_clip(-ay / (x[_G] * math.cos(x[_THETA])), -0.6, 0.6))
+        self._phi_ff += (phi_ff - self._phi_ff) * dt / self.ff_tau_s
+        # heading: PI + heading-rate damping, gains scaled to turn rate (V / g)
+        kv = max(x[_TAS], 50.0) / 100.0
         err_psi = _wrap(self.psi_cmd_rad - x[_PSI])
-        self._psi_int = _clip(self._psi_int + 0.3 * err_psi * self.dt_s, -10 * _DEG, 10 * _DEG)
         sph, cph = math.sin(x[_PHI]), math.cos(x[_PHI])
         psidot = (x[_Q] * sph + x[_R] * cph) / math.cos(x[_THETA])
-        # heading-rate damping: the rudder reversals between segments kick the heading
-        phi_cmd = phi_ff + _clip(3.0 * err_psi - 4.0 * psidot, -12 * _DEG, 12 * _DEG)
-        phi_cmd += self._psi_int
+        phi_fb = _clip(kv * (3.0 * err_psi - 4.0 * psidot), -12 * _DEG, 12 * _DEG)
+        phi_cmd = self._phi_ff + phi_fb + self._psi_int
+        if abs(phi_fb) < 12 * _DEG:
+            self._psi_int = _clip(self._psi_int + kv * 0.5 * err_psi * dt, -15 * _DEG, 15 * _DEG)
         # track = heading + beta: a sideslip ramp at constant heading needs a turn
         phi_cmd += math.atan(x[_TAS] * beta_rate / x[_G])
+        # bank: proportional roll-rate command plus the aileron trim (integral of the bank error,
+        # 1 per s relative to the proportional 2 per s; held while the ailerons are saturated)
+        aileron = self.aileron_for_bank(phi_cmd, x) + self._ail_int
+        err_phi = _wrap(phi_cmd - x[_PHI])
+        if abs(aileron) < self.AILERON_FULL or aileron * err_phi < 0:
+            self._ail_int = _clip(self._ail_int + 0.31821 * 1.0 * err_phi * dt,
+                                  -self.AILERON_FULL, self.AILERON_FULL)
+        aileron = _clip(aileron, -0.6, 0.6)
         dnz = self.dnz_for_altitude(x) + (1.0 / math.cos(x[_PHI]) - 1.0)
-        return (self.stick(dnz, x), self.aileron_for_bank(phi_cmd, x), rudder,
-                self.throttle_for_mach(x), 0.0)
+        return (self.stick(dnz, x), aileron, rudder, self.throttle_for_mach(x), 0.0)
 
     def check(self, t_s, x):
         if abs(_wrap(x[_PSI] - self.psi_cmd_rad)) > self.heading_tolerance_rad:

@@ -7,7 +7,11 @@ a few seconds of JSBSim time.
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -177,6 +181,57 @@ def test_shss_segments_hold_sideslip_and_heading(shss):
         start += seg.duration_s + seg.dt_s
     # the later segments are the steady part: sideslip held, not just touched
     assert np.min(np.abs(shss[-1].beta_rad)) >= MIN_SHSS_BETA_RAD
+
+
+#: the default campaign's atmosphere (campaigns/default.toml)
+CAMPAIGN_AIR = dict(planet="flat", wind_ned_mps=(6.0, -4.0, 0.0), turbulence="light")
+
+
+@pytest.mark.parametrize("seed", [2, 5])
+def test_shss_at_mach_0p3_holds_heading_in_turbulence(seed):
+    """Regression: at Mach 0.3 the sideslip's rolling moment needs most of the aileron, and the
+    f16's roll channel is a proportional roll-rate command; without an aileron trim (integral of
+    the bank error) the heading drifted past 5 deg for most turbulence seeds."""
+    segs = _fly(env=Environment(turbulence_seed=seed, **CAMPAIGN_AIR), kind="shss", mach=0.3,
+                altitude_m=3000.0)
+    assert len(segs) == 3
+    psi0 = segs[0].euler_rad[0, 2]
+    for i, seg in enumerate(segs):
+        assert np.max(np.abs(seg.beta_rad)) >= MIN_SHSS_BETA_RAD, f"segment {i}"
+        dpsi = np.angle(np.exp(1j * (seg.euler_rad[:, 2] - psi0)))
+        assert np.max(np.abs(dpsi)) <= 0.8 * MAX_SHSS_HEADING_DRIFT_RAD, f"segment {i} heading"
+    # the sideslip is held on the requested side, not just touched (its mean over the steady part)
+    steady = np.concatenate([s.beta_rad for s in segs[1:]])
+    assert np.mean(steady) >= MIN_SHSS_BETA_RAD
+
+
+def test_windup_defaults_follow_mach():
+    """At Mach 0.9 a wind-up turn is limited by load factor (the f16's FCS runs out of stick near
+    5 g at 8000 m), at Mach 0.5 by alpha."""
+    assert ManeuverSpec(kind="windup_turn", mach=0.5, altitude_m=5000.0).nz_max == 6.0
+    assert ManeuverSpec(kind="windup_turn", mach=0.7, altitude_m=5000.0).nz_max == 6.0
+    assert ManeuverSpec(kind="windup_turn", mach=0.9, altitude_m=8000.0).nz_max == pytest.approx(4.5)
+    assert ManeuverSpec(kind="windup_turn", mach=0.9, altitude_m=8000.0).alpha_max_rad == (
+        pytest.approx(14.0 * DEG))
+
+
+@pytest.mark.parametrize("seed", [3, 20261121])
+def test_windup_at_mach_0p9_winds_up_to_its_load_factor(seed):
+    """Regression: at Mach 0.9, 8000 m the default wind-up (alpha 14 deg or 6 g) reached neither
+    (the FCS's stick limit is about 5 g there); it now ramps the load factor to its default."""
+    tr = _one(env=Environment(turbulence_seed=seed, **CAMPAIGN_AIR), kind="windup_turn",
+              mach=0.9, altitude_m=8000.0)
+    nz_max = tr.meta["maneuver"]["nz_max"]
+    assert tr.meta["controller"]["nz_peak"] == pytest.approx(nz_max, abs=0.3)
+    assert np.max(np.abs(tr.mach - 0.9)) <= MAX_WINDUP_MACH_DRIFT
+    # a wind-up, not a step to the stop: g rises through the run and ends on the target
+    nz = _nz(tr)
+    n = len(nz)
+    quarters = [nz[i * n // 4:(i + 1) * n // 4].mean() for i in range(4)]
+    assert all(b > a + 0.3 for a, b in zip(quarters, quarters[1:], strict=False)), quarters
+    assert np.mean(nz[tr.t_s > tr.t_s[-1] - 3.0]) == pytest.approx(nz_max, abs=0.2)
+    # and alpha is swept well beyond trim
+    assert np.ptp(tr.alpha_rad) >= 6.0 * DEG
 
 
 def test_pullup_with_rudder_doublets_sweeps_alpha_and_beta(rudder_doublets):
@@ -456,6 +511,15 @@ def test_patched_f16_frees_the_rudder_and_has_ballast():
     assert pid is not None and pid.find("output") is None
     assert xml.find(f".//pointmass[@name='{io.BALLAST_NAME}']") is not None
     assert io.patched_root_dir("f16") == root  # cached
+
+
+def test_no_jsbsim_banner_on_stdout():
+    """JSBSim's startup banner (once per process) must not clutter `fpr fly` or worker output."""
+    env = {k: v for k, v in os.environ.items() if k != "JSBSIM_DEBUG"}
+    code = "from synth import jsbsim_io as io; io.create_fdm('f16', 'flat', 1 / 120)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                         cwd=Path(__file__).resolve().parents[1], check=True)
+    assert "JSBSim" not in out.stdout and "JSBSim" not in out.stderr, out.stdout
 
 
 def test_structural_frame_round_trip():
