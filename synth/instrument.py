@@ -51,6 +51,7 @@ from synth.local_flow import (
 )
 from synth.recorders import (
     allowed_stamp_interval_s,
+    average_at,
     grid_in_interval_s,
     resample_hold,
     resample_linear,
@@ -366,10 +367,14 @@ def instrument(
         plan[r][c] = rec[r].delay_s + group_delay.get(c, 0.0) + chd.get(c, 0.0)
     for s in sensors:
         plan["dru"][s] = rec["dru"].delay_s + errors.sensors[s].delay_s
+    # an IMU sample averages the interval before its stamp: it needs truth that far back
+    window_lag = {c: plan["dru"][c] + (1.0 / rec["dru"].rate_hz if rec["dru"].rate_hz else 0.0)
+                  for c in _IMU_COLUMNS}
     t0, t1 = float(t[0]), float(t[-1])
     intervals = {}
     for r in RECORDERS:
-        lo, hi = allowed_stamp_interval_s(t0, t1, rec[r].clock_offset_s, list(plan[r].values()))
+        lags = list(plan[r].values()) + (list(window_lag.values()) if r == "dru" else [])
+        lo, hi = allowed_stamp_interval_s(t0, t1, rec[r].clock_offset_s, lags)
         if rec[r].rate_hz is not None:
             stamps = grid_in_interval_s(lo, hi, rec[r].rate_hz)
             if len(stamps) < 2:
@@ -390,6 +395,16 @@ def instrument(
     def at(r: str, channel: str, signal: np.ndarray) -> np.ndarray:
         return sample_at(t, signal, stamps[r] - rec[r].clock_offset_s - plan[r][channel])
 
+    # a real IMU outputs interval means (strapdown increments) over its own sample interval; an
+    # ideal recorder (no rate) samples the true signal
+    imu_window_s = 1.0 / rec["dru"].rate_hz if rec["dru"].rate_hz is not None else 0.0
+
+    def imu_at(channel: str, signal: np.ndarray) -> np.ndarray:
+        if imu_window_s == 0.0:
+            return at("dru", channel, signal)
+        return average_at(t, signal, stamps["dru"] - rec["dru"].clock_offset_s - plan["dru"][channel],
+                          imu_window_s)
+
     def rng(seed: int, name: str) -> np.random.Generator:
         return channel_rng(seed, maneuver_key, _RNG_INDEX[name])
 
@@ -399,7 +414,7 @@ def instrument(
     for i, c in enumerate(_IMU_COLUMNS):
         accel = i < 3
         dru[c] = transduce(
-            at("dru", c, direct[c]),
+            imu_at(c, direct[c]),
             bias=(imu.accel_bias_mps2 if accel else imu.gyro_bias_rps)[i % 3],
             noise_std=imu.accel_noise_mps2 if accel else imu.gyro_noise_rps,
             quant_step=imu.accel_quant_mps2 if accel else imu.gyro_quant_rps,
@@ -551,6 +566,8 @@ def instrument(
     for s in sensors:
         injected[f"{s}.installation_bias_rad"] = bias_rad[s]
     shift = {c: rec[r].clock_offset_s + lag for r in RECORDERS for c, lag in plan[r].items()}
+    for c in _IMU_COLUMNS:  # an interval mean lags by half its interval
+        shift[c] += 0.5 * imu_window_s
     sources = {"alpha_zl_rad": "vane_left", "alpha_zr_rad": "vane_right",
                "alpha_lsp_rad": "side_probe_left", "alpha_rsp_rad": "side_probe_right",
                "beta_znp_rad": "nose_probe", "flank_np_rad": "nose_probe",

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.interpolate import CubicHermiteSpline
 
 #: Tolerance on sample-time comparisons, s (far below any sample period).
 TIME_EPS_S = 1e-9
@@ -33,6 +34,27 @@ def sample_at(t_truth_s: np.ndarray, y: np.ndarray, t_query_s: np.ndarray) -> np
     if y.ndim == 1:
         return np.interp(t_query_s, t_truth_s, y)
     return np.stack([np.interp(t_query_s, t_truth_s, y[:, j]) for j in range(y.shape[1])], axis=1)
+
+
+def average_at(t_truth_s: np.ndarray, y: np.ndarray, t_query_s: np.ndarray,
+               window_s: float) -> np.ndarray:
+    """Mean of ``y`` over ``[t - window, t]`` at each query time (what a strapdown IMU outputs).
+
+    A strapdown IMU reports the velocity and angle increments of each sample interval, i.e. the
+    mean specific force and rate over it, not a point sample: point-sampling a signal with
+    content above the sample rate aliases it, which the flight-path integration would then see
+    as a velocity error. The mean lags the signal by half the window (its group delay).
+    """
+    y = np.asarray(y, dtype=float)
+    dt = np.diff(t_truth_s).reshape((-1,) + (1,) * (y.ndim - 1))
+    cum = np.concatenate([np.zeros((1,) + y.shape[1:]),
+                          np.cumsum(0.5 * (y[1:] + y[:-1]) * dt, axis=0)])
+    # the running integral's derivative is y itself: Hermite interpolation between truth samples
+    # keeps the window ends accurate to the trapezoidal rule's order
+    spline = CubicHermiteSpline(t_truth_s, cum, y, axis=0)
+    lo = spline(t_query_s - window_s)
+    hi = spline(t_query_s)
+    return (hi - lo) / window_s
 
 
 def allowed_stamp_interval_s(t_first_s: float, t_last_s: float, clock_offset_s: float,
