@@ -113,23 +113,22 @@ def _key(problem: Problem, name: str, m, channel=None, element=None) -> str:
 
 
 def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> dict[str, float]:
-    """Least-squares fit of the calibration parameters to the clean channels (module docstring)."""
+    """Least-squares fit of the calibration parameters to the clean channels (module docstring).
+
+    Gauss-Newton from the problem's start values: most calibration models are affine in their
+    parameters, some are not (``f5(alpha_t) * (beta_s + b_n)``).
+    """
     ps = problem.parameters
     calib_kinds = ("table", "bias", "scale")
     tables = {n: Table(n, np.asarray(s.breakpoints)) for n, s in ps.specs.items() if s.breakpoints}
-    rows: list[tuple[np.ndarray, dict[str, np.ndarray], np.ndarray, str]] = []
-    structure: dict[str, float] = {}
-    keys_used: list[str] = []
+    cases = []  # (channel, maneuver, signals, clean target)
     for ch in problem.channels:
         if ch.sensor is None:
             continue
-        expr = ch.expression
         for m in problem.maneuvers:
-            if ch.column not in m.measurements:
-                continue
             tr = truths[m.id]
             clean_col = f"true_clean_{_dataset_column(ch.column)}"
-            if clean_col not in tr:
+            if ch.column not in m.measurements or clean_col not in tr:
                 continue
             t = tr["t_s"].to_numpy()
             y = tr[clean_col].to_numpy()
@@ -138,13 +137,10 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> di
                 for name, kind in (("alpha_s", "alpha"), ("beta_s", "beta"), ("flank_s", "flank"))
                 if _sensor_col(kind, ch.sensor) in tr
             }
-            sig |= {
-                "alpha_t": tr["true_alpha_cg_rad"].to_numpy(),
-                "beta_t": tr["true_beta_cg_rad"].to_numpy(),
-                "tas_t": tr["true_tas_mps"].to_numpy(),
-                "z": y, "zhat": y,
-            }
-            for name in expr.names - set(sig):
+            sig |= {"alpha_t": tr["true_alpha_cg_rad"].to_numpy(),
+                    "beta_t": tr["true_beta_cg_rad"].to_numpy(),
+                    "tas_t": tr["true_tas_mps"].to_numpy(), "z": y, "zhat": y}
+            for name in ch.expression.names - set(sig):
                 if name in ps.specs:
                     continue
                 clean_other = f"true_clean_{_dataset_column(chan_col.get(name, name))}"
@@ -152,58 +148,63 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> di
                     sig[name] = tr[clean_other].to_numpy()
                 elif name in m.signals:
                     sig[name] = np.interp(t, m.t_s, m.signals[name])
-            params = {n: 0.0 for n in expr.names if n in ps.specs}
-            tabs = {n: (tables[n], np.zeros(tables[n].breakpoints.size)) for n in expr.tables}
-            # every calibration model here is affine in its calibration parameters once z and zhat
-            # are the clean values: evaluate at zero for the offset, derivatives for the regressors
+            cases.append((ch, m, sig, y))
+    theta = ps.values.copy()
+    free_calib = [p.key for p in ps if p.free and p.kind in calib_kinds]
+    index = {k: i for i, k in enumerate(free_calib)}
+    if not free_calib or not cases:
+        return {}
+    residuals: dict[str, np.ndarray] = {}
+    for _ in range(8):
+        rows, rhs = [], []
+        for ch, m, sig, y in cases:
+            expr = ch.expression
+            params = {n: theta[ps.index(_key(problem, n, m, ch))] for n in expr.names if n in ps.specs}
+            tabs = {}
+            for n in expr.tables:
+                keys = [_key(problem, n, m, ch, e) for e in range(tables[n].breakpoints.size)]
+                tabs[n] = (tables[n], theta[[ps.index(k) for k in keys]])
             dual = expr.evaluate(sig, params, tabs)
-            cols: dict[str, np.ndarray] = {}
+            r = y - np.broadcast_to(dual.value, y.shape)
+            residuals[ch.name] = np.concatenate([residuals.get(ch.name, np.zeros(0)), r])
+            A = np.zeros((y.size, len(free_calib)))
             for n, d in dual.dparam.items():
-                if ps.specs[n].kind in calib_kinds:
-                    cols[_key(problem, n, m, ch)] = np.broadcast_to(d, y.shape).astype(float)
+                k = _key(problem, n, m, ch)
+                if k in index:
+                    A[:, index[k]] += np.broadcast_to(d, y.shape)
             for n, terms in dual.dtable.items():
                 for idx, coef in terms:
                     idx = np.broadcast_to(idx, y.shape)
                     coef = np.broadcast_to(coef, y.shape)
                     for e in np.unique(idx):
                         k = _key(problem, n, m, ch, int(e))
-                        cols[k] = cols.get(k, 0.0) + np.where(idx == e, coef, 0.0)
-            offset = np.broadcast_to(dual.value, y.shape)
-            # the non-calibration parameters (none in the shipped models) enter at zero: add them
-            rows.append((y - offset, cols, t, ch.name))
-            keys_used += list(cols)
-    keys = list(dict.fromkeys(k for k in keys_used if k in ps))
-    index = {k: i for i, k in enumerate(keys)}
-    fixed = {k for k in keys if not ps[k].free}
-    A_blocks, b_blocks, names = [], [], []
-    for target, cols, _t, cname in rows:
-        A = np.zeros((target.size, len(keys)))
-        rhs = target.copy()
-        for k, v in cols.items():
-            if k in fixed:
-                rhs -= v * ps[k].value
-            elif k in index:
-                A[:, index[k]] = v
-        A_blocks.append(A)
-        b_blocks.append(rhs)
-        names.append(cname)
-    if not keys:
-        return structure
-    A = np.vstack(A_blocks)
-    b = np.concatenate(b_blocks)
-    live = np.array([k not in fixed for k in keys]) & (np.abs(A).sum(axis=0) > 0)
-    sol, *_ = np.linalg.lstsq(A[:, live], b, rcond=None)
-    full = np.zeros(len(keys))
-    full[live] = sol
-    for k, v, ok in zip(keys, full, live, strict=True):
+                        if k in index:
+                            A[:, index[k]] += np.where(idx == e, coef, 0.0)
+            rows.append(A)
+            rhs.append(r)
+        A = np.vstack(rows)
+        b = np.concatenate(rhs)
+        live = np.abs(A).sum(axis=0) > 0
+        step, *_ = np.linalg.lstsq(A[:, live], b, rcond=None)
+        for j, k in enumerate(np.array(free_calib)[live]):
+            theta[ps.index(k)] += step[j]
+        residuals = {}
+        if np.abs(step).max() < 1e-12:
+            break
+    for k, ok in zip(free_calib, live, strict=True):
         if ok:
-            values[k] = float(v)
-    sq: dict[str, list[float]] = {}
-    for Ab, bb, cname in zip(A_blocks, b_blocks, names, strict=True):
-        r = bb - Ab[:, live] @ sol
-        sq.setdefault(cname, []).extend((r * r).tolist())
-    structure.update({c: float(np.sqrt(np.mean(v))) for c, v in sq.items()})
-    return structure
+            values[k] = float(theta[ps.index(k)])
+    # structure error: what the best fit leaves, per channel
+    out: dict[str, list[np.ndarray]] = {}
+    for ch, m, sig, y in cases:
+        expr = ch.expression
+        params = {n: theta[ps.index(_key(problem, n, m, ch))] for n in expr.names if n in ps.specs}
+        tabs = {n: (tables[n], theta[[ps.index(_key(problem, n, m, ch, e))
+                                      for e in range(tables[n].breakpoints.size)]])
+                for n in expr.tables}
+        fit = np.broadcast_to(expr.evaluate(sig, params, tabs).value, y.shape)
+        out.setdefault(ch.name, []).append(y - fit)
+    return {c: float(np.sqrt(np.mean(np.concatenate(v) ** 2))) for c, v in out.items()}
 
 
 def recovery_table(result: EstimationResult, truth: TruthProjection) -> pd.DataFrame:
