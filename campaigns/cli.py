@@ -4,6 +4,7 @@
     fpr fly --mach 0.5 0.7 --maneuver pitch_doublet --out DIR      ... or one given by flags
     fpr demo                            fly the small demo campaign and summarise it
     fpr show DIR                        summarise an existing dataset
+    fpr calibrate PROBLEM.toml|DATASET  estimate the calibration (FPR, output error)
 """
 
 from __future__ import annotations
@@ -113,6 +114,108 @@ def _show(args: argparse.Namespace) -> int:
     return 0
 
 
+CALIBRATE_EPILOG = """\
+PROBLEM.toml is a problem file: your flight data (CSV, text or Parquet), column names and units,
+sensor positions, CG, the channel models and which parameters are free; see the README section
+"Calibrating your own data" or estimator/io/__init__.py. A dataset directory written by
+`fpr fly` works too (then --select-* flags pick maneuvers, and the recovery table compares each
+estimate with the injected truth).
+
+Writes to --out: result.json (everything), parameters.csv (estimates, Cramer-Rao and
+coloured-residual standard deviations), residuals.csv (per maneuver and channel),
+correlation.csv, time_history_match.png, residual_crossplots.png, and for synthetic datasets
+recovery.csv.
+
+examples:
+  fpr calibrate my_flight.toml --out results/flight421
+  fpr calibrate data/small --kind pitch_doublet shss --mach-min 0.55 --mach-max 0.65 --out res
+"""
+
+
+def _add_calibrate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="estimate sensor calibrations by flight path reconstruction (output-error method)",
+        description="Estimate IMU biases, time delays, flow-angle biases, scale factors and "
+        "correction tables from many maneuvers at once by Flight Path Reconstruction and the "
+        "Output Error Method.",
+        epilog=CALIBRATE_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("source", type=Path, help="problem file (TOML) or dataset directory")
+    p.add_argument("--out", type=Path, default=None,
+                   help="results directory (default: fpr-out/calibrate-<name>)")
+    p.add_argument("--max-iterations", type=int, default=40)
+    p.add_argument("--no-colored", action="store_true",
+                   help="skip the coloured-residual (Morelli-Klein) standard deviations")
+    p.add_argument("--no-plots", action="store_true", help="do not draw figures")
+    p.add_argument("--verbose", action="store_true", help="one line per iteration")
+    g = p.add_argument_group("selecting maneuvers of a dataset")
+    g.add_argument("--kind", nargs="+", help="maneuver kinds")
+    g.add_argument("--config", nargs="+", help="configuration ids")
+    g.add_argument("--aircraft", nargs="+", help="aircraft ids")
+    g.add_argument("--mach-min", type=float, help="lowest mean Mach")
+    g.add_argument("--mach-max", type=float, help="highest mean Mach")
+    g.add_argument("--gear", choices=["up", "down"], help="gear position")
+    g.add_argument("--free", nargs="+", default=[], metavar="PARAM",
+                   help="free these parameter families (e.g. h0)")
+    g.add_argument("--fix", nargs="+", default=[], metavar="PARAM",
+                   help="fix these parameter families at their start values")
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    import warnings
+
+    from estimator.io import DataWarning, load_problem, problem_from_dataset
+    from estimator.plots import save_standard_figures
+    from estimator.solver import SolverOptions, estimate
+
+    src = args.source
+    overrides = {**{n: {"free": True} for n in args.free}, **{n: {"free": False} for n in args.fix}}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DataWarning)
+        if src.is_dir():
+            select = {k: v for k, v in {
+                "kind": args.kind, "configuration": args.config, "aircraft": args.aircraft,
+                "mach_min": args.mach_min, "mach_max": args.mach_max,
+                "gear_down": None if args.gear is None else args.gear == "down",
+            }.items() if v is not None}
+            problem = problem_from_dataset(src, select=select or None, overrides=overrides or None)
+        else:
+            if overrides:
+                print("fpr calibrate: --free/--fix apply to datasets; edit the problem file's "
+                      "[parameter.*] tables instead", file=sys.stderr)
+                return 2
+            problem = load_problem(src)
+    for w in caught:
+        print(f"warning: {w.message}", file=sys.stderr)
+    out = args.out or Path("fpr-out") / f"calibrate-{src.stem or src.name}"
+    out.mkdir(parents=True, exist_ok=True)
+    n_samples = sum(m.n for m in problem.maneuvers)
+    print(f"{len(problem.maneuvers)} maneuvers, {n_samples} samples, {len(problem.channels)} "
+          f"channels, {int(problem.parameters.free_mask.sum())} free parameters")
+    result = estimate(problem, SolverOptions(max_iterations=args.max_iterations,
+                                             colored=not args.no_colored, verbose=args.verbose))
+    print(result.summary())
+    result.to_json(out / "result.json")
+    result.to_csv(out)
+    if any("dataset" in m.meta for m in problem.maneuvers):
+        from campaigns.truth import recovery_table, true_parameters
+
+        truth = true_parameters(problem)
+        rec = recovery_table(result, truth)
+        rec.to_csv(out / "recovery.csv")
+        shown = rec[rec["kind"].isin(["time_delay", "bias", "scale", "table"])]
+        print("\nrecovery against the injected truth (calibration parameters; all in recovery.csv):")
+        print(shown.to_string(float_format=lambda v: f"{v: .4g}"))
+        print("model-structure error (rms of the best possible fit to the clean channels): " + ", ".join(
+            f"{c} {v * 57.29578:.4f} deg" for c, v in truth.structure_rms.items()))
+    if not args.no_plots:
+        save_standard_figures(problem, result, out)
+    print(f"\nresults in {out}")
+    return 0 if result.success else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fpr",
@@ -121,6 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
     _add_fly(sub)
+    _add_calibrate(sub)
     d = sub.add_parser("demo", help="fly the small demo campaign and print a summary")
     d.add_argument("--out", type=Path, default=Path("fpr-out/demo"),
                    help="where to write the demo dataset (default: fpr-out/demo; replaced)")
@@ -132,7 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    handlers = {"fly": _fly, "demo": _demo, "show": _show}
+    handlers = {"fly": _fly, "demo": _demo, "show": _show, "calibrate": _calibrate}
     try:
         return handlers[args.command](args)
     except (FileNotFoundError, FileExistsError, ValueError, KeyError) as exc:
