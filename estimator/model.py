@@ -1,4 +1,4 @@
-r"""The FPR output-error model of one maneuver: outputs and their exact Jacobian.
+r"""The FPR output-error model: outputs and their exact Jacobian, for all maneuvers at once.
 
 For maneuver ``k`` with parameter values ``theta``:
 
@@ -16,22 +16,40 @@ For maneuver ``k`` with parameter values ``theta``:
 
 A channel's first and last ``guard`` samples (the largest time shift its delay bounds allow) are
 left out of the cost so that no output ever depends on the signal outside the record.
+
+How it is computed (the arithmetic is the per-maneuver one above; only its organisation is for
+speed): all maneuvers are integrated in one compiled call; each channel is evaluated once for
+all maneuvers that have it, on their concatenated samples, with per-sample parameter values where
+a parameter's instance differs between maneuvers (a per-aircraft bias); everything that does not
+depend on the parameters (concatenated data, half-step inputs, angular accelerations, guard rows,
+index maps from each channel's Jacobian columns to parameters) is prepared once. The Jacobian of
+a channel is assembled in slot space — 13 state-equation columns, then one column per parameter,
+per table value and for the time shift, the same for every maneuver, with a per-maneuver map to
+the parameter indices — by a compiled kernel that chains the interpolated signal derivatives to
+the sensitivities row by row (:mod:`estimator.core.assembly`). :meth:`Model.evaluate` (one
+maneuver, per-channel blocks) is a view of :meth:`Model.evaluate_all`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimator.core.assembly import jacobian_rows
 from estimator.core.expressions import Table
 from estimator.core.kinematics import smoothed_derivative
-from estimator.core.observations import angle_signals, domega_matrix
-from estimator.core.sensitivity import N_SENS, integrate_sensitivities
+from estimator.core.observations import angle_signal
+from estimator.core.sensitivity import Inputs, integrate_many
 from estimator.parameters import make_key
 from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, Problem
 
 _EULER_INDEX = {"phi": 3, "theta": 4, "psi": 5, "h": 6}
+_FLOW_KIND = {"alpha_s": "alpha", "beta_s": "beta", "flank_s": "flank",
+              "alpha_t": "alpha", "beta_t": "beta", "tas_t": "tas"}
+#: Fixed-point iterations at most for an implicit (``zhat``) model, and their tolerance.
+IMPLICIT_ITERATIONS = 30
+IMPLICIT_TOL = 1e-13
 
 
 @dataclass(frozen=True)
@@ -63,6 +81,193 @@ class ManeuverEval:
     blocks: tuple[ChannelBlock, ...]
 
 
+@dataclass
+class ChannelEval:
+    """One channel evaluated for all its maneuvers; rows of maneuver ``mans[b]`` are
+    ``rseg[b]:rseg[b+1]`` (a *block*).
+
+    Attributes
+    ----------
+    channel : index into ``Problem.channels``.
+    mans : (B,) maneuver indices (into ``Problem.maneuvers``) of the blocks.
+    rseg : (B+1,) row offsets of the blocks.
+    rows : (n,) sample index (within its maneuver) of each row.
+    y, z : (n,) model output and measurement at the rows.
+    J : (n, m) Jacobian in slot space (None if not requested): column ``s`` of block ``b`` is the
+        derivative with respect to parameter ``colmap[b, s]``.
+    colmap : (B, m) parameter index of each slot, per block.
+    """
+
+    channel: int
+    mans: np.ndarray
+    rseg: np.ndarray
+    rows: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    J: np.ndarray | None
+    colmap: np.ndarray
+    _normal: tuple | None = field(default=None, repr=False)
+
+    @property
+    def e(self) -> np.ndarray:
+        return self.z - self.y
+
+    def block_normals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per block ``J^T J`` (B, m, m), ``J^T e`` (B, m) and non-zero counts per column (B, m).
+
+        Unweighted: the solver weights them with 1/R of the channel, which changes between
+        iterations while the Jacobian does not. Computed once and kept.
+        """
+        if self._normal is None:
+            if self.J is None:
+                raise ValueError("evaluated without the Jacobian")
+            nb, m = self.colmap.shape
+            H = np.empty((nb, m, m))
+            g = np.empty((nb, m))
+            cnt = np.empty((nb, m), dtype=np.int64)
+            e = self.e
+            for b in range(nb):
+                Jb = self.J[self.rseg[b]:self.rseg[b + 1]]
+                H[b] = Jb.T @ Jb
+                g[b] = Jb.T @ e[self.rseg[b]:self.rseg[b + 1]]
+                cnt[b] = np.count_nonzero(Jb, axis=0)
+            self._normal = (H, g, cnt)
+        return self._normal
+
+
+@dataclass
+class Evaluation:
+    """Every channel of a set of maneuvers, evaluated at one parameter vector.
+
+    Attributes
+    ----------
+    maneuvers : the maneuver indices evaluated.
+    X : (N, 7) states of those maneuvers, concatenated; maneuver ``maneuvers[i]`` is
+        ``X[seg[i]:seg[i+1]]``.
+    seg : sample offsets.
+    channels : one :class:`ChannelEval` per channel present in any of the maneuvers.
+    """
+
+    maneuvers: tuple[int, ...]
+    X: np.ndarray
+    seg: np.ndarray
+    channels: list[ChannelEval]
+
+    @property
+    def jacobian(self) -> bool:
+        return all(c.J is not None for c in self.channels)
+
+
+class _ChannelLayout:
+    """What a channel needs that does not depend on the parameter values, for a maneuver set."""
+
+    def __init__(self, model: Model, c: int, ks: tuple[int, ...], sub_seg: np.ndarray):
+        p = model.problem
+        ps = p.parameters
+        ch = p.channels[c]
+        expr = ch.expression
+        self.c, self.ch, self.expr = c, ch, expr
+        pos = [i for i, k in enumerate(ks) if c in model._present_set[k]]
+        self.pos = np.array(pos, dtype=np.intp)
+        self.mans = np.array([ks[i] for i in pos], dtype=np.intp)
+        mans = [p.maneuvers[k] for k in self.mans]
+        lens = np.array([m.n for m in mans], dtype=np.intp)
+        self.lens = lens
+        self.cseg = np.concatenate([[0], np.cumsum(lens)]).astype(np.intp)
+        # evaluation samples: every sample of the channel's maneuvers (the implicit models'
+        # fixed point is iterated over all of them, as for one maneuver); rows: the cost's
+        self.off = np.repeat(sub_seg[self.pos], lens)  # first sample of the maneuver, in sub space
+        self.t = np.concatenate([m.t_s for m in mans]) if mans else np.zeros(0)
+        self.t0 = np.repeat([m.t_s[0] for m in mans], lens)
+        self.dt = np.repeat([m.dt_s for m in mans], lens)
+        self.last = np.repeat(lens - 2, lens)
+        rows, local, rseg = [], [], [0]
+        for b, k in enumerate(self.mans):
+            g = model.guard_samples(int(k), c)
+            r = np.arange(g, lens[b] - g)
+            local.append(r)
+            rows.append(self.cseg[b] + r)
+            rseg.append(rseg[-1] + r.size)
+        self.rows = np.concatenate(rows) if rows else np.zeros(0, dtype=np.intp)
+        self.local_rows = np.concatenate(local) if local else np.zeros(0, dtype=np.intp)
+        self.rseg = np.array(rseg, dtype=np.intp)
+        self.z = np.concatenate([m.measurements[ch.column] for m in mans]) if mans else np.zeros(0)
+        self.z_rows = self.z[self.rows]
+        self.data: dict[str, np.ndarray] = {}
+        for name in expr.names - STATE_SIGNALS - {"z", "zhat"}:
+            if name in ps.specs:
+                continue
+            cols = model._channel_columns
+            self.data[name] = np.concatenate([
+                m.signals[name] if name in m.signals else
+                m.measurements[name] if name in m.measurements else m.measurements[cols[name]]
+                for m in mans])
+        self.state_names = sorted(expr.names & STATE_SIGNALS)
+        # slot space: 13 state-equation parameters, parameters, tables (K each), time shift
+        self.pnames = sorted(n for n in expr.names if n in ps.specs)
+        self.tnames = sorted(expr.tables)
+        cols = [model._state_idx[self.mans]]
+        self.pslot, self.pidx = {}, {}
+        nslot = len(STATE_PARAMS)
+        for name in self.pnames:
+            idx = np.array([ps.index(model.key(name, int(k), ch)) for k in self.mans], dtype=np.intp)
+            self.pidx[name] = idx
+            self.pslot[name] = nslot
+            cols.append(idx[:, None])
+            nslot += 1
+        self.tbase, self.tidx = {}, {}
+        for t in self.tnames:
+            K = model._tables[t].breakpoints.size
+            idx = np.array([[ps.index(model.key(t, int(k), ch, e)) for e in range(K)] for k in self.mans],
+                           dtype=np.intp).reshape(len(self.mans), K)
+            self.tidx[t] = idx
+            self.tbase[t] = nslot
+            cols.append(idx)
+            nslot += K
+        self.didx = None
+        if ch.delay:
+            self.didx = np.array([ps.index(model.key(ch.delay, int(k), ch)) for k in self.mans],
+                                 dtype=np.intp)
+            self.dslot = nslot
+            cols.append(self.didx[:, None])
+            nslot += 1
+        self.m = nslot
+        self.colmap = np.hstack(cols).astype(np.intp) if len(self.mans) else np.zeros((0, nslot), np.intp)
+
+    def index_per_sample(self, idx: np.ndarray, values: np.ndarray):
+        """Values of per-maneuver parameter indices (B,) or (B, K): one value (a scalar, or a (K,)
+        table) if every maneuver uses the same instance, as for one maneuver; else one per
+        evaluation sample."""
+        if idx.shape[0] and np.all(idx == idx[:1]):
+            first = values[idx[0]]
+            return float(first) if idx.ndim == 1 else first
+        return np.repeat(values[idx], self.lens, axis=0)
+
+
+class _Layout:
+    """The concatenated data of a maneuver set and its channel layouts."""
+
+    def __init__(self, model: Model, ks: tuple[int, ...]):
+        p = model.problem
+        self.ks = ks
+        lens = np.array([p.maneuvers[k].n for k in ks], dtype=np.intp)
+        self.seg = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
+        full = model._inputs
+        if ks == tuple(range(len(p.maneuvers))):
+            self.inputs = full
+        else:
+            idx = np.concatenate([np.arange(full.seg[k], full.seg[k + 1]) for k in ks])
+            self.inputs = Inputs(self.seg, full.t_s[idx], full.a_m[idx], full.om_m[idx], full.omd[idx],
+                                 full.a_mid[idx], full.om_mid[idx], full.omd_mid[idx],
+                                 full.r_imu_cg[list(ks)])
+        self.lens = lens
+        self.r_cg = np.repeat(np.array([p.maneuvers[k].r_cg_body_m for k in ks], dtype=float).reshape(-1, 3),
+                              lens, axis=0)
+        self.state_idx = model._state_idx[list(ks)]
+        present = sorted({c for k in ks for c in model._present[k]})
+        self.channels = [_ChannelLayout(model, c, ks, self.seg[:-1]) for c in present]
+
+
 class Model:
     """Precomputed structure of a problem; evaluates maneuvers for given parameter values.
 
@@ -86,6 +291,7 @@ class Model:
             [c for c, ch in enumerate(problem.channels) if ch.column in m.measurements]
             for m in problem.maneuvers
         ]
+        self._present_set = [set(v) for v in self._present]
         self._guard_s = []
         for ch in problem.channels:
             g = 0.0
@@ -112,6 +318,15 @@ class Model:
             for t in ch.expression.tables:
                 if t not in self._tables:
                     raise ValueError(f"channel {ch.name}: table {t!r} is not declared with breakpoints")
+        mans = problem.maneuvers
+        self._inputs = Inputs.concatenate(
+            [m.t_s for m in mans], [m.accel_imu_mps2 for m in mans], [m.omega_rps for m in mans],
+            self._omega_dot,
+            np.array([problem.imu_position_body_m - m.r_cg_body_m for m in mans], dtype=float).reshape(-1, 3),
+        )
+        self._state_idx = np.array([self.state_columns(k) for k in range(len(mans))],
+                                   dtype=np.intp).reshape(len(mans), len(STATE_PARAMS))
+        self._layouts: dict[tuple[int, ...], _Layout] = {}
 
     @property
     def _channel_columns(self) -> dict[str, str]:
@@ -141,149 +356,191 @@ class Model:
         m = self.problem.maneuvers[k]
         return int(np.ceil(self._guard_s[c] / m.dt_s)) + 1 if self._guard_s[c] > 0 else 0
 
+    def _layout(self, ks: tuple[int, ...]) -> _Layout:
+        lay = self._layouts.get(ks)
+        if lay is None:
+            lay = self._layouts[ks] = _Layout(self, ks)
+        return lay
+
+    # ------------------------------------------------------------------ evaluation
+    def integrate(self, values: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """States (N, 7) and sensitivities (N, 7, 13) of maneuver k."""
+        lay = self._layout((k,))
+        return integrate_many(lay.inputs, values[lay.state_idx], self.problem.g_mps2, sensitivities=True)
+
+    def evaluate(self, values: np.ndarray, k: int, jacobian: bool = True) -> ManeuverEval:
+        """Outputs (and Jacobian blocks) of every channel present in maneuver ``k``."""
+        ev = self.evaluate_all(values, jacobian, maneuvers=(k,))
+        blocks = []
+        for ce in ev.channels:
+            blocks.append(ChannelBlock(ce.channel, ce.rows, ce.y, ce.z, ce.J, ce.colmap[0].copy()))
+        return ManeuverEval(k, ev.X, tuple(blocks))
+
+    def evaluate_all(self, values: np.ndarray, jacobian: bool = True,
+                     maneuvers: tuple[int, ...] | None = None) -> Evaluation:
+        """Outputs (and Jacobians) of every channel of the given maneuvers (default: all).
+
+        Parameters
+        ----------
+        values : (P,) all parameter values, in ``ParameterSet`` order.
+        jacobian : also the Jacobian (sensitivities are integrated only then).
+        maneuvers : maneuver indices; None for every maneuver of the problem.
+        """
+        p = self.problem
+        ks = tuple(range(len(p.maneuvers))) if maneuvers is None else tuple(int(k) for k in maneuvers)
+        lay = self._layout(ks)
+        values = np.asarray(values, dtype=float)
+        sv = values[lay.state_idx]
+        X, S = integrate_many(lay.inputs, sv, p.g_mps2, sensitivities=jacobian)
+        omega = lay.inputs.om_m - np.repeat(sv[:, 10:13], lay.lens, axis=0)
+        cache: dict = {}
+
+        def state_signal(name: str, sensor: str | None):
+            """value (N,), and for the Jacobian (q, a (N, 3), b (N, 3) or None): the signal's
+            derivative is ``a . S[:, q, :]`` plus ``b`` on the gyro-bias columns (q is a state
+            index for an Euler angle or the altitude, None for the velocity components)."""
+            ck = (name, sensor if name in ("alpha_s", "beta_s", "flank_s") else None)
+            if ck in cache:
+                return cache[ck]
+            if name in _EULER_INDEX:
+                i = _EULER_INDEX[name]
+                out = (X[:, i], (i, None, None))
+            else:
+                if name.endswith("_s"):
+                    r = p.sensors[sensor] - lay.r_cg
+                    vs = X[:, :3] + np.cross(omega, r)
+                else:
+                    r = None
+                    vs = X[:, :3]
+                val, dv = angle_signal(vs, _FLOW_KIND[name])
+                b = None
+                if jacobian and r is not None:
+                    # V_s depends on omega = omega_m - d_omega: dV_s/d(d_omega) = -dV_s/domega,
+                    # i.e. minus dv @ d(omega x r)/domega
+                    x, y, z = r[:, 0], r[:, 1], r[:, 2]
+                    d0, d1, d2 = dv[:, 0], dv[:, 1], dv[:, 2]
+                    b = -np.stack([-z * d1 + y * d2, z * d0 - x * d2, -y * d0 + x * d1], axis=1)
+                out = (val, (None, dv, b))
+            cache[ck] = out
+            return out
+
+        channels = [self._evaluate_channel(cl, values, S, state_signal) for cl in lay.channels]
+        return Evaluation(ks, X, lay.seg, channels)
+
+    def _evaluate_channel(self, cl: _ChannelLayout, values, S, state_signal) -> ChannelEval:
+        ch, expr = cl.ch, cl.expr
+        jacobian = S is not None
+        tau = cl.index_per_sample(cl.didx, values) if cl.didx is not None else 0.0
+        # linear interpolation at t - tau on each maneuver's uniform grid
+        s = (cl.t - tau - cl.t0) / cl.dt
+        i0 = np.clip(np.floor(s).astype(np.intp), 0, cl.last)
+        w = np.clip(s - i0, 0.0, 1.0)
+        P0 = cl.off + i0
+        signals: dict[str, np.ndarray] = {}
+        for name in cl.state_names:
+            val, _ = state_signal(name, ch.sensor)
+            signals[name] = (1 - w) * val[P0] + w * val[P0 + 1]
+        signals["z"] = cl.z
+        signals.update(cl.data)
+        params = {name: cl.index_per_sample(cl.pidx[name], values) for name in cl.pnames}
+        tables = {t: (self._tables[t], cl.index_per_sample(cl.tidx[t], values)) for t in cl.tnames}
+        state = frozenset(cl.state_names) if jacobian else frozenset()
+        if "zhat" in expr.names:
+            dual, value = self._implicit(cl, signals, params, tables, state, jacobian)
+        elif jacobian:
+            dual = expr.evaluate(signals, params, tables, state)
+            value = dual.value
+        else:
+            dual, value = None, expr.value(signals, params, tables)
+        y = np.broadcast_to(value, cl.z.shape)[cl.rows]
+        J = self._jacobian(cl, dual, S, state_signal, w, P0) if jacobian else None
+        return ChannelEval(cl.c, cl.mans, cl.rseg, cl.local_rows, y, cl.z_rows, J, cl.colmap)
+
     @staticmethod
-    def _implicit(expr, signals, params, tables, state, z, ch: ChannelSpec, iterations: int = 30):
+    def _jacobian(cl: _ChannelLayout, dual, S, state_signal, w, P0) -> np.ndarray:
+        """Slot-space Jacobian rows of a channel (see :mod:`estimator.core.assembly`)."""
+        rows = cl.rows
+        n = rows.size
+        n_all = cl.z.size
+        wr = w[rows]
+        P0r = P0[rows]
+        CA = np.zeros((n, 2, 7))
+        CB = np.zeros((n, 3))
+        qs: set[int] = set()
+        dyt = np.zeros(n)
+        for name, dy in dual.dsignal.items():
+            g = np.broadcast_to(dy, (n_all,))[rows]
+            g0, g1 = g * (1 - wr), g * wr
+            val, (q, a, b) = state_signal(name, cl.ch.sensor)
+            if q is not None:
+                CA[:, 0, q] += g0
+                CA[:, 1, q] += g1
+                qs.add(q)
+            else:
+                CA[:, 0, :3] += g0[:, None] * a[P0r]
+                CA[:, 1, :3] += g1[:, None] * a[P0r + 1]
+                qs.update((0, 1, 2))
+                if b is not None:
+                    CB += g0[:, None] * b[P0r] + g1[:, None] * b[P0r + 1]
+            if cl.didx is not None:
+                dyt += g * (-(val[P0r + 1] - val[P0r]) / cl.dt[rows])
+        slots, coefs = [], []
+        for name, dy in dual.dparam.items():
+            slots.append(np.full(n, cl.pslot[name], dtype=np.intp))
+            coefs.append(np.broadcast_to(dy, (n_all,))[rows])
+        for t, terms in dual.dtable.items():
+            for idx, coef in terms:
+                slots.append(cl.tbase[t] + np.broadcast_to(idx, (n_all,))[rows])
+                coefs.append(np.broadcast_to(coef, (n_all,))[rows])
+        if cl.didx is not None:
+            slots.append(np.full(n, cl.dslot, dtype=np.intp))
+            coefs.append(dyt)
+        tslot = np.ascontiguousarray(np.stack(slots, axis=1) if slots else np.zeros((n, 0), np.intp),
+                                     dtype=np.int64)
+        tcoef = np.ascontiguousarray(np.stack(coefs, axis=1) if coefs else np.zeros((n, 0)))
+        J = np.zeros((n, cl.m))
+        jacobian_rows(S, P0r.astype(np.int64), CA, CB,
+                      np.array(sorted(qs), dtype=np.int64), tslot, tcoef, J)
+        return J
+
+    def _implicit(self, cl: _ChannelLayout, signals, params, tables, state, jacobian: bool):
         """Solve ``y = F(y, ...)`` for a model whose argument ``zhat`` is its own output.
 
         ``zhat`` is the noise-free model of the measurement: a table of the measured angle,
         evaluated at the *modelled* angle, avoids the errors-in-variables bias that the noisy
-        measurement ``z`` as argument causes (SPEC §5). Fixed-point iteration from ``z``; the
-        derivatives follow from ``dy = dF + F_zhat dy``, i.e. ``dy = dF / (1 - F_zhat)``.
+        measurement ``z`` as argument causes (SPEC §5). Fixed-point iteration from ``z``, each
+        maneuver until its own iterates agree to ``IMPLICIT_TOL`` (the iteration is sample-wise, so
+        all maneuvers iterate together and a converged one is held); the derivatives follow from
+        ``dy = dF + F_zhat dy``, i.e. ``dy = dF / (1 - F_zhat)``.
+
+        Returns
+        -------
+        (Dual or None, value): the Dual with the derivatives if ``jacobian``.
         """
+        expr, ch = cl.expr, cl.ch
         sig = dict(signals)
-        y = np.asarray(z, dtype=float)
-        for _ in range(iterations):
+        y = np.asarray(cl.z, dtype=float)
+        active = np.ones(cl.lens.size, dtype=bool)
+        starts = cl.cseg[:-1]
+        for _ in range(IMPLICIT_ITERATIONS):
             sig["zhat"] = y
-            y_new = np.broadcast_to(expr.evaluate(sig, params, tables).value, y.shape)
-            if np.max(np.abs(y_new - y)) < 1e-13:
-                y = y_new
+            y_new = np.broadcast_to(expr.value(sig, params, tables), y.shape)
+            dev = np.maximum.reduceat(np.abs(y_new - y), starts) if starts.size else np.zeros(0)
+            y = np.where(np.repeat(active, cl.lens), y_new, y)
+            active &= ~(dev < IMPLICIT_TOL)
+            if not active.any():
                 break
-            y = y_new
         else:
             raise ValueError(
                 f"channel {ch.name}: the implicit model {ch.model!r} does not converge (its "
                 "dependence on zhat must be weaker than 1:1); use z instead of zhat or bound the tables"
             )
         sig["zhat"] = y
+        if not jacobian:
+            return None, expr.value(sig, params, tables)
         dual = expr.evaluate(sig, params, tables, state | {"zhat"})
         f_z = np.broadcast_to(dual.dsignal.pop("zhat", 0.0), y.shape)
         factor = 1.0 / (1.0 - f_z)
         out = dual.scaled(factor)
         out.value = dual.value
-        return out
-
-    # ------------------------------------------------------------------ evaluation
-    def integrate(self, values: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """States (N, 7) and sensitivities (N, 7, 13) of maneuver k."""
-        p = self.problem
-        m = p.maneuvers[k]
-        sv = values[self.state_columns(k)]
-        return integrate_sensitivities(
-            m.t_s, sv[:7], m.accel_imu_mps2, m.omega_rps, self._omega_dot[k],
-            p.imu_position_body_m - m.r_cg_body_m, sv[7:10], sv[10:13], p.g_mps2,
-        )
-
-    def evaluate(self, values: np.ndarray, k: int, jacobian: bool = True) -> ManeuverEval:
-        """Outputs (and Jacobian blocks) of every channel present in maneuver ``k``."""
-        p = self.problem
-        m = p.maneuvers[k]
-        X, S = self.integrate(values, k)
-        state_cols = self.state_columns(k)
-        omega = m.omega_rps - values[state_cols[10:13]]
-        n = m.n
-        cache: dict[tuple[str, str | None], tuple[np.ndarray, np.ndarray]] = {}
-
-        def state_signal(name: str, sensor: str | None):
-            """value (N,), d value / d state params (N, 13)."""
-            ck = (name, sensor if name in ("alpha_s", "beta_s", "flank_s") else None)
-            if ck in cache:
-                return cache[ck]
-            if name in _EULER_INDEX:
-                i = _EULER_INDEX[name]
-                out = (X[:, i], S[:, i, :])
-            else:
-                if name.endswith("_s"):
-                    r = p.sensors[sensor] - m.r_cg_body_m
-                    vs = X[:, :3] + np.cross(omega, r)
-                    sig = {"alpha_s": "alpha", "beta_s": "beta", "flank_s": "flank"}[name]
-                else:
-                    r = None
-                    vs = X[:, :3]
-                    sig = {"alpha_t": "alpha", "beta_t": "beta", "tas_t": "tas"}[name]
-                val, dv = angle_signals(vs)[sig]
-                d = np.einsum("ni,nij->nj", dv, S[:, :3, :]) if jacobian else None
-                if jacobian and r is not None:
-                    # V_s depends on omega = omega_m - d_omega: dV_s/d(d_omega) = -dV_s/domega
-                    d[:, 10:13] -= dv @ domega_matrix(r)
-                out = (val, d)
-            cache[ck] = out
-            return out
-
-        blocks = []
-        for c in self._present[k]:
-            ch = p.channels[c]
-            expr = ch.expression
-            tau = self.value(values, ch.delay, k, ch) if ch.delay else 0.0
-            # linear interpolation at t - tau on the uniform grid
-            s = (m.t_s - tau - m.t_s[0]) / m.dt_s
-            i0 = np.clip(np.floor(s).astype(np.intp), 0, n - 2)
-            w = np.clip(s - i0, 0.0, 1.0)[:, None]
-            signals: dict[str, np.ndarray] = {}
-            dstate: dict[str, np.ndarray] = {}
-            dtau: dict[str, np.ndarray] = {}
-            for name in expr.names & STATE_SIGNALS:
-                val, d = state_signal(name, ch.sensor)
-                signals[name] = (1 - w[:, 0]) * val[i0] + w[:, 0] * val[i0 + 1]
-                if jacobian:
-                    dstate[name] = (1 - w) * d[i0] + w * d[i0 + 1]
-                    dtau[name] = -(val[i0 + 1] - val[i0]) / m.dt_s
-            z = m.measurements[ch.column]
-            signals["z"] = z
-            for name in expr.names - STATE_SIGNALS - {"z", "zhat"}:
-                if name in p.parameters.specs:
-                    continue
-                if name in m.signals:
-                    signals[name] = m.signals[name]
-                elif name in m.measurements:
-                    signals[name] = m.measurements[name]
-                else:
-                    signals[name] = m.measurements[self._channel_columns[name]]
-            params = {name: self.value(values, name, k, ch)
-                      for name in expr.names if name in p.parameters.specs}
-            tables = {}
-            for t in expr.tables:
-                keys = [self.key(t, k, ch, e) for e in range(self._tables[t].breakpoints.size)]
-                tables[t] = (self._tables[t], values[[p.parameters.index(kk) for kk in keys]])
-            if "zhat" in expr.names:
-                dual = self._implicit(expr, signals, params, tables, frozenset(dstate), z, ch)
-            else:
-                dual = expr.evaluate(signals, params, tables, frozenset(dstate))
-            y = np.broadcast_to(dual.value, (n,))
-            g = self.guard_samples(k, c)
-            rows = np.arange(g, n - g)
-            J = None
-            cols: list[int] = list(state_cols)
-            if jacobian:
-                blocks_j = [np.zeros((n, N_SENS))]
-                for name, dy in dual.dsignal.items():
-                    blocks_j[0] += np.broadcast_to(dy, (n,))[:, None] * dstate[name]
-                for name, dy in dual.dparam.items():
-                    blocks_j.append(np.broadcast_to(dy, (n,))[:, None])
-                    cols.append(p.parameters.index(self.key(name, k, ch)))
-                for t, terms in dual.dtable.items():
-                    K = self._tables[t].breakpoints.size
-                    tb = np.zeros((n, K))
-                    ar = np.arange(n)
-                    for idx, coef in terms:
-                        np.add.at(tb, (ar, np.broadcast_to(idx, (n,))), np.broadcast_to(coef, (n,)))
-                    blocks_j.append(tb)
-                    cols.extend(p.parameters.index(self.key(t, k, ch, e)) for e in range(K))
-                if ch.delay:
-                    dyt = np.zeros(n)
-                    for name, dy in dual.dsignal.items():
-                        dyt += np.broadcast_to(dy, (n,)) * dtau[name]
-                    blocks_j.append(dyt[:, None])
-                    cols.append(p.parameters.index(self.key(ch.delay, k, ch)))
-                J = np.hstack(blocks_j)[rows]
-            blocks.append(ChannelBlock(c, rows, np.array(y[rows]), z[rows], J, np.asarray(cols)))
-        return ManeuverEval(k, X, tuple(blocks))
+        return out, out.value

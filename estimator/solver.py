@@ -26,8 +26,9 @@ Standard deviations: Cramér-Rao, ``sqrt(diag(M^-1))``; and corrected for colour
 
     Cov = M^-1 [ sum_i sum_j J_i^T R^-1 r(i - j) R^-1 J_j ] M^-1
 
-with ``r`` the residual autocorrelation of each channel and maneuver, evaluated by FFT
-convolution. Rank deficiency of ``S`` or of a local block (a free table offset beside a free
+with ``r`` the residual autocorrelation of each channel and maneuver (every lag), evaluated by
+FFT per channel block in the block's own Jacobian columns and projected onto the globals per
+maneuver (see :func:`_colored_std`). Rank deficiency of ``S`` or of a local block (a free table offset beside a free
 bias, a time shift with no excitation) is detected on the scaled matrix and reported with the
 parameters involved; the step then uses the pseudo-inverse and their deviations are NaN.
 """
@@ -38,9 +39,10 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import fftconvolve
+from scipy import fft as sfft
 
-from estimator.model import ManeuverEval, Model
+from estimator.core.assembly import scatter_blocks
+from estimator.model import Evaluation, Model
 from estimator.problem import Problem
 from estimator.result import Confounding, EstimationResult, ResidualStats
 
@@ -105,50 +107,45 @@ class _Structure:
 
 
 class _Normal:
-    """Arrow-structured normal equations: global block, per-maneuver local and coupling blocks."""
+    """Arrow-structured normal equations: global block, per-maneuver local and coupling blocks.
+
+    The local blocks of all maneuvers live in padded arrays (``HLL_all[k, :n_k, :n_k]``) so that
+    the compiled scatter fills them in one call; ``HLL[k]``, ``HGL[k]``, ``gL[k]`` are views.
+    """
 
     def __init__(self, st: _Structure):
         ng = st.glob.size
+        nl = np.array([v.size for v in st.local_of_arr], dtype=np.intp)
+        lmax = int(nl.max()) if nl.size else 0
         self.st = st
         self.HGG = np.zeros((ng, ng))
         self.gG = np.zeros(ng)
-        self.HLL = [np.zeros((v.size, v.size)) for v in st.local_of_arr]
-        self.HGL = [np.zeros((ng, v.size)) for v in st.local_of_arr]
-        self.gL = [np.zeros(v.size) for v in st.local_of_arr]
+        self.HLL_all = np.zeros((nl.size, lmax, lmax))
+        self.HGL_all = np.zeros((nl.size, ng, lmax))
+        self.gL_all = np.zeros((nl.size, lmax))
+        self.HLL = [self.HLL_all[k, :n, :n] for k, n in enumerate(nl)]
+        self.HGL = [self.HGL_all[k, :, :n] for k, n in enumerate(nl)]
+        self.gL = [self.gL_all[k, :n] for k, n in enumerate(nl)]
         self.support = np.zeros(st.free.size, dtype=np.int64)
 
-    def add(self, k: int, J: np.ndarray, cols: np.ndarray, e: np.ndarray, w: float) -> None:
+    def add_blocks(self, H: np.ndarray, g: np.ndarray, colmap: np.ndarray, mans: np.ndarray,
+                   w: float) -> None:
+        """Add ``w`` times slot-space blocks (``J^T J``, ``J^T e`` per maneuver) of a channel.
+
+        Slot ``s`` of block ``b`` is parameter ``colmap[b, s]``; fixed parameters are left out and
+        a parameter that several slots reach gets their sum (as a merged Jacobian column would).
+        """
         st = self.st
-        np.add.at(self.support, cols, np.count_nonzero(J, axis=0))
-        keep = st.free[cols]
-        if not keep.any():
-            return
-        J = J[:, keep]
-        cols = cols[keep]
-        uc, inv = np.unique(cols, return_inverse=True)
-        if uc.size < cols.size:  # the same parameter reached twice: add its columns
-            J2 = np.zeros((J.shape[0], uc.size))
-            np.add.at(J2.T, inv, J.T)
-            J, cols = J2, uc
-        H = (J.T @ J) * w
-        g = (J.T @ e) * w
-        gp, lp = st.gpos[cols], st.lpos[cols]
-        gi, li = np.nonzero(gp >= 0)[0], np.nonzero(lp >= 0)[0]
-        if gi.size:
-            self.HGG[np.ix_(gp[gi], gp[gi])] += H[np.ix_(gi, gi)]
-            self.gG[gp[gi]] += g[gi]
-        if li.size:
-            self.HLL[k][np.ix_(lp[li], lp[li])] += H[np.ix_(li, li)]
-            self.gL[k][lp[li]] += g[li]
-            if gi.size:
-                self.HGL[k][np.ix_(gp[gi], lp[li])] += H[np.ix_(gi, li)]
+        scatter_blocks(H, g, colmap, mans.astype(np.int64), float(w), st.gpos, st.lpos,
+                       self.HGG, self.gG, self.HLL_all, self.HGL_all, self.gL_all)
 
 
-def _build_normal(st: _Structure, evals: list[ManeuverEval], R: np.ndarray) -> _Normal:
+def _build_normal(st: _Structure, ev: Evaluation, R: np.ndarray) -> _Normal:
     N = _Normal(st)
-    for ev in evals:
-        for b in ev.blocks:
-            N.add(ev.maneuver, b.J, b.cols, b.z - b.y, 1.0 / R[b.channel])
+    for ce in ev.channels:
+        H, g, cnt = ce.block_normals()
+        np.add.at(N.support, ce.colmap.ravel(), cnt.ravel())
+        N.add_blocks(H, g, ce.colmap, ce.mans, 1.0 / R[ce.channel])
     return N
 
 
@@ -215,14 +212,16 @@ def _lm_solve(N: _Normal, lam: float, rtol: float):
     return dG, dL, Sinv, Ainv
 
 
-def _residuals(evals: list[ManeuverEval], n_channels: int):
+def _residuals(ev: Evaluation, n_channels: int):
     sse = np.zeros(n_channels)
     cnt = np.zeros(n_channels)
-    for ev in evals:
-        for b in ev.blocks:
-            e = b.z - b.y
-            sse[b.channel] += e @ e
-            cnt[b.channel] += e.size
+    for ce in ev.channels:
+        e = ce.e
+        # block by block, in maneuver order: the sums of a per-maneuver evaluation, bit for bit
+        for b in range(ce.mans.size):
+            eb = e[ce.rseg[b]:ce.rseg[b + 1]]
+            sse[ce.channel] += eb @ eb
+            cnt[ce.channel] += eb.size
     return sse, cnt
 
 
@@ -294,7 +293,7 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
         raise ValueError(f"{problem.source}: no free parameters; free some in the problem file")
 
     def evaluate_all(th, jac):
-        return [model.evaluate(th, k, jacobian=jac) for k in range(len(problem.maneuvers))]
+        return model.evaluate_all(th, jacobian=jac)
 
     def variances(sse, cnt):
         return np.maximum(np.where(cnt > 0, sse / np.maximum(cnt, 1), 1.0), 1e-16)
@@ -359,8 +358,10 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
             sse, cnt = _residuals(evals, nch)
             rel = (cost0 - _cost(sse, cnt, R)) / max(abs(cost0), 1e-300)
             if opt.verbose:
+                order = np.concatenate([st.glob] + [v for v in st.local_of_arr if v.size])
                 print(f"iteration {it_total:3d}: cost {cost0: .6e}, rel. decrease {rel:.2e}, "
-                      f"max step {moved.max():.2e} sigma, lambda {lam:.1e}")
+                      f"max step {moved.max():.2e} sigma ({keys[order[np.argmax(moved)]]}), "
+                      f"lambda {lam:.1e}")
             if rel < opt.rtol_cost and moved.max() < opt.step_tol_sigma:
                 status, message = 1, (f"converged: relative cost decrease {rel:.1e} < "
                                       f"{opt.rtol_cost:.0e} and largest step {moved.max():.1e} "
@@ -451,73 +452,115 @@ def _high_correlations(corr: np.ndarray, keys: list[str], thr: float) -> list[Co
     return out
 
 
-def _autocorr(e: np.ndarray) -> np.ndarray:
-    """Biased autocorrelation at lags -(n-1)..(n-1)."""
-    n = e.size
-    return fftconvolve(e, e[::-1], mode="full") / n
+def _block_autocov(J: np.ndarray, e: np.ndarray, rseg: np.ndarray, chunk: int = 32) -> np.ndarray:
+    """``sum_i sum_j J_i^T r(i - j) J_j`` per block, ``r`` the block's biased residual autocorrelation.
+
+    Every lag is kept (as in Morelli & Klein 1997). With both sequences zero-padded to
+    ``L >= 2 n - 1`` the circular convolution is the linear one and the transform of ``r`` is the
+    periodogram ``|E_f|^2 / n``, so by Parseval::
+
+        sum_ij J_i^T r(i - j) J_j = 1/(n L) sum_f |E_f|^2 Re(conj(F_f)^T F_f),   F = DFT(J)
+
+    one forward transform per column and a weighted Gram matrix, batched over the blocks.
+
+    Parameters
+    ----------
+    J : (n, m) rows of all blocks; e : (n,) residuals; rseg : (B+1,) block row offsets.
+
+    Returns
+    -------
+    (B, m, m)
+    """
+    nb = rseg.size - 1
+    m = J.shape[1]
+    lens = np.diff(rseg)
+    out = np.zeros((nb, m, m))
+    if nb == 0 or m == 0 or lens.max() == 0:
+        return out
+    L = sfft.next_fast_len(2 * int(lens.max()) - 1, real=True)
+    nf = L // 2 + 1
+    wt = np.full(nf, 2.0)  # one-sided spectrum: every bin but DC (and Nyquist) stands for two
+    wt[0] = 1.0
+    if L % 2 == 0:
+        wt[-1] = 1.0
+    for c0 in range(0, nb, chunk):
+        bl = range(c0, min(nb, c0 + chunk))
+        Jp = np.zeros((len(bl), m, L))
+        ep = np.zeros((len(bl), L))
+        for i, b in enumerate(bl):
+            n = lens[b]
+            Jp[i, :, :n] = J[rseg[b]:rseg[b + 1]].T
+            ep[i, :n] = e[rseg[b]:rseg[b + 1]]
+        Jf = sfft.rfft(Jp, axis=-1, workers=-1)
+        Ef = sfft.rfft(ep, axis=-1, workers=-1)
+        D = np.sqrt((Ef.real ** 2 + Ef.imag ** 2) * wt / (lens[c0:c0 + len(bl), None] * L))
+        Y = np.concatenate([Jf.real * D[:, None, :], Jf.imag * D[:, None, :]], axis=-1)
+        for i, b in enumerate(bl):
+            out[b] = Y[i] @ Y[i].T
+    return out
 
 
-def _colored_std(model: Model, evals, N: _Normal, st: _Structure, R, cov_G, nparam, opt) -> np.ndarray:
-    """Morelli-Klein standard deviations for every free parameter (sandwich covariance)."""
+def _colored_std(model: Model, ev: Evaluation, N: _Normal, st: _Structure, R, cov_G, nparam,
+                 opt) -> np.ndarray:
+    """Morelli-Klein standard deviations for every free parameter (sandwich covariance).
+
+    With the arrow structure, ``Cov = M^-1 C M^-1`` needs, per maneuver, only the residual
+    autocovariance ``C`` of its own rows in their own Jacobian columns (residuals of different
+    channels or maneuvers are uncorrelated in the estimate): each channel block's
+    ``J^T R^-1 r R^-1 J`` in slot space (:func:`_block_autocov`), gathered like the normal
+    equations into a global part, a coupling part and a local part. The Schur projection of the
+    globals' sensitivities, ``J_G - J_L A^-1 M_LG``, is then applied to these small matrices per
+    maneuver instead of to the rows.
+    """
     ng = st.glob.size
-    CGG = np.zeros((ng, ng))
-    per_k = []
     _, _, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol)
-    for ev in evals:
-        k = ev.maneuver
-        lidx = st.local_of_arr[k]
-        nl = lidx.size
-        Bk = Ainv[k] @ N.HGL[k].T if nl else np.zeros((0, ng))  # (L, G) = A^-1 M_LG
-        CLL = np.zeros((nl, nl))
-        CLG = np.zeros((nl, ng))
-        for b in ev.blocks:
-            cols = b.cols
-            keep = st.free[cols]
-            if not keep.any():
-                continue
-            J = b.J[:, keep]
-            cols = cols[keep]
-            n = J.shape[0]
-            JG = np.zeros((n, ng))
-            JL = np.zeros((n, nl))
-            gp, lp = st.gpos[cols], st.lpos[cols]
-            for j in range(cols.size):
-                if gp[j] >= 0:
-                    JG[:, gp[j]] += J[:, j]
-                else:
-                    JL[:, lp[j]] += J[:, j]
-            Jt = JG - JL @ Bk if nl else JG  # Schur-projected sensitivities of the globals
-            w = 1.0 / R[b.channel]
-            r = _autocorr(b.z - b.y)
-            both = np.hstack([Jt, JL])
-            conv = fftconvolve(both, r[:, None], mode="full", axes=0)[n - 1:2 * n - 1]
-            C = both.T @ conv * w * w
-            CGG += C[:ng, :ng]
-            CLL += C[ng:, ng:]
-            CLG += C[ng:, :ng]
-        per_k.append((Bk, CLL, CLG))
+    C = _Normal(st)
+    for ce in ev.channels:
+        # only the slots that are free somewhere: fixed columns drop out of the sandwich
+        keep = np.nonzero(st.free[ce.colmap].any(axis=0))[0]
+        if not keep.size:
+            continue
+        w = 1.0 / R[ce.channel]
+        Cb = _block_autocov(ce.J[:, keep], ce.e, ce.rseg)
+        C.add_blocks(Cb, np.zeros((Cb.shape[0], keep.size)), np.ascontiguousarray(ce.colmap[:, keep]),
+                     ce.mans, w * w)
+    CGG = C.HGG.copy()
+    per_k = []
+    for k, lidx in enumerate(st.local_of_arr):
+        if not lidx.size:
+            per_k.append(None)
+            continue
+        Bk = Ainv[k] @ N.HGL[k].T  # (L, G) = A^-1 M_LG
+        CLG_raw = C.HGL[k].T  # (L, G)
+        CLL = C.HLL[k]
+        BtCLG = Bk.T @ CLG_raw
+        CGG += Bk.T @ CLL @ Bk - BtCLG - BtCLG.T
+        per_k.append((Bk, CLL, CLG_raw - CLL @ Bk))
     covG = Sinv @ CGG @ Sinv
     std = np.full(nparam, np.nan)
     std[st.glob] = np.sqrt(np.maximum(np.diag(covG), 0.0))
-    for k, (Bk, CLL, CLG) in enumerate(per_k):
-        lidx = st.local_of_arr[k]
-        if not lidx.size:
+    for k, item in enumerate(per_k):
+        if item is None:
             continue
+        Bk, CLL, CLG = item
         Ai = Ainv[k]
         cross = Ai @ CLG @ Sinv @ Bk.T
         cov = Ai @ CLL @ Ai - cross - cross.T + Bk @ covG @ Bk.T
-        std[lidx] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        std[st.local_of_arr[k]] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    del ng
     return std
 
 
-def _stats(problem: Problem, evals) -> tuple[ResidualStats, ...]:
+def _stats(problem: Problem, ev: Evaluation) -> tuple[ResidualStats, ...]:
+    blocks = []
+    for ce in ev.channels:
+        e = ce.e
+        for b, k in enumerate(ce.mans):
+            blocks.append((int(k), ce.channel, e[ce.rseg[b]:ce.rseg[b + 1]]))
     out = []
-    for ev in evals:
-        mid = problem.maneuvers[ev.maneuver].id
-        for b in ev.blocks:
-            e = b.z - b.y
-            out.append(ResidualStats(
-                maneuver=mid, channel=problem.channels[b.channel].name, n=int(e.size),
-                mean=float(e.mean()), std=float(e.std()), rms=float(np.sqrt(np.mean(e * e))),
-            ))
+    for k, c, e in sorted(blocks, key=lambda x: (x[0], x[1])):  # maneuver by maneuver
+        out.append(ResidualStats(
+            maneuver=problem.maneuvers[k].id, channel=problem.channels[c].name, n=int(e.size),
+            mean=float(e.mean()), std=float(e.std()), rms=float(np.sqrt(np.mean(e * e))),
+        ))
     return tuple(out)

@@ -18,6 +18,12 @@ partial derivatives with respect to each parameter, each table value and each st
 signal, so the estimator can chain ``dy/dx = dy/dsignal * dsignal/dx`` without finite differences.
 A table's derivative with respect to its values is a hat function: at most two breakpoints touch a
 sample, so it is stored sparsely as (left index, left weight, right weight).
+
+The estimator evaluates a channel for all maneuvers at once, on their concatenated samples: a
+parameter may then be an array (one value per sample: a per-aircraft bias over maneuvers of
+several aircraft), and so may a table's values (``(N, K)``, one row per sample).
+:meth:`Expression.value` evaluates without derivatives (the solver's trial steps), with the very
+same arithmetic as the value of :meth:`Expression.evaluate`.
 """
 
 from __future__ import annotations
@@ -77,7 +83,17 @@ class Table:
 
     def evaluate(self, values: np.ndarray, x: np.ndarray) -> np.ndarray:
         i, w, _ = self.locate(x)
-        return (1.0 - w) * values[i] + w * values[i + 1]
+        lo, hi = _node_values(values, i)
+        return (1.0 - w) * lo + w * hi
+
+
+def _node_values(values: np.ndarray, i: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Table values at segment ``i`` and ``i + 1``; ``values`` is (K,) or per sample (N, K)."""
+    if values.ndim == 1:
+        return values[i], values[i + 1]
+    i = np.broadcast_to(i, values.shape[:1])
+    rows = np.arange(values.shape[0])
+    return values[rows, i], values[rows, i + 1]
 
 
 @dataclass
@@ -148,8 +164,8 @@ class Expression:
         Parameters
         ----------
         signals : name -> (N,) array (SI).
-        params : name -> scalar value (SI).
-        tables : name -> (Table, values).
+        params : name -> scalar value (SI), or (N,) values per sample.
+        tables : name -> (Table, values (K,) or per sample (N, K)).
         state_signals : the signals to differentiate with respect to (they depend on the state).
 
         Returns
@@ -157,6 +173,15 @@ class Expression:
         Dual with the value (N,) and the derivatives.
         """
         return _Evaluator(self, signals, params, tables, state_signals).visit(self.tree)
+
+    def value(
+        self,
+        signals: Mapping[str, np.ndarray],
+        params: Mapping[str, float | np.ndarray],
+        tables: Mapping[str, tuple[Table, np.ndarray]],
+    ) -> np.ndarray:
+        """The value alone: what ``evaluate(...).value`` gives, operation for operation."""
+        return _Evaluator(self, signals, params, tables, frozenset()).value(self.tree)
 
 
 def parse(text: str, where: str = "model") -> Expression:
@@ -209,7 +234,7 @@ class _Evaluator:
                     return Dual(v, dsignal={n: np.ones_like(v)})
                 return Dual(v)
             if n in self.params:
-                return Dual(np.asarray(float(self.params[n])), dparam={n: np.asarray(1.0)})
+                return Dual(np.asarray(self.params[n], dtype=float), dparam={n: np.asarray(1.0)})
             self.fail(f"unknown name {n!r}: neither a signal nor a parameter of this channel")
         if isinstance(node, ast.UnaryOp):
             a = self.visit(node.operand)
@@ -241,12 +266,52 @@ class _Evaluator:
             table, values = self.tables[name]
             x = np.asarray(arg.value, dtype=float)
             i, w, inside = table.locate(x)
-            val = (1.0 - w) * values[i] + w * values[i + 1]
-            slope = np.where(inside, (values[i + 1] - values[i]) / np.diff(table.breakpoints)[i], 0.0)
+            lo, hi = _node_values(values, i)
+            val = (1.0 - w) * lo + w * hi
+            slope = np.where(inside, (hi - lo) / np.diff(table.breakpoints)[i], 0.0)
             out = arg.scaled(slope) if _has_d(arg) else Dual(val)
             out.value = val
             out.dtable.setdefault(name, []).extend([(i, 1.0 - w), (i + 1, w)])
             return out
+        self.fail(f"unsupported element {ast.dump(node)}")
+
+    def value(self, node) -> np.ndarray:
+        """``visit(node).value`` without the derivatives; each operation as :meth:`visit` does it."""
+        if isinstance(node, ast.Constant):
+            if not isinstance(node.value, (int, float)):
+                self.fail(f"constant {node.value!r} is not a number")
+            return np.asarray(float(node.value))
+        if isinstance(node, ast.Name):
+            n = node.id
+            if n in self.signals:
+                return np.asarray(self.signals[n], dtype=float)
+            if n in self.params:
+                return np.asarray(self.params[n], dtype=float)
+            self.fail(f"unknown name {n!r}: neither a signal nor a parameter of this channel")
+        if isinstance(node, ast.UnaryOp):
+            a = self.value(node.operand)
+            return a * -1.0 if isinstance(node.op, ast.USub) else a
+        if isinstance(node, ast.BinOp):
+            a, b = self.value(node.left), self.value(node.right)
+            if isinstance(node.op, ast.Add):
+                return a + b
+            if isinstance(node.op, ast.Sub):
+                return a + -1.0 * b
+            if isinstance(node.op, ast.Mult):
+                return a * b
+            if isinstance(node.op, ast.Div):
+                return a * (1.0 / b)
+        if isinstance(node, ast.Call):
+            name = node.func.id
+            arg = self.value(node.args[0])
+            if name in _FUNCS:
+                return _FUNCS[name][0](arg)
+            if name not in self.tables:
+                self.fail(f"unknown table {name!r}; declare it with its breakpoints")
+            table, values = self.tables[name]
+            i, w, _ = table.locate(np.asarray(arg, dtype=float))
+            lo, hi = _node_values(values, i)
+            return (1.0 - w) * lo + w * hi
         self.fail(f"unsupported element {ast.dump(node)}")
 
 

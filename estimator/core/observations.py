@@ -46,19 +46,27 @@ def angle_signals(v_s_mps: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray
     name -> (value (N,), d value / d(u_s, v_s, w_s) (N, 3)) for ``alpha``, ``beta``, ``flank``
     (rad) and ``tas`` (m/s).
     """
+    return {kind: angle_signal(v_s_mps, kind) for kind in ("alpha", "beta", "flank", "tas")}
+
+
+def angle_signal(v_s_mps: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """One of :func:`angle_signals` (``kind`` "alpha", "beta", "flank" or "tas"), computed alone."""
     u, v, w = v_s_mps[:, 0], v_s_mps[:, 1], v_s_mps[:, 2]
-    uw2 = u * u + w * w
-    uv2 = u * u + v * v
-    V2 = uw2 + v * v
-    V = np.sqrt(V2)
-    suw = np.sqrt(uw2)
-    zero = np.zeros_like(u)
-    alpha = np.arctan2(w, u)
-    d_alpha = np.stack([-w / uw2, zero, u / uw2], axis=1)
-    beta = np.arcsin(v / V)
-    d_beta = np.stack([-v * u / (V2 * suw), suw / V2, -v * w / (V2 * suw)], axis=1)
-    flank = np.arctan2(v, u)
-    d_flank = np.stack([-v / uv2, u / uv2, zero], axis=1)
-    d_tas = v_s_mps / V[:, None]
-    return {"alpha": (alpha, d_alpha), "beta": (beta, d_beta), "flank": (flank, d_flank),
-            "tas": (V, d_tas)}
+    if kind == "alpha":
+        uw2 = u * u + w * w
+        zero = np.zeros_like(u)
+        return np.arctan2(w, u), np.stack([-w / uw2, zero, u / uw2], axis=1)
+    if kind == "beta":
+        uw2 = u * u + w * w
+        V2 = uw2 + v * v
+        V = np.sqrt(V2)
+        suw = np.sqrt(uw2)
+        return np.arcsin(v / V), np.stack([-v * u / (V2 * suw), suw / V2, -v * w / (V2 * suw)], axis=1)
+    if kind == "flank":
+        uv2 = u * u + v * v
+        zero = np.zeros_like(u)
+        return np.arctan2(v, u), np.stack([-v / uv2, u / uv2, zero], axis=1)
+    if kind == "tas":
+        V = np.sqrt(u * u + w * w + v * v)
+        return V, v_s_mps / V[:, None]
+    raise ValueError(f"unknown flow signal {kind!r}; one of alpha, beta, flank, tas")

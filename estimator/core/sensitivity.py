@@ -17,7 +17,10 @@ variational equations (Jategaonkar 2006, §4.6)::
 Both are stepped with the same classical RK4 scheme as the states (inputs at the half step from
 :func:`estimator.core.kinematics.midpoints`, four-point cubic by default), so ``S`` is the exact
 derivative of the discrete solution: Gauss-Newton sees the gradient of the cost it minimises.
-Compiled with numba (cached on disk): the per-sample loop is the estimator's hot path.
+Compiled with numba (cached on disk): the per-sample loop is the estimator's hot path. All
+maneuvers of a problem are integrated in one compiled call (:func:`integrate_many`, inputs
+concatenated once in :class:`Inputs`), with or without the sensitivities: the solver's trial
+steps need only the states, which cost about a tenth.
 """
 
 from __future__ import annotations
@@ -123,23 +126,84 @@ def integrate_sensitivities(t_s, x0, a_m, om_m, omd, r_imu_cg, da, dw, g, midpoi
     """
     f64 = np.float64
     a_m, om_m, omd = (np.ascontiguousarray(v, dtype=f64) for v in (a_m, om_m, omd))
-    return _integrate(
-        np.ascontiguousarray(t_s, dtype=f64), np.ascontiguousarray(x0, dtype=f64), a_m, om_m, omd,
-        midpoints(a_m, midpoint), midpoints(om_m, midpoint), midpoints(omd, midpoint),
-        np.ascontiguousarray(r_imu_cg, dtype=f64), np.ascontiguousarray(da, dtype=f64),
-        np.ascontiguousarray(dw, dtype=f64), float(g),
+    n = a_m.shape[0]
+    inputs = Inputs(
+        np.array([0, n], dtype=np.int64), np.ascontiguousarray(t_s, dtype=f64), a_m, om_m, omd,
+        *(_padded_midpoints(v, midpoint) for v in (a_m, om_m, omd)),
+        np.ascontiguousarray(r_imu_cg, dtype=f64).reshape(1, 3),
     )
+    params = np.concatenate([np.asarray(x0, dtype=f64), np.asarray(da, dtype=f64),
+                             np.asarray(dw, dtype=f64)]).reshape(1, N_SENS)
+    return integrate_many(inputs, params, float(g), sensitivities=True)
+
+
+class Inputs:
+    """The measured IMU inputs of many maneuvers, concatenated, with their half-step values.
+
+    They never change during an estimation, so the midpoints are interpolated once.
+
+    Parameters
+    ----------
+    seg : (K+1,) sample offsets: maneuver k is samples ``seg[k]:seg[k+1]``.
+    t_s : (N,) sample times, s (each maneuver's own time base).
+    a_m, om_m, omd : (N, 3) measured specific force at the IMU, rates, angular accelerations.
+    a_mid, om_mid, omd_mid : (N, 3) their half-step values: row ``i`` holds the midpoint between
+        samples ``i`` and ``i + 1`` of the same maneuver (the last row of a maneuver is unused).
+    r_imu_cg : (K, 3) IMU position minus CG position of each maneuver, body, m.
+    """
+
+    def __init__(self, seg, t_s, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg):
+        self.seg, self.t_s, self.a_m, self.om_m, self.omd = seg, t_s, a_m, om_m, omd
+        self.a_mid, self.om_mid, self.omd_mid, self.r_imu_cg = a_mid, om_mid, omd_mid, r_imu_cg
+
+    @classmethod
+    def concatenate(cls, t_s, a_m, om_m, omd, r_imu_cg, midpoint="cubic"):
+        """From per-maneuver lists of arrays (``t_s[k]`` (N_k,), ``a_m[k]`` (N_k, 3), ...)."""
+        f64 = np.float64
+        seg = np.concatenate([[0], np.cumsum([len(t) for t in t_s])]).astype(np.int64)
+
+        def cat(parts):
+            return np.ascontiguousarray(np.concatenate(parts), dtype=f64)
+
+        mids = [cat([_padded_midpoints(np.asarray(v, dtype=f64), midpoint) for v in parts])
+                for parts in (a_m, om_m, omd)]
+        return cls(seg, cat(t_s), cat(a_m), cat(om_m), cat(omd), *mids,
+                   np.ascontiguousarray(np.reshape(r_imu_cg, (-1, 3)), dtype=f64))
+
+
+def _padded_midpoints(v, midpoint):
+    """``midpoints`` with a zero row appended so that row i is the midpoint after sample i."""
+    return np.ascontiguousarray(np.vstack([midpoints(v, midpoint), np.zeros((1, 3))]))
+
+
+def integrate_many(inputs: Inputs, params: np.ndarray, g: float, sensitivities: bool = True):
+    """RK4 of the states (and their sensitivities) of many maneuvers in one compiled call.
+
+    Parameters
+    ----------
+    inputs : the concatenated IMU data (:class:`Inputs`).
+    params : (K, 13) per maneuver ``[x0 (7), da (3), dw (3)]``.
+    g : gravity, m/s^2.
+    sensitivities : also integrate ``S = dX/dparams``; without them (trial steps of the solver)
+        the states cost about a tenth.
+
+    Returns
+    -------
+    X : (N, 7) states; S : (N, 7, 13) sensitivities, or None.
+    """
+    params = np.ascontiguousarray(params, dtype=np.float64)
+    args = (inputs.seg, inputs.t_s, params, inputs.a_m, inputs.om_m, inputs.omd, inputs.a_mid,
+            inputs.om_mid, inputs.omd_mid, inputs.r_imu_cg, float(g))
+    if sensitivities:
+        return _integrate_many(*args)
+    return _integrate_states_many(*args), None
 
 
 @njit(cache=True)
-def _integrate(t_s, x0, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, da, dw, g):
+def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, g):
     n = t_s.shape[0]
     X = np.empty((n, 7))
     S = np.empty((n, 7, N_SENS))
-    X[0] = x0
-    S[0] = 0.0
-    for i in range(7):
-        S[0, i, i] = 1.0
     k1x = np.empty(7)
     k2x = np.empty(7)
     k3x = np.empty(7)
@@ -150,37 +214,99 @@ def _integrate(t_s, x0, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, da, dw
     k4s = np.empty((7, N_SENS))
     xs = np.empty(7)
     Ss = np.empty((7, N_SENS))
-    am = np.empty(3)
-    wm = np.empty(3)
-    wdm = np.empty(3)
-    for k in range(n - 1):
-        h = t_s[k + 1] - t_s[k]
-        for i in range(3):
-            am[i] = a_mid[k, i]
-            wm[i] = om_mid[k, i]
-            wdm[i] = omd_mid[k, i]
-        xk = X[k]
-        Sk = S[k]
-        _rhs(xk, Sk, a_m[k], om_m[k], omd[k], r_imu_cg, da, dw, g, k1x, k1s)
+    for m in range(seg.shape[0] - 1):
+        r = r_imu_cg[m]
+        da = params[m, 7:10]
+        dw = params[m, 10:13]
+        b = seg[m]
+        X[b] = params[m, :7]
+        S[b] = 0.0
         for i in range(7):
-            xs[i] = xk[i] + 0.5 * h * k1x[i]
-            for j in range(N_SENS):
-                Ss[i, j] = Sk[i, j] + 0.5 * h * k1s[i, j]
-        _rhs(xs, Ss, am, wm, wdm, r_imu_cg, da, dw, g, k2x, k2s)
-        for i in range(7):
-            xs[i] = xk[i] + 0.5 * h * k2x[i]
-            for j in range(N_SENS):
-                Ss[i, j] = Sk[i, j] + 0.5 * h * k2s[i, j]
-        _rhs(xs, Ss, am, wm, wdm, r_imu_cg, da, dw, g, k3x, k3s)
-        for i in range(7):
-            xs[i] = xk[i] + h * k3x[i]
-            for j in range(N_SENS):
-                Ss[i, j] = Sk[i, j] + h * k3s[i, j]
-        _rhs(xs, Ss, a_m[k + 1], om_m[k + 1], omd[k + 1], r_imu_cg, da, dw, g, k4x, k4s)
-        h6 = h / 6.0
-        for i in range(7):
-            X[k + 1, i] = xk[i] + h6 * (k1x[i] + 2.0 * k2x[i] + 2.0 * k3x[i] + k4x[i])
-            for j in range(N_SENS):
-                S[k + 1, i, j] = Sk[i, j] + h6 * (k1s[i, j] + 2.0 * k2s[i, j] + 2.0 * k3s[i, j]
-                                                  + k4s[i, j])
+            S[b, i, i] = 1.0
+        for k in range(b, seg[m + 1] - 1):
+            h = t_s[k + 1] - t_s[k]
+            xk = X[k]
+            Sk = S[k]
+            _rhs(xk, Sk, a_m[k], om_m[k], omd[k], r, da, dw, g, k1x, k1s)
+            for i in range(7):
+                xs[i] = xk[i] + 0.5 * h * k1x[i]
+                for j in range(N_SENS):
+                    Ss[i, j] = Sk[i, j] + 0.5 * h * k1s[i, j]
+            _rhs(xs, Ss, a_mid[k], om_mid[k], omd_mid[k], r, da, dw, g, k2x, k2s)
+            for i in range(7):
+                xs[i] = xk[i] + 0.5 * h * k2x[i]
+                for j in range(N_SENS):
+                    Ss[i, j] = Sk[i, j] + 0.5 * h * k2s[i, j]
+            _rhs(xs, Ss, a_mid[k], om_mid[k], omd_mid[k], r, da, dw, g, k3x, k3s)
+            for i in range(7):
+                xs[i] = xk[i] + h * k3x[i]
+                for j in range(N_SENS):
+                    Ss[i, j] = Sk[i, j] + h * k3s[i, j]
+            _rhs(xs, Ss, a_m[k + 1], om_m[k + 1], omd[k + 1], r, da, dw, g, k4x, k4s)
+            h6 = h / 6.0
+            for i in range(7):
+                X[k + 1, i] = xk[i] + h6 * (k1x[i] + 2.0 * k2x[i] + 2.0 * k3x[i] + k4x[i])
+                for j in range(N_SENS):
+                    S[k + 1, i, j] = Sk[i, j] + h6 * (k1s[i, j] + 2.0 * k2s[i, j] + 2.0 * k3s[i, j]
+                                                      + k4s[i, j])
     return X, S
+
+
+@njit(cache=True)
+def _rhs_states(x, a_m, om_m, omd, r, da, dw, g, xd):
+    # the state part of _rhs, operation for operation (the same states with or without S)
+    p = om_m[0] - dw[0]
+    q = om_m[1] - dw[1]
+    rr = om_m[2] - dw[2]
+    odr = p * r[0] + q * r[1] + rr * r[2]
+    oo = p * p + q * q + rr * rr
+    ax = a_m[0] - da[0] - (omd[1] * r[2] - omd[2] * r[1]) - (p * odr - r[0] * oo)
+    ay = a_m[1] - da[1] - (omd[2] * r[0] - omd[0] * r[2]) - (q * odr - r[1] * oo)
+    az = a_m[2] - da[2] - (omd[0] * r[1] - omd[1] * r[0]) - (rr * odr - r[2] * oo)
+    u, v, w, phi, th = x[0], x[1], x[2], x[3], x[4]
+    sph, cph = np.sin(phi), np.cos(phi)
+    sth, cth = np.sin(th), np.cos(th)
+    tth = sth / cth
+    qs_rc = q * sph + rr * cph
+    qc_rs = q * cph - rr * sph
+    xd[0] = rr * v - q * w - g * sth + ax
+    xd[1] = p * w - rr * u + g * cth * sph + ay
+    xd[2] = q * u - p * v + g * cth * cph + az
+    xd[3] = p + qs_rc * tth
+    xd[4] = qc_rs
+    xd[5] = qs_rc / cth
+    xd[6] = u * sth - v * cth * sph - w * cth * cph
+
+
+@njit(cache=True)
+def _integrate_states_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, g):
+    n = t_s.shape[0]
+    X = np.empty((n, 7))
+    k1x = np.empty(7)
+    k2x = np.empty(7)
+    k3x = np.empty(7)
+    k4x = np.empty(7)
+    xs = np.empty(7)
+    for m in range(seg.shape[0] - 1):
+        r = r_imu_cg[m]
+        da = params[m, 7:10]
+        dw = params[m, 10:13]
+        b = seg[m]
+        X[b] = params[m, :7]
+        for k in range(b, seg[m + 1] - 1):
+            h = t_s[k + 1] - t_s[k]
+            xk = X[k]
+            _rhs_states(xk, a_m[k], om_m[k], omd[k], r, da, dw, g, k1x)
+            for i in range(7):
+                xs[i] = xk[i] + 0.5 * h * k1x[i]
+            _rhs_states(xs, a_mid[k], om_mid[k], omd_mid[k], r, da, dw, g, k2x)
+            for i in range(7):
+                xs[i] = xk[i] + 0.5 * h * k2x[i]
+            _rhs_states(xs, a_mid[k], om_mid[k], omd_mid[k], r, da, dw, g, k3x)
+            for i in range(7):
+                xs[i] = xk[i] + h * k3x[i]
+            _rhs_states(xs, a_m[k + 1], om_m[k + 1], omd[k + 1], r, da, dw, g, k4x)
+            h6 = h / 6.0
+            for i in range(7):
+                X[k + 1, i] = xk[i] + h6 * (k1x[i] + 2.0 * k2x[i] + 2.0 * k3x[i] + k4x[i])
+    return X
