@@ -36,11 +36,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator.core.assembly import jacobian_rows
+from estimator.core.assembly import channel_normals
 from estimator.core.expressions import Table
 from estimator.core.kinematics import smoothed_derivative
 from estimator.core.observations import angle_signal
-from estimator.core.sensitivity import Inputs, integrate_many
+from estimator.core.sensitivity import N_SENS, Inputs, integrate_many
 from estimator.parameters import make_key
 from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, Problem
 
@@ -93,9 +93,10 @@ class ChannelEval:
     rseg : (B+1,) row offsets of the blocks.
     rows : (n,) sample index (within its maneuver) of each row.
     y, z : (n,) model output and measurement at the rows.
-    J : (n, m) Jacobian in slot space (None if not requested): column ``s`` of block ``b`` is the
-        derivative with respect to parameter ``colmap[b, s]``.
+    J : (n, m) Jacobian in slot space (None if not requested or not kept): column ``s`` of block
+        ``b`` is the derivative with respect to parameter ``colmap[b, s]``.
     colmap : (B, m) parameter index of each slot, per block.
+    normal : per block ``J^T J``, ``J^T e`` and non-zero counts per slot (with the Jacobian).
     """
 
     channel: int
@@ -106,7 +107,7 @@ class ChannelEval:
     z: np.ndarray
     J: np.ndarray | None
     colmap: np.ndarray
-    _normal: tuple | None = field(default=None, repr=False)
+    normal: tuple | None = field(default=None, repr=False)
 
     @property
     def e(self) -> np.ndarray:
@@ -116,23 +117,11 @@ class ChannelEval:
         """Per block ``J^T J`` (B, m, m), ``J^T e`` (B, m) and non-zero counts per column (B, m).
 
         Unweighted: the solver weights them with 1/R of the channel, which changes between
-        iterations while the Jacobian does not. Computed once and kept.
+        iterations while the Jacobian does not.
         """
-        if self._normal is None:
-            if self.J is None:
-                raise ValueError("evaluated without the Jacobian")
-            nb, m = self.colmap.shape
-            H = np.empty((nb, m, m))
-            g = np.empty((nb, m))
-            cnt = np.empty((nb, m), dtype=np.int64)
-            e = self.e
-            for b in range(nb):
-                Jb = self.J[self.rseg[b]:self.rseg[b + 1]]
-                H[b] = Jb.T @ Jb
-                g[b] = Jb.T @ e[self.rseg[b]:self.rseg[b + 1]]
-                cnt[b] = np.count_nonzero(Jb, axis=0)
-            self._normal = (H, g, cnt)
-        return self._normal
+        if self.normal is None:
+            raise ValueError("evaluated without the Jacobian")
+        return self.normal
 
 
 @dataclass
@@ -153,9 +142,6 @@ class Evaluation:
     seg: np.ndarray
     channels: list[ChannelEval]
 
-    @property
-    def jacobian(self) -> bool:
-        return all(c.J is not None for c in self.channels)
 
 
 class _ChannelLayout:
@@ -264,6 +250,7 @@ class _Layout:
         self.r_cg = np.repeat(np.array([p.maneuvers[k].r_cg_body_m for k in ks], dtype=float).reshape(-1, 3),
                               lens, axis=0)
         self.state_idx = model._state_idx[list(ks)]
+        self.S: np.ndarray | None = None  # sensitivity buffer, reused by every evaluation
         present = sorted({c for k in ks for c in model._present[k]})
         self.channels = [_ChannelLayout(model, c, ks, self.seg[:-1]) for c in present]
 
@@ -377,21 +364,27 @@ class Model:
         return ManeuverEval(k, ev.X, tuple(blocks))
 
     def evaluate_all(self, values: np.ndarray, jacobian: bool = True,
-                     maneuvers: tuple[int, ...] | None = None) -> Evaluation:
+                     maneuvers: tuple[int, ...] | None = None, keep_jacobian: bool = True) -> Evaluation:
         """Outputs (and Jacobians) of every channel of the given maneuvers (default: all).
 
         Parameters
         ----------
         values : (P,) all parameter values, in ``ParameterSet`` order.
-        jacobian : also the Jacobian (sensitivities are integrated only then).
+        jacobian : also the Jacobian (sensitivities are integrated only then) and each block's
+            normal-equation terms (:meth:`ChannelEval.block_normals`).
         maneuvers : maneuver indices; None for every maneuver of the problem.
+        keep_jacobian : keep the Jacobian rows (``ChannelEval.J``); the solver's iterations need
+            only the normal-equation terms, and not writing the rows out saves memory traffic.
         """
         p = self.problem
         ks = tuple(range(len(p.maneuvers))) if maneuvers is None else tuple(int(k) for k in maneuvers)
         lay = self._layout(ks)
         values = np.asarray(values, dtype=float)
         sv = values[lay.state_idx]
-        X, S = integrate_many(lay.inputs, sv, p.g_mps2, sensitivities=jacobian)
+        if jacobian and lay.S is None:
+            lay.S = np.empty((lay.inputs.t_s.size, 7, N_SENS))
+        # S is scratch (consumed below, never handed out): one buffer per maneuver set
+        X, S = integrate_many(lay.inputs, sv, p.g_mps2, sensitivities=jacobian, out_S=lay.S)
         omega = lay.inputs.om_m - np.repeat(sv[:, 10:13], lay.lens, axis=0)
         cache: dict = {}
 
@@ -424,10 +417,11 @@ class Model:
             cache[ck] = out
             return out
 
-        channels = [self._evaluate_channel(cl, values, S, state_signal) for cl in lay.channels]
+        channels = [self._evaluate_channel(cl, values, S, state_signal, keep_jacobian)
+                    for cl in lay.channels]
         return Evaluation(ks, X, lay.seg, channels)
 
-    def _evaluate_channel(self, cl: _ChannelLayout, values, S, state_signal) -> ChannelEval:
+    def _evaluate_channel(self, cl: _ChannelLayout, values, S, state_signal, keep: bool) -> ChannelEval:
         ch, expr = cl.ch, cl.expr
         jacobian = S is not None
         tau = cl.index_per_sample(cl.didx, values) if cl.didx is not None else 0.0
@@ -453,37 +447,38 @@ class Model:
         else:
             dual, value = None, expr.value(signals, params, tables)
         y = np.broadcast_to(value, cl.z.shape)[cl.rows]
-        J = self._jacobian(cl, dual, S, state_signal, w, P0) if jacobian else None
-        return ChannelEval(cl.c, cl.mans, cl.rseg, cl.local_rows, y, cl.z_rows, J, cl.colmap)
+        J, normal = None, None
+        if jacobian:
+            J, normal = self._jacobian(cl, dual, S, state_signal, w, P0, cl.z_rows - y, keep)
+        return ChannelEval(cl.c, cl.mans, cl.rseg, cl.local_rows, y, cl.z_rows, J, cl.colmap, normal)
 
     @staticmethod
-    def _jacobian(cl: _ChannelLayout, dual, S, state_signal, w, P0) -> np.ndarray:
-        """Slot-space Jacobian rows of a channel (see :mod:`estimator.core.assembly`)."""
+    def _jacobian(cl: _ChannelLayout, dual, S, state_signal, w, P0, e, keep: bool):
+        """Slot-space Jacobian of a channel and its per-block normal-equation terms
+        (see :func:`estimator.core.assembly.channel_normals`)."""
         rows = cl.rows
         n = rows.size
         n_all = cl.z.size
-        wr = w[rows]
-        P0r = P0[rows]
-        CA = np.zeros((n, 2, 7))
-        CB = np.zeros((n, 3))
+        N = S.shape[0]
+        names = list(dual.dsignal)
+        G = np.empty((len(names), n))
+        sig_q = np.full(len(names), -1, dtype=np.int64)
+        A = np.zeros((len(names), N, 3))
+        B = np.zeros((len(names), N, 3))
+        V = np.empty((len(names), N))
         qs: set[int] = set()
-        dyt = np.zeros(n)
-        for name, dy in dual.dsignal.items():
-            g = np.broadcast_to(dy, (n_all,))[rows]
-            g0, g1 = g * (1 - wr), g * wr
+        for i, name in enumerate(names):
+            G[i] = np.broadcast_to(dual.dsignal[name], (n_all,))[rows]
             val, (q, a, b) = state_signal(name, cl.ch.sensor)
+            V[i] = val
             if q is not None:
-                CA[:, 0, q] += g0
-                CA[:, 1, q] += g1
+                sig_q[i] = q
                 qs.add(q)
             else:
-                CA[:, 0, :3] += g0[:, None] * a[P0r]
-                CA[:, 1, :3] += g1[:, None] * a[P0r + 1]
-                qs.update((0, 1, 2))
+                A[i] = a
                 if b is not None:
-                    CB += g0[:, None] * b[P0r] + g1[:, None] * b[P0r + 1]
-            if cl.didx is not None:
-                dyt += g * (-(val[P0r + 1] - val[P0r]) / cl.dt[rows])
+                    B[i] = b
+                qs.update((0, 1, 2))
         slots, coefs = [], []
         for name, dy in dual.dparam.items():
             slots.append(np.full(n, cl.pslot[name], dtype=np.intp))
@@ -492,16 +487,18 @@ class Model:
             for idx, coef in terms:
                 slots.append(cl.tbase[t] + np.broadcast_to(idx, (n_all,))[rows])
                 coefs.append(np.broadcast_to(coef, (n_all,))[rows])
-        if cl.didx is not None:
-            slots.append(np.full(n, cl.dslot, dtype=np.intp))
-            coefs.append(dyt)
-        tslot = np.ascontiguousarray(np.stack(slots, axis=1) if slots else np.zeros((n, 0), np.intp),
-                                     dtype=np.int64)
+        tslot = np.ascontiguousarray(np.stack(slots, axis=1) if slots else np.zeros((n, 0)), dtype=np.int64)
         tcoef = np.ascontiguousarray(np.stack(coefs, axis=1) if coefs else np.zeros((n, 0)))
-        J = np.zeros((n, cl.m))
-        jacobian_rows(S, P0r.astype(np.int64), CA, CB,
-                      np.array(sorted(qs), dtype=np.int64), tslot, tcoef, J)
-        return J
+        nb = cl.rseg.size - 1
+        H = np.empty((nb, cl.m, cl.m))
+        g = np.empty((nb, cl.m))
+        cnt = np.empty((nb, cl.m), dtype=np.int64)
+        J = np.empty((n if keep else 0, cl.m))
+        channel_normals(S, P0[rows].astype(np.int64), w[rows], G, sig_q, A, B, V,
+                        np.array(sorted(qs), dtype=np.int64), cl.dt[rows],
+                        cl.dslot if cl.didx is not None else -1, tslot, tcoef, e,
+                        cl.rseg.astype(np.int64), cl.m, H, g, cnt, J)
+        return (J if keep else None), (H, g, cnt)
 
     def _implicit(self, cl: _ChannelLayout, signals, params, tables, state, jacobian: bool):
         """Solve ``y = F(y, ...)`` for a model whose argument ``zhat`` is its own output.

@@ -28,9 +28,10 @@ Standard deviations: Cramér-Rao, ``sqrt(diag(M^-1))``; and corrected for colour
 
 with ``r`` the residual autocorrelation of each channel and maneuver (every lag), evaluated by
 FFT per channel block in the block's own Jacobian columns and projected onto the globals per
-maneuver (see :func:`_colored_std`). Rank deficiency of ``S`` or of a local block (a free table offset beside a free
-bias, a time shift with no excitation) is detected on the scaled matrix and reported with the
-parameters involved; the step then uses the pseudo-inverse and their deviations are NaN.
+maneuver (see :func:`_colored_std`). Rank deficiency of ``S`` or of a local block (a free table
+offset beside a free bias, a time shift with no excitation) is detected on the scaled matrix and
+reported with the parameters involved; the step then uses the pseudo-inverse and their deviations
+are NaN.
 """
 
 from __future__ import annotations
@@ -155,21 +156,40 @@ def _sym_inverse(H: np.ndarray, rtol: float) -> tuple[np.ndarray, np.ndarray]:
     Returns the inverse and the null-space directions (columns, in the unscaled coordinates'
     scaled form, i.e. of ``D^-1/2 H D^-1/2``) whose eigenvalues fall below ``rtol * max``.
     """
-    n = H.shape[0]
-    if n == 0:
-        return np.zeros((0, 0)), np.zeros((0, 0))
-    diag = np.diag(H)
-    live = diag > 1e-300 * max(diag.max(), 1e-300)
-    # rows with no information at all get a zero inverse (no step) and count as null directions
-    d = np.where(live, np.sqrt(np.where(live, diag, 1.0)), 1.0)
-    Hs = H / d[:, None] / d[None, :]
-    Hs[~live, :] = 0.0
-    Hs[:, ~live] = 0.0
-    lam, V = np.linalg.eigh(Hs)
-    thr = rtol * max(lam[-1], 1e-300)
-    ok = lam > thr
-    inv_s = (V[:, ok] / lam[ok]) @ V[:, ok].T
-    return inv_s / d[:, None] / d[None, :], V[:, ~ok]
+    inv, null = _sym_inverse_many([H], rtol)
+    return inv[0], null[0]
+
+
+def _sym_inverse_many(mats: list[np.ndarray], rtol: float) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """:func:`_sym_inverse` of each matrix; matrices of one size are decomposed in one stacked call
+    (one per maneuver: a Python loop of small ``eigh`` calls costs more than the arithmetic)."""
+    inv: list = [None] * len(mats)
+    null: list = [None] * len(mats)
+    sizes: dict[int, list[int]] = {}
+    for i, H in enumerate(mats):
+        sizes.setdefault(H.shape[0], []).append(i)
+    for n, idx in sizes.items():
+        if n == 0:
+            for i in idx:
+                inv[i], null[i] = np.zeros((0, 0)), np.zeros((0, 0))
+            continue
+        H = np.stack([mats[i] for i in idx])
+        diag = np.diagonal(H, axis1=1, axis2=2)
+        live = diag > 1e-300 * np.maximum(diag.max(axis=1), 1e-300)[:, None]
+        # rows with no information at all get a zero inverse (no step) and count as null directions
+        d = np.where(live, np.sqrt(np.where(live, diag, 1.0)), 1.0)
+        Hs = H / d[:, :, None] / d[:, None, :]
+        Hs = np.where(live[:, :, None] & live[:, None, :], Hs, 0.0)
+        lam, V = np.linalg.eigh(Hs)
+        thr = rtol * np.maximum(lam[:, -1], 1e-300)
+        ok = lam > thr[:, None]
+        scale = np.divide(1.0, lam, out=np.zeros_like(lam), where=ok)
+        inv_s = (V * scale[:, None, :]) @ np.swapaxes(V, 1, 2)
+        inv_all = inv_s / d[:, :, None] / d[:, None, :]
+        for j, i in enumerate(idx):
+            inv[i] = inv_all[j]
+            null[i] = V[j][:, ~ok[j]]
+    return inv, null
 
 
 def _confounded_sets(null: np.ndarray, keys: list[str], where: str) -> list[Confounding]:
@@ -188,24 +208,30 @@ def _confounded_sets(null: np.ndarray, keys: list[str], where: str) -> list[Conf
     return out
 
 
-def _lm_solve(N: _Normal, lam: float, rtol: float):
-    """Damped Schur-complement solve. Returns (delta_G, [delta_L_k], S, factors, null info)."""
+def _lm_solve(N: _Normal, lam: float, rtol: float, extra: dict | None = None):
+    """Damped Schur-complement solve. Returns (delta_G, [delta_L_k], S^-1, [A_k^-1]).
+
+    ``extra``, if given, receives the Schur complement ``"S"`` and the null directions of the
+    (damped) local blocks ``"null_L"``, for the rank checks.
+    """
     ng = N.HGG.shape[0]
     S = N.HGG.copy()
     S[np.diag_indices(ng)] *= 1.0 + lam
     r = N.gG.copy()
-    Ainv = []
-    for k, A in enumerate(N.HLL):
-        if A.shape[0] == 0:
-            Ainv.append(np.zeros((0, 0)))
-            continue
+    damped = []
+    for A in N.HLL:
         A = A.copy()
         A[np.diag_indices(A.shape[0])] *= 1.0 + lam
-        Ai, _ = _sym_inverse(A, rtol)
-        Ainv.append(Ai)
+        damped.append(A)
+    Ainv, null_L = _sym_inverse_many(damped, rtol)
+    for k, Ai in enumerate(Ainv):
+        if Ai.shape[0] == 0:
+            continue
         B = N.HGL[k] @ Ai
         S -= B @ N.HGL[k].T
         r -= B @ N.gL[k]
+    if extra is not None:
+        extra["S"], extra["null_L"] = S.copy(), null_L
     Sinv, _ = _sym_inverse(S, rtol)
     dG = Sinv @ r
     dL = [Ai @ (gl - hgl.T @ dG) for Ai, gl, hgl in zip(Ainv, N.gL, N.HGL, strict=True)]
@@ -293,7 +319,8 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
         raise ValueError(f"{problem.source}: no free parameters; free some in the problem file")
 
     def evaluate_all(th, jac):
-        return model.evaluate_all(th, jacobian=jac)
+        # the iterations need each block's normal-equation terms, not the Jacobian rows
+        return model.evaluate_all(th, jacobian=jac, keep_jacobian=False)
 
     def variances(sse, cnt):
         return np.maximum(np.where(cnt > 0, sse / np.maximum(cnt, 1), 1.0), 1e-16)
@@ -397,7 +424,9 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
     confounding += _high_correlations(corr_G, [keys[i] for i in st.glob], opt.correlation_warn)
     std_col = np.full(len(keys), np.nan)
     if opt.colored:
-        std_col = _colored_std(model, evals, N, st, R, cov_G, len(keys), opt)
+        # the same evaluation once more, now keeping the Jacobian rows the sandwich needs
+        evals_J = model.evaluate_all(theta, jacobian=True, keep_jacobian=True)
+        std_col = _colored_std(model, evals_J, N, st, R, cov_G, len(keys), opt)
     if any(c.kind in ("unidentifiable", "no_data") for c in confounding):
         message += "; some parameters were held because the data do not determine them (see confounding)"
     return EstimationResult.build(
@@ -412,15 +441,11 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
 
 def _covariance(N: _Normal, st: _Structure, keys, problem: Problem, opt: SolverOptions):
     """Undamped Cramér-Rao covariance of the global block and of each local block."""
-    dG, dL, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol)
+    extra: dict = {}
+    dG, dL, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol, extra)
     confounding: list[Confounding] = []
-    # rank checks: the Schur complement (globals) and each local block
-    ng = N.HGG.shape[0]
-    S = N.HGG.copy()
-    for k, Ai in enumerate(Ainv):
-        if Ai.size:
-            S -= N.HGL[k] @ Ai @ N.HGL[k].T
-    _, null = _sym_inverse(S, opt.rank_rtol)
+    # rank checks: the Schur complement (globals) and each local block (undamped: lambda = 0)
+    _, null = _sym_inverse(extra["S"], opt.rank_rtol)
     confounding += _confounded_sets(null, [keys[i] for i in st.glob], "global parameters")
     cov_L = []
     for k, Ai in enumerate(Ainv):
@@ -428,12 +453,12 @@ def _covariance(N: _Normal, st: _Structure, keys, problem: Problem, opt: SolverO
         if not idx.size:
             cov_L.append(np.zeros((0, 0)))
             continue
-        _, nullk = _sym_inverse(N.HLL[k], opt.rank_rtol)
+        nullk = extra["null_L"][k]
         confounding += _confounded_sets(nullk, [keys[i] for i in idx],
                                         f"maneuver {problem.maneuvers[k].id}")
         B = Ai @ N.HGL[k].T
         cov_L.append(Ai + B @ Sinv @ B.T)
-    del ng, dG, dL
+    del dG, dL
     return Sinv, cov_L, confounding
 
 

@@ -9,43 +9,112 @@ the channel's parameters, table values and time shift; :mod:`estimator.model`)::
 where ``P_0(i), P_1(i) = P_0(i) + 1`` are the two samples the time-shifted signal interpolates
 between, ``S`` the state sensitivities, and ``CA`` the chain-rule coefficients
 ``dy/dsignal * (interpolation weight) * dsignal/dstate``. Forming this directly from ``S`` avoids
-an (N, 13) derivative array per signal and its interpolation.
+an (N, 13) derivative array per signal and its interpolation; forming it block by block (one
+channel of one maneuver) in a buffer that stays in cache, with the block's ``J^T J`` right after,
+avoids writing and re-reading the whole Jacobian (the hot loop is memory-bound otherwise).
 """
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 
 @njit(cache=True)
-def jacobian_rows(S, P0, CA, CB, qlist, tslot, tcoef, J):
-    """Fill the slot-space Jacobian rows ``J`` (n, m) (zero on entry).
+def channel_normals(S, P0, W, G, sig_q, A, B, V, qlist, dt, dslot, tslot, tcoef, e, rseg, m,
+                    H, g, cnt, J):
+    """Jacobian rows of a channel, block by block, and each block's normal-equation terms.
+
+    Row ``r`` (interpolating between samples ``P0[r]`` and ``P0[r] + 1`` with weight ``W[r]``)::
+
+        J[r, :13] = sum_q c0_q S[P0, q, :] + c1_q S[P0 + 1, q, :]   (+ gyro-bias terms)
+        c0_q = sum_sig G[sig, r] (1 - W[r]) a_sig,q[P0],   c1_q likewise with W[r] at P0 + 1
+
+    with ``a_sig`` the signal's derivative with respect to the state (``A[sig]`` for a velocity
+    signal, a unit vector for an Euler angle or the altitude, ``sig_q[sig] >= 0``); the time-shift
+    slot ``dslot`` gets ``sum_sig G[sig, r] * -(V[sig, P0 + 1] - V[sig, P0]) / dt[r]``; the sparse
+    terms add ``tcoef`` at ``tslot``. A block's rows are built in a small buffer that stays in
+    cache, and ``J^T J`` is one BLAS call on it.
 
     Parameters
     ----------
-    S : (N, 7, 13) state sensitivities of the concatenated maneuvers.
-    P0 : (n,) left interpolation sample of each row (``P0 + 1`` is the right one).
-    CA : (n, 2, 7) coefficients of ``S[P0]`` and ``S[P0 + 1]`` per state.
-    CB : (n, 3) direct derivative with respect to the gyro biases (slots 10-12).
-    qlist : states with non-zero coefficients (the others are skipped).
-    tslot, tcoef : (n, T) sparse terms: ``J[i, tslot[i, t]] += tcoef[i, t]``.
-    J : (n, m) output.
+    S : (N, 7, 13) sensitivities; P0, W, dt : (n,) per row.
+    G : (n_sig, n) d output / d signal; sig_q : (n_sig,) state index, or -1 for velocity signals.
+    A, B : (n_sig, N, 3) velocity-signal derivatives with respect to (u, v, w) and, directly, to
+        the gyro biases; V : (n_sig, N) signal values.
+    qlist : states any signal depends on.
+    dslot : slot of the time shift, or -1.
+    tslot, tcoef : (n, T) sparse terms.
+    e : (n,) residuals; rseg : (B+1,) block row offsets; m : number of slots.
+    H (B, m, m), g (B, m), cnt (B, m) : outputs, ``J^T J``, ``J^T e`` and non-zeros per slot.
+    J : (n, m) output rows, or a (0, m) array not to keep them.
     """
-    n = P0.shape[0]
+    nsig = G.shape[0]
     nq = qlist.shape[0]
     nt = tslot.shape[1]
-    for r in range(n):
-        p0 = P0[r]
-        for a in range(nq):
-            q = qlist[a]
-            c0 = CA[r, 0, q]
-            c1 = CA[r, 1, q]
-            for j in range(13):
-                J[r, j] += c0 * S[p0, q, j] + c1 * S[p0 + 1, q, j]
-        for j in range(3):
-            J[r, 10 + j] += CB[r, j]
-        for t in range(nt):
-            J[r, tslot[r, t]] += tcoef[r, t]
+    keep = J.shape[0] > 0
+    lmax = 0
+    for b in range(rseg.shape[0] - 1):
+        lmax = max(lmax, rseg[b + 1] - rseg[b])
+    buf = np.zeros((lmax, m))
+    c0 = np.zeros(7)
+    c1 = np.zeros(7)
+    b3 = np.zeros(3)
+    for b in range(rseg.shape[0] - 1):
+        r0 = rseg[b]
+        nb = rseg[b + 1] - r0
+        for i in range(nb):
+            r = r0 + i
+            p0 = P0[r]
+            w1 = W[r]
+            w0 = 1 - w1
+            row = buf[i]
+            for s in range(m):
+                row[s] = 0.0
+            for q in range(7):
+                c0[q] = 0.0
+                c1[q] = 0.0
+            for k in range(3):
+                b3[k] = 0.0
+            dyt = 0.0
+            for sg in range(nsig):
+                gr = G[sg, r]
+                g0 = gr * w0
+                g1 = gr * w1
+                q = sig_q[sg]
+                if q >= 0:
+                    c0[q] += g0
+                    c1[q] += g1
+                else:
+                    for k in range(3):
+                        c0[k] += g0 * A[sg, p0, k]
+                        c1[k] += g1 * A[sg, p0 + 1, k]
+                        b3[k] += g0 * B[sg, p0, k] + g1 * B[sg, p0 + 1, k]
+                if dslot >= 0:
+                    dyt += gr * (-(V[sg, p0 + 1] - V[sg, p0]) / dt[r])
+            for a in range(nq):
+                q = qlist[a]
+                x0 = c0[q]
+                x1 = c1[q]
+                for j in range(13):
+                    row[j] += x0 * S[p0, q, j] + x1 * S[p0 + 1, q, j]
+            for k in range(3):
+                row[10 + k] += b3[k]
+            for t in range(nt):
+                row[tslot[r, t]] += tcoef[r, t]
+            if dslot >= 0:
+                row[dslot] += dyt
+        Jb = buf[:nb]
+        H[b] = np.dot(Jb.T, Jb)
+        g[b] = np.dot(Jb.T, e[r0:r0 + nb])
+        for s in range(m):
+            c = 0
+            for i in range(nb):
+                if Jb[i, s] != 0.0:
+                    c += 1
+            cnt[b, s] = c
+        if keep:
+            J[r0:r0 + nb] = Jb
 
 
 @njit(cache=True)

@@ -176,7 +176,8 @@ def _padded_midpoints(v, midpoint):
     return np.ascontiguousarray(np.vstack([midpoints(v, midpoint), np.zeros((1, 3))]))
 
 
-def integrate_many(inputs: Inputs, params: np.ndarray, g: float, sensitivities: bool = True):
+def integrate_many(inputs: Inputs, params: np.ndarray, g: float, sensitivities: bool = True,
+                   out_S: np.ndarray | None = None):
     """RK4 of the states (and their sensitivities) of many maneuvers in one compiled call.
 
     Parameters
@@ -186,24 +187,31 @@ def integrate_many(inputs: Inputs, params: np.ndarray, g: float, sensitivities: 
     g : gravity, m/s^2.
     sensitivities : also integrate ``S = dX/dparams``; without them (trial steps of the solver)
         the states cost about a tenth.
+    out_S : (N, 7, 13) array to write the sensitivities into (overwritten). A caller that
+        integrates repeatedly passes the same one: a fresh array this large comes from the
+        operating system page by page, which can cost more than the integration.
 
     Returns
     -------
-    X : (N, 7) states; S : (N, 7, 13) sensitivities, or None.
+    X : (N, 7) states; S : (N, 7, 13) sensitivities (``out_S`` if given), or None.
     """
     params = np.ascontiguousarray(params, dtype=np.float64)
     args = (inputs.seg, inputs.t_s, params, inputs.a_m, inputs.om_m, inputs.omd, inputs.a_mid,
             inputs.om_mid, inputs.omd_mid, inputs.r_imu_cg, float(g))
     if sensitivities:
-        return _integrate_many(*args)
+        n = inputs.t_s.shape[0]
+        if out_S is None:
+            out_S = np.empty((n, 7, N_SENS))
+        elif out_S.shape != (n, 7, N_SENS) or not out_S.flags.c_contiguous:
+            raise ValueError(f"out_S must be a C-contiguous ({n}, 7, {N_SENS}) array")
+        return _integrate_many(*args, out_S), out_S
     return _integrate_states_many(*args), None
 
 
 @njit(cache=True)
-def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, g):
+def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, g, S):
     n = t_s.shape[0]
     X = np.empty((n, 7))
-    S = np.empty((n, 7, N_SENS))
     k1x = np.empty(7)
     k2x = np.empty(7)
     k3x = np.empty(7)
@@ -249,7 +257,7 @@ def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_
                 for j in range(N_SENS):
                     S[k + 1, i, j] = Sk[i, j] + h6 * (k1s[i, j] + 2.0 * k2s[i, j] + 2.0 * k3s[i, j]
                                                       + k4s[i, j])
-    return X, S
+    return X
 
 
 @njit(cache=True)
