@@ -424,9 +424,7 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
     confounding += _high_correlations(corr_G, [keys[i] for i in st.glob], opt.correlation_warn)
     std_col = np.full(len(keys), np.nan)
     if opt.colored:
-        # the same evaluation once more, now keeping the Jacobian rows the sandwich needs
-        evals_J = model.evaluate_all(theta, jacobian=True, keep_jacobian=True)
-        std_col = _colored_std(model, evals_J, N, st, R, cov_G, len(keys), opt)
+        std_col = _colored_std(model, theta, N, st, R, len(keys), opt)
     if any(c.kind in ("unidentifiable", "no_data") for c in confounding):
         message += "; some parameters were held because the data do not determine them (see confounding)"
     return EstimationResult.build(
@@ -525,7 +523,7 @@ def _block_autocov(J: np.ndarray, e: np.ndarray, rseg: np.ndarray, chunk: int = 
     return out
 
 
-def _colored_std(model: Model, ev: Evaluation, N: _Normal, st: _Structure, R, cov_G, nparam,
+def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R, nparam,
                  opt) -> np.ndarray:
     """Morelli-Klein standard deviations for every free parameter (sandwich covariance).
 
@@ -537,7 +535,9 @@ def _colored_std(model: Model, ev: Evaluation, N: _Normal, st: _Structure, R, co
     globals' sensitivities, ``J_G - J_L A^-1 M_LG``, is then applied to these small matrices per
     maneuver instead of to the rows.
     """
-    ng = st.glob.size
+    # the final evaluation once more, now keeping the Jacobian rows the sandwich needs (the
+    # iterations only keep each block's normal-equation terms)
+    ev = model.evaluate_all(theta, jacobian=True, keep_jacobian=True)
     _, _, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol)
     C = _Normal(st)
     for ce in ev.channels:
@@ -572,7 +572,6 @@ def _colored_std(model: Model, ev: Evaluation, N: _Normal, st: _Structure, R, co
         cross = Ai @ CLG @ Sinv @ Bk.T
         cov = Ai @ CLL @ Ai - cross - cross.T + Bk @ covG @ Bk.T
         std[st.local_of_arr[k]] = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    del ng
     return std
 
 
