@@ -281,10 +281,27 @@ def _screen(problem, st: _Structure, evals, R, opt: SolverOptions):
             ))
             st = _Structure(problem, st.free & ~no_data)
             continue
-        _, _, conf = _covariance(N, st, keys, problem, opt)
+        cov_G, cov_L, conf = _covariance(N, st, keys, problem, opt)
         conf = [c for c in conf if c.kind == "unidentifiable"]
         if not conf:
-            break
+            # a parameter whose Cramér-Rao deviation exceeds half its allowed range is not
+            # determined by these data (a pressure-altitude scale in level flight): hold it
+            std = np.full(len(keys), np.nan)
+            std[st.glob] = np.sqrt(np.maximum(np.diag(cov_G), 0.0))
+            for k, idx in enumerate(st.local_of_arr):
+                if idx.size:
+                    std[idx] = np.sqrt(np.maximum(np.diag(cov_L[k]), 0.0))
+            width = st.hi - st.lo
+            loose = st.free & np.isfinite(width) & (std > 0.5 * width)
+            if not loose.any():
+                break
+            found.append(Confounding(
+                parameters=tuple(keys[i] for i in np.nonzero(loose)[0]), kind="no_data",
+                detail=("the data barely depend on these parameters: their Cramér-Rao deviation "
+                        "exceeds half their allowed range (bounds); held at their start values"),
+            ))
+            st = _Structure(problem, st.free & ~loose)
+            continue
         free = st.free.copy()
         for c in conf:
             free[[problem.parameters.index(k) for k in c.parameters]] = False
@@ -354,6 +371,8 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
                 moved = np.abs(np.concatenate([dG] + [d for d in dL if d.size])) / sig
                 if attempt == 0:
                     moved_first = moved.max()
+                    # decrease of the cost the undamped Gauss-Newton model predicts, g.d / 2
+                    predicted = 0.5 * (dG @ N.gG + sum(d @ g for d, g in zip(dL, N.gL, strict=True)))
                 if moved_first < opt.step_tol_sigma:
                     # the Gauss-Newton step is already negligible against the parameters'
                     # deviations: at the minimum (round-off may keep the cost from decreasing)
@@ -389,10 +408,11 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
                 print(f"iteration {it_total:3d}: cost {cost0: .6e}, rel. decrease {rel:.2e}, "
                       f"max step {moved.max():.2e} sigma ({keys[order[np.argmax(moved)]]}), "
                       f"lambda {lam:.1e}")
-            if rel < opt.rtol_cost and moved.max() < opt.step_tol_sigma:
+            pred_rel = abs(predicted) / max(abs(cost0), 1e-300)
+            if rel < opt.rtol_cost and (moved.max() < opt.step_tol_sigma or pred_rel < opt.rtol_cost):
                 status, message = 1, (f"converged: relative cost decrease {rel:.1e} < "
-                                      f"{opt.rtol_cost:.0e} and largest step {moved.max():.1e} "
-                                      f"sigma < {opt.step_tol_sigma}")
+                                      f"{opt.rtol_cost:.0e}, and largest step {moved.max():.1e} "
+                                      f"sigma or predicted further decrease {pred_rel:.1e} small")
                 break
         # the trajectory moved: a breakpoint may have lost its data, or a combination its
         # excitation; hold those, restore their start values, and iterate again
