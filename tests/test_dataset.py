@@ -48,7 +48,7 @@ def test_round_trip(tmp_path):
     pd.testing.assert_frame_equal(ds.load("m0001"), frames[1])
     meta = read_maneuver_metadata(tmp_path / "ds" / "maneuvers" / "m0000.parquet")
     assert meta["injected"]["imu.accel_bias_mps2"] == [0.1, 0.0, -0.05]
-    for (entry, df), ref in zip(ds, frames, strict=True):
+    for (_entry, df), ref in zip(ds, frames, strict=True):
         pd.testing.assert_frame_equal(df, ref)
 
 

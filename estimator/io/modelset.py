@@ -236,7 +236,8 @@ def check_maneuver_lengths(specs: Sequence[ParameterSpec], maneuvers: Sequence[M
         if m.n < need or dur < MIN_DURATION_S:
             raise DataError(
                 f"{m.source}: too short to estimate its {n_free} free per-maneuver "
-                f"parameters (initial conditions, IMU biases): {m.n} samples over {dur:.2f} s; "
+                f"parameters (initial conditions, IMU biases, altitude scale): {m.n} samples over "
+                f"{dur:.2f} s; "
                 f"needs at least {need} samples ({MIN_SAMPLES_PER_FREE_PARAMETER} per free parameter) "
                 f"and {MIN_DURATION_S:.0f} s. Widen its time range, or hold some of its parameters "
                 "fixed (e.g. [parameter.dax] free = false)"
