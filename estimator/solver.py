@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import fft as sfft
+from threadpoolctl import threadpool_limits
 
 from estimator.core.assembly import scatter_blocks
 from estimator.model import Evaluation, Model
@@ -323,8 +324,17 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
     -------
     EstimationResult with estimates, Cramér-Rao and coloured-residual deviations, correlations,
     residual statistics, iterations, status and message.
+
+    Notes
+    -----
+    Runs with one BLAS thread (restored on return): every matrix here is small, and waking
+    OpenBLAS's worker threads for each of them costs more than the arithmetic.
     """
-    opt = options or SolverOptions()
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _estimate(problem, options or SolverOptions())
+
+
+def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
     t0 = time.perf_counter()
     model = Model(problem)
     ps = problem.parameters
@@ -382,7 +392,10 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
                 for k, idx in enumerate(st.local_of_arr):
                     step[idx] = dL[k]
                 trial = np.clip(theta + step, st.lo, st.hi)
-                sse_t, cnt_t = _residuals(evaluate_all(trial, False), nch)
+                # the first trial is usually accepted and is then the next iterate: evaluate it
+                # with the Jacobian right away (the values are the same either way)
+                trial_ev = evaluate_all(trial, attempt == 0)
+                sse_t, cnt_t = _residuals(trial_ev, nch)
                 cost_t = _cost(sse_t, cnt_t, R)
                 if np.isfinite(cost_t) and cost_t <= cost0:
                     accepted = True
@@ -400,8 +413,8 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
             # convergence: small relative decrease and steps small against their deviations
             theta = trial
             lam = max(lam * 0.1, 1e-9)
-            evals = evaluate_all(theta, True)
-            sse, cnt = _residuals(evals, nch)
+            evals = trial_ev if attempt == 0 else evaluate_all(theta, True)
+            sse, cnt = sse_t, cnt_t
             rel = (cost0 - _cost(sse, cnt, R)) / max(abs(cost0), 1e-300)
             if opt.verbose:
                 order = np.concatenate([st.glob] + [v for v in st.local_of_arr if v.size])

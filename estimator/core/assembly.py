@@ -11,7 +11,10 @@ between, ``S`` the state sensitivities, and ``CA`` the chain-rule coefficients
 ``dy/dsignal * (interpolation weight) * dsignal/dstate``. Forming this directly from ``S`` avoids
 an (N, 13) derivative array per signal and its interpolation; forming it block by block (one
 channel of one maneuver) in a buffer that stays in cache, with the block's ``J^T J`` right after,
-avoids writing and re-reading the whole Jacobian (the hot loop is memory-bound otherwise).
+avoids writing and re-reading the whole Jacobian (the hot loop is memory-bound otherwise). The
+Gram matrices are compiled loops rather than BLAS calls: they are small, and a multi-threaded BLAS
+spends more on waking its threads than on the arithmetic (twice the estimator's time on two
+busy cores).
 """
 
 from __future__ import annotations
@@ -33,8 +36,8 @@ def channel_normals(S, P0, W, G, sig_q, A, B, V, qlist, dt, dslot, tslot, tcoef,
     with ``a_sig`` the signal's derivative with respect to the state (``A[sig]`` for a velocity
     signal, a unit vector for an Euler angle or the altitude, ``sig_q[sig] >= 0``); the time-shift
     slot ``dslot`` gets ``sum_sig G[sig, r] * -(V[sig, P0 + 1] - V[sig, P0]) / dt[r]``; the sparse
-    terms add ``tcoef`` at ``tslot``. A block's rows are built in a small buffer that stays in
-    cache, and ``J^T J`` is one BLAS call on it.
+    terms add ``tcoef`` at ``tslot``. A block's columns are built in a small buffer that stays in
+    cache, and its ``J^T J`` follows from it (:func:`_gram`).
 
     Parameters
     ----------
@@ -56,7 +59,9 @@ def channel_normals(S, P0, W, G, sig_q, A, B, V, qlist, dt, dslot, tslot, tcoef,
     lmax = 0
     for b in range(rseg.shape[0] - 1):
         lmax = max(lmax, rseg[b + 1] - rseg[b])
-    buf = np.zeros((lmax, m))
+    buf = np.zeros((m, lmax))  # column-major: a column's rows are contiguous for the Gram
+    first = np.empty(m, dtype=np.int64)
+    last = np.empty(m, dtype=np.int64)
     c0 = np.zeros(7)
     c1 = np.zeros(7)
     b3 = np.zeros(3)
@@ -68,9 +73,8 @@ def channel_normals(S, P0, W, G, sig_q, A, B, V, qlist, dt, dslot, tslot, tcoef,
             p0 = P0[r]
             w1 = W[r]
             w0 = 1 - w1
-            row = buf[i]
             for s in range(m):
-                row[s] = 0.0
+                buf[s, i] = 0.0
             for q in range(7):
                 c0[q] = 0.0
                 c1[q] = 0.0
@@ -97,24 +101,56 @@ def channel_normals(S, P0, W, G, sig_q, A, B, V, qlist, dt, dslot, tslot, tcoef,
                 x0 = c0[q]
                 x1 = c1[q]
                 for j in range(13):
-                    row[j] += x0 * S[p0, q, j] + x1 * S[p0 + 1, q, j]
+                    buf[j, i] += x0 * S[p0, q, j] + x1 * S[p0 + 1, q, j]
             for k in range(3):
-                row[10 + k] += b3[k]
+                buf[10 + k, i] += b3[k]
             for t in range(nt):
-                row[tslot[r, t]] += tcoef[r, t]
+                buf[tslot[r, t], i] += tcoef[r, t]
             if dslot >= 0:
-                row[dslot] += dyt
-        Jb = buf[:nb]
-        H[b] = np.dot(Jb.T, Jb)
-        g[b] = np.dot(Jb.T, e[r0:r0 + nb])
+                buf[dslot, i] += dyt
+        # non-zero rows of each column: table columns are zero where the argument is elsewhere
         for s in range(m):
             c = 0
+            lo = nb
+            hi = -1
             for i in range(nb):
-                if Jb[i, s] != 0.0:
+                if buf[s, i] != 0.0:
                     c += 1
+                    if lo == nb:
+                        lo = i
+                    hi = i
             cnt[b, s] = c
+            first[s] = lo
+            last[s] = hi
+        _gram(buf, first, last, e[r0:r0 + nb], H[b], g[b])
         if keep:
-            J[r0:r0 + nb] = Jb
+            for i in range(nb):
+                for s in range(m):
+                    J[r0 + i, s] = buf[s, i]
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _gram(buf, first, last, e, H, g):
+    """``H = J^T J`` and ``g = J^T e`` of a column-major block, each dot product over the rows
+    where both columns can be non-zero (vectorised: the sums may be reassociated)."""
+    m = buf.shape[0]
+    for s1 in range(m):
+        lo1 = first[s1]
+        hi1 = last[s1]
+        c1 = buf[s1]
+        acc = 0.0
+        for i in range(lo1, hi1 + 1):
+            acc += c1[i] * e[i]
+        g[s1] = acc
+        for s2 in range(s1, m):
+            lo = max(lo1, first[s2])
+            hi = min(hi1, last[s2])
+            c2 = buf[s2]
+            acc = 0.0
+            for i in range(lo, hi + 1):
+                acc += c1[i] * c2[i]
+            H[s1, s2] = acc
+            H[s2, s1] = acc
 
 
 @njit(cache=True)
