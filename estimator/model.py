@@ -39,7 +39,7 @@ import numpy as np
 from estimator.core.assembly import channel_normals
 from estimator.core.expressions import Table
 from estimator.core.kinematics import smoothed_derivative
-from estimator.core.observations import angle_signal
+from estimator.core.observations import flow_signal_batch
 from estimator.core.sensitivity import N_SENS, Inputs, integrate_many
 from estimator.parameters import make_key
 from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, Problem
@@ -142,6 +142,11 @@ class Evaluation:
     seg: np.ndarray
     channels: list[ChannelEval]
 
+
+
+def _signal_key(name: str, sensor: str | None) -> tuple[str, str | None]:
+    """A state signal's identity: sensor signals differ per sensor, the others do not."""
+    return name, (sensor if name in ("alpha_s", "beta_s", "flank_s") else None)
 
 
 class _ChannelLayout:
@@ -253,6 +258,10 @@ class _Layout:
         self.S: np.ndarray | None = None  # sensitivity buffer, reused by every evaluation
         present = sorted({c for k in ks for c in model._present[k]})
         self.channels = [_ChannelLayout(model, c, ks, self.seg[:-1]) for c in present]
+        # every state signal the channels use, numbered for the derivative stacks SA, SB, SV
+        keys = {_signal_key(n, cl.ch.sensor) for cl in self.channels for n in cl.state_names}
+        self.sig_id = {k: i for i, k in enumerate(sorted(keys, key=str))}
+        self.SA = self.SB = self.SV = None
 
 
 class Model:
@@ -387,41 +396,42 @@ class Model:
         X, S = integrate_many(lay.inputs, sv, p.g_mps2, sensitivities=jacobian, out_S=lay.S)
         omega = lay.inputs.om_m - np.repeat(sv[:, 10:13], lay.lens, axis=0)
         cache: dict = {}
+        if jacobian and lay.SA is None:
+            # derivative stacks of every state signal of the maneuver set, reused (see lay.S)
+            n, ns = lay.inputs.t_s.size, len(lay.sig_id)
+            lay.SA, lay.SB, lay.SV = np.zeros((ns, n, 3)), np.zeros((ns, n, 3)), np.zeros((ns, n))
 
         def state_signal(name: str, sensor: str | None):
-            """value (N,), and for the Jacobian (q, a (N, 3), b (N, 3) or None): the signal's
-            derivative is ``a . S[:, q, :]`` plus ``b`` on the gyro-bias columns (q is a state
-            index for an Euler angle or the altitude, None for the velocity components)."""
-            ck = (name, sensor if name in ("alpha_s", "beta_s", "flank_s") else None)
+            """value (N,), and for the Jacobian (q, id, has_b): the signal's derivative is
+            ``SA[id] . S[:, :3, :]`` plus ``SB[id]`` on the gyro-bias columns (if ``has_b``), or
+            ``S[:, q, :]`` for an Euler angle or the altitude (``q >= 0``); ``SV[id]`` its value."""
+            ck = _signal_key(name, sensor)
             if ck in cache:
                 return cache[ck]
+            sid = lay.sig_id[ck]
             if name in _EULER_INDEX:
                 i = _EULER_INDEX[name]
-                out = (X[:, i], (i, None, None))
+                out = (X[:, i], (i, sid, False))
+                if jacobian:
+                    lay.SV[sid] = X[:, i]
             else:
-                if name.endswith("_s"):
-                    r = p.sensors[sensor] - lay.r_cg
-                    vs = X[:, :3] + np.cross(omega, r)
-                else:
-                    r = None
-                    vs = X[:, :3]
-                val, dv = angle_signal(vs, _FLOW_KIND[name])
-                b = None
-                if jacobian and r is not None:
-                    # V_s depends on omega = omega_m - d_omega: dV_s/d(d_omega) = -dV_s/domega,
-                    # i.e. minus dv @ d(omega x r)/domega
-                    x, y, z = r[:, 0], r[:, 1], r[:, 2]
-                    d0, d1, d2 = dv[:, 0], dv[:, 1], dv[:, 2]
-                    b = -np.stack([-z * d1 + y * d2, z * d0 - x * d2, -y * d0 + x * d1], axis=1)
-                out = (val, (None, dv, b))
+                sensor_pos = p.sensors[sensor] if name.endswith("_s") else None
+                dv_out = lay.SA[sid] if jacobian else None
+                b_out = lay.SB[sid] if jacobian and sensor_pos is not None else None
+                val, _, _ = flow_signal_batch(X, omega, lay.r_cg, sensor_pos, _FLOW_KIND[name], jacobian,
+                                              dv_out=dv_out, b_out=b_out)
+                if jacobian:
+                    lay.SV[sid] = val
+                out = (val, (-1, sid, sensor_pos is not None))
             cache[ck] = out
             return out
 
-        channels = [self._evaluate_channel(cl, values, S, state_signal, keep_jacobian)
+        channels = [self._evaluate_channel(cl, lay, values, S, state_signal, keep_jacobian)
                     for cl in lay.channels]
         return Evaluation(ks, X, lay.seg, channels)
 
-    def _evaluate_channel(self, cl: _ChannelLayout, values, S, state_signal, keep: bool) -> ChannelEval:
+    def _evaluate_channel(self, cl: _ChannelLayout, lay: _Layout, values, S, state_signal,
+                          keep: bool) -> ChannelEval:
         ch, expr = cl.ch, cl.expr
         jacobian = S is not None
         tau = cl.index_per_sample(cl.didx, values) if cl.didx is not None else 0.0
@@ -449,36 +459,27 @@ class Model:
         y = np.broadcast_to(value, cl.z.shape)[cl.rows]
         J, normal = None, None
         if jacobian:
-            J, normal = self._jacobian(cl, dual, S, state_signal, w, P0, cl.z_rows - y, keep)
+            J, normal = self._jacobian(cl, lay, dual, S, state_signal, w, P0, cl.z_rows - y, keep)
         return ChannelEval(cl.c, cl.mans, cl.rseg, cl.local_rows, y, cl.z_rows, J, cl.colmap, normal)
 
     @staticmethod
-    def _jacobian(cl: _ChannelLayout, dual, S, state_signal, w, P0, e, keep: bool):
+    def _jacobian(cl: _ChannelLayout, lay: _Layout, dual, S, state_signal, w, P0, e, keep: bool):
         """Slot-space Jacobian of a channel and its per-block normal-equation terms
         (see :func:`estimator.core.assembly.channel_normals`)."""
         rows = cl.rows
         n = rows.size
         n_all = cl.z.size
-        N = S.shape[0]
         names = list(dual.dsignal)
         G = np.empty((len(names), n))
-        sig_q = np.full(len(names), -1, dtype=np.int64)
-        A = np.zeros((len(names), N, 3))
-        B = np.zeros((len(names), N, 3))
-        V = np.empty((len(names), N))
+        sig_q = np.empty(len(names), dtype=np.int64)
+        sig_id = np.empty(len(names), dtype=np.int64)
+        has_b = np.zeros(len(names), dtype=np.bool_)
         qs: set[int] = set()
         for i, name in enumerate(names):
             G[i] = np.broadcast_to(dual.dsignal[name], (n_all,))[rows]
-            val, (q, a, b) = state_signal(name, cl.ch.sensor)
-            V[i] = val
-            if q is not None:
-                sig_q[i] = q
-                qs.add(q)
-            else:
-                A[i] = a
-                if b is not None:
-                    B[i] = b
-                qs.update((0, 1, 2))
+            _, (q, sid, hb) = state_signal(name, cl.ch.sensor)
+            sig_q[i], sig_id[i], has_b[i] = q, sid, hb
+            qs.update((q,) if q >= 0 else (0, 1, 2))
         slots, coefs = [], []
         for name, dy in dual.dparam.items():
             slots.append(np.full(n, cl.pslot[name], dtype=np.intp))
@@ -494,8 +495,8 @@ class Model:
         g = np.empty((nb, cl.m))
         cnt = np.empty((nb, cl.m), dtype=np.int64)
         J = np.empty((n if keep else 0, cl.m))
-        channel_normals(S, P0[rows].astype(np.int64), w[rows], G, sig_q, A, B, V,
-                        np.array(sorted(qs), dtype=np.int64), cl.dt[rows],
+        channel_normals(S, P0[rows].astype(np.int64), w[rows], G, sig_q, sig_id, has_b, lay.SA, lay.SB,
+                        lay.SV, np.array(sorted(qs), dtype=np.int64), cl.dt[rows],
                         cl.dslot if cl.didx is not None else -1, tslot, tcoef, e,
                         cl.rseg.astype(np.int64), cl.m, H, g, cnt, J)
         return (J if keep else None), (H, g, cnt)

@@ -24,8 +24,8 @@ from numba import njit
 
 
 @njit(cache=True)
-def channel_normals(S, P0, W, G, sig_q, A, B, V, qlist, dt, dslot, tslot, tcoef, e, rseg, m,
-                    H, g, cnt, J):
+def channel_normals(S, P0, W, G, sig_q, sig_id, has_b, A, B, V, qlist, dt, dslot, tslot, tcoef, e,
+                    rseg, m, H, g, cnt, J):
     """Jacobian rows of a channel, block by block, and each block's normal-equation terms.
 
     Row ``r`` (interpolating between samples ``P0[r]`` and ``P0[r] + 1`` with weight ``W[r]``)::
@@ -43,8 +43,9 @@ def channel_normals(S, P0, W, G, sig_q, A, B, V, qlist, dt, dslot, tslot, tcoef,
     ----------
     S : (N, 7, 13) sensitivities; P0, W, dt : (n,) per row.
     G : (n_sig, n) d output / d signal; sig_q : (n_sig,) state index, or -1 for velocity signals.
-    A, B : (n_sig, N, 3) velocity-signal derivatives with respect to (u, v, w) and, directly, to
-        the gyro biases; V : (n_sig, N) signal values.
+    sig_id : (n_sig,) each signal's row in ``A``, ``B``, ``V``; has_b : (n_sig,) ``B`` applies.
+    A, B : (n_all, N, 3) velocity-signal derivatives with respect to (u, v, w) and, directly, to
+        the gyro biases; V : (n_all, N) signal values (the stacks of all signals of an evaluation).
     qlist : states any signal depends on.
     dslot : slot of the time shift, or -1.
     tslot, tcoef : (n, T) sparse terms.
@@ -86,16 +87,19 @@ def channel_normals(S, P0, W, G, sig_q, A, B, V, qlist, dt, dslot, tslot, tcoef,
                 g0 = gr * w0
                 g1 = gr * w1
                 q = sig_q[sg]
+                sid = sig_id[sg]
                 if q >= 0:
                     c0[q] += g0
                     c1[q] += g1
                 else:
                     for k in range(3):
-                        c0[k] += g0 * A[sg, p0, k]
-                        c1[k] += g1 * A[sg, p0 + 1, k]
-                        b3[k] += g0 * B[sg, p0, k] + g1 * B[sg, p0 + 1, k]
+                        c0[k] += g0 * A[sid, p0, k]
+                        c1[k] += g1 * A[sid, p0 + 1, k]
+                    if has_b[sg]:
+                        for k in range(3):
+                            b3[k] += g0 * B[sid, p0, k] + g1 * B[sid, p0 + 1, k]
                 if dslot >= 0:
-                    dyt += gr * (-(V[sg, p0 + 1] - V[sg, p0]) / dt[r])
+                    dyt += gr * (-(V[sid, p0 + 1] - V[sid, p0]) / dt[r])
             for a in range(nq):
                 q = qlist[a]
                 x0 = c0[q]
@@ -110,15 +114,16 @@ def channel_normals(S, P0, W, G, sig_q, A, B, V, qlist, dt, dslot, tslot, tcoef,
                 buf[dslot, i] += dyt
         # non-zero rows of each column: table columns are zero where the argument is elsewhere
         for s in range(m):
+            col = buf[s]
+            lo = 0
+            while lo < nb and col[lo] == 0.0:
+                lo += 1
+            hi = nb - 1
+            while hi >= lo and col[hi] == 0.0:
+                hi -= 1
             c = 0
-            lo = nb
-            hi = -1
-            for i in range(nb):
-                if buf[s, i] != 0.0:
-                    c += 1
-                    if lo == nb:
-                        lo = i
-                    hi = i
+            for i in range(lo, hi + 1):
+                c += col[i] != 0.0
             cnt[b, s] = c
             first[s] = lo
             last[s] = hi
@@ -132,25 +137,59 @@ def channel_normals(S, P0, W, G, sig_q, A, B, V, qlist, dt, dslot, tslot, tcoef,
 @njit(cache=True, fastmath={"reassoc", "contract"})
 def _gram(buf, first, last, e, H, g):
     """``H = J^T J`` and ``g = J^T e`` of a column-major block, each dot product over the rows
-    where both columns can be non-zero (vectorised: the sums may be reassociated)."""
+    where the columns can be non-zero; four columns per pass over a column (each load of it is
+    used four times), the sums vectorised (they may be reassociated). The loops run over slices
+    from 0 so that no index can be negative (no wrap-around test to keep them from vectorising)."""
     m = buf.shape[0]
     for s1 in range(m):
         lo1 = first[s1]
-        hi1 = last[s1]
-        c1 = buf[s1]
-        acc = 0.0
-        for i in range(lo1, hi1 + 1):
-            acc += c1[i] * e[i]
-        g[s1] = acc
-        for s2 in range(s1, m):
+        hi1 = last[s1] + 1
+        g[s1] = _dot(buf[s1, lo1:hi1], e[lo1:hi1])
+        s2 = s1
+        while s2 + 3 < m:
+            lo = max(lo1, min(min(first[s2], first[s2 + 1]), min(first[s2 + 2], first[s2 + 3])))
+            hi = min(hi1, max(max(last[s2], last[s2 + 1]), max(last[s2 + 2], last[s2 + 3])) + 1)
+            a0, a1, a2, a3 = _dot4(buf[s1, lo:hi], buf[s2, lo:hi], buf[s2 + 1, lo:hi],
+                                   buf[s2 + 2, lo:hi], buf[s2 + 3, lo:hi])
+            H[s1, s2] = a0
+            H[s2, s1] = a0
+            H[s1, s2 + 1] = a1
+            H[s2 + 1, s1] = a1
+            H[s1, s2 + 2] = a2
+            H[s2 + 2, s1] = a2
+            H[s1, s2 + 3] = a3
+            H[s2 + 3, s1] = a3
+            s2 += 4
+        while s2 < m:
             lo = max(lo1, first[s2])
-            hi = min(hi1, last[s2])
-            c2 = buf[s2]
-            acc = 0.0
-            for i in range(lo, hi + 1):
-                acc += c1[i] * c2[i]
-            H[s1, s2] = acc
-            H[s2, s1] = acc
+            hi = min(hi1, last[s2] + 1)
+            a0 = _dot(buf[s1, lo:hi], buf[s2, lo:hi])
+            H[s1, s2] = a0
+            H[s2, s1] = a0
+            s2 += 1
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _dot(x, y):
+    acc = 0.0
+    for i in range(x.shape[0]):
+        acc += x[i] * y[i]
+    return acc
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _dot4(x, y0, y1, y2, y3):
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    a3 = 0.0
+    for i in range(x.shape[0]):
+        v = x[i]
+        a0 += v * y0[i]
+        a1 += v * y1[i]
+        a2 += v * y2[i]
+        a3 += v * y3[i]
+    return a0, a1, a2, a3
 
 
 @njit(cache=True)
