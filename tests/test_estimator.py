@@ -144,8 +144,11 @@ class Flight:
         channels, specs = load_model_set("tejas")
         channels = [c for c in channels if c.name in CHANNELS]
         out = []
+        used = {"u0", "v0", "w0", "phi0", "theta0", "psi0", "h0", "dax", "day", "daz", "dp", "dq", "dr"}
+        for c in channels:
+            used |= c.expression.names | c.expression.tables | ({c.delay} if c.delay else set())
         for s in specs:
-            if s.name in ("k_ba", "k_bu", "k_bl", "b_ba", "b_bu", "b_bl", "tau_ba", "tau_bu", "tau_bl"):
+            if s.name not in used:
                 continue
             if s.kind == "initial_condition":
                 s = replace(s, per_instance={m.id: m.meta["ic"][s.name] for m in mans})

@@ -25,7 +25,7 @@ DATASET_COLUMNS: dict[str, str] = {
     "ax_imu_mps2": "ax", "ay_imu_mps2": "ay", "az_imu_mps2": "az",
     "p_rps": "p", "q_rps": "q", "r_rps": "r",
     "phi_rad": "phi", "theta_rad": "theta", "psi_rad": "psi",
-    "tas_mps": "tas", "h_baro_m": "h",
+    "tas_mps": "tas", "h_baro_m": "h", "h_dgps_m": "h_dgps",
     "alpha_zl_rad": "alpha_zl", "alpha_zr_rad": "alpha_zr",
     "alpha_zsp_rad": "alpha_zsp", "beta_zsp_rad": "beta_zsp", "beta_znp_rad": "beta_znp",
     "alpha_zb_rad": "alpha_zb", "beta_zbu_rad": "beta_zbu", "beta_zbl_rad": "beta_zbl",
