@@ -93,8 +93,8 @@ class ChannelEval:
     rseg : (B+1,) row offsets of the blocks.
     rows : (n,) sample index (within its maneuver) of each row.
     y, z : (n,) model output and measurement at the rows.
-    J : (n, m) Jacobian in slot space (None if not requested or not kept): column ``s`` of block
-        ``b`` is the derivative with respect to parameter ``colmap[b, s]``.
+    JT : (m, n) Jacobian in slot space, stored slot by slot (None if not requested or not kept):
+        row ``s`` within block ``b`` is the derivative with respect to parameter ``colmap[b, s]``.
     colmap : (B, m) parameter index of each slot, per block.
     normal : per block ``J^T J``, ``J^T e`` and non-zero counts per slot (with the Jacobian).
     """
@@ -105,9 +105,14 @@ class ChannelEval:
     rows: np.ndarray
     y: np.ndarray
     z: np.ndarray
-    J: np.ndarray | None
+    JT: np.ndarray | None
     colmap: np.ndarray
     normal: tuple | None = field(default=None, repr=False)
+
+    @property
+    def J(self) -> np.ndarray | None:
+        """(n, m) the Jacobian rows (a view of ``JT``)."""
+        return None if self.JT is None else self.JT.T
 
     @property
     def e(self) -> np.ndarray:
@@ -382,8 +387,8 @@ class Model:
         jacobian : also the Jacobian (sensitivities are integrated only then) and each block's
             normal-equation terms (:meth:`ChannelEval.block_normals`).
         maneuvers : maneuver indices; None for every maneuver of the problem.
-        keep_jacobian : keep the Jacobian rows (``ChannelEval.J``); the solver's iterations need
-            only the normal-equation terms, and not writing the rows out saves memory traffic.
+        keep_jacobian : keep the Jacobian (``ChannelEval.J``), else only each block's
+            normal-equation terms (less memory traffic when the Jacobian itself is not needed).
         """
         p = self.problem
         ks = tuple(range(len(p.maneuvers))) if maneuvers is None else tuple(int(k) for k in maneuvers)
@@ -494,12 +499,12 @@ class Model:
         H = np.empty((nb, cl.m, cl.m))
         g = np.empty((nb, cl.m))
         cnt = np.empty((nb, cl.m), dtype=np.int64)
-        J = np.empty((n if keep else 0, cl.m))
+        JT = np.empty((cl.m, n if keep else 0))
         channel_normals(S, P0[rows].astype(np.int64), w[rows], G, sig_q, sig_id, has_b, lay.SA, lay.SB,
                         lay.SV, np.array(sorted(qs), dtype=np.int64), cl.dt[rows],
                         cl.dslot if cl.didx is not None else -1, tslot, tcoef, e,
-                        cl.rseg.astype(np.int64), cl.m, H, g, cnt, J)
-        return (J if keep else None), (H, g, cnt)
+                        cl.rseg.astype(np.int64), cl.m, H, g, cnt, JT)
+        return (JT if keep else None), (H, g, cnt)
 
     def _implicit(self, cl: _ChannelLayout, signals, params, tables, state, jacobian: bool):
         """Solve ``y = F(y, ...)`` for a model whose argument ``zhat`` is its own output.

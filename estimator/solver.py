@@ -346,8 +346,9 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         raise ValueError(f"{problem.source}: no free parameters; free some in the problem file")
 
     def evaluate_all(th, jac):
-        # the iterations need each block's normal-equation terms, not the Jacobian rows
-        return model.evaluate_all(th, jacobian=jac, keep_jacobian=False)
+        # the Jacobian is kept for the Morelli-Klein deviations of whichever evaluation is last:
+        # writing it costs less than evaluating the last one again
+        return model.evaluate_all(th, jacobian=jac, keep_jacobian=opt.colored)
 
     def variances(sse, cnt):
         return np.maximum(np.where(cnt > 0, sse / np.maximum(cnt, 1), 1.0), 1e-16)
@@ -457,7 +458,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
     confounding += _high_correlations(corr_G, [keys[i] for i in st.glob], opt.correlation_warn)
     std_col = np.full(len(keys), np.nan)
     if opt.colored:
-        std_col = _colored_std(model, theta, N, st, R, len(keys), opt)
+        std_col = _colored_std(evals, N, st, R, len(keys), opt)
     if any(c.kind in ("unidentifiable", "no_data") for c in confounding):
         message += "; some parameters were held because the data do not determine them (see confounding)"
     return EstimationResult.build(
@@ -508,7 +509,7 @@ def _high_correlations(corr: np.ndarray, keys: list[str], thr: float) -> list[Co
     return out
 
 
-def _block_autocov(J: np.ndarray, e: np.ndarray, rseg: np.ndarray, chunk: int = 32) -> np.ndarray:
+def _block_autocov(JT: np.ndarray, e: np.ndarray, rseg: np.ndarray, chunk: int = 32) -> np.ndarray:
     """``sum_i sum_j J_i^T r(i - j) J_j`` per block, ``r`` the block's biased residual autocorrelation.
 
     Every lag is kept (as in Morelli & Klein 1997). With both sequences zero-padded to
@@ -521,14 +522,15 @@ def _block_autocov(J: np.ndarray, e: np.ndarray, rseg: np.ndarray, chunk: int = 
 
     Parameters
     ----------
-    J : (n, m) rows of all blocks; e : (n,) residuals; rseg : (B+1,) block row offsets.
+    JT : (m, n) Jacobian of all blocks, slot by slot; e : (n,) residuals; rseg : (B+1,) block row
+        offsets.
 
     Returns
     -------
     (B, m, m)
     """
     nb = rseg.size - 1
-    m = J.shape[1]
+    m = JT.shape[0]
     lens = np.diff(rseg)
     out = np.zeros((nb, m, m))
     if nb == 0 or m == 0 or lens.max() == 0:
@@ -544,20 +546,20 @@ def _block_autocov(J: np.ndarray, e: np.ndarray, rseg: np.ndarray, chunk: int = 
         Jp = np.zeros((len(bl), m, L))
         ep = np.zeros((len(bl), L))
         for i, b in enumerate(bl):
-            n = lens[b]
-            Jp[i, :, :n] = J[rseg[b]:rseg[b + 1]].T
-            ep[i, :n] = e[rseg[b]:rseg[b + 1]]
+            Jp[i, :, :lens[b]] = JT[:, rseg[b]:rseg[b + 1]]
+            ep[i, :lens[b]] = e[rseg[b]:rseg[b + 1]]
         Jf = sfft.rfft(Jp, axis=-1, workers=-1)
         Ef = sfft.rfft(ep, axis=-1, workers=-1)
         D = np.sqrt((Ef.real ** 2 + Ef.imag ** 2) * wt / (lens[c0:c0 + len(bl), None] * L))
-        Y = np.concatenate([Jf.real * D[:, None, :], Jf.imag * D[:, None, :]], axis=-1)
+        Jf *= D[:, None, :]
+        # (real, imag) interleaved: the Gram of the real view is sum_f Re(conj(F_p) F_q) D_f^2
+        Y = Jf.view(np.float64)
         for i, b in enumerate(bl):
             out[b] = Y[i] @ Y[i].T
     return out
 
 
-def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R, nparam,
-                 opt) -> np.ndarray:
+def _colored_std(ev: Evaluation, N: _Normal, st: _Structure, R, nparam, opt) -> np.ndarray:
     """Morelli-Klein standard deviations for every free parameter (sandwich covariance).
 
     With the arrow structure, ``Cov = M^-1 C M^-1`` needs, per maneuver, only the residual
@@ -568,9 +570,6 @@ def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R,
     globals' sensitivities, ``J_G - J_L A^-1 M_LG``, is then applied to these small matrices per
     maneuver instead of to the rows.
     """
-    # the final evaluation once more, now keeping the Jacobian rows the sandwich needs (the
-    # iterations only keep each block's normal-equation terms)
-    ev = model.evaluate_all(theta, jacobian=True, keep_jacobian=True)
     _, _, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol)
     C = _Normal(st)
     for ce in ev.channels:
@@ -579,7 +578,7 @@ def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R,
         if not keep.size:
             continue
         w = 1.0 / R[ce.channel]
-        Cb = _block_autocov(ce.J[:, keep], ce.e, ce.rseg)
+        Cb = _block_autocov(ce.JT[keep], ce.e, ce.rseg)
         C.add_blocks(Cb, np.zeros((Cb.shape[0], keep.size)), np.ascontiguousarray(ce.colmap[:, keep]),
                      ce.mans, w * w)
     CGG = C.HGG.copy()

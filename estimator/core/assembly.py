@@ -25,7 +25,7 @@ from numba import njit
 
 @njit(cache=True)
 def channel_normals(S, P0, W, G, sig_q, sig_id, has_b, A, B, V, qlist, dt, dslot, tslot, tcoef, e,
-                    rseg, m, H, g, cnt, J):
+                    rseg, m, H, g, cnt, JT):
     """Jacobian rows of a channel, block by block, and each block's normal-equation terms.
 
     Row ``r`` (interpolating between samples ``P0[r]`` and ``P0[r] + 1`` with weight ``W[r]``)::
@@ -51,12 +51,12 @@ def channel_normals(S, P0, W, G, sig_q, sig_id, has_b, A, B, V, qlist, dt, dslot
     tslot, tcoef : (n, T) sparse terms.
     e : (n,) residuals; rseg : (B+1,) block row offsets; m : number of slots.
     H (B, m, m), g (B, m), cnt (B, m) : outputs, ``J^T J``, ``J^T e`` and non-zeros per slot.
-    J : (n, m) output rows, or a (0, m) array not to keep them.
+    JT : (m, n) output Jacobian, slot by slot, or an (m, 0) array not to keep it.
     """
     nsig = G.shape[0]
     nq = qlist.shape[0]
     nt = tslot.shape[1]
-    keep = J.shape[0] > 0
+    keep = JT.shape[1] > 0
     lmax = 0
     for b in range(rseg.shape[0] - 1):
         lmax = max(lmax, rseg[b + 1] - rseg[b])
@@ -129,9 +129,8 @@ def channel_normals(S, P0, W, G, sig_q, sig_id, has_b, A, B, V, qlist, dt, dslot
             last[s] = hi
         _gram(buf, first, last, e[r0:r0 + nb], H[b], g[b])
         if keep:
-            for i in range(nb):
-                for s in range(m):
-                    J[r0 + i, s] = buf[s, i]
+            for s in range(m):
+                JT[s, r0:r0 + nb] = buf[s, :nb]
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
