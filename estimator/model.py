@@ -32,6 +32,7 @@ maneuver, per-channel blocks) is a view of :meth:`Model.evaluate_all`.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,13 +41,15 @@ from estimator.core.assembly import channel_normals
 from estimator.core.expressions import Table
 from estimator.core.kinematics import smoothed_derivative
 from estimator.core.observations import flow_signal_batch
-from estimator.core.sensitivity import N_SENS, Inputs, integrate_many
+from estimator.core.sensitivity import N_SENS, Inputs, _threads, integrate_many
 from estimator.parameters import make_key
 from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, Problem
 
 _EULER_INDEX = {"phi": 3, "theta": 4, "psi": 5, "h": 6}
 _FLOW_KIND = {"alpha_s": "alpha", "beta_s": "beta", "flank_s": "flank",
               "alpha_t": "alpha", "beta_t": "beta", "tas_t": "tas"}
+#: Problems with at least this many samples evaluate their channels on two threads.
+_THREADED_SAMPLES = 20000
 #: Fixed-point iterations at most for an implicit (``zhat``) model, and their tolerance.
 IMPLICIT_ITERATIONS = 30
 IMPLICIT_TOL = 1e-13
@@ -228,6 +231,8 @@ class _ChannelLayout:
             cols.append(self.didx[:, None])
             nslot += 1
         self.m = nslot
+        # relative work of an evaluation with the Jacobian (rows times slots), to balance threads
+        self.cost = float(self.rows.size * (self.m + 13))
         self.colmap = np.hstack(cols).astype(np.intp) if len(self.mans) else np.zeros((0, nslot), np.intp)
 
     def index_per_sample(self, idx: np.ndarray, values: np.ndarray):
@@ -271,6 +276,8 @@ class _Layout:
 
 class Model:
     """Precomputed structure of a problem; evaluates maneuvers for given parameter values.
+
+    A Model reuses scratch buffers between evaluations: use one Model per thread.
 
     Parameters
     ----------
@@ -431,8 +438,28 @@ class Model:
             cache[ck] = out
             return out
 
-        channels = [self._evaluate_channel(cl, lay, values, S, state_signal, keep_jacobian)
-                    for cl in lay.channels]
+        # every state signal first (the channels then only read them), then the channels, which
+        # are independent: on two threads for a large problem (the compiled kernels and numpy's
+        # array loops release the GIL; the threads end before this returns)
+        # one request per signal identity (a CG signal is the same for every sensor)
+        needed = list({_signal_key(name, cl.ch.sensor): (name, cl.ch.sensor)
+                       for cl in lay.channels for name in cl.state_names}.values())
+
+        def channel(cl):
+            return self._evaluate_channel(cl, lay, values, S, state_signal, keep_jacobian)
+
+        if _threads() > 1 and lay.inputs.t_s.size >= _THREADED_SAMPLES and len(lay.channels) > 1:
+            with ThreadPoolExecutor(_threads()) as ex:
+                # distinct signals write distinct rows of the stacks and cache keys
+                list(ex.map(lambda ns: state_signal(*ns), needed))
+                # longest first, so that the two threads finish together
+                order = sorted(range(len(lay.channels)), key=lambda i: -lay.channels[i].cost)
+                done = dict(zip(order, ex.map(lambda i: channel(lay.channels[i]), order), strict=True))
+            channels = [done[i] for i in range(len(lay.channels))]
+        else:
+            for ns in needed:
+                state_signal(*ns)
+            channels = [channel(cl) for cl in lay.channels]
         return Evaluation(ks, X, lay.seg, channels)
 
     def _evaluate_channel(self, cl: _ChannelLayout, lay: _Layout, values, S, state_signal,

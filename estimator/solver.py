@@ -36,7 +36,9 @@ are NaN.
 
 from __future__ import annotations
 
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -548,8 +550,8 @@ def _block_autocov(JT: np.ndarray, e: np.ndarray, rseg: np.ndarray, chunk: int =
         for i, b in enumerate(bl):
             Jp[i, :, :lens[b]] = JT[:, rseg[b]:rseg[b + 1]]
             ep[i, :lens[b]] = e[rseg[b]:rseg[b + 1]]
-        Jf = sfft.rfft(Jp, axis=-1, workers=-1)
-        Ef = sfft.rfft(ep, axis=-1, workers=-1)
+        Jf = sfft.rfft(Jp, axis=-1)
+        Ef = sfft.rfft(ep, axis=-1)
         D = np.sqrt((Ef.real ** 2 + Ef.imag ** 2) * wt / (lens[c0:c0 + len(bl), None] * L))
         Jf *= D[:, None, :]
         # (real, imag) interleaved: the Gram of the real view is sum_f Re(conj(F_p) F_q) D_f^2
@@ -572,13 +574,19 @@ def _colored_std(ev: Evaluation, N: _Normal, st: _Structure, R, nparam, opt) -> 
     """
     _, _, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol)
     C = _Normal(st)
-    for ce in ev.channels:
-        # only the slots that are free somewhere: fixed columns drop out of the sandwich
-        keep = np.nonzero(st.free[ce.colmap].any(axis=0))[0]
-        if not keep.size:
-            continue
+    # only the slots that are free somewhere: fixed columns drop out of the sandwich
+    work = [(ce, np.nonzero(st.free[ce.colmap].any(axis=0))[0]) for ce in ev.channels]
+    work = [(ce, keep) for ce, keep in work if keep.size]
+
+    def autocov(item):
+        ce, keep = item
+        return _block_autocov(ce.JT[keep], ce.e, ce.rseg)
+
+    # channels are independent: two threads (FFTs and BLAS release the GIL)
+    with ThreadPoolExecutor(min(2, os.cpu_count() or 1)) as ex:
+        blocks = list(ex.map(autocov, work))
+    for (ce, keep), Cb in zip(work, blocks, strict=True):
         w = 1.0 / R[ce.channel]
-        Cb = _block_autocov(ce.JT[keep], ce.e, ce.rseg)
         C.add_blocks(Cb, np.zeros((Cb.shape[0], keep.size)), np.ascontiguousarray(ce.colmap[:, keep]),
                      ce.mans, w * w)
     CGG = C.HGG.copy()

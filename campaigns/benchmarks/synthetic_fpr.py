@@ -7,8 +7,9 @@ flat-earth state equations (SPEC §3) hold exactly. The IMU sits away from the C
 accelerometers and gyros carry per-maneuver biases; altitude is the quadrature of ``h'``. The
 measured channels are the paper's Table 1 models (``estimator/models/tejas.toml``) applied to
 the exact flow at each sensor, ``V + omega x (r_s - r_cg)`` at ``t - tau``, with per-aircraft
-biases, shared correction tables and white noise. So the estimator's model fits the data to the
-noise, and a benchmark measures the solver, not a model mismatch.
+biases, shared correction tables and white noise; DGPS height is the geometric altitude with a
+per-maneuver offset. So the estimator's model fits the data to the noise, and a benchmark
+measures the solver, not a model mismatch.
 
 A fleet of five aircraft: three with the nose probe, two with the flight-test boom (paper §3),
 each with its own CG and installation biases. Data are generated in memory in about a second for
@@ -40,11 +41,11 @@ SENSORS = {
 }
 #: aircraft id -> carries the boom (else the nose probe)
 FLEET = {"PV1": False, "PV2": False, "PV3": False, "PT1": True, "PT2": True}
-NOISE = {"phi": 0.03 * DEG, "theta": 0.03 * DEG, "psi": 0.03 * DEG, "tas": 0.3, "h": 1.0,
+NOISE = {"phi": 0.03 * DEG, "theta": 0.03 * DEG, "psi": 0.03 * DEG, "tas": 0.3, "h": 1.0, "h_dgps": 0.5,
          "alpha_zl": 0.07 * DEG, "alpha_zr": 0.07 * DEG, "alpha_zsp": 0.1 * DEG,
          "beta_zsp": 0.1 * DEG, "beta_znp": 0.1 * DEG, "alpha_zb": 0.05 * DEG,
          "beta_zbu": 0.05 * DEG, "beta_zbl": 0.05 * DEG}
-TAUS = {"tau_phi": 0.02, "tau_theta": 0.02, "tau_psi": 0.02, "tau_tas": 0.0, "tau_h": 0.0,
+TAUS = {"tau_phi": 0.02, "tau_theta": 0.02, "tau_psi": 0.02, "tau_tas": 0.0, "tau_h": 0.0, "tau_dgps": 0.1,
         "tau_alpha_zl": 0.03, "tau_alpha_zr": 0.045, "tau_sp": 0.08, "tau_np": 0.06,
         "tau_ba": 0.01, "tau_bu": 0.015, "tau_bl": 0.015}
 SCALES = {"k_ba": 0.02, "k_bu": -0.03, "k_bl": 0.025}
@@ -151,6 +152,8 @@ def _maneuver(mid: str, aircraft: str, duration_s: float, rate_hz: float, truth:
     meas = {}
     for name, idx in (("phi", 3), ("theta", 4), ("psi", 5), ("h", 6)):
         meas[name] = states_at(t - TAUS[f"tau_{name}"])[:, idx]
+    # DGPS height: geometric (pressure altitude here is geometric too: k_h = 0), its own offset
+    meas["h_dgps"] = states_at(t - TAUS["tau_dgps"])[:, 6] + rng.uniform(-30.0, 30.0)
     meas["tas"] = flow(t - TAUS["tau_tas"], None)[3]
     for ch, sensor, sign in (("alpha_zl", "vane_left", -1.0), ("alpha_zr", "vane_right", 1.0)):
         ts = t - TAUS[f"tau_{ch}"]

@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def channel_normals(S, P0, W, G, sig_q, sig_id, has_b, A, B, V, qlist, dt, dslot, tslot, tcoef, e,
                     rseg, m, H, g, cnt, JT):
     """Jacobian rows of a channel, block by block, and each block's normal-equation terms.

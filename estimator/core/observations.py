@@ -124,7 +124,7 @@ def flow_signal_batch(X: np.ndarray, omega: np.ndarray | None, r_cg: np.ndarray 
     return val, dv, (b if has_sensor else None)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sensor_velocity(X, omega, r_cg, sensor, vs):
     # V + omega x r with r = sensor - r_cg, as np.cross computes it
     for i in range(X.shape[0]):
@@ -137,7 +137,7 @@ def _sensor_velocity(X, omega, r_cg, sensor, vs):
         vs[i, 2] = X[i, 2] + (o0 * r1 - o1 * r0)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _flow_derivatives(vs, kind, r_cg, sensor, dv, b):
     has_sensor = b.shape[0] > 0
     for i in range(vs.shape[0]):

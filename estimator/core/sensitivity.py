@@ -25,6 +25,9 @@ steps need only the states, which cost about a tenth.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 from numba import njit
 
@@ -196,22 +199,48 @@ def integrate_many(inputs: Inputs, params: np.ndarray, g: float, sensitivities: 
     X : (N, 7) states; S : (N, 7, 13) sensitivities (``out_S`` if given), or None.
     """
     params = np.ascontiguousarray(params, dtype=np.float64)
-    args = (inputs.seg, inputs.t_s, params, inputs.a_m, inputs.om_m, inputs.omd, inputs.a_mid,
-            inputs.om_mid, inputs.omd_mid, inputs.r_imu_cg, float(g))
+    n = inputs.t_s.shape[0]
+    X = np.empty((n, 7))
     if sensitivities:
-        n = inputs.t_s.shape[0]
         if out_S is None:
             out_S = np.empty((n, 7, N_SENS))
         elif out_S.shape != (n, 7, N_SENS) or not out_S.flags.c_contiguous:
             raise ValueError(f"out_S must be a C-contiguous ({n}, 7, {N_SENS}) array")
-        return _integrate_many(*args, out_S), out_S
-    return _integrate_states_many(*args), None
+    K = inputs.seg.size - 1
+    # maneuvers are independent: two halves (by samples) on two threads when there are two
+    # cores (the kernels release the GIL; the threads end before this returns)
+    parts = [(0, K)]
+    if _threads() > 1 and K > 1:
+        half = int(np.searchsorted(inputs.seg, inputs.seg[-1] / 2))
+        half = min(max(half, 1), K - 1)
+        parts = [(0, half), (half, K)]
+
+    def run(part):
+        a, b = part
+        args = (inputs.seg[a:b + 1], inputs.t_s, params[a:b], inputs.a_m, inputs.om_m, inputs.omd,
+                inputs.a_mid, inputs.om_mid, inputs.omd_mid, inputs.r_imu_cg[a:b], float(g), X)
+        if sensitivities:
+            _integrate_many(*args, out_S)
+        else:
+            _integrate_states_many(*args)
+
+    if len(parts) == 1:
+        run(parts[0])
+    else:
+        with ThreadPoolExecutor(len(parts)) as ex:
+            list(ex.map(run, parts))
+    return X, (out_S if sensitivities else None)
 
 
-@njit(cache=True)
-def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, g, S):
-    n = t_s.shape[0]
-    X = np.empty((n, 7))
+def _threads() -> int:
+    """Worker threads for the estimator's compiled kernels: the cores, at most two (the work is
+    split in two halves; more threads would mostly share memory bandwidth)."""
+    return min(2, os.cpu_count() or 1)
+
+
+@njit(cache=True, nogil=True)
+def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, g, X, S):
+    # maneuver m is samples seg[m]:seg[m+1] of the full arrays (seg may be a slice of offsets)
     k1x = np.empty(7)
     k2x = np.empty(7)
     k3x = np.empty(7)
@@ -257,7 +286,6 @@ def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_
                 for j in range(N_SENS):
                     S[k + 1, i, j] = Sk[i, j] + h6 * (k1s[i, j] + 2.0 * k2s[i, j] + 2.0 * k3s[i, j]
                                                       + k4s[i, j])
-    return X
 
 
 @njit(cache=True)
@@ -286,10 +314,8 @@ def _rhs_states(x, a_m, om_m, omd, r, da, dw, g, xd):
     xd[6] = u * sth - v * cth * sph - w * cth * cph
 
 
-@njit(cache=True)
-def _integrate_states_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, g):
-    n = t_s.shape[0]
-    X = np.empty((n, 7))
+@njit(cache=True, nogil=True)
+def _integrate_states_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, g, X):
     k1x = np.empty(7)
     k2x = np.empty(7)
     k3x = np.empty(7)
@@ -317,4 +343,3 @@ def _integrate_states_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_
             h6 = h / 6.0
             for i in range(7):
                 X[k + 1, i] = xk[i] + h6 * (k1x[i] + 2.0 * k2x[i] + 2.0 * k3x[i] + k4x[i])
-    return X
