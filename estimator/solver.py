@@ -348,9 +348,10 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         raise ValueError(f"{problem.source}: no free parameters; free some in the problem file")
 
     def evaluate_all(th, jac):
-        # the Jacobian is kept for the Morelli-Klein deviations of whichever evaluation is last:
-        # writing it costs less than evaluating the last one again
-        return model.evaluate_all(th, jacobian=jac, keep_jacobian=jac and opt.colored)
+        # the iterations need each block's normal-equation terms, not the Jacobian itself: fresh
+        # memory for it each time costs more (page by page from the operating system) than
+        # evaluating the last iterate once more for the Morelli-Klein deviations
+        return model.evaluate_all(th, jacobian=jac, keep_jacobian=False)
 
     def variances(sse, cnt):
         return np.maximum(np.where(cnt > 0, sse / np.maximum(cnt, 1), 1.0), 1e-16)
@@ -396,12 +397,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
                     step[idx] = dL[k]
                 trial = np.clip(theta + step, st.lo, st.hi)
                 # the first trial is usually accepted and is then the next iterate: evaluate it
-                # with the Jacobian right away (the values are the same either way). The current
-                # Jacobian rows are then no longer needed (the normal equations are built): let
-                # them go first, so that only one set is ever held
-                if attempt == 0:
-                    for ce in evals.channels:
-                        ce.JT = None
+                # with the Jacobian right away (the values are the same either way)
                 trial_ev = evaluate_all(trial, attempt == 0)
                 sse_t, cnt_t = _residuals(trial_ev, nch)
                 cost_t = _cost(sse_t, cnt_t, R)
@@ -465,9 +461,9 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
     confounding += _high_correlations(corr_G, [keys[i] for i in st.glob], opt.correlation_warn)
     std_col = np.full(len(keys), np.nan)
     if opt.colored:
-        if any(ce.JT is None for ce in evals.channels):  # the last trial was rejected
-            evals = model.evaluate_all(theta, jacobian=True, keep_jacobian=True)
-        std_col = _colored_std(evals, N, st, R, len(keys), opt)
+        # the final evaluation once more, now keeping the Jacobian the sandwich needs
+        evals_J = model.evaluate_all(theta, jacobian=True, keep_jacobian=True)
+        std_col = _colored_std(evals_J, N, st, R, len(keys), opt)
     if any(c.kind in ("unidentifiable", "no_data") for c in confounding):
         message += "; some parameters were held because the data do not determine them (see confounding)"
     return EstimationResult.build(
