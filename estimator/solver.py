@@ -514,7 +514,7 @@ def _high_correlations(corr: np.ndarray, keys: list[str], thr: float) -> list[Co
     return out
 
 
-def _block_autocov(JT: np.ndarray, e: np.ndarray, rseg: np.ndarray, chunk: int = 32) -> np.ndarray:
+def _block_autocov(JT: np.ndarray, e: np.ndarray, rseg: np.ndarray, chunk: int = 8) -> np.ndarray:
     """``sum_i sum_j J_i^T r(i - j) J_j`` per block, ``r`` the block's biased residual autocorrelation.
 
     Every lag is kept (as in Morelli & Klein 1997). With both sequences zero-padded to
