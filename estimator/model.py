@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimator.core.assembly import channel_normals
+from estimator.core.assembly import channel_normals, shift_index, shift_values
 from estimator.core.expressions import Table
 from estimator.core.kinematics import smoothed_derivative
 from estimator.core.observations import flow_signal_batch
@@ -175,11 +175,11 @@ class _ChannelLayout:
         self.cseg = np.concatenate([[0], np.cumsum(lens)]).astype(np.intp)
         # evaluation samples: every sample of the channel's maneuvers (the implicit models'
         # fixed point is iterated over all of them, as for one maneuver); rows: the cost's
-        self.off = np.repeat(sub_seg[self.pos], lens)  # first sample of the maneuver, in sub space
+        self.off = np.repeat(sub_seg[self.pos], lens).astype(np.int64)  # maneuver's first sample
         self.t = np.concatenate([m.t_s for m in mans]) if mans else np.zeros(0)
         self.t0 = np.repeat([m.t_s[0] for m in mans], lens)
         self.dt = np.repeat([m.dt_s for m in mans], lens)
-        self.last = np.repeat(lens - 2, lens)
+        self.last = np.repeat(lens - 2, lens).astype(np.int64)
         rows, local, rseg = [], [], [0]
         for b, k in enumerate(self.mans):
             g = model.guard_samples(int(k), c)
@@ -468,14 +468,15 @@ class Model:
         jacobian = S is not None
         tau = cl.index_per_sample(cl.didx, values) if cl.didx is not None else 0.0
         # linear interpolation at t - tau on each maneuver's uniform grid
-        s = (cl.t - tau - cl.t0) / cl.dt
-        i0 = np.clip(np.floor(s).astype(np.intp), 0, cl.last)
-        w = np.clip(s - i0, 0.0, 1.0)
-        P0 = cl.off + i0
+        n_all = cl.z.size
+        P0 = np.empty(n_all, dtype=np.int64)
+        w = np.empty(n_all)
+        shift_index(cl.t, np.atleast_1d(np.asarray(tau, dtype=float)), cl.t0, cl.dt, cl.last, cl.off, P0, w)
         signals: dict[str, np.ndarray] = {}
         for name in cl.state_names:
             val, _ = state_signal(name, ch.sensor)
-            signals[name] = (1 - w) * val[P0] + w * val[P0 + 1]
+            signals[name] = np.empty(n_all)
+            shift_values(np.ascontiguousarray(val), P0, w, signals[name])
         signals["z"] = cl.z
         signals.update(cl.data)
         params = {name: cl.index_per_sample(cl.pidx[name], values) for name in cl.pnames}
@@ -527,7 +528,7 @@ class Model:
         g = np.empty((nb, cl.m))
         cnt = np.empty((nb, cl.m), dtype=np.int64)
         JT = np.empty((cl.m, n if keep else 0))
-        channel_normals(S, P0[rows].astype(np.int64), w[rows], G, sig_q, sig_id, has_b, lay.SA, lay.SB,
+        channel_normals(S, P0[rows], w[rows], G, sig_q, sig_id, has_b, lay.SA, lay.SB,
                         lay.SV, np.array(sorted(qs), dtype=np.int64), cl.dt[rows],
                         cl.dslot if cl.didx is not None else -1, tslot, tcoef, e,
                         cl.rseg.astype(np.int64), cl.m, H, g, cnt, JT)

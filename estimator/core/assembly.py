@@ -230,3 +230,28 @@ def scatter_blocks(H, g, colmap, mans, w, gpos, lpos, HGG, gG, HLL, HGL, gL):
                         HGL[k, g1, l2] += v
                 elif l2 >= 0:
                     HLL[k, l1, l2] += v
+
+
+@njit(cache=True, nogil=True)
+def shift_index(t, tau, t0, dt, last, off, P0, W):
+    """Linear interpolation at ``t - tau`` on each maneuver's uniform grid, in one pass.
+
+    ``s = (t - tau - t0) / dt``, left sample ``clip(floor(s), 0, last)`` (``last = n - 2`` of the
+    sample's maneuver), weight ``clip(s - i0, 0, 1)``; ``P0 = off + i0`` indexes the concatenated
+    samples. The same operations as the array expressions they replace. ``tau`` has one value,
+    or one per sample.
+    """
+    one = tau.shape[0] == 1
+    for i in range(t.shape[0]):
+        s = (t[i] - (tau[0] if one else tau[i]) - t0[i]) / dt[i]
+        i0 = min(max(int(np.floor(s)), 0), last[i])
+        W[i] = min(max(s - i0, 0.0), 1.0)
+        P0[i] = off[i] + i0
+
+
+@njit(cache=True, nogil=True)
+def shift_values(val, P0, W, out):
+    """``out = (1 - W) * val[P0] + W * val[P0 + 1]``."""
+    for i in range(P0.shape[0]):
+        w = W[i]
+        out[i] = (1 - w) * val[P0[i]] + w * val[P0[i] + 1]
