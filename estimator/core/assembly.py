@@ -66,16 +66,18 @@ def channel_normals(S, P0, W, G, sig_q, sig_id, has_b, A, B, V, qlist, dt, dslot
     c0 = np.zeros(7)
     c1 = np.zeros(7)
     b3 = np.zeros(3)
+    jrow = np.zeros(13)
     for b in range(rseg.shape[0] - 1):
         r0 = rseg[b]
         nb = rseg[b + 1] - r0
+        # zero the block column by column (contiguous), then write each row's entries once
+        for s in range(m):
+            buf[s, :nb] = 0.0
         for i in range(nb):
             r = r0 + i
             p0 = P0[r]
             w1 = W[r]
             w0 = 1 - w1
-            for s in range(m):
-                buf[s, i] = 0.0
             for q in range(7):
                 c0[q] = 0.0
                 c1[q] = 0.0
@@ -100,14 +102,18 @@ def channel_normals(S, P0, W, G, sig_q, sig_id, has_b, A, B, V, qlist, dt, dslot
                             b3[k] += g0 * B[sid, p0, k] + g1 * B[sid, p0 + 1, k]
                 if dslot >= 0:
                     dyt += gr * (-(V[sid, p0 + 1] - V[sid, p0]) / dt[r])
+            for j in range(13):
+                jrow[j] = 0.0
             for a in range(nq):
                 q = qlist[a]
                 x0 = c0[q]
                 x1 = c1[q]
                 for j in range(13):
-                    buf[j, i] += x0 * S[p0, q, j] + x1 * S[p0 + 1, q, j]
+                    jrow[j] += x0 * S[p0, q, j] + x1 * S[p0 + 1, q, j]
             for k in range(3):
-                buf[10 + k, i] += b3[k]
+                jrow[10 + k] += b3[k]
+            for j in range(13):
+                buf[j, i] = jrow[j]
             for t in range(nt):
                 buf[tslot[r, t], i] += tcoef[r, t]
             if dslot >= 0:
