@@ -26,8 +26,12 @@ index maps from each channel's Jacobian columns to parameters) is prepared once.
 a channel is assembled in slot space — 13 state-equation columns, then one column per parameter,
 per table value and for the time shift, the same for every maneuver, with a per-maneuver map to
 the parameter indices — by a compiled kernel that chains the interpolated signal derivatives to
-the sensitivities row by row (:mod:`estimator.core.assembly`). :meth:`Model.evaluate` (one
-maneuver, per-channel blocks) is a view of :meth:`Model.evaluate_all`.
+the sensitivities row by row, each block's ``J^T J`` and ``J^T e`` right after
+(:mod:`estimator.core.assembly`); the solver needs only those, so the Jacobian itself is kept
+only when asked. The compiled kernels release the GIL: a large problem runs the two halves of the
+integration, the state signals and the channels on a two-thread pool that ends with the call
+(results do not depend on the scheduling). :meth:`Model.evaluate` (one maneuver, per-channel
+blocks) is a view of :meth:`Model.evaluate_all`.
 """
 
 from __future__ import annotations
@@ -41,7 +45,7 @@ from estimator.core.assembly import channel_normals, shift_index, shift_values
 from estimator.core.expressions import Table
 from estimator.core.kinematics import smoothed_derivative
 from estimator.core.observations import flow_signal_batch
-from estimator.core.sensitivity import N_SENS, Inputs, _threads, integrate_many
+from estimator.core.sensitivity import N_SENS, Inputs, integrate_many, worker_threads
 from estimator.parameters import make_key
 from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, Problem
 
@@ -448,8 +452,8 @@ class Model:
         def channel(cl):
             return self._evaluate_channel(cl, lay, values, S, state_signal, keep_jacobian)
 
-        if _threads() > 1 and lay.inputs.t_s.size >= _THREADED_SAMPLES and len(lay.channels) > 1:
-            with ThreadPoolExecutor(_threads()) as ex:
+        if worker_threads() > 1 and lay.inputs.t_s.size >= _THREADED_SAMPLES and len(lay.channels) > 1:
+            with ThreadPoolExecutor(worker_threads()) as ex:
                 # distinct signals write distinct rows of the stacks and cache keys
                 list(ex.map(lambda ns: state_signal(*ns), needed))
                 # longest first, so that the two threads finish together

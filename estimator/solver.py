@@ -36,7 +36,6 @@ are NaN.
 
 from __future__ import annotations
 
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -46,6 +45,7 @@ from scipy import fft as sfft
 from threadpoolctl import threadpool_limits
 
 from estimator.core.assembly import scatter_blocks
+from estimator.core.sensitivity import worker_threads
 from estimator.model import Evaluation, Model
 from estimator.problem import Problem
 from estimator.result import Confounding, EstimationResult, ResidualStats
@@ -586,7 +586,7 @@ def _colored_std(ev: Evaluation, N: _Normal, st: _Structure, R, nparam, opt) -> 
         return _block_autocov(ce.JT[keep], ce.e, ce.rseg)
 
     # channels are independent: two threads (FFTs and BLAS release the GIL)
-    with ThreadPoolExecutor(min(2, os.cpu_count() or 1)) as ex:
+    with ThreadPoolExecutor(worker_threads()) as ex:
         blocks = list(ex.map(autocov, work))
     for (ce, keep), Cb in zip(work, blocks, strict=True):
         w = 1.0 / R[ce.channel]

@@ -15,6 +15,10 @@ avoids writing and re-reading the whole Jacobian (the hot loop is memory-bound o
 Gram matrices are compiled loops rather than BLAS calls: they are small, and a multi-threaded BLAS
 spends more on waking its threads than on the arithmetic (twice the estimator's time on two
 busy cores).
+
+Also here: the scatter of those blocks into the arrow-structured normal equations, and the
+time-shift interpolation of a channel's state signals. Every kernel releases the GIL, so that
+independent channels can run on two threads.
 """
 
 from __future__ import annotations
@@ -197,7 +201,7 @@ def _dot4(x, y0, y1, y2, y3):
     return a0, a1, a2, a3
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def scatter_blocks(H, g, colmap, mans, w, gpos, lpos, HGG, gG, HLL, HGL, gL):
     """Add ``w`` times slot-space normal-equation blocks into the arrow-structured system.
 

@@ -210,7 +210,7 @@ def integrate_many(inputs: Inputs, params: np.ndarray, g: float, sensitivities: 
     # maneuvers are independent: two halves (by samples) on two threads when there are two
     # cores (the kernels release the GIL; the threads end before this returns)
     parts = [(0, K)]
-    if _threads() > 1 and K > 1:
+    if worker_threads() > 1 and K > 1:
         half = int(np.searchsorted(inputs.seg, inputs.seg[-1] / 2))
         half = min(max(half, 1), K - 1)
         parts = [(0, half), (half, K)]
@@ -232,7 +232,7 @@ def integrate_many(inputs: Inputs, params: np.ndarray, g: float, sensitivities: 
     return X, (out_S if sensitivities else None)
 
 
-def _threads() -> int:
+def worker_threads() -> int:
     """Worker threads for the estimator's compiled kernels: the cores, at most two (the work is
     split in two halves; more threads would mostly share memory bandwidth)."""
     return min(2, os.cpu_count() or 1)
