@@ -389,7 +389,8 @@ class Model:
         return ManeuverEval(k, ev.X, tuple(blocks))
 
     def evaluate_all(self, values: np.ndarray, jacobian: bool = True,
-                     maneuvers: tuple[int, ...] | None = None, keep_jacobian: bool = True) -> Evaluation:
+                     maneuvers: tuple[int, ...] | None = None, keep_jacobian: bool = True,
+                     on_channel=None) -> Evaluation:
         """Outputs (and Jacobians) of every channel of the given maneuvers (default: all).
 
         Parameters
@@ -400,6 +401,9 @@ class Model:
         maneuvers : maneuver indices; None for every maneuver of the problem.
         keep_jacobian : keep the Jacobian (``ChannelEval.J``), else only each block's
             normal-equation terms (less memory traffic when the Jacobian itself is not needed).
+        on_channel : called with each :class:`ChannelEval` as soon as it is complete (possibly
+            on a worker thread, channels in any order): a caller that needs each channel's
+            Jacobian once can use it and drop it (``ce.JT = None``) instead of holding all.
         """
         p = self.problem
         ks = tuple(range(len(p.maneuvers))) if maneuvers is None else tuple(int(k) for k in maneuvers)
@@ -450,7 +454,10 @@ class Model:
                        for cl in lay.channels for name in cl.state_names}.values())
 
         def channel(cl):
-            return self._evaluate_channel(cl, lay, values, S, state_signal, keep_jacobian)
+            ce = self._evaluate_channel(cl, lay, values, S, state_signal, keep_jacobian)
+            if on_channel is not None:
+                on_channel(ce)
+            return ce
 
         if worker_threads() > 1 and lay.inputs.t_s.size >= _THREADED_SAMPLES and len(lay.channels) > 1:
             with ThreadPoolExecutor(worker_threads()) as ex:

@@ -37,7 +37,6 @@ are NaN.
 from __future__ import annotations
 
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,7 +44,6 @@ from scipy import fft as sfft
 from threadpoolctl import threadpool_limits
 
 from estimator.core.assembly import scatter_blocks
-from estimator.core.sensitivity import worker_threads
 from estimator.model import Evaluation, Model
 from estimator.problem import Problem
 from estimator.result import Confounding, EstimationResult, ResidualStats
@@ -461,9 +459,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
     confounding += _high_correlations(corr_G, [keys[i] for i in st.glob], opt.correlation_warn)
     std_col = np.full(len(keys), np.nan)
     if opt.colored:
-        # the final evaluation once more, now keeping the Jacobian the sandwich needs
-        evals_J = model.evaluate_all(theta, jacobian=True, keep_jacobian=True)
-        std_col = _colored_std(evals_J, N, st, R, len(keys), opt)
+        std_col = _colored_std(model, theta, N, st, R, len(keys), opt)
     if any(c.kind in ("unidentifiable", "no_data") for c in confounding):
         message += "; some parameters were held because the data do not determine them (see confounding)"
     return EstimationResult.build(
@@ -564,7 +560,8 @@ def _block_autocov(JT: np.ndarray, e: np.ndarray, rseg: np.ndarray, chunk: int =
     return out
 
 
-def _colored_std(ev: Evaluation, N: _Normal, st: _Structure, R, nparam, opt) -> np.ndarray:
+def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R, nparam,
+                 opt) -> np.ndarray:
     """Morelli-Klein standard deviations for every free parameter (sandwich covariance).
 
     With the arrow structure, ``Cov = M^-1 C M^-1`` needs, per maneuver, only the residual
@@ -577,19 +574,21 @@ def _colored_std(ev: Evaluation, N: _Normal, st: _Structure, R, nparam, opt) -> 
     """
     _, _, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol)
     C = _Normal(st)
-    # only the slots that are free somewhere: fixed columns drop out of the sandwich
-    work = [(ce, np.nonzero(st.free[ce.colmap].any(axis=0))[0]) for ce in ev.channels]
-    work = [(ce, keep) for ce, keep in work if keep.size]
+    done: dict[int, tuple] = {}
 
-    def autocov(item):
-        ce, keep = item
-        return _block_autocov(ce.JT[keep], ce.e, ce.rseg)
+    def autocov(ce):
+        # only the slots that are free somewhere: fixed columns drop out of the sandwich
+        keep = np.nonzero(st.free[ce.colmap].any(axis=0))[0]
+        if keep.size:
+            done[ce.channel] = (ce, keep, _block_autocov(ce.JT[keep], ce.e, ce.rseg))
+        ce.JT = None  # used once: do not hold every channel's Jacobian at the same time
 
-    # channels are independent: two threads (FFTs and BLAS release the GIL)
-    with ThreadPoolExecutor(worker_threads()) as ex:
-        blocks = list(ex.map(autocov, work))
-    for (ce, keep), Cb in zip(work, blocks, strict=True):
-        w = 1.0 / R[ce.channel]
+    # the last iterate once more, now with its Jacobian, each channel's autocovariance computed
+    # (on the evaluation's worker threads) as soon as the channel is done
+    model.evaluate_all(theta, jacobian=True, keep_jacobian=True, on_channel=autocov)
+    for c in sorted(done):
+        ce, keep, Cb = done[c]
+        w = 1.0 / R[c]
         C.add_blocks(Cb, np.zeros((Cb.shape[0], keep.size)), np.ascontiguousarray(ce.colmap[:, keep]),
                      ce.mans, w * w)
     CGG = C.HGG.copy()
