@@ -139,7 +139,9 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> di
             }
             sig |= {"alpha_t": tr["true_alpha_cg_rad"].to_numpy(),
                     "beta_t": tr["true_beta_cg_rad"].to_numpy(),
-                    "tas_t": tr["true_tas_mps"].to_numpy(), "z": y, "zhat": y}
+                    "tas_t": tr["true_tas_mps"].to_numpy(), "z": y, "zhat": y,
+                    "p": tr["true_p_rps"].to_numpy(), "q": tr["true_q_rps"].to_numpy(),
+                    "r": tr["true_r_rps"].to_numpy()}
             for name in ch.expression.names - set(sig):
                 if name in ps.specs:
                     continue

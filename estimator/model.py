@@ -50,6 +50,7 @@ from estimator.parameters import make_key
 from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, Problem
 
 _EULER_INDEX = {"phi": 3, "theta": 4, "psi": 5, "h": 6}
+_RATE_INDEX = {"p": 0, "q": 1, "r": 2}
 _FLOW_KIND = {"alpha_s": "alpha", "beta_s": "beta", "flank_s": "flank",
               "alpha_t": "alpha", "beta_t": "beta", "tas_t": "tas"}
 #: Problems with at least this many samples evaluate their channels on two threads.
@@ -434,6 +435,16 @@ class Model:
                 out = (X[:, i], (i, sid, False))
                 if jacobian:
                     lay.SV[sid] = X[:, i]
+            elif name in _RATE_INDEX:
+                # a bias-corrected body rate: depends on its gyro bias only (d/d(d_omega) = -1)
+                j = _RATE_INDEX[name]
+                val = omega[:, j]
+                if jacobian:
+                    lay.SA[sid] = 0.0
+                    lay.SB[sid] = 0.0
+                    lay.SB[sid][:, j] = -1.0
+                    lay.SV[sid] = val
+                out = (val, (-1, sid, True))
             else:
                 sensor_pos = p.sensors[sensor] if name.endswith("_s") else None
                 dv_out = lay.SA[sid] if jacobian else None

@@ -14,6 +14,7 @@ Channel models are text (:mod:`estimator.core.expressions`) over these signals:
 ``beta_t``          sideslip at the CG, rad
 ``tas_t``           true airspeed at the CG, m/s
 ``phi``, ``theta``, ``psi``, ``h``  reconstructed Euler angles (rad) and altitude (m)
+``p``, ``q``, ``r``   body rates, gyro biases removed, rad/s (for rate-dependent sensor terms)
 ``z``               the channel's own measurement (SPEC §5: f3, f4 take a measured argument)
 ``zhat``            the channel's own *modelled* measurement: ``y = F(zhat)`` is solved as an implicit
                     equation. As a table argument it is the measured-angle table of the paper without
@@ -36,7 +37,8 @@ from estimator.parameters import ParameterSet, ParameterSpec
 
 #: Signals computed from the reconstructed states (their derivatives are chained to the states).
 STATE_SIGNALS = frozenset(
-    {"alpha_s", "beta_s", "flank_s", "alpha_t", "beta_t", "tas_t", "phi", "theta", "psi", "h"}
+    {"alpha_s", "beta_s", "flank_s", "alpha_t", "beta_t", "tas_t", "phi", "theta", "psi", "h",
+     "p", "q", "r"}
 )
 #: Signals that need a sensor position.
 SENSOR_SIGNALS = frozenset({"alpha_s", "beta_s", "flank_s"})

@@ -44,7 +44,7 @@ def _truth_values(rng: np.random.Generator) -> dict:
     return {
         "dax": 0.08, "day": -0.05, "daz": 0.12, "dp": 0.2 * DEG, "dq": -0.3 * DEG, "dr": 0.15 * DEG,
         "tau_phi": 0.02, "tau_theta": 0.02, "tau_psi": 0.02, "tau_tas": 0.0, "tau_h": 0.0,
-        "tau_alpha_zl": 0.03, "tau_alpha_zr": 0.045, "tau_sp": 0.08, "tau_np": 0.06, "k_h": 0.0,
+        "tau_alpha_zl": 0.03, "tau_alpha_zr": 0.045, "tau_sp": 0.08, "tau_np": 0.06, "k_h": 0.0, "k_spr": 0.0,
         "b_l": 0.3 * DEG, "b_r": -0.2 * DEG, "b_sa": 0.25 * DEG, "b_sb": -0.15 * DEG, "b_n": 0.1 * DEG,
         "f1": None, "f2": None, "f3": None, "f4": None, "f5": None,
         "_table_noise": rng.normal(size=40),
