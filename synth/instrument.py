@@ -450,17 +450,36 @@ def instrument(
                 theta.shape)
         dru[raw] = transduce(law.dp_pa(theta, qc_s, m_s), scale=e.scale, noise_std=e.noise_pa,
                              quant_step=e.quant_pa, rng=rng(seeds.probe_noise, s))
-    # the airdata computer on the DRU's samples (paper Eq. 2)
+    # A probe's angle is dp / qc: the impact pressure it is normalised by must lag as the probe's
+    # differential pressure does, or the probe's delay is no delay of its channel (SPEC §2, §6:
+    # y(t - tau)) but an error alpha * (d ln qc / dt) * (tau_probe - tau_qc) -- 0.004 deg in a
+    # pull-up with an 80 ms probe lag, 8 Cramer-Rao sigmas of the side-probe AOA bias. The ADC's
+    # airdata for each probe are therefore its qc and ps transducers' samples at the probe's lag
+    # (the same transducers: same bias and noise realisation as qc_pa, ps_pa), as when the probe's
+    # pressures and its normalising pressure share one pneumatic path and transducer frame.
+    def probe_airdata(s: str) -> tuple[np.ndarray, np.ndarray]:
+        qc_s = transduce(at("dru", s, qc_true), bias=ad.qc_bias_pa, noise_std=ad.qc_noise_pa,
+                         quant_step=ad.qc_quant_pa, rng=rng(seeds.airdata_noise, "qc_pa"))
+        ps_s = transduce(at("dru", s, truth.p_static_pa), bias=ad.ps_bias_pa,
+                         noise_std=ad.ps_noise_pa, quant_step=ad.ps_quant_pa,
+                         rng=rng(seeds.airdata_noise, "ps_pa"))
+        return qc_s, mach_from_pressures(qc_s, ps_s)
+
+    # the airdata computer on the DRU's samples (paper Eq. 2); the vanes' Mach argument stays the
+    # ADC's own (a lag mismatch there costs only df_v/dM * dM/dt * dtau)
     dru["alpha_zl_rad"] = adc.f_v(dru["alpha_lm_rad"], mach_m, gear_m)
     dru["alpha_zr_rad"] = adc.f_v(dru["alpha_rm_rad"], mach_m, gear_m)
-    dru["alpha_lsp_rad"] = adc.side_probe_angle_rad(dru["dp_alpha_lsp_pa"], dru["qc_pa"], mach_m)
-    dru["alpha_rsp_rad"] = adc.side_probe_angle_rad(dru["dp_alpha_rsp_pa"], dru["qc_pa"], mach_m)
+    qc_l, mach_l = probe_airdata("side_probe_left")
+    qc_r, mach_r = probe_airdata("side_probe_right")
+    dru["alpha_lsp_rad"] = adc.side_probe_angle_rad(dru["dp_alpha_lsp_pa"], qc_l, mach_l)
+    dru["alpha_rsp_rad"] = adc.side_probe_angle_rad(dru["dp_alpha_rsp_pa"], qc_r, mach_r)
     dru["alpha_zsp_rad"], dru["beta_zsp_rad"] = adc.f_sp(dru["alpha_lsp_rad"], dru["alpha_rsp_rad"],
-                                                         mach_m, gear_m)
+                                                         0.5 * (mach_l + mach_r), gear_m)
     if "nose_probe" in sensors:
-        dru["flank_np_rad"] = adc.nose_probe_flank_rad(dru["dp_beta_np_pa"], dru["qc_pa"], mach_m)
+        qc_n, mach_n = probe_airdata("nose_probe")
+        dru["flank_np_rad"] = adc.nose_probe_flank_rad(dru["dp_beta_np_pa"], qc_n, mach_n)
         dru["beta_znp_rad"] = adc.f_np(dru["flank_np_rad"], dru["alpha_zl_rad"],
-                                       dru["alpha_zr_rad"], mach_m)
+                                       dru["alpha_zr_rad"], mach_n)
 
     # ---- the clean channels: every deterministic error (local flow, installation bias, scale,
     #      the ADC's tables), no noise, no quantization, no delay, true Mach and impact pressure.
