@@ -94,6 +94,8 @@ def main() -> int:
         "fpr benchmark: fly + instrument",
         f"machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
         f"jsbsim {jsbsim.__version__}",
+        "load average at start: " + " ".join(f"{v:.2f}" for v in os.getloadavg())
+        + " (other work on the 2 cores slows the 2-worker case most)",
         "",
     ]
     per_kind(lines)
