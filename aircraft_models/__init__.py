@@ -133,17 +133,32 @@ def _read_toml(path: Path) -> dict:
         raise ValueError(f"{path}: not valid TOML: {exc}") from None
 
 
-def _resolve(name_or_path: str | Path) -> Path:
+def is_bare_name(name_or_path: str | Path) -> bool:
+    """A shipped-data name (``fleet_default``), not a path: no directory part, no suffix."""
     p = Path(name_or_path)
-    if p.suffix == ".toml" and p.exists():
-        return p
-    candidate = DATA_DIR / (p.name if p.suffix == ".toml" else f"{p.name}.toml")
+    return len(p.parts) == 1 and not p.suffix
+
+
+def resolve_data_file(name_or_path: str | Path) -> Path:
+    """A TOML path (which must exist), or the name of a file shipped in ``aircraft_models/``.
+
+    A path is never silently replaced by a shipped file of the same name: a user's edited copy
+    with a mistyped path must fail, not fall back to the original.
+    """
+    p = Path(name_or_path)
+    shipped = sorted(q.stem for q in DATA_DIR.glob("*.toml"))
+    if not is_bare_name(p):
+        if p.is_file():
+            return p
+        raise FileNotFoundError(f"{name_or_path}: no such file (shipped models, by bare name: {shipped})")
+    candidate = DATA_DIR / f"{p.name}.toml"
     if candidate.exists():
         return candidate
-    raise FileNotFoundError(
-        f"{name_or_path}: neither a TOML file nor a model shipped in {DATA_DIR} "
-        f"(shipped: {sorted(q.stem for q in DATA_DIR.glob('*.toml'))})"
-    )
+    raise FileNotFoundError(f"{name_or_path}: no model of that name is shipped in {DATA_DIR} "
+                            f"(shipped: {shipped}); give a path to your own TOML file instead")
+
+
+_resolve = resolve_data_file
 
 
 def load_airframe(name_or_path: str | Path = "f16_testbed") -> Airframe:

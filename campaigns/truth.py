@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from estimator.core.expressions import Table
-from estimator.io import load_truth
+from estimator.io import DATASET_COLUMNS, load_truth
 from estimator.parameters import make_key
 from estimator.problem import Problem
 from estimator.result import EstimationResult
@@ -97,12 +97,12 @@ def true_parameters(problem: Problem) -> TruthProjection:
     return TruthProjection(values=values, structure_rms=structure)
 
 
-_DATASET_COLUMNS = {"phi": "phi_rad", "theta": "theta_rad", "psi": "psi_rad", "tas": "tas_mps",
-                    "h": "h_baro_m"}
+#: canonical channel name -> the dataset's column (the inverse of the estimator's import map)
+_DATASET_COLUMNS = {canonical: column for column, canonical in DATASET_COLUMNS.items()}
 
 
 def _dataset_column(canonical: str) -> str:
-    return _DATASET_COLUMNS.get(canonical, f"{canonical}_rad")
+    return _DATASET_COLUMNS.get(canonical, canonical)
 
 
 def _key(problem: Problem, name: str, m, channel=None, element=None) -> str:

@@ -120,9 +120,9 @@ def parse_model_set(raw: Mapping, source: str) -> tuple[list[ChannelSpec], list[
 def load_model_set(name_or_path: str | Path = "tejas") -> tuple[list[ChannelSpec], list[ParameterSpec]]:
     """Read a model set: a shipped name (``"tejas"``) or a TOML path."""
     p = Path(name_or_path)
-    if not p.exists():
-        p = MODELS_DIR / f"{Path(name_or_path).stem}.toml"
-    if not p.exists():
+    if not p.is_file() and len(p.parts) == 1 and not p.suffix:  # a shipped name, never a bad path
+        p = MODELS_DIR / f"{p.name}.toml"
+    if not p.is_file():
         shipped = sorted(q.stem for q in MODELS_DIR.glob("*.toml"))
         raise FileNotFoundError(f"{name_or_path}: no such model set (shipped: {shipped})")
     with open(p, "rb") as fh:

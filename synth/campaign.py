@@ -110,10 +110,10 @@ class Campaign:
 def resolve_campaign_path(name_or_path: str | Path) -> Path:
     """A campaign file path, or the name of one shipped in ``campaigns/`` (e.g. ``default``)."""
     p = Path(name_or_path)
-    if p.exists():
+    if p.is_file():
         return p
-    shipped = CAMPAIGN_DIR / (p.name if p.suffix == ".toml" else f"{p.name}.toml")
-    if shipped.exists():
+    shipped = CAMPAIGN_DIR / f"{p.name}.toml"
+    if len(p.parts) == 1 and not p.suffix and shipped.exists():  # a bare name, never a mistyped path
         return shipped
     raise FileNotFoundError(
         f"{name_or_path}: no such campaign file, nor a campaign shipped in {CAMPAIGN_DIR} "

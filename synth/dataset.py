@@ -63,6 +63,10 @@ def _atomic_write_bytes(path: Path, payload: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(payload)
+        # mkstemp makes the file private (0600); a dataset file gets the usual permissions
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -111,10 +115,14 @@ def prepare_directory(directory: Path, overwrite: bool = False) -> Path:
                 f"{directory}: directory exists and is not empty; choose another --out or pass "
                 "--overwrite to replace it (its current contents will be deleted)"
             )
-        if not (directory / MANIFEST).exists() and not (directory / "maneuvers").exists():
+        try:
+            is_dataset = json.loads((directory / MANIFEST).read_text()).get("format") == FORMAT
+        except (OSError, ValueError):
+            is_dataset = False
+        if not is_dataset:
             raise FileExistsError(
-                f"{directory}: not an fpr dataset (no {MANIFEST}); refusing to delete it even with "
-                "--overwrite. Choose an empty or new directory."
+                f"{directory}: not an fpr dataset (no {MANIFEST} of format {FORMAT!r}); refusing to "
+                "delete it even with --overwrite. Choose an empty or new directory."
             )
         shutil.rmtree(directory)
     (directory / "maneuvers").mkdir(parents=True, exist_ok=True)

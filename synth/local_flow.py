@@ -66,7 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aircraft_models import DATA_DIR
+from aircraft_models import resolve_data_file
 
 # ------------------------------------------------------------------ rigid-body kinematics
 
@@ -332,14 +332,7 @@ def _read(path: Path) -> dict:
         raise ValueError(f"{path}: not valid TOML: {exc}") from None
 
 
-def _resolve(name_or_path: str | Path) -> Path:
-    p = Path(name_or_path)
-    if p.suffix == ".toml" and p.exists():
-        return p
-    candidate = DATA_DIR / (p.name if p.suffix == ".toml" else f"{p.name}.toml")
-    if candidate.exists():
-        return candidate
-    raise FileNotFoundError(f"{name_or_path}: neither a TOML file nor a model in {DATA_DIR}")
+
 
 
 def _law(cls, raw: dict | None, where: str):
@@ -411,7 +404,7 @@ def _model_from_raw(raw: dict, path: Path, *, truth: bool) -> LocalFlowModel:
 @lru_cache(maxsize=8)
 def load_local_flow_truth(name_or_path: str | Path = "local_flow_truth") -> LocalFlowModel:
     """The fleet's local-flow truth (``aircraft_models/local_flow_truth.toml`` or a TOML path)."""
-    path = _resolve(name_or_path)
+    path = resolve_data_file(name_or_path)
     return _model_from_raw(_read(path), path, truth=True)
 
 
@@ -432,7 +425,7 @@ class TableGrid:
 @lru_cache(maxsize=8)
 def load_adc_baseline(name_or_path: str | Path = "adc_baseline") -> tuple[LocalFlowModel, TableGrid]:
     """The ADC's nominal ("CFD/wind-tunnel") model and its table breakpoints (``adc_baseline.toml``)."""
-    path = _resolve(name_or_path)
+    path = resolve_data_file(name_or_path)
     raw = _read(path)
     tables = raw.pop("tables", None)
     if tables is None:

@@ -120,3 +120,13 @@ def test_fly_by_flags_writes_a_dataset(tmp_path, capsys):
     assert "1 maneuver files" in capsys.readouterr().out
     # never clobbers an existing dataset
     assert main(["fly", "--mach", "0.4", "--maneuver", "3211", "--out", str(out)]) == 2
+
+
+def test_a_mistyped_path_never_falls_back_to_a_shipped_file(tmp_path):
+    from aircraft_models import load_fleet
+
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        load_fleet(tmp_path / "edited" / "fleet_default.toml")
+    with pytest.raises(FileNotFoundError, match="no such campaign"):
+        load_campaign(tmp_path / "default.toml")
+    assert load_campaign("default").name == "default"  # a bare name is the shipped file

@@ -82,3 +82,24 @@ def test_missing_file_is_reported(tmp_path):
 def test_not_a_dataset(tmp_path):
     with pytest.raises(FileNotFoundError, match="no manifest"):
         load_dataset(tmp_path)
+
+
+def test_overwrite_deletes_only_an_fpr_dataset(tmp_path):
+    # a user's directory that merely has a maneuvers/ folder is not a dataset: never deleted
+    user = tmp_path / "flight_tests"
+    (user / "maneuvers").mkdir(parents=True)
+    (user / "maneuvers" / "notes.txt").write_text("flight 421")
+    with pytest.raises(FileExistsError, match="not an fpr dataset"):
+        prepare_directory(user, overwrite=True)
+    assert (user / "maneuvers" / "notes.txt").exists()
+
+
+def test_dataset_files_are_not_private(tmp_path):
+    import os
+    import stat
+
+    _write(tmp_path / "ds", [_frame()])
+    umask = os.umask(0)
+    os.umask(umask)
+    mode = stat.S_IMODE((tmp_path / "ds" / "manifest.json").stat().st_mode)
+    assert mode == 0o666 & ~umask, oct(mode)

@@ -144,6 +144,8 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
         if req.resample_hz * step < 0.5:
             warn(f"{where}: resampling from {1 / step:.4g} Hz down to {req.resample_hz:.4g} Hz by linear "
                  "interpolation without an anti-aliasing filter; filter the data first if it is noisy")
+        if "psi" in si:  # unwrap first: interpolating across a +-180 deg wrap invents headings
+            si["psi"] = np.unwrap(si["psi"])
         t_s, si = resample(t_s, si, float(req.resample_hz), where)
     if "psi" in si:  # heading wraps at +-180 deg or 0/360 deg; the reconstruction does not
         si["psi"] = np.unwrap(si["psi"])

@@ -45,8 +45,9 @@ OWN_SIGNALS = frozenset({"z", "zhat"})
 def read_model_set(name_or_path: str | Path, base_dir: Path | None = None) -> tuple[dict, str]:
     """Raw TOML of a model set: a path (relative to ``base_dir``) or a shipped name (``"tejas"``)."""
     p = Path(name_or_path)
-    cands = ([base_dir / p] if base_dir is not None and not p.is_absolute() else []) + [
-        p, MODELS_DIR / f"{p.stem}.toml"]
+    bare = len(p.parts) == 1 and not p.suffix  # a shipped name; a path never falls back to one
+    cands = ([base_dir / p] if base_dir is not None and not p.is_absolute() else []) + [p] + (
+        [MODELS_DIR / f"{p.name}.toml"] if bare else [])
     path = next((c for c in cands if c.is_file()), None)
     if path is None:
         shipped = sorted(q.stem for q in MODELS_DIR.glob("*.toml"))
