@@ -145,6 +145,8 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("source", type=Path, help="problem file (TOML) or dataset directory")
     p.add_argument("--out", type=Path, default=None,
                    help="results directory (default: fpr-out/calibrate-<name>)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the results of an earlier run in --out")
     p.add_argument("--max-iterations", type=int, default=40)
     p.add_argument("--no-colored", action="store_true",
                    help="skip the coloured-residual (Morelli-Klein) standard deviations")
@@ -190,6 +192,17 @@ def _calibrate(args: argparse.Namespace) -> int:
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
     out = args.out or Path("fpr-out") / f"calibrate-{src.stem or src.name}"
+    if out.exists() and any(out.iterdir()):
+        ours = {"result.json", "parameters.csv", "residuals.csv", "correlation.csv", "recovery.csv",
+                "time_history_match.png", "residual_crossplots.png"}
+        present = {p.name for p in out.iterdir()}
+        if not args.overwrite or present - ours:
+            print(f"fpr calibrate: {out} is not empty; choose another --out" + (
+                "" if present - ours else " or pass --overwrite to replace the earlier results"),
+                file=sys.stderr)
+            return 2
+        for name in present:  # no stale file of an earlier run survives beside the new results
+            (out / name).unlink()
     out.mkdir(parents=True, exist_ok=True)
     n_samples = sum(m.n for m in problem.maneuvers)
     print(f"{len(problem.maneuvers)} maneuvers, {n_samples} samples, {len(problem.channels)} "

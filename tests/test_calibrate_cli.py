@@ -152,3 +152,21 @@ def test_calibrate_says_what_is_wrong_with_a_missing_file(tmp_path, capsys):
     bad.write_text('[sensors]\nimu = [0, 0, 0]\n[[files]]\npath = "nope.csv"\n')
     assert main(["calibrate", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "nope.csv" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_calibrate_never_mixes_results_of_two_runs(dataset, tmp_path, capsys):
+    out = tmp_path / "res"
+    assert main(["calibrate", str(dataset), "--out", str(out), "--no-colored"]) == 0
+    assert (out / "recovery.csv").exists()
+    # a second run into the same directory must be asked for, and then replaces everything
+    assert main(["calibrate", str(dataset), "--out", str(out), "--no-plots"]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert main(["calibrate", str(dataset), "--out", str(out), "--no-plots", "--overwrite"]) == 0
+    assert not (out / "time_history_match.png").exists(), "a stale figure survived"
+    # a directory holding anything else is never touched
+    other = tmp_path / "mine"
+    other.mkdir()
+    (other / "notes.txt").write_text("keep me")
+    assert main(["calibrate", str(dataset), "--out", str(other), "--overwrite"]) == 2
+    assert (other / "notes.txt").exists()
