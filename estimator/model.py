@@ -2,9 +2,12 @@ r"""The FPR output-error model: outputs and their exact Jacobian, for all maneuv
 
 For maneuver ``k`` with parameter values ``theta``:
 
-1. States and sensitivities: RK4 of the state equations driven by the IMU (biases subtracted,
-   lever arm removed, angular accelerations by smoothed differentiation of the rates), started at
-   the maneuver's initial conditions (:mod:`estimator.core.sensitivity`).
+1. States and sensitivities: RK4 of the state equations driven by the IMU (biases subtracted),
+   started at the maneuver's initial conditions (:mod:`estimator.core.sensitivity`). The lever arm
+   (``Problem.lever_arm``): by default the states are the IMU point's velocity, which needs none;
+   or the SPEC's lever-arm correction with angular accelerations from smoothed differentiation
+   of the rates, the states then being the CG's. Attitude and altitude are the CG's either way,
+   and so are the initial conditions ``u0, v0, w0``; :attr:`Evaluation.X` reports the CG's.
 2. State signals (``alpha_s``, ``beta_t``, ``phi``, ...) on the sample grid, with derivatives with
    respect to the 13 state-equation parameters (initial conditions, IMU biases)
    (:mod:`estimator.core.observations`).
@@ -45,7 +48,7 @@ from estimator.core.assembly import channel_normals, shift_index, shift_values
 from estimator.core.expressions import Table
 from estimator.core.kinematics import smoothed_derivative
 from estimator.core.observations import flow_signal_batch
-from estimator.core.sensitivity import N_SENS, Inputs, integrate_many, worker_threads
+from estimator.core.sensitivity import LEVER_ARMS, N_SENS, Inputs, integrate_many, worker_threads
 from estimator.parameters import make_key
 from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, Problem
 
@@ -53,6 +56,7 @@ _EULER_INDEX = {"phi": 3, "theta": 4, "psi": 5, "h": 6}
 _RATE_INDEX = {"p": 0, "q": 1, "r": 2}
 _FLOW_KIND = {"alpha_s": "alpha", "beta_s": "beta", "flank_s": "flank",
               "alpha_t": "alpha", "beta_t": "beta", "tas_t": "tas"}
+_ORIGIN = np.zeros(3)
 #: Problems with at least this many samples evaluate their channels on two threads.
 _THREADED_SAMPLES = 20000
 #: Fixed-point iterations at most for an implicit (``zhat``) model, and their tolerance.
@@ -144,8 +148,8 @@ class Evaluation:
     Attributes
     ----------
     maneuvers : the maneuver indices evaluated.
-    X : (N, 7) states of those maneuvers, concatenated; maneuver ``maneuvers[i]`` is
-        ``X[seg[i]:seg[i+1]]``.
+    X : (N, 7) states (the CG's velocity, attitude, altitude) of those maneuvers, concatenated;
+        maneuver ``maneuvers[i]`` is ``X[seg[i]:seg[i+1]]``.
     seg : sample offsets.
     channels : one :class:`ChannelEval` per channel present in any of the maneuvers.
     """
@@ -265,10 +269,16 @@ class _Layout:
             idx = np.concatenate([np.arange(full.seg[k], full.seg[k + 1]) for k in ks])
             self.inputs = Inputs(self.seg, full.t_s[idx], full.a_m[idx], full.om_m[idx], full.omd[idx],
                                  full.a_mid[idx], full.om_mid[idx], full.omd_mid[idx],
-                                 full.r_imu_cg[list(ks)])
+                                 full.r_imu_cg[list(ks)], lever_arm=full.lever_arm)
         self.lens = lens
         self.r_cg = np.repeat(np.array([p.maneuvers[k].r_cg_body_m for k in ks], dtype=float).reshape(-1, 3),
                               lens, axis=0)
+        # the point whose velocity the states are (the flow at a sensor at r_s is
+        # V + omega x (r_s - r_ref)); for the IMU point, the CG is a sensor at r_cg too
+        self.imu_point = full.lever_arm == "imu_point"
+        self.r_ref = (np.repeat(np.reshape(p.imu_position_body_m, (1, 3)).astype(float), lens.sum(), axis=0)
+                      if self.imu_point else self.r_cg)
+        self.r_ref_cg = self.r_ref - self.r_cg  # the CG "sensor" at the origin: r = r_cg - r_ref
         self.state_idx = model._state_idx[list(ks)]
         self.S: np.ndarray | None = None  # sensitivity buffer, reused by every evaluation
         present = sorted({c for k in ks for c in model._present[k]})
@@ -287,17 +297,25 @@ class Model:
     Parameters
     ----------
     problem : the problem.
-    derivative_window_s : Savitzky-Golay window for the angular accelerations, s.
+    derivative_window_s : Savitzky-Golay window for the angular accelerations, s (used by the
+        "differentiated" lever arm only).
+    lever_arm : the state equations' lever-arm formulation, "imu_point" or "differentiated"
+        (:mod:`estimator.core.sensitivity`); None: the problem's (``Problem.lever_arm``).
     """
 
-    def __init__(self, problem: Problem, derivative_window_s: float = 0.15):
+    def __init__(self, problem: Problem, derivative_window_s: float = 0.15, lever_arm: str | None = None):
         self.problem = problem
+        self.lever_arm = problem.lever_arm if lever_arm is None else lever_arm
+        if self.lever_arm not in LEVER_ARMS:
+            raise ValueError(f"lever_arm must be one of {LEVER_ARMS}, got {self.lever_arm!r}")
         ps = problem.parameters
         self._tables = {
             name: Table(name, np.asarray(spec.breakpoints))
             for name, spec in ps.specs.items() if spec.breakpoints is not None
         }
+        # angular accelerations: the differentiated lever arm's only (unused, zero, otherwise)
         self._omega_dot = [smoothed_derivative(m.t_s, m.omega_rps, window_s=derivative_window_s)
+                           if self.lever_arm == "differentiated" else np.zeros_like(m.omega_rps)
                            for m in problem.maneuvers]
         # which channels each maneuver has, and the guard band of each channel
         self._present = [
@@ -336,6 +354,7 @@ class Model:
             [m.t_s for m in mans], [m.accel_imu_mps2 for m in mans], [m.omega_rps for m in mans],
             self._omega_dot,
             np.array([problem.imu_position_body_m - m.r_cg_body_m for m in mans], dtype=float).reshape(-1, 3),
+            lever_arm=self.lever_arm,
         )
         self._state_idx = np.array([self.state_columns(k) for k in range(len(mans))],
                                    dtype=np.intp).reshape(len(mans), len(STATE_PARAMS))
@@ -377,7 +396,8 @@ class Model:
 
     # ------------------------------------------------------------------ evaluation
     def integrate(self, values: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """States (N, 7) and sensitivities (N, 7, 13) of maneuver k."""
+        """States (N, 7) and sensitivities (N, 7, 13) of maneuver k (with the "imu_point" lever
+        arm, ``X[:, :3]`` is the IMU point's velocity)."""
         lay = self._layout((k,))
         return integrate_many(lay.inputs, values[lay.state_idx], self.problem.g_mps2, sensitivities=True)
 
@@ -446,10 +466,12 @@ class Model:
                     lay.SV[sid] = val
                 out = (val, (-1, sid, True))
             else:
-                sensor_pos = p.sensors[sensor] if name.endswith("_s") else None
+                sensor_pos, r_ref = (p.sensors[sensor], lay.r_ref) if name.endswith("_s") else (None, None)
+                if sensor_pos is None and lay.imu_point:
+                    sensor_pos, r_ref = _ORIGIN, lay.r_ref_cg
                 dv_out = lay.SA[sid] if jacobian else None
                 b_out = lay.SB[sid] if jacobian and sensor_pos is not None else None
-                val, _, _ = flow_signal_batch(X, omega, lay.r_cg, sensor_pos, _FLOW_KIND[name], jacobian,
+                val, _, _ = flow_signal_batch(X, omega, r_ref, sensor_pos, _FLOW_KIND[name], jacobian,
                                               dv_out=dv_out, b_out=b_out)
                 if jacobian:
                     lay.SV[sid] = val
@@ -482,6 +504,9 @@ class Model:
             for ns in needed:
                 state_signal(*ns)
             channels = [channel(cl) for cl in lay.channels]
+        if lay.imu_point:  # report the CG's states
+            X = X.copy()
+            X[:, :3] += np.cross(omega, lay.r_cg - lay.r_ref)
         return Evaluation(ks, X, lay.seg, channels)
 
     def _evaluate_channel(self, cl: _ChannelLayout, lay: _Layout, values, S, state_signal,

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimator.core.expressions import Expression, parse
+from estimator.core.sensitivity import LEVER_ARMS
 from estimator.parameters import ParameterSet, ParameterSpec
 
 #: Signals computed from the reconstructed states (their derivatives are chained to the states).
@@ -138,6 +139,10 @@ class Problem:
     parameters : the expanded parameter set (start values, free/fixed, bounds).
     g_mps2 : gravity used by the flat-earth state equations.
     source : problem file or dataset path.
+    lever_arm : how the state equations treat the accelerometers' lever arm (SPEC §3):
+        "imu_point" (default) integrates the IMU point's velocity, exact, no angular acceleration
+        needed; "differentiated" removes the lever arm with angular accelerations from smoothed
+        differentiation of the rates, the SPEC's method (:mod:`estimator.core.sensitivity`).
     """
 
     maneuvers: tuple[ManeuverData, ...]
@@ -147,8 +152,11 @@ class Problem:
     parameters: ParameterSet
     g_mps2: float = 9.80665
     source: str = ""
+    lever_arm: str = "imu_point"
 
     def __post_init__(self) -> None:
+        if self.lever_arm not in LEVER_ARMS:
+            raise ValueError(f"{self.source}: lever_arm must be one of {LEVER_ARMS}, got {self.lever_arm!r}")
         ids = [m.id for m in self.maneuvers]
         if len(set(ids)) != len(ids):
             dup = sorted({i for i in ids if ids.count(i) > 1})

@@ -265,6 +265,16 @@ def test_model_can_be_constructed(tmp_path):
     assert {"u0", "dax", "b_l", "b_r", "f1", "tau_alpha_zl"} <= names
 
 
+def test_lever_arm_formulation_from_the_problem_file(tmp_path):
+    from estimator.model import Model
+
+    assert load_problem(si_problem(tmp_path)).lever_arm == "imu_point"
+    prob = load_problem(si_problem(tmp_path, extra='lever_arm = "differentiated"\n'))
+    assert prob.lever_arm == "differentiated" and Model(prob).lever_arm == "differentiated"
+    assert Model(prob, lever_arm="imu_point").lever_arm == "imu_point"
+    raises(si_problem(tmp_path, extra='lever_arm = "cg"\n'), "lever_arm", "'imu_point'", "'differentiated'")
+
+
 def test_initial_conditions_from_the_first_samples(tmp_path):
     frame = flight_frame()
     prob = load_problem(si_problem(tmp_path, frame))

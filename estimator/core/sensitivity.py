@@ -14,6 +14,24 @@ variational equations (Jategaonkar 2006, §4.6)::
     F[:, 10:13] = df/da L - df/domega,   L = d(omega x (omega x r))/domega
                                            = (omega.r) I + omega r^T - 2 r omega^T
 
+That is the SPEC's formulation (``lever_arm="differentiated"``), whose angular acceleration comes
+from smoothed numerical differentiation of the rates and is only as good as that. The exact
+alternative (``lever_arm="imu_point"``) integrates the velocity of the IMU point instead: with
+``V_imu = V_cg + omega x r`` the lever-arm terms cancel identically, ::
+
+    V_imu' = a_m - d_a + g_body - omega x V_imu
+
+i.e. the same equations with zero lever arm and no angular acceleration. The attitude is the rigid
+body's; the altitude stays the CG's, integrated with the CG's velocity ``V_imu - omega x r``::
+
+    h' = (V_imu - omega x r) . n,   n = (sin theta, -cos theta sin phi, -cos theta cos phi)
+
+so that ``dh'/d d_omega = r x n`` joins the forcing. The initial conditions ``x0[:3]`` remain the
+CG's velocity: ``V_imu(0) = x0[:3] + omega(0) x r``, whence ``S(0)[:3, 10:13] = [r]x``. The kernels
+take both lever arms — ``r_acc`` of the accelerations, ``r_h`` of the altitude and the initial
+velocity — one of them zero, so either formulation is the same branch-free arithmetic (the
+differentiated one bit-identical to a kernel without ``r_h``).
+
 Both are stepped with the same classical RK4 scheme as the states (inputs at the half step from
 :func:`estimator.core.kinematics.midpoints`, four-point cubic by default), so ``S`` is the exact
 derivative of the discrete solution: Gauss-Newton sees the gradient of the cost it minimises.
@@ -33,6 +51,8 @@ from numba import njit
 
 from estimator.core.kinematics import midpoints
 
+#: Lever-arm formulations (see the module docstring); the first is the estimator's default.
+LEVER_ARMS = ("imu_point", "differentiated")
 N_STATE = 7
 N_SENS = 13  # x0 (7), accelerometer biases (3), gyro biases (3)
 SENS_NAMES = ("u0", "v0", "w0", "phi0", "theta0", "psi0", "h0",
@@ -40,7 +60,8 @@ SENS_NAMES = ("u0", "v0", "w0", "phi0", "theta0", "psi0", "h0",
 
 
 @njit(cache=True, fastmath=False)
-def _rhs(x, S, a_m, om_m, omd, r, da, dw, g, xd, Sd):
+def _rhs(x, S, a_m, om_m, omd, r, rh, da, dw, g, xd, Sd):
+    # r: lever arm of the accelerations (zero for the IMU point); rh: of the altitude's velocity
     p = om_m[0] - dw[0]
     q = om_m[1] - dw[1]
     rr = om_m[2] - dw[2]
@@ -62,7 +83,15 @@ def _rhs(x, S, a_m, om_m, omd, r, da, dw, g, xd, Sd):
     xd[3] = p + qs_rc * tth
     xd[4] = qc_rs
     xd[5] = qs_rc / cth
-    xd[6] = u * sth - v * cth * sph - w * cth * cph
+    # the CG's velocity V - om x rh (rh = 0: the state is the CG's velocity)
+    wx0 = q * rh[2] - rr * rh[1]
+    wx1 = rr * rh[0] - p * rh[2]
+    wx2 = p * rh[1] - q * rh[0]
+    uc = u - wx0
+    vc = v - wx1
+    wc = w - wx2
+    n0, n1, n2 = sth, -cth * sph, -cth * cph
+    xd[6] = uc * sth - vc * cth * sph - wc * cth * cph
 
     # S' = A S + F with A = df/dx written out by its non-zeros (psi and h never feed back)
     gc, gs = g * cth, g * sth
@@ -70,8 +99,8 @@ def _rhs(x, S, a_m, om_m, omd, r, da, dw, g, xd, Sd):
     a34 = qs_rc / (cth * cth)
     a53 = qc_rs / cth
     a54 = qs_rc * sth / (cth * cth)
-    a63 = -v * cth * cph + w * cth * sph
-    a64 = u * cth + v * sth * sph + w * sth * cph
+    a63 = -vc * cth * cph + wc * cth * sph
+    a64 = uc * cth + vc * sth * sph + wc * sth * cph
     for j in range(N_SENS):
         s0, s1, s2, s3, s4 = S[0, j], S[1, j], S[2, j], S[3, j], S[4, j]
         Sd[0, j] = rr * s1 - q * s2 - gc * s4
@@ -106,9 +135,14 @@ def _rhs(x, S, a_m, om_m, omd, r, da, dw, g, xd, Sd):
     Sd[4, 12] += sph
     Sd[5, 11] -= sph / cth
     Sd[5, 12] -= cph / cth
+    # altitude: h' = (V - om x rh) . n = V . n - om . (rh x n), so dh'/d(d_omega) = rh x n
+    Sd[6, 10] += rh[1] * n2 - rh[2] * n1
+    Sd[6, 11] += rh[2] * n0 - rh[0] * n2
+    Sd[6, 12] += rh[0] * n1 - rh[1] * n0
 
 
-def integrate_sensitivities(t_s, x0, a_m, om_m, omd, r_imu_cg, da, dw, g, midpoint="cubic"):
+def integrate_sensitivities(t_s, x0, a_m, om_m, omd, r_imu_cg, da, dw, g, midpoint="cubic",
+                            lever_arm="differentiated"):
     """RK4 of the states and their sensitivities.
 
     Parameters
@@ -122,6 +156,9 @@ def integrate_sensitivities(t_s, x0, a_m, om_m, omd, r_imu_cg, da, dw, g, midpoi
     da, dw : (3,) accelerometer (m/s^2) and gyro (rad/s) biases, subtracted from the measurements.
     g : gravity, m/s^2.
     midpoint : half-step input interpolation, "cubic" or "linear" (see ``midpoints``).
+    lever_arm : "differentiated" (states: the CG's velocity) or "imu_point" (states: the IMU
+        point's velocity; ``omd`` unused), see :data:`LEVER_ARMS`. ``x0[:3]`` is the CG's
+        velocity either way.
 
     Returns
     -------
@@ -133,7 +170,7 @@ def integrate_sensitivities(t_s, x0, a_m, om_m, omd, r_imu_cg, da, dw, g, midpoi
     inputs = Inputs(
         np.array([0, n], dtype=np.int64), np.ascontiguousarray(t_s, dtype=f64), a_m, om_m, omd,
         *(_padded_midpoints(v, midpoint) for v in (a_m, om_m, omd)),
-        np.ascontiguousarray(r_imu_cg, dtype=f64).reshape(1, 3),
+        np.ascontiguousarray(r_imu_cg, dtype=f64).reshape(1, 3), lever_arm=lever_arm,
     )
     params = np.concatenate([np.asarray(x0, dtype=f64), np.asarray(da, dtype=f64),
                              np.asarray(dw, dtype=f64)]).reshape(1, N_SENS)
@@ -153,14 +190,24 @@ class Inputs:
     a_mid, om_mid, omd_mid : (N, 3) their half-step values: row ``i`` holds the midpoint between
         samples ``i`` and ``i + 1`` of the same maneuver (the last row of a maneuver is unused).
     r_imu_cg : (K, 3) IMU position minus CG position of each maneuver, body, m.
+    lever_arm : the formulation, one of :data:`LEVER_ARMS`.
     """
 
-    def __init__(self, seg, t_s, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg):
+    def __init__(self, seg, t_s, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg,
+                 lever_arm="differentiated"):
+        if lever_arm not in LEVER_ARMS:
+            raise ValueError(f"lever_arm must be one of {LEVER_ARMS}, got {lever_arm!r}")
         self.seg, self.t_s, self.a_m, self.om_m, self.omd = seg, t_s, a_m, om_m, omd
         self.a_mid, self.om_mid, self.omd_mid, self.r_imu_cg = a_mid, om_mid, omd_mid, r_imu_cg
+        self.lever_arm = lever_arm
+        # the kernels' two lever arms: of the accelerations, and of the altitude's velocity
+        zero = np.zeros_like(r_imu_cg)
+        imu = lever_arm == "imu_point"
+        self.r_acc = zero if imu else r_imu_cg
+        self.r_h = r_imu_cg if imu else zero
 
     @classmethod
-    def concatenate(cls, t_s, a_m, om_m, omd, r_imu_cg, midpoint="cubic"):
+    def concatenate(cls, t_s, a_m, om_m, omd, r_imu_cg, midpoint="cubic", lever_arm="differentiated"):
         """From per-maneuver lists of arrays (``t_s[k]`` (N_k,), ``a_m[k]`` (N_k, 3), ...)."""
         f64 = np.float64
         seg = np.concatenate([[0], np.cumsum([len(t) for t in t_s])]).astype(np.int64)
@@ -171,7 +218,7 @@ class Inputs:
         mids = [cat([_padded_midpoints(np.asarray(v, dtype=f64), midpoint) for v in parts])
                 for parts in (a_m, om_m, omd)]
         return cls(seg, cat(t_s), cat(a_m), cat(om_m), cat(omd), *mids,
-                   np.ascontiguousarray(np.reshape(r_imu_cg, (-1, 3)), dtype=f64))
+                   np.ascontiguousarray(np.reshape(r_imu_cg, (-1, 3)), dtype=f64), lever_arm=lever_arm)
 
 
 def _padded_midpoints(v, midpoint):
@@ -196,7 +243,8 @@ def integrate_many(inputs: Inputs, params: np.ndarray, g: float, sensitivities: 
 
     Returns
     -------
-    X : (N, 7) states; S : (N, 7, 13) sensitivities (``out_S`` if given), or None.
+    X : (N, 7) states (with ``inputs.lever_arm == "imu_point"``, ``X[:, :3]`` is the IMU point's
+    velocity); S : (N, 7, 13) sensitivities (``out_S`` if given), or None.
     """
     params = np.ascontiguousarray(params, dtype=np.float64)
     n = inputs.t_s.shape[0]
@@ -218,7 +266,8 @@ def integrate_many(inputs: Inputs, params: np.ndarray, g: float, sensitivities: 
     def run(part):
         a, b = part
         args = (inputs.seg[a:b + 1], inputs.t_s, params[a:b], inputs.a_m, inputs.om_m, inputs.omd,
-                inputs.a_mid, inputs.om_mid, inputs.omd_mid, inputs.r_imu_cg[a:b], float(g), X)
+                inputs.a_mid, inputs.om_mid, inputs.omd_mid, inputs.r_acc[a:b], inputs.r_h[a:b],
+                float(g), X)
         if sensitivities:
             _integrate_many(*args, out_S)
         else:
@@ -239,7 +288,18 @@ def worker_threads() -> int:
 
 
 @njit(cache=True, nogil=True)
-def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, g, X, S):
+def _initial_velocity(x, om_m, dw, rh):
+    # the IMU point's velocity from the CG's (x[:3] on entry): V + om x rh (rh = 0: unchanged)
+    p = om_m[0] - dw[0]
+    q = om_m[1] - dw[1]
+    rr = om_m[2] - dw[2]
+    x[0] += q * rh[2] - rr * rh[1]
+    x[1] += rr * rh[0] - p * rh[2]
+    x[2] += p * rh[1] - q * rh[0]
+
+
+@njit(cache=True, nogil=True)
+def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_acc, r_h, g, X, S):
     # maneuver m is samples seg[m]:seg[m+1] of the full arrays (seg may be a slice of offsets)
     k1x = np.empty(7)
     k2x = np.empty(7)
@@ -252,7 +312,8 @@ def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_
     xs = np.empty(7)
     Ss = np.empty((7, N_SENS))
     for m in range(seg.shape[0] - 1):
-        r = r_imu_cg[m]
+        r = r_acc[m]
+        rh = r_h[m]
         da = params[m, 7:10]
         dw = params[m, 10:13]
         b = seg[m]
@@ -260,26 +321,34 @@ def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_
         S[b] = 0.0
         for i in range(7):
             S[b, i, i] = 1.0
+        _initial_velocity(X[b], om_m[b], dw, rh)
+        # d(om x rh)/d(d_omega) = [rh]x (om = om_m - d_omega)
+        S[b, 0, 11] = -rh[2]
+        S[b, 0, 12] = rh[1]
+        S[b, 1, 10] = rh[2]
+        S[b, 1, 12] = -rh[0]
+        S[b, 2, 10] = -rh[1]
+        S[b, 2, 11] = rh[0]
         for k in range(b, seg[m + 1] - 1):
             h = t_s[k + 1] - t_s[k]
             xk = X[k]
             Sk = S[k]
-            _rhs(xk, Sk, a_m[k], om_m[k], omd[k], r, da, dw, g, k1x, k1s)
+            _rhs(xk, Sk, a_m[k], om_m[k], omd[k], r, rh, da, dw, g, k1x, k1s)
             for i in range(7):
                 xs[i] = xk[i] + 0.5 * h * k1x[i]
                 for j in range(N_SENS):
                     Ss[i, j] = Sk[i, j] + 0.5 * h * k1s[i, j]
-            _rhs(xs, Ss, a_mid[k], om_mid[k], omd_mid[k], r, da, dw, g, k2x, k2s)
+            _rhs(xs, Ss, a_mid[k], om_mid[k], omd_mid[k], r, rh, da, dw, g, k2x, k2s)
             for i in range(7):
                 xs[i] = xk[i] + 0.5 * h * k2x[i]
                 for j in range(N_SENS):
                     Ss[i, j] = Sk[i, j] + 0.5 * h * k2s[i, j]
-            _rhs(xs, Ss, a_mid[k], om_mid[k], omd_mid[k], r, da, dw, g, k3x, k3s)
+            _rhs(xs, Ss, a_mid[k], om_mid[k], omd_mid[k], r, rh, da, dw, g, k3x, k3s)
             for i in range(7):
                 xs[i] = xk[i] + h * k3x[i]
                 for j in range(N_SENS):
                     Ss[i, j] = Sk[i, j] + h * k3s[i, j]
-            _rhs(xs, Ss, a_m[k + 1], om_m[k + 1], omd[k + 1], r, da, dw, g, k4x, k4s)
+            _rhs(xs, Ss, a_m[k + 1], om_m[k + 1], omd[k + 1], r, rh, da, dw, g, k4x, k4s)
             h6 = h / 6.0
             for i in range(7):
                 X[k + 1, i] = xk[i] + h6 * (k1x[i] + 2.0 * k2x[i] + 2.0 * k3x[i] + k4x[i])
@@ -289,7 +358,7 @@ def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_
 
 
 @njit(cache=True)
-def _rhs_states(x, a_m, om_m, omd, r, da, dw, g, xd):
+def _rhs_states(x, a_m, om_m, omd, r, rh, da, dw, g, xd):
     # the state part of _rhs, operation for operation (the same states with or without S)
     p = om_m[0] - dw[0]
     q = om_m[1] - dw[1]
@@ -311,35 +380,40 @@ def _rhs_states(x, a_m, om_m, omd, r, da, dw, g, xd):
     xd[3] = p + qs_rc * tth
     xd[4] = qc_rs
     xd[5] = qs_rc / cth
+    u = u - (q * rh[2] - rr * rh[1])
+    v = v - (rr * rh[0] - p * rh[2])
+    w = w - (p * rh[1] - q * rh[0])
     xd[6] = u * sth - v * cth * sph - w * cth * cph
 
 
 @njit(cache=True, nogil=True)
-def _integrate_states_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg, g, X):
+def _integrate_states_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_acc, r_h, g, X):
     k1x = np.empty(7)
     k2x = np.empty(7)
     k3x = np.empty(7)
     k4x = np.empty(7)
     xs = np.empty(7)
     for m in range(seg.shape[0] - 1):
-        r = r_imu_cg[m]
+        r = r_acc[m]
+        rh = r_h[m]
         da = params[m, 7:10]
         dw = params[m, 10:13]
         b = seg[m]
         X[b] = params[m, :7]
+        _initial_velocity(X[b], om_m[b], dw, rh)
         for k in range(b, seg[m + 1] - 1):
             h = t_s[k + 1] - t_s[k]
             xk = X[k]
-            _rhs_states(xk, a_m[k], om_m[k], omd[k], r, da, dw, g, k1x)
+            _rhs_states(xk, a_m[k], om_m[k], omd[k], r, rh, da, dw, g, k1x)
             for i in range(7):
                 xs[i] = xk[i] + 0.5 * h * k1x[i]
-            _rhs_states(xs, a_mid[k], om_mid[k], omd_mid[k], r, da, dw, g, k2x)
+            _rhs_states(xs, a_mid[k], om_mid[k], omd_mid[k], r, rh, da, dw, g, k2x)
             for i in range(7):
                 xs[i] = xk[i] + 0.5 * h * k2x[i]
-            _rhs_states(xs, a_mid[k], om_mid[k], omd_mid[k], r, da, dw, g, k3x)
+            _rhs_states(xs, a_mid[k], om_mid[k], omd_mid[k], r, rh, da, dw, g, k3x)
             for i in range(7):
                 xs[i] = xk[i] + h * k3x[i]
-            _rhs_states(xs, a_m[k + 1], om_m[k + 1], omd[k + 1], r, da, dw, g, k4x)
+            _rhs_states(xs, a_m[k + 1], om_m[k + 1], omd[k + 1], r, rh, da, dw, g, k4x)
             h6 = h / 6.0
             for i in range(7):
                 X[k + 1, i] = xk[i] + h6 * (k1x[i] + 2.0 * k2x[i] + 2.0 * k3x[i] + k4x[i])

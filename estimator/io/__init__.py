@@ -15,6 +15,10 @@ z down) from the aircraft's reference point::
 
     title = "PV1 vane calibration, flight 421"
     g_mps2 = 9.80665          # gravity of the flat-earth state equations (default 9.80665)
+    lever_arm = "imu_point"   # optional: the accelerometers' lever arm in the state equations:
+                              # "imu_point" (default; integrates the IMU point's velocity, exact)
+                              # or "differentiated" (SPEC §3: angular accelerations from smoothed
+                              # differentiation of the rates)
     model = "tejas"           # model set: a shipped name (estimator/models/*.toml) or a path
     channels = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr"]
                               # optional: the channels to fit; default: every channel of the

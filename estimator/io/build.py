@@ -15,7 +15,7 @@ from estimator.io.modelset import (
 )
 from estimator.io.units import UNITS
 from estimator.parameters import ParameterSpec
-from estimator.problem import ChannelSpec, Problem, expand_parameters
+from estimator.problem import LEVER_ARMS, ChannelSpec, Problem, expand_parameters
 
 
 def select_channels(channels: Sequence[ChannelSpec], explicit: Sequence[str] | None,
@@ -44,6 +44,7 @@ def build_problem(
     imu_position_body_m: np.ndarray,
     g_mps2: float,
     source: str,
+    lever_arm: str = LEVER_ARMS[0],
 ) -> Problem:
     """Check and assemble the problem.
 
@@ -57,7 +58,10 @@ def build_problem(
     imu_position_body_m : accelerometer position, body axes, m.
     g_mps2 : gravity of the flat-earth equations.
     source : problem file or dataset, for messages.
+    lever_arm : the state equations' lever-arm formulation (:class:`Problem`).
     """
+    if lever_arm not in LEVER_ARMS:
+        raise DataError(f"{source}: lever_arm = {lever_arm!r}; one of {', '.join(map(repr, LEVER_ARMS))}")
     if not 9.7 <= g_mps2 <= 9.9:
         raise DataError(f"{source}: g_mps2 = {g_mps2} is not an Earth gravity in m/s^2 (9.78 to 9.83); "
                         "give it in m/s^2, e.g. 9.80665")
@@ -95,7 +99,7 @@ def build_problem(
         params = expand_parameters(final, maneuvers, chans)
         return Problem(maneuvers=tuple(maneuvers), channels=tuple(chans), sensors=dict(sensors),
                        imu_position_body_m=np.asarray(imu_position_body_m, dtype=float),
-                       parameters=params, g_mps2=float(g_mps2), source=source)
+                       parameters=params, g_mps2=float(g_mps2), source=source, lever_arm=lever_arm)
     except DataError:
         raise
     except ValueError as exc:

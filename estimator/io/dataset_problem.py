@@ -20,7 +20,7 @@ from estimator.io.fprdataset import (
 )
 from estimator.io.modelset import merge_model_set, read_model_set
 from estimator.io.tables import numeric
-from estimator.problem import Problem
+from estimator.problem import LEVER_ARMS, Problem
 
 
 def load_dataset_maneuvers(path: str | Path, select: Mapping | None = None
@@ -69,6 +69,7 @@ def problem_from_dataset(
     extra_channels: Sequence[Mapping] | None = None,
     sensors: Mapping[str, Sequence[float]] | None = None,
     g_mps2: float = 9.80665,
+    lever_arm: str = LEVER_ARMS[0],
 ) -> Problem:
     """The estimation problem of (a selection of) an ``fpr fly`` dataset.
 
@@ -83,6 +84,8 @@ def problem_from_dataset(
     extra_channels : channel tables as in ``[[channel]]``.
     sensors : sensor positions (body axes, m) added to or replacing the manifest's airframe ones.
     g_mps2 : gravity of the flat-earth equations.
+    lever_arm : the state equations' lever-arm formulation, "imu_point" or "differentiated"
+        (:class:`~estimator.problem.Problem`).
     """
     raw, msource = read_model_set(model)
     chans, specs, declared = merge_model_set(raw, overrides, extra_channels, msource, str(path))
@@ -92,4 +95,5 @@ def problem_from_dataset(
         raise DataError(f"{path}: the manifest's airframe has no imu position; "
                         "pass sensors={'imu': [x, y, z]}")
     return build_problem(pairs, chans, specs, user_declared=declared, explicit_channels=channels,
-                         sensors=pos, imu_position_body_m=pos["imu"], g_mps2=g_mps2, source=str(path))
+                         sensors=pos, imu_position_body_m=pos["imu"], g_mps2=g_mps2, source=str(path),
+                         lever_arm=lever_arm)

@@ -14,10 +14,10 @@ from estimator.io.dataset_problem import load_dataset_maneuvers
 from estimator.io.errors import DataError
 from estimator.io.modelset import merge_model_set, read_model_set
 from estimator.io.tables import infer_format, numeric, pick_column, read_table
-from estimator.problem import Problem
+from estimator.problem import LEVER_ARMS, Problem
 
-TOP_KEYS = ("title", "g_mps2", "model", "channels", "resample_hz", "sensors", "aircraft", "columns",
-            "files", "data", "parameter", "channel")
+TOP_KEYS = ("title", "g_mps2", "lever_arm", "model", "channels", "resample_hz", "sensors", "aircraft",
+            "columns", "files", "data", "parameter", "channel")
 FILE_KEYS = ("path", "format", "header", "delimiter", "skip_rows", "aircraft", "configuration",
              "maneuvers", "resample_hz", "columns", "r_cg_body_m", "r_cg_body_in", "r_cg_body_ft")
 MANEUVER_KEYS = ("id", "t_start_s", "t_end_s", "configuration", "r_cg_body_m", "r_cg_body_in",
@@ -203,4 +203,5 @@ def load_problem(path: str | Path) -> Problem:
     if isinstance(g, bool) or not isinstance(g, (int, float)):
         raise DataError(f"{where}: g_mps2 must be a number (m/s^2), got {g!r}")
     return build_problem(pairs, chans, specs, user_declared=declared, explicit_channels=raw.get("channels"),
-                         sensors=sensors, imu_position_body_m=sensors["imu"], g_mps2=float(g), source=where)
+                         sensors=sensors, imu_position_body_m=sensors["imu"], g_mps2=float(g), source=where,
+                         lever_arm=raw.get("lever_arm", LEVER_ARMS[0]))
