@@ -453,7 +453,8 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         if idx.size:
             std[idx] = np.sqrt(np.maximum(np.diag(cov_L[k]), 0.0))
     for c in final_conf:
-        std[[ps.index(k) for k in c.parameters]] = np.nan
+        if c.kind == "unidentifiable":  # correlated parameters keep their (large) deviations
+            std[[ps.index(k) for k in c.parameters]] = np.nan
     dg = np.sqrt(np.maximum(np.diag(cov_G), 1e-300))
     corr_G = cov_G / np.outer(dg, dg)
     confounding += _high_correlations(corr_G, [keys[i] for i in st.glob], opt.correlation_warn)
@@ -492,6 +493,25 @@ def _covariance(N: _Normal, st: _Structure, keys, problem: Problem, opt: SolverO
         B = Ai @ N.HGL[k].T
         cov_L.append(Ai + B @ Sinv @ B.T)
     del dG, dL
+    # correlations across the blocks: Cov(local_k, global) = -A_k^-1 M_LkG S^-1. A per-maneuver
+    # initial condition that trades against a fleet-wide bias is exactly the confounding an
+    # engineer must see (SPEC §5), and it lives in these blocks, not in the global one
+    thr = opt.correlation_warn
+    sd_g = np.sqrt(np.maximum(np.diag(Sinv), 1e-300))
+    gkeys = [keys[i] for i in st.glob]
+    for k, Ai in enumerate(Ainv):
+        idx = st.local_of_arr[k]
+        if not idx.size or not sd_g.size:
+            continue
+        cross = -(Ai @ N.HGL[k].T) @ Sinv
+        sd_l = np.sqrt(np.maximum(np.diag(cov_L[k]), 1e-300))
+        corr = cross / sd_l[:, None] / sd_g[None, :]
+        for a, b in zip(*np.nonzero(np.abs(corr) > thr), strict=True):
+            confounding.append(Confounding(
+                parameters=(keys[idx[a]], gkeys[b]), kind="correlated",
+                detail=(f"correlation {corr[a, b]:+.4f}: the data barely separate {keys[idx[a]]} "
+                        f"from {gkeys[b]}; their individual values are uncertain"),
+            ))
     return Sinv, cov_L, confounding
 
 
