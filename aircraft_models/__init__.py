@@ -123,7 +123,8 @@ class Fleet:
             ) from None
 
 
-def _read_toml(path: Path) -> dict:
+def read_toml(path: Path) -> dict:
+    """Parse a TOML file; errors name the file."""
     try:
         with open(path, "rb") as fh:
             return tomllib.load(fh)
@@ -164,7 +165,7 @@ _resolve = resolve_data_file
 def load_airframe(name_or_path: str | Path = "f16_testbed") -> Airframe:
     """Load an airframe definition (shipped name such as ``"f16_testbed"`` or a TOML path)."""
     path = _resolve(name_or_path)
-    raw = _read_toml(path)
+    raw = read_toml(path)
     try:
         positions = {
             k: _vec3(v, f"{path}: positions_body_m.{k}") for k, v in raw["positions_body_m"].items()
@@ -186,7 +187,7 @@ def load_airframe(name_or_path: str | Path = "f16_testbed") -> Airframe:
 def load_fleet(name_or_path: str | Path = "fleet_default") -> Fleet:
     """Load a fleet (shipped name such as ``"fleet_default"`` or a TOML path)."""
     path = _resolve(name_or_path)
-    raw = _read_toml(path)
+    raw = read_toml(path)
     airframe_name = raw.get("airframe", "f16-testbed").replace("-", "_")
     airframe = load_airframe(airframe_name)
     aircraft: dict[str, Aircraft] = {}

@@ -59,14 +59,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
-from aircraft_models import resolve_data_file
+from aircraft_models import read_toml, resolve_data_file
 
 # ------------------------------------------------------------------ rigid-body kinematics
 
@@ -322,14 +321,7 @@ class LocalFlowModel:
 _D2R = math.pi / 180.0
 
 
-def _read(path: Path) -> dict:
-    try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: file not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: not valid TOML: {exc}") from None
+
 
 
 
@@ -405,7 +397,7 @@ def _model_from_raw(raw: dict, path: Path, *, truth: bool) -> LocalFlowModel:
 def load_local_flow_truth(name_or_path: str | Path = "local_flow_truth") -> LocalFlowModel:
     """The fleet's local-flow truth (``aircraft_models/local_flow_truth.toml`` or a TOML path)."""
     path = resolve_data_file(name_or_path)
-    return _model_from_raw(_read(path), path, truth=True)
+    return _model_from_raw(read_toml(path), path, truth=True)
 
 
 @dataclass(frozen=True)
@@ -426,7 +418,7 @@ class TableGrid:
 def load_adc_baseline(name_or_path: str | Path = "adc_baseline") -> tuple[LocalFlowModel, TableGrid]:
     """The ADC's nominal ("CFD/wind-tunnel") model and its table breakpoints (``adc_baseline.toml``)."""
     path = resolve_data_file(name_or_path)
-    raw = _read(path)
+    raw = read_toml(path)
     tables = raw.pop("tables", None)
     if tables is None:
         raise ValueError(f"{path}: missing [tables] (alpha_min_deg, alpha_max_deg, alpha_step_deg, "
