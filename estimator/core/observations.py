@@ -23,56 +23,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-
-def velocity_at_sensor(v_body_mps: np.ndarray, omega_rps: np.ndarray, r_from_cg_m: np.ndarray) -> np.ndarray:
-    """``V_s = V + omega x r``: (N, 3) air velocity at the sensor, body axes, m/s."""
-    return v_body_mps + np.cross(omega_rps, r_from_cg_m)
-
-
-def domega_matrix(r_from_cg_m: np.ndarray) -> np.ndarray:
-    """``d(omega x r)/d omega = -[r]x``: (3, 3), rows (u_s, v_s, w_s), columns (p, q, r)."""
-    x, y, z = r_from_cg_m
-    return np.array([[0.0, z, -y], [-z, 0.0, x], [y, -x, 0.0]])
-
-
-def angle_signals(v_s_mps: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Flow angles and speed of a velocity, with derivatives with respect to its components.
-
-    Parameters
-    ----------
-    v_s_mps : (N, 3) air velocity (u_s, v_s, w_s), body axes, m/s.
-
-    Returns
-    -------
-    name -> (value (N,), d value / d(u_s, v_s, w_s) (N, 3)) for ``alpha``, ``beta``, ``flank``
-    (rad) and ``tas`` (m/s).
-    """
-    return {kind: angle_signal(v_s_mps, kind) for kind in ("alpha", "beta", "flank", "tas")}
-
-
-def angle_signal(v_s_mps: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
-    """One of :func:`angle_signals` (``kind`` "alpha", "beta", "flank" or "tas"), computed alone."""
-    u, v, w = v_s_mps[:, 0], v_s_mps[:, 1], v_s_mps[:, 2]
-    if kind == "alpha":
-        uw2 = u * u + w * w
-        zero = np.zeros_like(u)
-        return np.arctan2(w, u), np.stack([-w / uw2, zero, u / uw2], axis=1)
-    if kind == "beta":
-        uw2 = u * u + w * w
-        V2 = uw2 + v * v
-        V = np.sqrt(V2)
-        suw = np.sqrt(uw2)
-        return np.arcsin(v / V), np.stack([-v * u / (V2 * suw), suw / V2, -v * w / (V2 * suw)], axis=1)
-    if kind == "flank":
-        uv2 = u * u + v * v
-        zero = np.zeros_like(u)
-        return np.arctan2(v, u), np.stack([-v / uv2, u / uv2, zero], axis=1)
-    if kind == "tas":
-        V = np.sqrt(u * u + w * w + v * v)
-        return V, v_s_mps / V[:, None]
-    raise ValueError(f"unknown flow signal {kind!r}; one of alpha, beta, flank, tas")
-
-
 _KIND_CODE = {"alpha": 0, "beta": 1, "flank": 2, "tas": 3}
 
 
