@@ -62,36 +62,24 @@ SENS_NAMES = ("u0", "v0", "w0", "phi0", "theta0", "psi0", "h0",
 @njit(cache=True, fastmath=False)
 def _rhs(x, S, a_m, om_m, omd, r, rh, da, dw, g, xd, Sd):
     # r: lever arm of the accelerations (zero for the IMU point); rh: of the altitude's velocity
+    # the states' derivative is _rhs_states' (one implementation: states with or without S agree)
+    _rhs_states(x, a_m, om_m, omd, r, rh, da, dw, g, xd)
+    # what the sensitivity part needs of the same quantities
     p = om_m[0] - dw[0]
     q = om_m[1] - dw[1]
     rr = om_m[2] - dw[2]
-    # lever arm: a = a_m - da - omd x r - om x (om x r)
     odr = p * r[0] + q * r[1] + rr * r[2]
-    oo = p * p + q * q + rr * rr
-    ax = a_m[0] - da[0] - (omd[1] * r[2] - omd[2] * r[1]) - (p * odr - r[0] * oo)
-    ay = a_m[1] - da[1] - (omd[2] * r[0] - omd[0] * r[2]) - (q * odr - r[1] * oo)
-    az = a_m[2] - da[2] - (omd[0] * r[1] - omd[1] * r[0]) - (rr * odr - r[2] * oo)
     u, v, w, phi, th = x[0], x[1], x[2], x[3], x[4]
     sph, cph = np.sin(phi), np.cos(phi)
     sth, cth = np.sin(th), np.cos(th)
     tth = sth / cth
     qs_rc = q * sph + rr * cph
     qc_rs = q * cph - rr * sph
-    xd[0] = rr * v - q * w - g * sth + ax
-    xd[1] = p * w - rr * u + g * cth * sph + ay
-    xd[2] = q * u - p * v + g * cth * cph + az
-    xd[3] = p + qs_rc * tth
-    xd[4] = qc_rs
-    xd[5] = qs_rc / cth
     # the CG's velocity V - om x rh (rh = 0: the state is the CG's velocity)
-    wx0 = q * rh[2] - rr * rh[1]
-    wx1 = rr * rh[0] - p * rh[2]
-    wx2 = p * rh[1] - q * rh[0]
-    uc = u - wx0
-    vc = v - wx1
-    wc = w - wx2
+    uc = u - (q * rh[2] - rr * rh[1])
+    vc = v - (rr * rh[0] - p * rh[2])
+    wc = w - (p * rh[1] - q * rh[0])
     n0, n1, n2 = sth, -cth * sph, -cth * cph
-    xd[6] = uc * sth - vc * cth * sph - wc * cth * cph
 
     # S' = A S + F with A = df/dx written out by its non-zeros (psi and h never feed back)
     gc, gs = g * cth, g * sth
@@ -359,7 +347,7 @@ def _integrate_many(seg, t_s, params, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_
 
 @njit(cache=True)
 def _rhs_states(x, a_m, om_m, omd, r, rh, da, dw, g, xd):
-    # the state part of _rhs, operation for operation (the same states with or without S)
+    # the states' right-hand side; _rhs adds the sensitivities to it
     p = om_m[0] - dw[0]
     q = om_m[1] - dw[1]
     rr = om_m[2] - dw[2]
