@@ -166,6 +166,13 @@ def _signal_key(name: str, sensor: str | None) -> tuple[str, str | None]:
     return name, (sensor if name in ("alpha_s", "beta_s", "flank_s") else None)
 
 
+def _filled(t_s: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """A measurement as a model input at every sample: an own-rate channel (NaN between its
+    samples) interpolated linearly; it is fitted only where it has samples."""
+    fin = np.isfinite(v)
+    return v if fin.all() else np.interp(t_s, t_s[fin], v[fin])
+
+
 class _ChannelLayout:
     """What a channel needs that does not depend on the parameter values, for a maneuver set."""
 
@@ -193,22 +200,25 @@ class _ChannelLayout:
         for b, k in enumerate(self.mans):
             g = model.guard_samples(int(k), c)
             r = np.arange(g, lens[b] - g)
+            # an own-rate channel (NaN between its samples) is fitted at its samples only
+            r = r[np.isfinite(mans[b].measurements[ch.column][r])]
             local.append(r)
             rows.append(self.cseg[b] + r)
             rseg.append(rseg[-1] + r.size)
         self.rows = np.concatenate(rows) if rows else np.zeros(0, dtype=np.intp)
         self.local_rows = np.concatenate(local) if local else np.zeros(0, dtype=np.intp)
         self.rseg = np.array(rseg, dtype=np.intp)
-        self.z = np.concatenate([m.measurements[ch.column] for m in mans]) if mans else np.zeros(0)
+        self.z = np.concatenate([_filled(m.t_s, m.measurements[ch.column]) for m in mans]
+                                ) if mans else np.zeros(0)
         self.z_rows = self.z[self.rows]
         self.data: dict[str, np.ndarray] = {}
         for name in expr.names - STATE_SIGNALS - {"z", "zhat"}:
             if name in ps.specs:
                 continue
             cols = model._channel_columns
-            self.data[name] = np.concatenate([
+            self.data[name] = np.concatenate([_filled(m.t_s,
                 m.signals[name] if name in m.signals else
-                m.measurements[name] if name in m.measurements else m.measurements[cols[name]]
+                m.measurements[name] if name in m.measurements else m.measurements[cols[name]])
                 for m in mans])
         self.state_names = sorted(expr.names & STATE_SIGNALS)
         # slot space: 13 state-equation parameters, parameters, tables (K each), time shift

@@ -97,7 +97,8 @@ class ManeuverData:
     t_s : (N,) uniform, strictly increasing sample times, s.
     accel_imu_mps2 : (N, 3) specific force measured at the IMU, body axes, m/s^2.
     omega_rps : (N, 3) body rates measured by the IMU, rad/s.
-    measurements : channel column -> (N,) measured values (SI), NaN-free.
+    measurements : channel column -> (N,) measured values (SI); NaN only where an own-rate
+        channel (recorded slower than the time base) has no sample.
     signals : other data columns the models may use (``gear``, ``mach``), (N,) each.
     r_cg_body_m : (3,) CG position, body axes, m (reference-point origin).
     aircraft, configuration : for aircraft- and configuration-scoped parameters.

@@ -299,6 +299,7 @@ def _run_job(job: Job) -> JobResult:
             "environment": env.to_dict(),
             "injected": inst.injected,
             "channel_units": inst.channel_units,
+            "own_rate_columns": list(inst.own_rate_columns),
             "flight_meta": {k: v for k, v in truth.meta.items() if k != "spec"},
         }
         write_maneuver(_WORKER["out_dir"] / fname, data, entry)

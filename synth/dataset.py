@@ -15,7 +15,9 @@ has one entry per Parquet file with: ``id``, ``file``, ``configuration``, ``airc
 ``nose_sensor``, ``kind``, ``segment``, ``mach_nominal``, ``mach_mean``, ``mach_min``,
 ``mach_max``, ``altitude_m``, ``gear_down``, ``duration_s``, ``n_samples``, ``sample_rate_hz``,
 ``r_cg_body_m_mean``, ``g_mps2_mean`` (gravity JSBSim used), ``environment``, ``injected``
-(every injected error value, SI) and ``channel_units``. The same entry is stored in each
+(every injected error value, SI), ``channel_units`` and ``own_rate_columns`` (measured columns
+kept at their recorder's own, slower samples: empty between them, e.g. the 10 Hz DGPS height on a
+40 Hz base). The same entry is stored in each
 Parquet file's key-value metadata under ``fpr.maneuver`` so a single file stays self-describing.
 
 Files are written to a temporary name and renamed into place, so an interrupted run never leaves

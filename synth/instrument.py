@@ -106,12 +106,15 @@ class InstrumentedManeuver:
         ``time_shift_s.<column>`` = total lag of a measured column against the truth, ...).
     channel_units : column -> unit.
     streams : recorder -> its raw stream (``t_s`` = its stamps) before resampling.
+    own_rate_columns : measured columns kept at their own, slower samples: empty (NaN) between
+        them, because their recorder's stamps lie on the common time base (see :func:`instrument`).
     """
 
     data: pd.DataFrame
     injected: dict[str, float | list]
     channel_units: dict[str, str]
     streams: dict[str, pd.DataFrame] = field(default_factory=dict)
+    own_rate_columns: tuple[str, ...] = ()
 
 
 # ------------------------------------------------------------------ sensing kernels (shared)
@@ -293,7 +296,10 @@ def instrument(
         ``true_alpha_sp_rad``/``true_beta_sp_rad`` at the side probes' mean position;
         ``true_clean_<channel>`` for each calibrated flow channel: its value with every
         deterministic error and no noise, quantization or delay).
-        ``psi`` is continuous (unwrapped) within the maneuver.
+        ``psi`` is continuous (unwrapped) within the maneuver. A recorder slower than the
+        common base whose stamps are common-base times (DGPS at 10 Hz on 40 Hz) keeps its own
+        samples: its columns are NaN between them (listed in ``own_rate_columns``); faster or
+        unaligned streams are interpolated linearly in their stamps.
     """
     _check_truth(truth, common_rate_hz)
     truth_model, sensing, adc = _models(errors, truth_model, adc_baseline)
@@ -520,10 +526,19 @@ def instrument(
     # ---- preprocessing onto the common time base ------------------------------------------------
     streams = {"dru": dru, "ins": ins, "dgps": dgps}
     common: dict[str, np.ndarray] = {}
+    own_rate: list[str] = []
     for r, cols in streams.items():
+        on_grid = _stamps_on_grid(stamps[r], t_common, common_rate_hz)
         for c, v in cols.items():
             if v.dtype == bool:
                 common[c] = resample_hold(stamps[r], v, t_common)
+            elif on_grid is not None:
+                # a slow stream whose stamps are common-base times stays at its own samples:
+                # interpolating it between them would low-pass it, which an estimator reads as
+                # a small extra delay; it fits the samples where they are instead
+                common[c] = np.full(t_common.shape, np.nan)
+                common[c][on_grid[1]] = v[on_grid[0]]
+                own_rate.append(c)
             else:
                 common[c] = resample_linear(stamps[r], v, t_common)
 
@@ -604,4 +619,18 @@ def instrument(
     units = {c: _units(c) for c in columns}
     stream_frames = {r: pd.DataFrame({"t_s": stamps[r], **cols}) for r, cols in streams.items()}
     return InstrumentedManeuver(data=data, injected=injected, channel_units=units,
-                                streams=stream_frames)
+                                streams=stream_frames, own_rate_columns=tuple(own_rate))
+
+
+def _stamps_on_grid(stamps_s: np.ndarray, t_common_s: np.ndarray, common_rate_hz: float
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
+    """For a stream slower than the common base whose stamps are common-base times: the indices
+    of its stamps inside the common span and of the common samples they fall on; else None."""
+    if len(stamps_s) < 2 or np.median(np.diff(stamps_s)) * common_rate_hz < 1.5:
+        return None
+    k = np.rint(stamps_s * common_rate_hz)
+    if np.max(np.abs(stamps_s * common_rate_hz - k)) > 1e-6:
+        return None
+    j = (k - round(t_common_s[0] * common_rate_hz)).astype(np.int64)
+    inside = np.flatnonzero((j >= 0) & (j < len(t_common_s)))
+    return inside, j[inside]

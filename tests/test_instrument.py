@@ -180,7 +180,7 @@ def changed_columns(a: pd.DataFrame, b: pd.DataFrame) -> set[str]:
     """Columns that differ; a clean channel (true_clean_X) may change only together with X."""
     assert list(a.columns) == list(b.columns)
     assert np.array_equal(a["t_s"], b["t_s"])
-    changed = {c for c in a.columns if not np.array_equal(a[c].to_numpy(), b[c].to_numpy())}
+    changed = {c for c in a.columns if not np.array_equal(a[c].to_numpy(), b[c].to_numpy(), equal_nan=True)}
     clean = {c for c in changed if c.startswith("true_clean_")}
     for c in clean:
         assert c.removeprefix("true_clean_") in changed, f"{c} changed but its channel did not"
@@ -617,7 +617,11 @@ def test_injected_values_and_units_are_complete():
     assert set(inst.channel_units) == set(df.columns)
     assert inst.channel_units["q_rps"] == "rad/s" and inst.channel_units["dp_beta_np_pa"] == "Pa"
     assert np.allclose(np.diff(df["t_s"]) * 40.0, 1.0)
-    assert not df.isna().any().any()
+    # the 10 Hz DGPS stream's stamps are 40 Hz times: it stays at its own samples, every 4th row
+    assert inst.own_rate_columns == ("h_dgps_m",)
+    dgps = df["h_dgps_m"].to_numpy()
+    assert np.all(np.diff(np.flatnonzero(np.isfinite(dgps))) == 4)
+    assert not df.drop(columns="h_dgps_m").isna().any().any()
     for col in CHANNEL_TRUTH.values():
         if "boom" not in col:
             assert col in df

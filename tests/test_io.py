@@ -629,6 +629,8 @@ def test_documented_problem_file_example_works(tmp_path):
         "PHI": f["phi"] / DEG, "THETA": f["theta"] / DEG, "PSI": np.mod(f["psi"] / DEG, 360.0),
         "TAS": f["tas"] / KT, "HP": f["h"] / FT, "AOA_R": f["alpha_zr"] / DEG, "GEAR": f["gear"],
         "MACH": f["mach"], "AOA_L": f["alpha_zl"] / DEG,
+        # a GPS height at a quarter of the file's rate, empty between its samples (own_rate)
+        "GPS_ALT": np.where(np.arange(len(f)) % 4 == 0, f["h"] / FT, np.nan),
     })
     eng.to_csv(tmp_path / "flight421.csv", index=False)
     with pytest.warns(DataWarning, match="b_5h"):  # declared for the example channel, which is not listed
@@ -638,6 +640,10 @@ def test_documented_problem_file_example_works(tmp_path):
     assert pd1.t_s[0] == pytest.approx(120.0) and wut1.t_s[-1] == pytest.approx(340.0)
     sel = (f["time"] >= 120.0 - 1e-9) & (f["time"] <= 155.0 + 1e-9)
     np.testing.assert_allclose(pd1.measurements["alpha_zl"], f.loc[sel, "alpha_zl"], rtol=1e-9)
+    gps = pd1.measurements["h_dgps"]
+    assert np.array_equal(np.isfinite(gps), (np.flatnonzero(sel) % 4) == 0)
+    np.testing.assert_allclose(gps[np.isfinite(gps)], f.loc[sel, "h"].to_numpy()[np.isfinite(gps)],
+                               rtol=1e-9)
     np.testing.assert_allclose(pd1.measurements["tas"], f.loc[sel, "tas"], rtol=1e-9)
     assert prob.parameters["u0[pd1]"].value == 152.0
     assert prob.parameters["b_l[PV1]"].bounds == pytest.approx((-3 * DEG, 3 * DEG))

@@ -20,7 +20,7 @@ z down) from the aircraft's reference point::
                               # or "differentiated" (SPEC §3: angular accelerations from smoothed
                               # differentiation of the rates)
     model = "tejas"           # model set: a shipped name (estimator/models/*.toml) or a path
-    channels = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr"]
+    channels = ["phi", "theta", "psi", "tas", "h", "h_dgps", "alpha_zl", "alpha_zr"]
                               # optional: the channels to fit; default: every channel of the
                               # model set that has data (the others are left out with a warning)
     resample_hz = 40.0        # optional, for every file: see "Sampling" below
@@ -53,6 +53,10 @@ z down) from the aircraft's reference point::
     alpha_zl = { column = 7, unit = "deg" }
     alpha_zr = { column = "AOA_R", unit = "deg", optional = true }
                               # optional: a file without this column simply has no such channel
+    h_dgps = { column = "GPS_ALT", unit = "ft", own_rate = true }
+                              # own_rate: recorded slower than the file's time base and empty
+                              # between its samples (a 10 Hz GPS height in a 40 Hz file): fitted
+                              # at its own samples only (interpolating it would delay it)
     gear = { column = "GEAR", unit = "1" } # any other data signal a model uses (1 = gear down)
     mach = { column = "MACH", unit = "1" }
 
@@ -131,7 +135,8 @@ column, the time and data row (0-based, after the header) of the first bad sampl
   using a data signal a maneuver lacks; a sensor without a position;
 - time not strictly increasing (duplicated or going back) anywhere in a file; a maneuver's time
   range outside the file's span;
-- NaN, empty or non-numeric cells in any mapped column inside a maneuver;
+- NaN, empty or non-numeric cells in any mapped column inside a maneuver (an ``own_rate``
+  channel may be empty between its samples, but needs two of them);
 - gaps: a step longer than :data:`~estimator.io.timebase.GAP_FACTOR` (1.5) times the median step;
 - non-uniform sampling: a step off the median by more than
   :data:`~estimator.io.timebase.JITTER_FRACTION` (1 %) is an error unless ``resample_hz`` is
@@ -159,6 +164,7 @@ Start values of the initial conditions ``u0 v0 w0 phi0 theta0 psi0 h0`` come fro
 measured flow angles, Euler angles, altitude); values given in the problem file win.
 """
 
+from estimator.io.build import subproblem
 from estimator.io.dataset_problem import load_dataset_maneuvers, problem_from_dataset
 from estimator.io.errors import DataError, DataWarning
 from estimator.io.fprdataset import DATASET_COLUMNS, load_truth
@@ -175,5 +181,6 @@ from estimator.io.units import UNITS, to_si
 __all__ = [
     "DATASET_COLUMNS", "GAP_FACTOR", "IC_AVERAGE_SAMPLES", "JITTER_FRACTION", "MIN_DURATION_S",
     "MIN_SAMPLES_PER_FREE_PARAMETER", "UNITS", "DataError", "DataWarning", "initial_condition_starts",
-    "load_dataset_maneuvers", "load_problem", "load_truth", "problem_from_dataset", "to_si",
+    "load_dataset_maneuvers", "load_problem", "load_truth", "problem_from_dataset", "subproblem",
+    "to_si",
 ]

@@ -44,6 +44,8 @@ class SourceTable:
     units : canonical name -> declared unit.
     labels : canonical name -> how messages name it (``"channel ax (column 'AX')"``).
     rows : (N,) data row of each sample (0-based after the header).
+    own_rate : canonical names recorded at their own, slower rate: empty (NaN) between their
+        samples, fitted only where they have one (``own_rate = true`` in ``[columns]``).
     """
 
     path: Path
@@ -53,6 +55,7 @@ class SourceTable:
     not_numeric: dict[str, np.ndarray] = field(default_factory=dict)
     raw_text: dict[str, np.ndarray] = field(default_factory=dict)
     rows: np.ndarray | None = None
+    own_rate: frozenset[str] = frozenset()
 
     def __post_init__(self) -> None:
         missing = [c for c in REQUIRED if c not in self.values]
@@ -124,19 +127,35 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
     idx = select_range(table.t_s, req.t_start_s, req.t_end_s, where)
     t_s = table.t_s[idx]
     rows = table.rows[idx]
+    own = table.own_rate & set(table.values)
+    bad_own = own & (set(REQUIRED) | {"phi", "theta", "psi"} | (set(table.values) - channel_columns))
+    if bad_own:
+        raise DataError(
+            f"{where}: {sorted(bad_own)} cannot be own_rate columns: the IMU inputs, Euler angles "
+            "and data signals are needed at every sample; resample them onto the time base first "
+            "(own_rate is for slow measured channels such as a GPS height)")
+    present = {}
     for name, v in table.values.items():
-        check_finite(v[idx], table.not_numeric.get(name, np.zeros(len(v), bool))[idx],
-                     table.raw_text[name][idx] if name in table.raw_text else None, t_s, rows, where,
-                     table.labels[name])
+        vi = v[idx]
+        not_num = table.not_numeric.get(name, np.zeros(len(v), bool))[idx]
+        keep = np.isfinite(vi) | not_num | np.isinf(vi) if name in own else np.ones(vi.size, bool)
+        if name in own and np.count_nonzero(keep) < 2:
+            raise DataError(f"{where}: {table.labels[name]} (own_rate) has fewer than 2 samples in the "
+                            "maneuver; widen the time range or leave the channel out")
+        check_finite(vi[keep], not_num[keep],
+                     table.raw_text[name][idx][keep] if name in table.raw_text else None, t_s[keep],
+                     rows[keep], where, table.labels[name])
+        present[name] = keep
     check_sampling(t_s, rows, where, req.resample_hz)
     si = {name: to_si(v[idx], table.units[name], table.labels[name])
           for name, v in table.values.items() if name != "t"}
     check_plausible("t", table.labels["t"], t_s, table.units["t"], t_s, rows, where)
     for name, v in si.items():
         if name not in ("ax", "ay", "az"):
-            check_plausible(name, table.labels[name], v, table.units[name], t_s, rows, where)
+            k = present[name]
+            check_plausible(name, table.labels[name], v[k], table.units[name], t_s[k], rows[k], where)
     _check_accel(table, si, t_s, rows, where)
-    if "tas" in si and "mach" in si:
+    if "tas" in si and "mach" in si and "tas" not in own:
         check_tas_against_mach(si["tas"], si["mach"], table.units["tas"], table.labels["tas"], where)
     check_euler_rates(si, t_s, table.units, table.labels, where)
     if req.resample_hz is not None:
@@ -146,7 +165,12 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
                  "interpolation without an anti-aliasing filter; filter the data first if it is noisy")
         if "psi" in si:  # unwrap first: interpolating across a +-180 deg wrap invents headings
             si["psi"] = np.unwrap(si["psi"])
-        t_s, si = resample(t_s, si, float(req.resample_hz), where)
+        t_old = t_s
+        t_s, si = resample(t_s, {k: v for k, v in si.items() if k not in own}, float(req.resample_hz),
+                           where)
+        for name in own:
+            si[name] = _own_rate_on_grid(t_old, to_si(table.values[name][idx], table.units[name],
+                                                      table.labels[name]), t_s, table.labels[name], where)
     if "psi" in si:  # heading wraps at +-180 deg or 0/360 deg; the reconstruction does not
         si["psi"] = np.unwrap(si["psi"])
     ids = set(REQUIRED)
@@ -167,6 +191,26 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
         source=f"{table.path}, maneuver {req.id} (t = {t_s[0]:.3f} to {t_s[-1]:.3f} s)",
         meta=meta,
     )
+
+
+def _own_rate_on_grid(t_s: np.ndarray, v: np.ndarray, t_new_s: np.ndarray, label: str,
+                      where: Where) -> np.ndarray:
+    """An own-rate column on a resampled grid: each sample moves to the grid time it falls on
+    (within 1 % of a step); interpolating between samples would low-pass the channel."""
+    k = np.flatnonzero(np.isfinite(v))
+    step = float(t_new_s[1] - t_new_s[0])
+    j = np.rint((t_s[k] - t_new_s[0]) / step).astype(np.int64)
+    off = np.abs(t_s[k] - t_new_s[0] - j * step)
+    if np.any(off > 0.01 * step):
+        i = int(k[np.argmax(off)])
+        raise DataError(
+            f"{where}: {label} (own_rate) has a sample at t = {t_s[i]:.4f} s that is not a time of "
+            f"the resampled grid (step {step:.4g} s from t = {t_new_s[0]:.4f} s); choose a "
+            "resample_hz that is a multiple of the channel's rate, or resample the file yourself")
+    out = np.full(t_new_s.shape, np.nan)
+    inside = (j >= 0) & (j < t_new_s.size)
+    out[j[inside]] = v[k[inside]]
+    return out
 
 
 def _check_accel(table: SourceTable, si: Mapping[str, np.ndarray], t_s, rows, where: Where) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -104,3 +105,38 @@ def build_problem(
         raise
     except ValueError as exc:
         raise DataError(f"{source}: {exc}") from None
+
+
+def subproblem(problem: Problem, maneuver_ids: Sequence[str], *,
+               values: Mapping[str, float] | None = None,
+               free: Mapping[str, bool] | None = None) -> Problem:
+    """The same problem restricted to some of its maneuvers (a Mach bin, the gear-down ones).
+
+    Parameter families are re-expanded over the instances the subset has (an aircraft without
+    maneuvers in it has no bias there), channels without data in the subset are left out, and
+    an instance whose channels have no data is fixed, exactly as when the problem was built.
+
+    Parameters
+    ----------
+    problem : the full problem.
+    maneuver_ids : ids of the maneuvers to keep, in the order given.
+    values : parameter key -> value (SI) to start from or hold; keys absent from the subset are
+        ignored (an aircraft not in it).
+    free : parameter key or family name -> free (True) or held (False), applied after ``values``.
+    """
+    by_id = {m.id: m for m in problem.maneuvers}
+    unknown = [i for i in maneuver_ids if i not in by_id]
+    if unknown:
+        raise DataError(f"{problem.source}: no maneuver(s) {unknown[:5]} in the problem")
+    if not maneuver_ids:
+        raise DataError(f"{problem.source}: an empty set of maneuvers has nothing to estimate")
+    mans = [by_id[i] for i in maneuver_ids]
+    chans = [c for c in problem.channels if any(c.column in m.measurements for m in mans)]
+    specs = finalize_parameters(list(problem.parameters.specs.values()), set(), chans, mans,
+                                problem.source)
+    params = expand_parameters(specs, mans, chans)
+    if values:
+        params = params.with_values({k: v for k, v in values.items() if k in params})
+    if free:
+        params = params.with_free(free)
+    return replace(problem, maneuvers=tuple(mans), channels=tuple(chans), parameters=params)

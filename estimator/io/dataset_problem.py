@@ -46,6 +46,8 @@ def load_dataset_maneuvers(path: str | Path, select: Mapping | None = None
             path=file, values=values, not_numeric=bad, raw_text=text,
             units={DATASET_COLUMNS[c]: column_unit(c) for c in df.columns},
             labels={DATASET_COLUMNS[c]: f"{DATASET_COLUMNS[c]} (column {c!r})" for c in df.columns},
+            own_rate=frozenset(DATASET_COLUMNS[c] for c in e.get("own_rate_columns", ())
+                               if c in df.columns),
         )
         if e.get("r_cg_body_m_mean") is None:
             raise DataError(f"{directory}: manifest entry {e['id']} has no r_cg_body_m_mean (the CG)")

@@ -191,7 +191,11 @@ def initial_condition_starts(m: ManeuverData, n_avg: int = IC_AVERAGE_SAMPLES) -
     k = max(1, min(n_avg, m.n))
 
     def first(name: str) -> float | None:
-        return float(np.mean(data[name][:k])) if name in data else None
+        if name not in data:
+            return None
+        v = data[name]
+        fin = np.flatnonzero(np.isfinite(v))  # an own-rate channel is NaN between its samples
+        return float(np.mean(v[fin[fin < k]])) if np.any(fin < k) else float(v[fin[0]])
 
     out: dict[str, float] = {}
     for name, key in (("phi", "phi0"), ("theta", "theta0"), ("psi", "psi0"), ("h", "h0")):

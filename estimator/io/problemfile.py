@@ -22,7 +22,7 @@ FILE_KEYS = ("path", "format", "header", "delimiter", "skip_rows", "aircraft", "
              "maneuvers", "resample_hz", "columns", "r_cg_body_m", "r_cg_body_in", "r_cg_body_ft")
 MANEUVER_KEYS = ("id", "t_start_s", "t_end_s", "configuration", "r_cg_body_m", "r_cg_body_in",
                  "r_cg_body_ft")
-COLUMN_KEYS = ("column", "unit", "optional")
+COLUMN_KEYS = ("column", "unit", "optional", "own_rate")
 _LENGTH_SUFFIXES = (("_m", 1.0), ("_in", 0.0254), ("_ft", 0.3048))
 
 
@@ -102,7 +102,9 @@ def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: s
             text[name] = series.to_numpy()
         units[name] = spec["unit"]
         labels[name] = f"{name} (column {src!r})"
-    return SourceTable(path=path, values=values, not_numeric=bad, raw_text=text, units=units, labels=labels)
+    own = frozenset(n for n, spec in columns.items() if spec.get("own_rate", False) and n in values)
+    return SourceTable(path=path, values=values, not_numeric=bad, raw_text=text, units=units, labels=labels,
+                       own_rate=own)
 
 
 def _file_pairs(raw: Mapping, base: Path, where: str) -> list[tuple[SourceTable, ManeuverRequest]]:
