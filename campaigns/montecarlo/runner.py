@@ -1,0 +1,488 @@
+"""Run a Monte Carlo scenario into an output directory, locally or on a Dask cluster, resumably.
+
+Layout of the output directory::
+
+    OUT/montecarlo.json            format, scenario (as read) and its hash, N, software versions
+    OUT/scenario.toml              a copy of the scenario file (when it came from one)
+    OUT/flights/j0007.pkl          truth of each maneuver flown once (reused by every replication)
+    OUT/replications/r00042.parquet         one finished replication (ReplicationResult.to_pandas,
+                                            its scalars in the file metadata under fpr.montecarlo)
+    OUT/replications/r00043.failed.json     one failed replication: status, error text, seeds
+
+Every file is written to a temporary name and renamed into place, by the one process that runs
+the campaign (workers return results; they never write), so an interrupted run leaves whole files
+only. Running the same command again skips the replications that have a file (a failed one too,
+unless ``retry_failed``) and ends with exactly one file per replication. An output directory made
+from another scenario (its hash differs) is refused. A lock (``OUT/.lock``) keeps two runs out of
+one directory.
+
+Executors: local processes (:class:`concurrent.futures.ProcessPoolExecutor`, the default),
+in-process (``workers=1``, for debugging and tests), or a Dask distributed cluster
+(``scheduler=ADDRESS`` or a :class:`dask.distributed.Client`). Replication ``k``'s results do not
+depend on the executor: everything it draws derives from ``(seed, k)``.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import pickle
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from synth.campaign import software_versions
+from synth.flight import FlightError
+from synth.truth import TruthTrajectory
+
+from .replication import Models, ReplicationResult, failure_record, fly, run_replication_safely
+from .scenario import Scenario, ScenarioError, parse_scenario, scenario_hash, with_replications
+
+FORMAT = "fpr-montecarlo"
+FORMAT_VERSION = 1
+STATE_FILE = "montecarlo.json"
+METADATA_KEY = b"fpr.montecarlo"
+_REP = "replications"
+_FLIGHTS = "flights"
+
+
+# ---------------------------------------------------------------------------- files
+
+
+def _atomic_write(path: Path, payload: bytes) -> None:
+    """Write ``payload`` to a temporary file beside ``path`` and rename it into place."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(payload)
+        os.chmod(tmp, 0o644)  # mkstemp's 0600 would hide results from the rest of the team
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def replication_file(out_dir: Path, index: int, failed: bool = False) -> Path:
+    """The file of replication ``index`` (finished or failed)."""
+    name = f"r{index:05d}.failed.json" if failed else f"r{index:05d}.parquet"
+    return Path(out_dir) / _REP / name
+
+
+def finished_replications(out_dir: Path) -> dict[int, str]:
+    """Replication index -> "ok" or "failed", from the files present (a finished result wins
+    over a failure record of the same index)."""
+    out: dict[int, str] = {}
+    rep = Path(out_dir) / _REP
+    if not rep.is_dir():
+        return out
+    for p in rep.iterdir():
+        if p.name.startswith("."):
+            continue
+        if p.name.endswith(".failed.json"):
+            out.setdefault(int(p.name[1:6]), "failed")
+        elif p.suffix == ".parquet":
+            out[int(p.name[1:6])] = "ok"
+    return out
+
+
+def write_replication(out_dir: Path, result: ReplicationResult) -> Path:
+    """Write one replication's file atomically (and drop an earlier failure record of it)."""
+    if not result.ok:
+        path = replication_file(out_dir, result.index, failed=True)
+        _atomic_write(path, failure_record(result).encode())
+        return path
+    table = pa.Table.from_pandas(result.to_pandas(), preserve_index=False)
+    meta = dict(table.schema.metadata or {})
+    meta[METADATA_KEY] = json.dumps(result.meta(), sort_keys=True).encode()
+    sink = pa.BufferOutputStream()
+    pq.write_table(table.replace_schema_metadata(meta), sink, compression="zstd")
+    path = replication_file(out_dir, result.index)
+    _atomic_write(path, sink.getvalue().to_pybytes())
+    replication_file(out_dir, result.index, failed=True).unlink(missing_ok=True)
+    return path
+
+
+def read_replication(path: Path) -> ReplicationResult:
+    """Read a replication file (finished ``.parquet`` or ``.failed.json``)."""
+    path = Path(path)
+    if path.name.endswith(".failed.json"):
+        meta = json.loads(path.read_text())
+        return ReplicationResult(index=int(meta["replication"]), ok=False, status=int(meta["status"]),
+                                 message=str(meta["message"]), noise_seed=int(meta["noise_seed"]),
+                                 scenario_hash=str(meta["scenario_hash"]),
+                                 elapsed_s=float(meta.get("elapsed_s", 0.0)),
+                                 warnings=tuple(meta.get("warnings", ())))
+    table = pq.read_table(path)
+    raw = (table.schema.metadata or {}).get(METADATA_KEY)
+    if raw is None:
+        raise ValueError(f"{path}: no {METADATA_KEY.decode()} metadata; not a replication file written "
+                         "by `fpr montecarlo` (remove it from the replications/ directory)")
+    return ReplicationResult.from_pandas(table.to_pandas(), json.loads(raw))
+
+
+def read_state(out_dir: Path) -> dict:
+    """The run's ``montecarlo.json``."""
+    path = Path(out_dir) / STATE_FILE
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no {STATE_FILE}; is {out_dir} the --out directory of "
+                                "`fpr montecarlo`?")
+    state = json.loads(path.read_text())
+    if state.get("format") != FORMAT:
+        raise ValueError(f"{path}: format {state.get('format')!r}, expected {FORMAT!r}")
+    return state
+
+
+def scenario_of(out_dir: Path) -> Scenario:
+    """The scenario an output directory was made from (as stored in its ``montecarlo.json``)."""
+    state = read_state(out_dir)
+    return parse_scenario(state["scenario"], source=state.get("source", str(out_dir)))
+
+
+def prepare_output(scenario: Scenario, out_dir: Path) -> Path:
+    """Create the output directory, or check that an existing one holds this scenario's run.
+
+    Raises
+    ------
+    ScenarioError
+        The directory holds a run of another scenario, or something that is not a run.
+    """
+    out_dir = Path(out_dir)
+    state_path = out_dir / STATE_FILE
+    if out_dir.exists() and any(out_dir.iterdir()):
+        if not state_path.exists():
+            raise ScenarioError(f"{out_dir}: not empty and not a Monte Carlo output (no {STATE_FILE}); "
+                                "choose a new or empty --out directory")
+        state = read_state(out_dir)
+        if state.get("scenario_hash") != scenario.hash:
+            raise ScenarioError(
+                f"{out_dir}: made from another scenario ({state.get('source')}, hash "
+                f"{str(state.get('scenario_hash'))[:12]}) than {scenario.source} "
+                f"(hash {scenario.hash[:12]}); "
+                "results of two scenarios must not mix. Choose another --out, delete the directory to "
+                f"start over, or resume it with the scenario it was made from ({out_dir / 'scenario.toml'})")
+    (out_dir / _REP).mkdir(parents=True, exist_ok=True)
+    (out_dir / _FLIGHTS).mkdir(parents=True, exist_ok=True)
+    for sub in (_REP, _FLIGHTS):  # leftovers of a run killed while writing: never whole files
+        for p in (out_dir / sub).glob(".*.tmp"):
+            p.unlink(missing_ok=True)
+    src = Path(scenario.source)
+    if src.is_file() and not (out_dir / "scenario.toml").exists():
+        _atomic_write(out_dir / "scenario.toml", src.read_bytes())
+    state = {"format": FORMAT, "format_version": FORMAT_VERSION, "name": scenario.name,
+             "source": scenario.source, "scenario_hash": scenario.hash,
+             "replications": scenario.replications, "scenario": scenario.raw,
+             "software": software_versions()}
+    _atomic_write(state_path, (json.dumps(state, indent=1, sort_keys=True, default=str) + "\n").encode())
+    return out_dir
+
+
+# ---------------------------------------------------------------------------- worker side
+
+#: per worker process: the parsed scenario and its models, and the truths read from a cache
+_PROCESS: dict = {}
+
+
+@dataclass(frozen=True)
+class ScenarioPayload:
+    """What a worker needs to rebuild the scenario: its raw tables (small, picklable; the parsed
+    Scenario holds read-only mappings that do not pickle)."""
+
+    raw: dict
+    source: str
+
+    @property
+    def key(self) -> str:
+        return scenario_hash(self.raw) + self.source
+
+
+@dataclass(frozen=True)
+class FlightCache:
+    """The truths of the maneuvers flown once: job index -> segments. One object, so Dask scatters
+    it as one piece of data to every worker."""
+
+    truths: Mapping[int, tuple[TruthTrajectory, ...]]
+
+
+def _worker_scenario(payload: ScenarioPayload) -> tuple[Scenario, Models]:
+    if _PROCESS.get("key") != payload.key:
+        scenario = parse_scenario(payload.raw, source=payload.source)
+        _PROCESS.update(key=payload.key, scenario=scenario, models=Models.of(scenario), truths={})
+    return _PROCESS["scenario"], _PROCESS["models"]
+
+
+def _load_truths(source: str | FlightCache | Mapping, jobs: Iterable[int]) -> Mapping[int, tuple]:
+    if isinstance(source, FlightCache):
+        return source.truths
+    if isinstance(source, Mapping):
+        return source
+    cache = _PROCESS.setdefault("truths", {})
+    for j in jobs:  # read once per process, then kept: the same flights serve every replication
+        if j not in cache:
+            cache[j] = pickle.loads((Path(source) / f"j{j:04d}.pkl").read_bytes())
+    return cache
+
+
+def fly_task(payload: ScenarioPayload, job_index: int) -> tuple[int, tuple | None, str | None]:
+    """Fly one maneuver that every replication shares: (job index, truth segments, error)."""
+    scenario, _ = _worker_scenario(payload)
+    md = scenario.draw(0).maneuvers[job_index]
+    try:
+        return job_index, fly(scenario, md), None
+    except FlightError as exc:
+        return job_index, None, f"FlightError: {exc}"
+
+
+def replication_task(payload: ScenarioPayload, index: int,
+                     truths: str | FlightCache | Mapping) -> ReplicationResult:
+    """Run replication ``index`` in a worker (failures come back as failed results)."""
+    scenario, models = _worker_scenario(payload)
+    cached = _load_truths(truths, (j.index for j in scenario.fixed_jobs))
+    return run_replication_safely(scenario, index, cached, models)
+
+
+# ---------------------------------------------------------------------------- the run
+
+
+@dataclass(frozen=True)
+class RunReport:
+    """What :func:`run_montecarlo` did.
+
+    Attributes
+    ----------
+    out_dir : the output directory.
+    requested : N.
+    ran : replications computed by this call.
+    skipped : replications already finished before it.
+    failed : indices (of 0..N-1) whose file is a failure record.
+    flights_flown : maneuvers flown for the shared truth cache by this call.
+    wall_s : wall time of the call, s.
+    executor : "in-process", "processes(N)" or "dask(ADDRESS)".
+    """
+
+    out_dir: Path
+    requested: int
+    ran: tuple[int, ...]
+    skipped: int
+    failed: tuple[int, ...]
+    flights_flown: int
+    wall_s: float
+    executor: str
+
+    @property
+    def complete(self) -> bool:
+        """Every replication 0..N-1 has a file."""
+        have = finished_replications(self.out_dir)
+        return all(k in have for k in range(self.requested))
+
+    def text(self) -> str:
+        per = f", {self.wall_s / len(self.ran):.1f} s per replication" if self.ran else ""
+        lines = [f"{self.out_dir}: {len(self.ran)} replications run now, {self.skipped} already done, "
+                 f"{self.requested} requested; {self.flights_flown} shared flights flown; "
+                 f"{self.executor}; wall {self.wall_s:.1f} s{per}"]
+        if self.failed:
+            lines.append(f"failed replications ({len(self.failed)}): {list(self.failed)[:20]} "
+                         f"(records in {self.out_dir / _REP}/rNNNNN.failed.json)")
+        return "\n".join(lines)
+
+
+class _Lock:
+    """An exclusive lock on the output directory for the duration of a run."""
+
+    def __init__(self, out_dir: Path):
+        self.path = Path(out_dir) / ".lock"
+
+    def __enter__(self) -> _Lock:
+        self.fh = open(self.path, "a")  # noqa: SIM115 (held until __exit__)
+        try:
+            fcntl.flock(self.fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self.fh.close()
+            raise ScenarioError(f"{self.path.parent}: another `fpr montecarlo` is running into this "
+                                "directory; wait for it or stop it before resuming") from None
+        return self
+
+    def __exit__(self, *exc) -> None:
+        fcntl.flock(self.fh, fcntl.LOCK_UN)
+        self.fh.close()
+
+
+def _progress_bar(total: int, initial: int, desc: str, progress):
+    if progress is not True:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=initial, unit="replication", desc=desc, file=sys.stderr,
+                mininterval=0.5 if sys.stderr.isatty() else 10.0)
+
+
+def run_montecarlo(
+    scenario: Scenario,
+    out_dir: str | Path,
+    *,
+    replications: int | None = None,
+    workers: int | None = None,
+    scheduler=None,
+    indices: Sequence[int] | None = None,
+    retry_failed: bool = False,
+    progress: bool | Callable[[int, int], None] = False,
+) -> RunReport:
+    """Run (or resume) a Monte Carlo scenario into ``out_dir``.
+
+    Parameters
+    ----------
+    scenario : from :func:`~campaigns.montecarlo.load_scenario`.
+    out_dir : the output directory (created; an existing one must hold this scenario's run).
+    replications : N, overriding the scenario's.
+    workers : local worker processes (default: the number of CPUs; 1 runs everything in this
+        process). Ignored with ``scheduler``.
+    scheduler : a Dask scheduler address (``tcp://host:8786``) or a ``dask.distributed.Client``
+        to run the replications on that cluster instead.
+    indices : run only these replications (default: every one of 0..N-1 without a file).
+    retry_failed : run again the replications whose file is a failure record.
+    progress : a tqdm progress bar (True) or a callback ``progress(done, total)``.
+
+    Returns
+    -------
+    RunReport
+    """
+    t0 = time.perf_counter()
+    scenario = with_replications(scenario, replications)
+    n = scenario.replications
+    out_dir = prepare_output(scenario, Path(out_dir))
+    with _Lock(out_dir):
+        have = finished_replications(out_dir)
+        wanted = range(n) if indices is None else sorted(set(int(i) for i in indices))
+        bad = [i for i in wanted if not 0 <= i < n]
+        if bad:
+            raise ScenarioError(f"replications {bad} are outside 0..{n - 1}")
+        todo = [k for k in wanted if k not in have or (retry_failed and have[k] == "failed")]
+        payload = ScenarioPayload(raw=scenario.raw, source=scenario.source)
+        bar = _progress_bar(len(todo), 0, f"monte carlo {scenario.name} ({len(wanted) - len(todo)} done "
+                            "before)", progress)
+        done = [0]
+
+        def record(res: ReplicationResult) -> None:
+            write_replication(out_dir, res)
+            done[0] += 1
+            if bar is not None:
+                bar.update(1)
+                if not res.ok:
+                    bar.write(f"replication {res.index} failed: {res.message.splitlines()[0]}")
+            elif callable(progress):
+                progress(done[0], len(todo))
+
+        try:
+            if scheduler is not None:
+                flown, executor = _run_dask(scenario, payload, out_dir, todo, scheduler, record)
+            elif (workers or os.cpu_count() or 1) == 1:
+                flown, executor = _run_in_process(scenario, out_dir, todo, record)
+            else:
+                flown, executor = _run_processes(scenario, payload, out_dir, todo,
+                                                 workers or os.cpu_count() or 1, record)
+        finally:
+            if bar is not None:
+                bar.close()
+        final = finished_replications(out_dir)
+    return RunReport(out_dir=out_dir, requested=n, ran=tuple(todo), skipped=len(wanted) - len(todo),
+                     failed=tuple(k for k in range(n) if final.get(k) == "failed"),
+                     flights_flown=flown, wall_s=time.perf_counter() - t0, executor=executor)
+
+
+def _missing_flights(scenario: Scenario, out_dir: Path, todo: Sequence[int]) -> list[int]:
+    if not todo:
+        return []
+    return [j.index for j in scenario.fixed_jobs
+            if not (out_dir / _FLIGHTS / f"j{j.index:04d}.pkl").exists()]
+
+
+def _store_flights(scenario: Scenario, out_dir: Path,
+                   outcomes: Iterable[tuple[int, tuple | None, str | None]]) -> int:
+    """Write the flown truths to the cache; a maneuver that cannot be flown stops the campaign
+    (every replication would lack it), with every such maneuver named."""
+    errors, n = [], 0
+    for job_index, segments, error in outcomes:
+        if error is not None:
+            job = scenario.campaign.jobs[job_index]
+            errors.append(f"  maneuver {job_index} ({job.configuration_id}, {job.maneuver['kind']}, "
+                          f"Mach {job.maneuver['mach']}): {error}")
+            continue
+        _atomic_write(out_dir / _FLIGHTS / f"j{job_index:04d}.pkl",
+                      pickle.dumps(tuple(segments), protocol=pickle.HIGHEST_PROTOCOL))
+        n += 1
+    if errors:
+        raise ScenarioError(f"{scenario.source}: {len(errors)} maneuver(s) cannot be flown, so no "
+                            "replication could use them; change or remove them in [[flights]]:\n"
+                            + "\n".join(errors))
+    return n
+
+
+def _run_in_process(scenario, out_dir, todo, record) -> tuple[int, str]:
+    payload = ScenarioPayload(raw=scenario.raw, source=scenario.source)
+    flown = _store_flights(scenario, out_dir, (fly_task(payload, j)
+                                               for j in _missing_flights(scenario, out_dir, todo)))
+    cache = str(out_dir / _FLIGHTS)
+    for k in todo:
+        record(replication_task(payload, k, cache))
+    return flown, "in-process"
+
+
+def _run_processes(scenario, payload, out_dir, todo, workers, record) -> tuple[int, str]:
+    cache = str(out_dir / _FLIGHTS)
+    pool = ProcessPoolExecutor(max_workers=workers)
+    try:
+        missing = _missing_flights(scenario, out_dir, todo)
+        flown = _store_flights(scenario, out_dir,
+                               pool.map(fly_task, [payload] * len(missing), missing))
+        pending = {pool.submit(replication_task, payload, k, cache) for k in todo}
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                record(fut.result())
+    finally:
+        # an interrupt (Ctrl-C, an error writing a file) cancels what has not started
+        pool.shutdown(wait=True, cancel_futures=True)
+    return flown, f"processes({workers})"
+
+
+def _run_dask(scenario, payload, out_dir, todo, scheduler, record) -> tuple[int, str]:
+    try:
+        from dask.distributed import Client, as_completed
+    except ImportError:  # pragma: no cover - dask is a dependency; a broken install says so
+        raise ScenarioError("--scheduler needs dask.distributed: python -m pip install "
+                            "\"dask[distributed]\"") from None
+    own = not isinstance(scheduler, Client)
+    client = Client(scheduler) if own else scheduler
+    try:
+        missing = _missing_flights(scenario, out_dir, todo)
+        flights = client.map(fly_task, [payload] * len(missing), missing, pure=False)
+        flown = _store_flights(scenario, out_dir, (f.result() for f in as_completed(flights)))
+        if not todo:
+            return flown, f"dask({client.scheduler.address})"
+        fixed = [j.index for j in scenario.fixed_jobs]
+        truths = FlightCache({j: pickle.loads((out_dir / _FLIGHTS / f"j{j:04d}.pkl").read_bytes())
+                              for j in fixed})
+        # the workers need not see this directory: the truths travel to each of them once
+        shared = client.scatter(truths, broadcast=True)
+        futures = [client.submit(replication_task, payload, k, shared, pure=False) for k in todo]
+        index_of = {f.key: k for f, k in zip(futures, todo, strict=True)}
+        for fut in as_completed(futures):
+            try:
+                res = fut.result()
+            except Exception as exc:  # the worker died or the task could not run there
+                res = ReplicationResult(index=index_of[fut.key], ok=False, status=-1,
+                                        message=f"dask: {type(exc).__name__}: {exc}",
+                                        noise_seed=scenario.draw(index_of[fut.key]).noise_seed,
+                                        scenario_hash=scenario.hash)
+            record(res)
+        return flown, f"dask({client.scheduler.address})"
+    finally:
+        if own:
+            client.close()
