@@ -14,6 +14,7 @@ paper's Table 2) and of the calibrated channel against the true flow angle
 from __future__ import annotations
 
 import json
+import re
 import tempfile
 import time
 import traceback
@@ -126,7 +127,13 @@ class ReplicationResult:
         p = df[df["record"] == "parameter"].drop(columns="record").reset_index(drop=True)
         c = df[df["record"] == "channel"].drop(columns="record").reset_index(drop=True)
         d = df[df["record"] == "draw"]
-        draws = pd.DataFrame({"path": d["family"], "name": d["name"], "value": d["estimate"]})
+        # name = path[instance][component] (instance absent for fleet-wide draws)
+        parts = [re.fullmatch(r"(?:\[(.*?)\])?\[(\d+)\]", n[len(p):])
+                 for n, p in zip(d["name"], d["family"], strict=True)]
+        draws = pd.DataFrame({"path": d["family"].to_numpy(),
+                              "instance": [m.group(1) or "" for m in parts],
+                              "component": [int(m.group(2)) for m in parts],
+                              "value": d["estimate"].to_numpy()})
         return cls(index=int(meta["replication"]), ok=bool(meta["ok"]), status=int(meta["status"]),
                    message=str(meta["message"]), noise_seed=int(meta["noise_seed"]),
                    scenario_hash=str(meta["scenario_hash"]), elapsed_s=float(meta.get("elapsed_s", 0)),
@@ -163,7 +170,8 @@ def fly(scenario: Scenario, md: ManeuverDraw) -> tuple[TruthTrajectory, ...]:
 
 def _entry(scenario: Scenario, md: ManeuverDraw, seg_no: int, n_seg: int, truth: TruthTrajectory,
            inst, mid: str) -> dict:
-    """The manifest entry of one instrumented maneuver, as synth.campaign writes it."""
+    """The manifest entry of one instrumented maneuver, as synth.campaign writes it (the same
+    keys: keep the two in step until synth.campaign offers this as a function)."""
     fleet = scenario.campaign.fleet
     cfg = fleet.configuration(md.job.configuration_id)
     spec = ManeuverSpec.from_dict(md.job.maneuver)
@@ -181,6 +189,8 @@ def _entry(scenario: Scenario, md: ManeuverDraw, seg_no: int, n_seg: int, truth:
         "g_mps2_mean": float(np.mean(truth.g_mps2)), "maneuver": spec.to_dict(),
         "environment": md.environment.to_dict(), "injected": inst.injected,
         "channel_units": inst.channel_units,
+        "own_rate_columns": list(inst.own_rate_columns),
+        "flight_meta": {k: v for k, v in truth.meta.items() if k != "spec"},
     }
 
 
