@@ -87,14 +87,23 @@ LOW_SPEED_DEFAULTS: dict[str, dict[str, float]] = {
 }
 FULL_DEFAULTS_FROM_MACH = 0.5
 
-#: Defaults at Mach 0.9 where they differ: at high Mach a wind-up turn is limited by load factor,
-#: not alpha. The f16's FCS runs out of stick (the command saturates) at about 4.9-5.4 g at Mach
-#: 0.9 and 8000 m, at alpha 9.5-11 deg, so the turn winds up to 4.5 g. Interpolated linearly in
-#: Mach from :data:`FULL_DEFAULTS_UP_TO_MACH`, below which :data:`DEFAULTS` apply.
+#: Defaults from Mach :data:`HIGH_SPEED_DEFAULTS_FROM_MACH` up where they differ: the wind-up turn
+#: winds up to 12 deg or 4.5 g, whichever comes first. The f16's FCS runs out of stick (command at
+#: its aft stop) at an alpha that falls with Mach, and sooner with a forward CG: PT1, whose nose
+#: ballast puts its CG furthest forward in the fleet, reaches at most 12.9 deg (4.2 g) at Mach 0.7,
+#: 6000 m, 13.2 deg (4.9 g) at Mach 0.8, 8000 m and 4.8 g (9.4 deg) at Mach 0.9, 8000 m, the other
+#: aircraft 0.3-2 deg more (calm air); winding up more slowly does not help (12.8-12.9 deg at Mach
+#: 0.7 over 25, 40 or 60 s). So DEFAULTS' 14 deg or 6 g is out of reach there, while 12 deg or
+#: 4.5 g is within reach of every configuration of the default fleet at Mach 0.7-0.9 from 3000 m
+#: (4.5 g binds; the FCS gives 5.5 g or more) to 10000 m (12 deg binds), except at Mach 0.9 above
+#: 8000 m (PT1: 4.25 g at 9000 m). Interpolated linearly in Mach from
+#: :data:`FULL_DEFAULTS_UP_TO_MACH`, below which DEFAULTS apply: at the default campaign's Mach 0.4-0.6
+#: points PT1 reaches 14 deg with 0.1-0.5 deg to spare.
 HIGH_SPEED_DEFAULTS: dict[str, dict[str, float]] = {
-    "windup_turn": {"nz_max": 4.5},
+    "windup_turn": {"alpha_max_rad": 12.0 * _DEG, "nz_max": 4.5},
 }
-FULL_DEFAULTS_UP_TO_MACH = 0.7
+FULL_DEFAULTS_UP_TO_MACH = 0.6
+HIGH_SPEED_DEFAULTS_FROM_MACH = 0.7
 
 
 def default_value(kind: str, name: str, mach: float) -> float:
@@ -102,12 +111,15 @@ def default_value(kind: str, name: str, mach: float) -> float:
 
     :data:`DEFAULTS` between Mach :data:`FULL_DEFAULTS_FROM_MACH` and
     :data:`FULL_DEFAULTS_UP_TO_MACH`, interpolated linearly towards :data:`LOW_SPEED_DEFAULTS` at
-    Mach 0.3 and towards :data:`HIGH_SPEED_DEFAULTS` at Mach 0.9.
+    Mach 0.3 and towards :data:`HIGH_SPEED_DEFAULTS` at Mach :data:`HIGH_SPEED_DEFAULTS_FROM_MACH`,
+    which hold up to Mach 0.9.
     """
     mid = DEFAULTS[kind][name]
-    if mach >= FULL_DEFAULTS_UP_TO_MACH:
+    if mach > FULL_DEFAULTS_UP_TO_MACH:
         hi = HIGH_SPEED_DEFAULTS.get(kind, {}).get(name, mid)
-        f = min(1.0, (mach - FULL_DEFAULTS_UP_TO_MACH) / (MACH_RANGE[1] - FULL_DEFAULTS_UP_TO_MACH))
+        if mach >= HIGH_SPEED_DEFAULTS_FROM_MACH:
+            return float(hi)  # exactly, not through the interpolation's rounding
+        f = (mach - FULL_DEFAULTS_UP_TO_MACH) / (HIGH_SPEED_DEFAULTS_FROM_MACH - FULL_DEFAULTS_UP_TO_MACH)
         return float(mid + f * (hi - mid))
     lo = LOW_SPEED_DEFAULTS.get(kind, {}).get(name, mid)
     f = min(1.0, max(0.0, (mach - MACH_RANGE[0]) / (FULL_DEFAULTS_FROM_MACH - MACH_RANGE[0])))
@@ -155,9 +167,9 @@ class ManeuverSpec:
     heading_rad : initial true heading, rad.
     delta_nz, pulse_s, nz_max, nz_min, period_s, alpha_max_rad, beta_rad, segment_s,
     rudder_norm, delta_mach : excitation settings; ``None`` takes the kind's default in
-        :data:`DEFAULTS` (reduced towards Mach 0.3 per :data:`LOW_SPEED_DEFAULTS` and towards
-        Mach 0.9 per :data:`HIGH_SPEED_DEFAULTS`); setting one that does not apply to the kind is
-        an error.
+        :data:`DEFAULTS` (reduced towards Mach 0.3 per :data:`LOW_SPEED_DEFAULTS` and from Mach
+        0.6 to 0.7 and above per :data:`HIGH_SPEED_DEFAULTS`); setting one that does not apply to
+        the kind is an error.
     """
 
     kind: str
@@ -605,9 +617,11 @@ class WindupTurn(Controller):
                 f"{math.degrees(reached):.1f}) nor load factor {self.spec.nz_max:.1f} (got "
                 f"{self.notes['nz_peak']:.1f})",
                 float(t_s[-1]),
-                "lower alpha_max_rad or nz_max, or lengthen duration_s (the f16 FCS limits "
-                "alpha to about 25 deg and load factor to 9; at Mach 0.9 and 8000 m it runs out "
-                "of stick near 5 g, and higher up at less)",
+                "lower alpha_max_rad or nz_max to what the f16's FCS gives at full aft stick: "
+                "about 12-17 deg of alpha at Mach 0.4-0.8 and 6000-8000 m (the least with a "
+                "forward CG; less lower down, where load factor binds first), near 5 g at Mach "
+                "0.9 and 8000 m and less higher up; a slower wind-up (longer duration_s) does not "
+                "raise them",
             )
 
 
