@@ -166,6 +166,10 @@ def _signal_key(name: str, sensor: str | None) -> tuple[str, str | None]:
     return name, (sensor if name in ("alpha_s", "beta_s", "flank_s") else None)
 
 
+class ModelEvaluationError(ValueError):
+    """The model cannot be evaluated at these parameter values (an implicit model diverges)."""
+
+
 def _filled(t_s: np.ndarray, v: np.ndarray) -> np.ndarray:
     """A measurement as a model input at every sample: an own-rate channel (NaN between its
     samples) interpolated linearly; it is fitted only where it has samples."""
@@ -619,7 +623,7 @@ class Model:
             if not active.any():
                 break
         else:
-            raise ValueError(
+            raise ModelEvaluationError(
                 f"channel {ch.name}: the implicit model {ch.model!r} does not converge (its "
                 "dependence on zhat must be weaker than 1:1); use z instead of zhat or bound the tables"
             )

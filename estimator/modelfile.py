@@ -8,6 +8,8 @@ A model set (``estimator/models/tejas.toml`` is the default, the paper's Table 1
     sensor = "vane_left"           # position from the problem's [sensors]
     model = "f1(alpha_s) - f2(alpha_t) * beta_s + b_l"
     delay = "tau_alpha_zl"         # parameter of its time shift, or omit
+    measures = "alpha_s"           # the flow signal it measures (its calibrated value); needed
+                                   # when the model uses several (default: the only one)
     recorder = "dru"               # default "dru"
     unit = "rad"                   # default "rad"
 
@@ -39,7 +41,7 @@ from estimator.parameters import KINDS, SCOPES, ParameterSpec
 from estimator.problem import ChannelSpec
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
-_CHANNEL_KEYS = {"name", "column", "model", "sensor", "delay", "recorder", "unit"}
+_CHANNEL_KEYS = {"name", "column", "model", "sensor", "delay", "recorder", "unit", "measures"}
 _PARAM_KEYS = {
     "unit", "kind", "scope", "value", "value_deg", "bounds", "bounds_deg", "free", "breakpoints",
     "breakpoints_deg", "fixed_elements", "values", "values_deg", "free_instances",
@@ -76,7 +78,7 @@ def parse_channel(d: Mapping, where: str) -> ChannelSpec:
     return ChannelSpec(
         name=d["name"], column=d.get("column", d["name"]), model=d["model"], sensor=d.get("sensor"),
         delay=d.get("delay"), recorder=d.get("recorder", "dru"), unit=unit, display_scale=scale,
-        display_unit=dunit,
+        display_unit=dunit, measures=d.get("measures"),
     )
 
 

@@ -62,6 +62,9 @@ class ChannelSpec:
     recorder : recorder the channel comes from (for recorder-scoped parameters).
     unit : SI unit of the measurement.
     display_scale, display_unit : for reports (57.29578, "deg").
+    measures : the flow signal the channel measures (``alpha_s``, ``beta_s`` or ``flank_s``), whose
+        value the calibrated channel gives; default: the only sensor signal of its model (None
+        if it has none or several and none is declared).
     """
 
     name: str
@@ -73,6 +76,7 @@ class ChannelSpec:
     unit: str = "rad"
     display_scale: float = 1.0
     display_unit: str = ""
+    measures: str | None = None
     expression: Expression = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -85,6 +89,14 @@ class ChannelSpec:
             )
         if not self.display_unit:
             object.__setattr__(self, "display_unit", self.unit)
+        used = expr.names & SENSOR_SIGNALS
+        if self.measures is None and len(used) == 1:
+            object.__setattr__(self, "measures", next(iter(used)))
+        elif self.measures is not None and self.measures not in used:
+            raise ValueError(
+                f"channel {self.name}: measures = {self.measures!r} is not a sensor signal of its "
+                f"model {self.model!r}; use one of {sorted(used) or ['alpha_s', 'beta_s', 'flank_s']}"
+            )
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,7 @@ from scipy import fft as sfft
 from threadpoolctl import threadpool_limits
 
 from estimator.core.assembly import scatter_blocks
-from estimator.model import Evaluation, Model
+from estimator.model import Evaluation, Model, ModelEvaluationError
 from estimator.problem import Problem
 from estimator.result import Confounding, EstimationResult, ResidualStats
 
@@ -396,7 +396,13 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
                 trial = np.clip(theta + step, st.lo, st.hi)
                 # the first trial is usually accepted and is then the next iterate: evaluate it
                 # with the Jacobian right away (the values are the same either way)
-                trial_ev = evaluate_all(trial, attempt == 0)
+                try:
+                    trial_ev = evaluate_all(trial, attempt == 0)
+                except ModelEvaluationError:
+                    # the step left the model's domain (e.g. a table steeper than 1:1 in an
+                    # implicit model): a rejected step, damped further
+                    lam = max(lam, 1e-6) * 10.0
+                    continue
                 sse_t, cnt_t = _residuals(trial_ev, nch)
                 cost_t = _cost(sse_t, cnt_t, R)
                 if np.isfinite(cost_t) and cost_t <= cost0:

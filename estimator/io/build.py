@@ -132,8 +132,10 @@ def subproblem(problem: Problem, maneuver_ids: Sequence[str], *,
         raise DataError(f"{problem.source}: an empty set of maneuvers has nothing to estimate")
     mans = [by_id[i] for i in maneuver_ids]
     chans = [c for c in problem.channels if any(c.column in m.measurements for m in mans)]
-    specs = finalize_parameters(list(problem.parameters.specs.values()), set(), chans, mans,
-                                problem.source)
+    ids = set(maneuver_ids)
+    specs = [replace(s, per_instance={i: v for i, v in s.per_instance.items() if i in ids})
+             if s.scope == "maneuver" else s for s in problem.parameters.specs.values()]
+    specs = finalize_parameters(specs, set(), chans, mans, problem.source)
     params = expand_parameters(specs, mans, chans)
     if values:
         params = params.with_values({k: v for k, v in values.items() if k in params})

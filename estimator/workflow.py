@@ -1,0 +1,547 @@
+r"""The paper's calibration workflow over a fleet (Saraf & Kumaresan §3-4; SPEC §8).
+
+1. **Mach bins.** Each gear-up maneuver goes to the bin of its mean Mach (bins ``bin_width``
+   wide, centred on multiples of it); a maneuver whose Mach varies by more than
+   ``max_mach_variation`` (``mach_max - mach_min``) is left out and reported, as are bins with
+   too few maneuvers.
+2. **All aircraft together, biases free.** Each bin is estimated with every aircraft's maneuvers
+   (per-aircraft vane biases ``b_l``, ``b_r``; shared tables with ``f1(0)`` held).
+3. **Apportionment** (paper §4.1, Fig. 4). Per bin, aircraft ``a`` has the mean vane bias
+   ``m_a = (b_l,a + b_r,a) / 2``; the fleet mean ``M = mean_a m_a`` is the correction model's
+   update; ``m_a - M`` is the aircraft's mean installation bias. Installation biases are taken
+   at the reference Mach (0.5) and held for every Mach: ``b_l,a^inst = b_l,a - M``,
+   ``b_r,a^inst = b_r,a - M`` there (a fleet whose installation biases average to zero: the only
+   split the data allow). Standard deviations follow from the estimates' covariance.
+4. **Installation biases fixed.** Each bin is estimated again with ``b_l``, ``b_r`` held at the
+   installation biases and ``f1`` (now including ``f1(0)``) and ``f2`` free: the correction-model
+   update valid for the whole fleet; the other sensors' tables, biases and scale factors come
+   out of the same estimation.
+5. **Gear down.** The gear-down maneuvers of each bin, biases held: the gear-down tables.
+6. **Accuracy** (Table 2). Per sensor and bin, 3 sigma of measurement minus model at the final
+   estimate (about zero: a mean offset counts), against the desired accuracy; the nose probe's
+   sideslip only below its usable angle of attack, found from the growth of its error with alpha
+   (paper Fig. 7): the highest alpha up to which every 2-degree alpha band keeps its 3 sigma
+   within the desired value.
+
+Everything here runs on flight data alone (no truth); comparisons with a synthetic truth live in
+``campaigns/``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pandas as pd
+
+from estimator.io import subproblem
+from estimator.model import Model
+from estimator.problem import Problem
+from estimator.result import EstimationResult
+from estimator.solver import SolverOptions, estimate
+
+RAD2DEG = 180.0 / math.pi
+
+
+@dataclass(frozen=True)
+class Requirement:
+    """Desired 3-sigma accuracy of a calibrated channel (paper §4, Table 2).
+
+    Attributes
+    ----------
+    sensor : how tables name it.
+    desired_deg : desired 3-sigma accuracy, deg.
+    low_alpha_only : judged only below the sensor's usable angle of attack (the nose probe).
+    """
+
+    sensor: str
+    desired_deg: float
+    low_alpha_only: bool = False
+
+
+#: The paper's desired accuracies; the boom (a flight-test reference, not in the paper's table)
+#: is held to the vanes' +-0.5 deg.
+REQUIREMENTS: Mapping[str, Requirement] = {
+    "alpha_zl": Requirement("vane AOA left", 0.5),
+    "alpha_zr": Requirement("vane AOA right", 0.5),
+    "alpha_zsp": Requirement("side-probe AOA", 1.0),
+    "beta_zsp": Requirement("side-probe AOSS", 1.0),
+    "beta_znp": Requirement("nose-probe AOSS (low AOA)", 0.5, low_alpha_only=True),
+    "alpha_zb": Requirement("boom AOA", 0.5),
+    "beta_zbu": Requirement("boom AOSS upper vane", 0.5),
+    "beta_zbl": Requirement("boom AOSS lower vane", 0.5),
+}
+
+
+@dataclass(frozen=True)
+class WorkflowOptions:
+    """Settings of :func:`run_workflow`.
+
+    Attributes
+    ----------
+    bin_width : Mach bin width; bins are centred on its multiples.
+    max_mach_variation : maneuvers whose Mach varies by more than this are left out.
+    min_maneuvers : bins with fewer maneuvers are left out.
+    reference_mach : Mach of the bin whose installation biases hold for every bin (paper: 0.5).
+    vane_biases : the left and right vane bias families.
+    vane_tables : the vane correction tables re-estimated with the installation biases held.
+    nose_probe_channel : the channel whose usable alpha range is found from its error growth.
+    alpha_band_deg : width of the alpha bands of that search, deg.
+    min_band_samples : bands with fewer samples are not judged.
+    requirements : channel -> desired accuracy.
+    solver : estimator settings for every estimation.
+    progress : called with a line of text as the workflow proceeds.
+    """
+
+    bin_width: float = 0.1
+    max_mach_variation: float = 0.05
+    min_maneuvers: int = 3
+    reference_mach: float = 0.5
+    vane_biases: tuple[str, str] = ("b_l", "b_r")
+    vane_tables: tuple[str, ...] = ("f1", "f2")
+    nose_probe_channel: str = "beta_znp"
+    alpha_band_deg: float = 2.0
+    min_band_samples: int = 200
+    requirements: Mapping[str, Requirement] = field(default_factory=lambda: dict(REQUIREMENTS))
+    solver: SolverOptions = field(default_factory=SolverOptions)
+    progress: Callable[[str], None] | None = None
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One estimation of the workflow.
+
+    Attributes
+    ----------
+    name : "biases free", "installation biases fixed" or "gear down".
+    mach : the bin's centre Mach.
+    gear_down : the bin's gear position.
+    problem, result : what was estimated and the estimate.
+    """
+
+    name: str
+    mach: float
+    gear_down: bool
+    problem: Problem = field(repr=False)
+    result: EstimationResult = field(repr=False)
+
+
+@dataclass(frozen=True)
+class WorkflowResult:
+    """Everything the workflow found.
+
+    Attributes
+    ----------
+    maneuvers : one row per maneuver: id, aircraft, configuration, mach_mean, mach_variation,
+        gear_down, bin (centre Mach, NaN if left out), used, reason.
+    first, final, gear_down : the estimations of steps 2, 4 and 5 (one per bin).
+    vane_bias : per bin and aircraft (step 3): b_l, b_r, their mean, its std, the fleet mean and
+        the aircraft's deviation from it, deg.
+    installation : per aircraft: installation biases b_l, b_r, their mean and stds (deg), and
+        the Mach they were taken at.
+    accuracy : Table 2: sensor, channel, mach, gear, n, three_sigma_deg, desired_deg, passed.
+    nose_probe_growth : alpha band (deg), samples, 3 sigma (deg) of the nose probe's residual.
+    nose_probe_alpha_limit_deg : its usable alpha limit (None without nose-probe data).
+    notes : what a reader must know (exclusions, fallbacks).
+    elapsed_s : wall time.
+    """
+
+    maneuvers: pd.DataFrame
+    first: tuple[Stage, ...]
+    final: tuple[Stage, ...]
+    gear_down: tuple[Stage, ...]
+    vane_bias: pd.DataFrame
+    installation: pd.DataFrame
+    accuracy: pd.DataFrame
+    nose_probe_growth: pd.DataFrame
+    nose_probe_alpha_limit_deg: float | None
+    notes: tuple[str, ...] = ()
+    elapsed_s: float = 0.0
+
+    @property
+    def success(self) -> bool:
+        return all(s.result.success for s in (*self.first, *self.final, *self.gear_down))
+
+    def table_updates(self) -> pd.DataFrame:
+        """Every table of the final and gear-down estimations: table, breakpoint_deg, mach, gear,
+        value, std (display units), unit; ``f1``'s value is its update ``f1(alpha) - alpha``."""
+        rows = []
+        for st in (*self.final, *self.gear_down):
+            df = st.result.to_pandas()
+            for name, spec in st.problem.parameters.specs.items():
+                if spec.kind != "table":
+                    continue
+                bp = np.asarray(spec.breakpoints) * RAD2DEG
+                for e in range(len(bp)):
+                    key = f"{name}[{e}]"
+                    if key not in df.index:
+                        continue
+                    r = df.loc[key]
+                    value = float(r["value_display"])
+                    identity = bp[e] if name == self.identity_table else 0.0
+                    rows.append({"table": name, "breakpoint_deg": float(bp[e]), "mach": st.mach,
+                                 "gear": "down" if st.gear_down else "up", "value": value - identity,
+                                 "std": float(r["std_crb_display"]), "free": bool(r["free"]),
+                                 "unit": r["display_unit"]})
+        return pd.DataFrame(rows)
+
+    #: the table that starts at the identity (its update is shown)
+    identity_table: str = "f1"
+
+    def correction_tables(self) -> dict[str, pd.DataFrame]:
+        """Per table, its values (display units, f1 as f1 itself) with breakpoints as rows and
+        one column per bin and gear position: ready for the flight-control team."""
+        out: dict[str, pd.DataFrame] = {}
+        upd = self.table_updates()
+        if upd.empty:
+            return out
+        for name, g in upd.groupby("table"):
+            g = g.copy()
+            if name == self.identity_table:
+                g["value"] = g["value"] + g["breakpoint_deg"]
+            g["column"] = [f"M{m:.2f} gear {gear}" for m, gear in zip(g["mach"], g["gear"], strict=True)]
+            t = g.pivot_table(index="breakpoint_deg", columns="column", values="value", sort=False)
+            out[str(name)] = t[sorted(t.columns, key=lambda c: (c.endswith("down"), c))]
+        return out
+
+
+# --------------------------------------------------------------------------------------- binning
+def assign_bins(problem: Problem, opt: WorkflowOptions) -> pd.DataFrame:
+    """Step 1: one row per maneuver with its Mach bin, or why it was left out."""
+    rows = []
+    for m in problem.maneuvers:
+        meta = m.meta
+        mean = meta.get("mach_mean")
+        lo, hi = meta.get("mach_min"), meta.get("mach_max")
+        var = float(hi - lo) if lo is not None and hi is not None else math.nan
+        row = {"id": m.id, "aircraft": m.aircraft, "configuration": m.configuration,
+               "kind": meta.get("kind", ""), "mach_mean": mean, "mach_variation": var,
+               "gear_down": bool(meta.get("gear_down", False)), "bin": math.nan, "used": False,
+               "reason": ""}
+        if mean is None:
+            row["reason"] = "no Mach signal (map a mach column)"
+        elif var > opt.max_mach_variation:
+            row["reason"] = f"Mach varies by {var:.3f} > {opt.max_mach_variation}"
+        else:
+            row["bin"] = round(round(float(mean) / opt.bin_width) * opt.bin_width, 6)
+            row["used"] = True
+        rows.append(row)
+    df = pd.DataFrame(rows)
+    for (b, gear), g in df[df["used"]].groupby(["bin", "gear_down"]):
+        if len(g) < opt.min_maneuvers:
+            df.loc[g.index, "used"] = False
+            df.loc[g.index, "reason"] = (f"only {len(g)} maneuver(s) in the Mach {b:.2f} "
+                                         f"gear-{'down' if gear else 'up'} bin (< {opt.min_maneuvers})")
+    return df
+
+
+# ---------------------------------------------------------------------------------- apportioning
+def _covariance(result: EstimationResult, keys: Sequence[str]) -> np.ndarray:
+    """Covariance (SI) of some free global/aircraft parameters from the result's correlation."""
+    pos = {k: i for i, k in enumerate(result.correlation_keys)}
+    std = np.array([result.std(k) for k in keys])
+    C = np.zeros((len(keys), len(keys)))
+    for i, a in enumerate(keys):
+        for j, b in enumerate(keys):
+            rho = result.correlation[pos[a], pos[b]] if a in pos and b in pos else float(i == j)
+            C[i, j] = rho * std[i] * std[j]
+    return np.nan_to_num(C)
+
+
+def apportion(biases_left: Mapping[str, float], biases_right: Mapping[str, float],
+              covariance: np.ndarray | None = None) -> pd.DataFrame:
+    """Split per-aircraft vane biases into a fleet mean and per-aircraft installation biases.
+
+    Parameters
+    ----------
+    biases_left, biases_right : aircraft -> b_l, b_r (any angle unit; the same out).
+    covariance : (2A, 2A) covariance of (b_l of every aircraft, then b_r), in the order of
+        ``biases_left``; None: no standard deviations.
+
+    Returns
+    -------
+    One row per aircraft: ``b_l``, ``b_r``, ``mean_bias`` = (b_l + b_r)/2, ``fleet_mean`` (the
+    correction-model update), ``installation_mean`` = mean_bias - fleet_mean,
+    ``installation_left`` = b_l - fleet_mean, ``installation_right`` = b_r - fleet_mean, and
+    ``std_*`` of each (NaN without a covariance).
+    """
+    ac = list(biases_left)
+    if set(ac) != set(biases_right) or not ac:
+        raise ValueError(f"apportion: left and right biases must name the same aircraft, got "
+                         f"{sorted(biases_left)} and {sorted(biases_right)}")
+    n = len(ac)
+    b = np.array([biases_left[a] for a in ac] + [biases_right[a] for a in ac], dtype=float)
+    # every output is linear in b: rows of L
+    half = 0.5 * np.hstack([np.eye(n), np.eye(n)])            # mean bias per aircraft
+    fleet = np.full((1, n), 1.0 / n) @ half                     # fleet mean
+    L = {
+        "mean_bias": half,
+        "fleet_mean": np.repeat(fleet, n, axis=0),
+        "installation_mean": half - fleet,
+        "installation_left": np.hstack([np.eye(n), np.zeros((n, n))]) - fleet,
+        "installation_right": np.hstack([np.zeros((n, n)), np.eye(n)]) - fleet,
+    }
+    out = pd.DataFrame({"aircraft": ac, "b_l": b[:n], "b_r": b[n:]})
+    for name, M in L.items():
+        out[name] = M @ b
+        out[f"std_{name}"] = (np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", M, covariance, M), 0.0))
+                              if covariance is not None else np.nan)
+    return out.set_index("aircraft")
+
+
+# --------------------------------------------------------------------------------------- running
+def _say(opt: WorkflowOptions, text: str) -> None:
+    if opt.progress is not None:
+        opt.progress(text)
+
+
+def _run(problem: Problem, ids: Sequence[str], name: str, mach: float, gear: bool, opt: WorkflowOptions,
+         values: Mapping[str, float] | None = None, free: Mapping[str, bool] | None = None) -> Stage:
+    t0 = time.perf_counter()
+    sub = subproblem(problem, list(ids), values=values, free=free)
+    res = estimate(sub, opt.solver)
+    _say(opt, f"  Mach {mach:.2f} gear {'down' if gear else 'up'}, {name}: {len(ids)} maneuvers, "
+              f"{int(sub.parameters.free_mask.sum())} free parameters, {res.iterations} iterations, "
+              f"{time.perf_counter() - t0:.1f} s, {'converged' if res.success else res.message}")
+    return Stage(name, mach, gear, sub, res)
+
+
+def _aircraft_biases(stage: Stage, names: tuple[str, str]) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Aircraft with both vane biases free and determined in a stage; values and covariance (rad)."""
+    res = stage.result
+    ac = sorted({m.aircraft for m in stage.problem.maneuvers})
+    ok = []
+    for a in ac:
+        keys = [f"{n}[{a}]" for n in names]
+        if all(k in res.parameters and res.parameters[k].free and np.isfinite(res.std(k)) for k in keys):
+            ok.append(a)
+    keys = [f"{names[0]}[{a}]" for a in ok] + [f"{names[1]}[{a}]" for a in ok]
+    vals = np.array([res.value(k) for k in keys])
+    return ok, vals, _covariance(res, keys)
+
+
+def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> WorkflowResult:
+    """Run the calibration workflow (module docstring) on a problem holding a fleet's maneuvers."""
+    opt = options or WorkflowOptions()
+    t_start = time.perf_counter()
+    notes: list[str] = []
+    bins = assign_bins(problem, opt)
+    left = bins[~bins["used"]]
+    if len(left):
+        notes.append(f"{len(left)} maneuver(s) left out: " + "; ".join(
+            f"{r.id} ({r.reason})" for r in left.head(12).itertuples())
+            + (" ..." if len(left) > 12 else ""))
+    up = bins[bins["used"] & ~bins["gear_down"]]
+    if up.empty:
+        raise ValueError(f"{problem.source}: no gear-up Mach bin has {opt.min_maneuvers} or more maneuvers "
+                         f"of steady Mach (variation <= {opt.max_mach_variation}); nothing to calibrate")
+    bl, br = opt.vane_biases
+    has_vanes = bl in problem.parameters.specs and br in problem.parameters.specs
+    # ---- step 2
+    _say(opt, "step 2: every aircraft together, vane biases free")
+    first = tuple(_run(problem, g["id"].tolist(), "biases free", float(b), False, opt)
+                  for b, g in up.groupby("bin"))
+    # ---- step 3
+    vb_rows, inst = [], pd.DataFrame()
+    if has_vanes:
+        per_bin = {}
+        for st in first:
+            ac, vals, cov = _aircraft_biases(st, opt.vane_biases)
+            if not ac:
+                continue
+            n = len(ac)
+            ap = apportion(dict(zip(ac, vals[:n], strict=True)), dict(zip(ac, vals[n:], strict=True)), cov)
+            per_bin[st.mach] = ap
+            for a, r in ap.iterrows():
+                vb_rows.append({"mach": st.mach, "aircraft": a, "b_l_deg": r["b_l"] * RAD2DEG,
+                                "b_r_deg": r["b_r"] * RAD2DEG, "mean_bias_deg": r["mean_bias"] * RAD2DEG,
+                                "std_deg": r["std_mean_bias"] * RAD2DEG,
+                                "fleet_mean_deg": r["fleet_mean"] * RAD2DEG,
+                                "deviation_deg": r["installation_mean"] * RAD2DEG,
+                                "std_deviation_deg": r["std_installation_mean"] * RAD2DEG})
+        if not per_bin:
+            raise ValueError(f"{problem.source}: no bin determines the vane biases {bl}, {br}")
+        ref = min(per_bin, key=lambda m: (abs(m - opt.reference_mach), m))
+        if abs(ref - opt.reference_mach) > 1e-9:
+            notes.append(f"no Mach {opt.reference_mach} bin: installation biases taken at Mach {ref:.2f}")
+        rows = []
+        all_ac = sorted({m.aircraft for m in problem.maneuvers})
+        for a in all_ac:
+            src = [m for m in sorted(per_bin, key=lambda m: (abs(m - ref), m)) if a in per_bin[m].index]
+            if not src:
+                notes.append(f"aircraft {a}: no bin determines its vane biases; they stay free")
+                continue
+            m = src[0]
+            if m != ref:
+                notes.append(f"aircraft {a} has no vane biases at Mach {ref:.2f}: its installation "
+                             f"biases are taken at Mach {m:.2f}")
+            r = per_bin[m].loc[a]
+            rows.append({"aircraft": a, "mach": m,
+                         **{f"{k}_deg": r[k] * RAD2DEG for k in ("installation_left", "installation_right",
+                                                                  "installation_mean")},
+                         **{f"std_{k}_deg": r[f"std_{k}"] * RAD2DEG
+                            for k in ("installation_left", "installation_right", "installation_mean")},
+                         "n_aircraft_in_bin": len(per_bin[m])})
+        inst = pd.DataFrame(rows).set_index("aircraft") if rows else pd.DataFrame()
+        if len(all_ac) < 2:
+            notes.append("one aircraft only: its vane biases cannot be split into installation and "
+                         "correction-model biases (the split needs a fleet); installation biases are 0")
+    # ---- step 4
+    fixed_bias: dict[str, float] = {}
+    for a, r in inst.iterrows():
+        fixed_bias[f"{bl}[{a}]"] = r["installation_left_deg"] / RAD2DEG
+        fixed_bias[f"{br}[{a}]"] = r["installation_right_deg"] / RAD2DEG
+    free4 = {k: False for k in fixed_bias} | {t: True for t in opt.vane_tables
+                                               if t in problem.parameters.specs}
+    _say(opt, "step 4: installation biases fixed, correction tables free")
+    final = []
+    for st in first:
+        start = dict(zip(st.result.parameters.keys, st.result.values, strict=True))
+        fm = [r["fleet_mean_deg"] for r in vb_rows if r["mach"] == st.mach]
+        if fm and "f1" in problem.parameters.specs:  # start f1 where the fleet-mean bias puts it
+            for k in [k for k in start if k.startswith("f1[")]:
+                start[k] += fm[0] / RAD2DEG
+        ids = [m.id for m in st.problem.maneuvers]
+        final.append(_run(problem, ids, "installation biases fixed", st.mach, False, opt,
+                          values={**start, **fixed_bias}, free=free4))
+    final = tuple(final)
+    # ---- step 5
+    down = bins[bins["used"] & bins["gear_down"]]
+    gear = []
+    if len(down):
+        _say(opt, "step 5: gear-down maneuvers, installation biases fixed")
+    for b, g in down.groupby("bin"):
+        near = min(final, key=lambda s: (abs(s.mach - b), s.mach))
+        start = dict(zip(near.result.parameters.keys, near.result.values, strict=True))
+        gear.append(_run(problem, g["id"].tolist(), "gear down", float(b), True, opt,
+                         values={**start, **fixed_bias}, free=free4))
+    # ---- step 6
+    acc, growth, limit = _accuracy(final, tuple(gear), opt)
+    vb = pd.DataFrame(vb_rows)
+    return WorkflowResult(maneuvers=bins, first=first, final=final, gear_down=tuple(gear), vane_bias=vb,
+                          installation=inst, accuracy=acc, nose_probe_growth=growth,
+                          nose_probe_alpha_limit_deg=limit, notes=tuple(notes),
+                          elapsed_s=time.perf_counter() - t_start)
+
+
+# --------------------------------------------------------------------------------------- accuracy
+@dataclass(frozen=True)
+class ChannelResiduals:
+    """Measurement minus model of one channel over a stage's maneuvers, at the cost's samples.
+
+    Attributes
+    ----------
+    maneuver : (n,) maneuver id per sample.
+    t_s : (n,) time, s.
+    z, y : (n,) measurement and model, SI.
+    alpha_t_rad : (n,) the reconstructed angle of attack at the CG, rad.
+    """
+
+    maneuver: np.ndarray
+    t_s: np.ndarray
+    z: np.ndarray
+    y: np.ndarray
+    alpha_t_rad: np.ndarray
+
+    @property
+    def e(self) -> np.ndarray:
+        return self.z - self.y
+
+
+def stage_residuals(stage: Stage | tuple[Problem, EstimationResult]) -> dict[str, ChannelResiduals]:
+    """Channel name -> residuals of every maneuver of a stage at its estimate."""
+    problem, result = (stage.problem, stage.result) if isinstance(stage, Stage) else stage
+    model = Model(problem)
+    ev = model.evaluate_all(result.values, jacobian=False)
+    pos = {k: i for i, k in enumerate(ev.maneuvers)}
+    out = {}
+    for ce in ev.channels:
+        ids, ts, al = [], [], []
+        for b, k in enumerate(ce.mans):
+            rows = ce.rows[ce.rseg[b]:ce.rseg[b + 1]]
+            m = problem.maneuvers[int(k)]
+            X = ev.X[ev.seg[pos[int(k)]]:ev.seg[pos[int(k)] + 1]]
+            ids.append(np.full(rows.size, m.id, dtype=object))
+            ts.append(m.t_s[rows])
+            al.append(np.arctan2(X[rows, 2], X[rows, 0]))
+        ch = problem.channels[ce.channel]
+        out[ch.name] = ChannelResiduals(np.concatenate(ids), np.concatenate(ts), ce.z, ce.y,
+                                        np.concatenate(al))
+    return out
+
+
+def three_sigma(e: np.ndarray) -> float:
+    """3 x the rms about zero (a mean offset is an error too)."""
+    return float(3.0 * np.sqrt(np.mean(np.square(e)))) if e.size else math.nan
+
+
+def alpha_limit(alpha_deg: np.ndarray, err_deg: np.ndarray, desired_deg: float, band_deg: float,
+                min_samples: int) -> tuple[pd.DataFrame, float | None]:
+    """3 sigma of an error in alpha bands and the highest alpha up to which every band passes.
+
+    Returns
+    -------
+    (bands, limit): bands has alpha_lo_deg, alpha_hi_deg, n, three_sigma_deg, passed; limit is the
+    upper edge of the last passing band counted from the lowest (None without judged bands).
+    """
+    if alpha_deg.size == 0:
+        return pd.DataFrame(columns=["alpha_lo_deg", "alpha_hi_deg", "n", "three_sigma_deg", "passed"]), None
+    edges = np.arange(math.floor(alpha_deg.min() / band_deg) * band_deg,
+                      alpha_deg.max() + band_deg, band_deg)
+    rows = []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        sel = (alpha_deg >= lo) & (alpha_deg < hi)
+        n = int(sel.sum())
+        s = three_sigma(err_deg[sel])
+        rows.append({"alpha_lo_deg": float(lo), "alpha_hi_deg": float(hi), "n": n, "three_sigma_deg": s,
+                     "passed": bool(n >= min_samples and s <= desired_deg) if n >= min_samples else None})
+    bands = pd.DataFrame(rows)
+    limit = None
+    for r in bands.itertuples():
+        if r.passed is None:
+            continue
+        if not r.passed:
+            break
+        limit = r.alpha_hi_deg
+    return bands, limit
+
+
+def _accuracy(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOptions):
+    res = {id(st): stage_residuals(st) for st in (*final, *gear)}
+    np_ch = opt.nose_probe_channel
+    growth, limit = pd.DataFrame(), None
+    req_np = opt.requirements.get(np_ch)
+    pooled = [r[np_ch] for st in final for r in [res[id(st)]] if np_ch in r]
+    if pooled and req_np is not None:
+        a = np.concatenate([p.alpha_t_rad for p in pooled]) * RAD2DEG
+        e = np.concatenate([p.e for p in pooled]) * RAD2DEG
+        growth, limit = alpha_limit(a, e, req_np.desired_deg, opt.alpha_band_deg, opt.min_band_samples)
+    rows = []
+    for st in (*final, *gear):
+        for name, r in res[id(st)].items():
+            req = opt.requirements.get(name)
+            if req is None:
+                continue
+            e = r.e * RAD2DEG
+            note = ""
+            if req.low_alpha_only:
+                if limit is None:
+                    note = "no usable alpha range found"
+                else:
+                    keep = r.alpha_t_rad * RAD2DEG < limit
+                    e = e[keep]
+                    note = f"alpha < {limit:.0f} deg"
+            s = three_sigma(e)
+            rows.append({"sensor": req.sensor, "channel": name, "mach": st.mach,
+                         "gear": "down" if st.gear_down else "up", "n": int(e.size),
+                         "three_sigma_deg": s, "desired_deg": req.desired_deg,
+                         "passed": bool(s <= req.desired_deg), "note": note})
+    return pd.DataFrame(rows), growth, limit
+
+
+def with_solver(options: WorkflowOptions, **solver_changes) -> WorkflowOptions:
+    """A copy of the options with some solver settings changed."""
+    return replace(options, solver=replace(options.solver, **solver_changes))
