@@ -2,9 +2,10 @@
 
     fpr fly CAMPAIGN.toml --out DIR     fly a campaign into a dataset
     fpr fly --mach 0.5 0.7 --maneuver pitch_doublet --out DIR      ... or one given by flags
-    fpr demo                            fly the small demo campaign and summarise it
+    fpr demo                            fly the demo fleet campaign, calibrate it, write the report
     fpr show DIR                        summarise an existing dataset
-    fpr calibrate PROBLEM.toml|DATASET  estimate the calibration (FPR, output error)
+    fpr calibrate PROBLEM.toml|DATASET  the Mach-bin calibration workflow and its report
+                                        (--single: one estimation over all maneuvers)
 """
 
 from __future__ import annotations
@@ -102,7 +103,21 @@ def _demo(args: argparse.Namespace) -> int:
     print(summarize(result.manifest))
     print(f"\ndataset written to {out} ({time.perf_counter() - t0:.1f} s). "
           "Load it with synth.dataset.load_dataset().")
-    return 0 if result.ok else 1
+    if not result.ok:
+        return 1
+    import warnings
+
+    from estimator.io import problem_from_dataset
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        problem = problem_from_dataset(out)
+    report_dir = out.parent / f"{out.name}-report"
+    ns = argparse.Namespace(overwrite=True, max_mach_variation=0.05, reference_mach=0.5, max_iterations=40,
+                            no_colored=False, verbose=False)
+    code = _workflow(problem, report_dir, ns)
+    print(f"fpr demo: {time.perf_counter() - t0:.0f} s in all")
+    return code
 
 
 def _show(args: argparse.Namespace) -> int:
@@ -152,6 +167,12 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
                    help="skip the coloured-residual (Morelli-Klein) standard deviations")
     p.add_argument("--no-plots", action="store_true", help="do not draw figures")
     p.add_argument("--verbose", action="store_true", help="one line per iteration")
+    p.add_argument("--single", action="store_true",
+                   help="one estimation over every selected maneuver instead of the Mach-bin workflow")
+    p.add_argument("--max-mach-variation", type=float, default=0.05,
+                   help="workflow: leave out maneuvers whose Mach varies by more (default 0.05)")
+    p.add_argument("--reference-mach", type=float, default=0.5,
+                   help="workflow: Mach of the installation biases (default 0.5)")
     g = p.add_argument_group("selecting maneuvers of a dataset")
     g.add_argument("--kind", nargs="+", help="maneuver kinds")
     g.add_argument("--config", nargs="+", help="configuration ids")
@@ -192,6 +213,8 @@ def _calibrate(args: argparse.Namespace) -> int:
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
     out = args.out or Path("fpr-out") / f"calibrate-{src.stem or src.name}"
+    if not args.single:
+        return _workflow(problem, out, args)
     if out.exists() and any(out.iterdir()):
         ours = {"result.json", "parameters.csv", "residuals.csv", "correlation.csv", "recovery.csv",
                 "time_history_match.png", "residual_crossplots.png"}
@@ -229,6 +252,71 @@ def _calibrate(args: argparse.Namespace) -> int:
     return 0 if result.success else 1
 
 
+def _fmt_table2(acc, title: str) -> str:
+    """Table 2 as text: sensors x Mach, 3 sigma in deg, * where it misses the desired accuracy."""
+    if acc is None or acc.empty:
+        return f"{title}: no data"
+    a = acc.assign(col=[f"M{m:.2f}{' down' if g == 'down' else ''}" for m, g in zip(acc["mach"], acc["gear"],
+                                                                                    strict=True)],
+                   cell=[f"{v:.3f}{'' if ok else '*'}" for v, ok in zip(acc["three_sigma_deg"], acc["passed"],
+                                                                       strict=True)])
+    t = a.pivot_table(index=["sensor", "desired_deg"], columns="col", values="cell", aggfunc="first",
+                      sort=False)
+    verdict = "every sensor meets its desired accuracy" if acc["passed"].all() else \
+        f"{int((~acc['passed']).sum())} cell(s) miss it (*)"
+    return f"{title} (deg; desired = +- 3-sigma target): {verdict}\n{t.to_string()}"
+
+
+def _workflow(problem, out: Path, args: argparse.Namespace) -> int:
+    """The Mach-bin calibration workflow and its report (issue 4)."""
+    from campaigns.calibration_report import build_report
+    from estimator.solver import SolverOptions
+    from estimator.workflow import WorkflowOptions, run_workflow
+
+    if out.exists() and any(out.iterdir()) and not args.overwrite:
+        print(f"fpr calibrate: {out} is not empty; choose another --out or pass --overwrite", file=sys.stderr)
+        return 2
+    if out.exists() and args.overwrite and any(out.iterdir()):
+        ours = {p for p in out.iterdir() if p.is_file() and p.suffix in (".csv", ".html", ".png", ".json")}
+        if set(out.iterdir()) - ours:
+            print(f"fpr calibrate: {out} holds files that are not an earlier report's; choose another --out",
+                  file=sys.stderr)
+            return 2
+        for p in ours:
+            p.unlink()
+    n_samples = sum(m.n for m in problem.maneuvers)
+    print(f"{len(problem.maneuvers)} maneuvers, {n_samples} samples, {len(problem.channels)} channels: "
+          "Mach-bin calibration workflow (paper §4)")
+    opt = WorkflowOptions(max_mach_variation=args.max_mach_variation, reference_mach=args.reference_mach,
+                          solver=SolverOptions(max_iterations=args.max_iterations,
+                                               colored=not args.no_colored, verbose=args.verbose),
+                          progress=print)
+    wf = run_workflow(problem, opt)
+    print("\n".join(wf.notes))
+    print(f"workflow done in {wf.elapsed_s:.0f} s; writing the report")
+    tables = build_report(wf, out, f"Flow-angle calibration: {problem.source}")
+    print()
+    print(_fmt_table2(tables["accuracy"], "Table 2, measurement - model (3-sigma)"))
+    if tables["true_accuracy"] is not None:
+        print()
+        print(_fmt_table2(tables["true_accuracy"], "Table 2 against the truth, calibrated - true flow angle"))
+        ir = tables["installation_recovery"]
+        if ir is not None and len(ir):
+            print(f"\ninstallation biases vs truth: {int((ir['z'].abs() < 3).sum())} of {len(ir)} within "
+                  f"3 sigma, largest error {ir['error_deg'].abs().max():.4f} deg")
+            print(ir[["aircraft", "vane", "estimate_deg", "truth_deg", "std_deg", "z"]].to_string(
+                index=False, float_format=lambda v: f"{v: .4f}"))
+        rec = tables["recovery"]
+        if rec is not None and len(rec):
+            summ = rec.assign(crb=rec["z_crb"].abs() < 3, colored=rec["z_colored"].abs() < 3).groupby(
+                "kind")[["crb", "colored"]].mean()
+            print("\nrecovery: fraction of estimates within 3 Cramer-Rao / coloured-residual sigmas of "
+                  "their truth")
+            print(summ.to_string(float_format=lambda v: f"{v:.2f}"))
+    print(f"\nreport: {tables['report']}")
+    return 0 if wf.success else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fpr",
@@ -238,7 +326,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _add_fly(sub)
     _add_calibrate(sub)
-    d = sub.add_parser("demo", help="fly the small demo campaign and print a summary")
+    d = sub.add_parser("demo", help="fly the demo fleet campaign, run the calibration workflow, "
+                       "print Table 2 (model and truth) and the recovery summary, write the report")
     d.add_argument("--out", type=Path, default=Path("fpr-out/demo"),
                    help="where to write the demo dataset (default: fpr-out/demo; replaced)")
     d.add_argument("--workers", type=int, default=None, help="worker processes (default: all CPUs)")

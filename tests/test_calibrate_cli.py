@@ -109,7 +109,7 @@ free = true
 def test_calibrate_a_problem_file_of_user_data(dataset, tmp_path, capsys):
     problem, ds = _write_user_files(dataset, tmp_path)
     out = tmp_path / "results"
-    code = main(["calibrate", str(problem), "--out", str(out), "--no-plots"])
+    code = main(["calibrate", str(problem), "--single", "--out", str(out), "--no-plots"])
     text = capsys.readouterr().out
     assert code == 0, text
     for name in ("result.json", "parameters.csv", "residuals.csv", "correlation.csv"):
@@ -137,7 +137,7 @@ def test_calibrate_a_problem_file_of_user_data(dataset, tmp_path, capsys):
 @pytest.mark.slow
 def test_calibrate_a_dataset_writes_the_recovery_table(dataset, tmp_path, capsys):
     out = tmp_path / "res"
-    code = main(["calibrate", str(dataset), "--free", "h0", "--out", str(out)])
+    code = main(["calibrate", str(dataset), "--single", "--free", "h0", "--out", str(out)])
     text = capsys.readouterr().out
     assert code == 0, text
     assert "recovery against the injected truth" in text
@@ -157,16 +157,16 @@ def test_calibrate_says_what_is_wrong_with_a_missing_file(tmp_path, capsys):
 @pytest.mark.slow
 def test_calibrate_never_mixes_results_of_two_runs(dataset, tmp_path, capsys):
     out = tmp_path / "res"
-    assert main(["calibrate", str(dataset), "--out", str(out), "--no-colored"]) == 0
+    assert main(["calibrate", str(dataset), "--single", "--out", str(out), "--no-colored"]) == 0
     assert (out / "recovery.csv").exists()
     # a second run into the same directory must be asked for, and then replaces everything
-    assert main(["calibrate", str(dataset), "--out", str(out), "--no-plots"]) == 2
+    assert main(["calibrate", str(dataset), "--single", "--out", str(out), "--no-plots"]) == 2
     assert "--overwrite" in capsys.readouterr().err
-    assert main(["calibrate", str(dataset), "--out", str(out), "--no-plots", "--overwrite"]) == 0
+    assert main(["calibrate", str(dataset), "--single", "--out", str(out), "--no-plots", "--overwrite"]) == 0
     assert not (out / "time_history_match.png").exists(), "a stale figure survived"
     # a directory holding anything else is never touched
     other = tmp_path / "mine"
     other.mkdir()
     (other / "notes.txt").write_text("keep me")
-    assert main(["calibrate", str(dataset), "--out", str(other), "--overwrite"]) == 2
+    assert main(["calibrate", str(dataset), "--single", "--out", str(other), "--overwrite"]) == 2
     assert (other / "notes.txt").exists()

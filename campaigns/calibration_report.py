@@ -1,0 +1,161 @@
+"""The calibration report of a workflow run: Table 2 (model and truth), Figs. 3-8, CSV tables.
+
+Joins the estimator's workflow (:mod:`estimator.workflow`), its renderer (:mod:`estimator.report`)
+and, for synthetic datasets, the truth (:mod:`campaigns.workflow_truth`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from estimator.report import (
+    Section,
+    accuracy_table_html,
+    figure_bias_vs_mach,
+    figure_crossplot,
+    figure_table_updates,
+    figure_time_history,
+    write_report,
+)
+from estimator.workflow import RAD2DEG, WorkflowResult, stage_residuals
+
+
+def _has_truth(wf: WorkflowResult) -> bool:
+    return all("dataset" in m.meta for st in wf.final for m in st.problem.maneuvers)
+
+
+def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | None = None) -> dict:
+    """Write ``out_dir/report.html`` and its CSV files; return the tables it printed from.
+
+    Returns
+    -------
+    dict with ``accuracy`` (Table 2, model), ``true_accuracy`` and ``installation_recovery`` and
+    ``recovery`` (None without truth), ``report`` (the HTML path).
+    """
+    truth = _has_truth(wf) if truth is None else truth
+    out_dir.mkdir(parents=True, exist_ok=True)
+    sections = []
+    used = wf.maneuvers[wf.maneuvers["used"]]
+    counts = used.groupby(["bin", "gear_down"]).size()
+    per_bin = ", ".join(f"M{b:.2f} gear {'down' if g else 'up'}: {n}" for (b, g), n in counts.items())
+    summary = (
+        f"{len(wf.maneuvers)} maneuvers from {wf.maneuvers['aircraft'].nunique()} aircraft; "
+        f"{len(used)} used in {len(counts)} Mach bins ({per_bin}). "
+        f"Workflow wall time {wf.elapsed_s:.0f} s; all estimations converged: {wf.success}.\n"
+        + "\n".join(wf.notes)
+    )
+    stages = pd.DataFrame([{"step": s.name, "mach": s.mach, "gear": "down" if s.gear_down else "up",
+                            "maneuvers": len(s.problem.maneuvers),
+                            "free_parameters": int(s.problem.parameters.free_mask.sum()),
+                            "iterations": s.result.iterations, "status": s.result.message}
+                           for s in (*wf.first, *wf.final, *wf.gear_down)])
+    sections.append(Section("Summary", summary, tables=[("Estimations", stages)],
+                            csv=[("maneuvers.csv", wf.maneuvers)]))
+    sections.append(Section(
+        "Table 2: 3-sigma of measurement minus model",
+        "Per sensor and Mach bin at the final estimate (installation biases fixed), 3 x rms about zero, "
+        "against the desired accuracy (paper Table 2). Nose-probe sideslip below its usable angle of attack.",
+        tables=[("", accuracy_table_html(wf.accuracy, "3-sigma of measurement - model (deg)"))],
+        csv=[("table2_model.csv", wf.accuracy)]))
+    out: dict = {"accuracy": wf.accuracy, "true_accuracy": None, "installation_recovery": None,
+                 "recovery": None}
+    samples = {}
+    if truth:
+        from campaigns.workflow_truth import installation_recovery, recovery, true_accuracy
+
+        tacc, samples = true_accuracy(wf)
+        inst = installation_recovery(wf)
+        rec = recovery(wf)
+        out.update(true_accuracy=tacc, installation_recovery=inst, recovery=rec)
+        sections.append(Section(
+            "Table 2 against the truth: calibrated channel minus true flow angle at the sensor",
+            "What the paper could not measure: each measurement run back through its estimated "
+            "calibration model, minus the true flow angle at the sensor (at the time the sensor saw it).",
+            tables=[("", accuracy_table_html(tacc, "3-sigma of calibrated - true (deg)"))],
+            csv=[("table2_truth.csv", tacc)]))
+    # Fig. 4 and the apportionment
+    fig4 = []
+    if not wf.vane_bias.empty:
+        vb = wf.vane_bias.copy()
+        fig4.append(("Fig. 4: average vane bias (b_l + b_r)/2 vs Mach per aircraft, fleet mean",
+                     figure_bias_vs_mach(vb, reference_mach=float(wf.installation["mach"].iloc[0])
+                                         if not wf.installation.empty else None)))
+    tabs = [("Installation biases (deg), held for every Mach", wf.installation.reset_index())]
+    csvs = [("vane_biases.csv", wf.vane_bias), ("installation_biases.csv", wf.installation.reset_index())]
+    if truth and out["installation_recovery"] is not None and len(out["installation_recovery"]):
+        tabs.append(("Installation biases against the truth", out["installation_recovery"]))
+        csvs.append(("installation_recovery.csv", out["installation_recovery"]))
+    sections.append(Section("Vane bias apportionment (paper §4.1)",
+                            "Per Mach bin the fleet mean of (b_l + b_r)/2 is the correction model's update; "
+                            "each aircraft's deviation from it is its mean installation bias.",
+                            tables=tabs, figures=fig4, csv=csvs))
+    # Figs. 6 and 8: table updates, and the tables for the flight-control team
+    upd = wf.table_updates()
+    figs, csvs = [], []
+    if not upd.empty:
+        figs.append(("Figs. 6 and 8: correction-table updates vs breakpoint per Mach (f1 as f1(alpha) - "
+                     "alpha), gear down dashed", figure_table_updates(upd)))
+        csvs.append(("table_updates.csv", upd))
+    for name, t in wf.correction_tables().items():
+        csvs.append((f"correction_table_{name}.csv", t.reset_index()))
+    sections.append(Section("Correction tables", "The updated tables, breakpoints x Mach, in "
+                             "correction_table_<name>.csv (display units: deg for angle tables).",
+                             figures=figs, csv=csvs))
+    # Figs. 5 and 7: error cross-plots; Fig. 3: a time-history match
+    ref = min(wf.final, key=lambda s: abs(s.mach - 0.5))
+    res = stage_residuals(ref)
+    figs = []
+    for name in ("alpha_zl", "alpha_zr"):
+        if name in res:
+            r = res[name]
+            figs.append((f"Fig. 5: {name} measurement - model vs model at Mach {ref.mach:.2f}",
+                         figure_crossplot(r.y * RAD2DEG, r.e * RAD2DEG, f"{name}, Mach {ref.mach:.2f}",
+                                          "model (deg)", "measurement - model (deg)", limit_deg=0.5)))
+    pooled = [stage_residuals(s).get("beta_znp") for s in wf.final]
+    pooled = [p for p in pooled if p is not None]
+    if pooled:
+        a = np.concatenate([p.alpha_t_rad for p in pooled]) * RAD2DEG
+        e = np.concatenate([p.e for p in pooled]) * RAD2DEG
+        figs.append(("Fig. 7: nose-probe sideslip error vs angle of attack, all Mach bins; its usable "
+                     f"range ends at alpha = {wf.nose_probe_alpha_limit_deg} deg",
+                     figure_crossplot(a, e, "nose probe AOSS", "alpha (deg)", "measurement - model (deg)",
+                                      limit_deg=0.5, x_limit_deg=wf.nose_probe_alpha_limit_deg)))
+    if samples:
+        s = samples.get((ref.mach, "up"), {})
+        for name in ("alpha_zl", "beta_znp", "beta_zbu"):
+            if name in s:
+                d = s[name]
+                figs.append((f"{name}: calibrated - true vs true angle at Mach {ref.mach:.2f} (truth)",
+                             figure_crossplot(d["true_rad"].to_numpy() * RAD2DEG,
+                                              d["error_rad"].to_numpy() * RAD2DEG,
+                                              f"{name} against the truth", "true angle (deg)",
+                                              "calibrated - true (deg)", limit_deg=0.5)))
+    sections.append(Section("Error cross-plots", "", figures=figs,
+                            tables=[("Nose-probe error growth with alpha", wf.nose_probe_growth)]))
+    mid = next((m.id for m in ref.problem.maneuvers if m.meta.get("kind") in ("pitch_doublet", "3211")),
+               ref.problem.maneuvers[0].id)
+    chans = {}
+    for name, r in res.items():
+        sel = r.maneuver == mid
+        if sel.any() and name in ("theta", "tas", "alpha_zl", "alpha_zr", "alpha_zsp", "beta_zsp",
+                                  "beta_znp", "alpha_zb"):
+            scale, unit = (RAD2DEG, "deg") if name != "tas" else (1.0, "m/s")
+            chans[name] = (r.z[sel] * scale, r.y[sel] * scale, unit)
+    if chans:
+        t = res[next(iter(chans))].t_s[res[next(iter(chans))].maneuver == mid]
+        sections.append(Section("Time-history match (paper Fig. 3)", f"Maneuver {mid}, Mach {ref.mach:.2f}",
+                                figures=[(f"Fig. 3: {mid}", figure_time_history(mid, t, chans))]))
+    if truth and out["recovery"] is not None and len(out["recovery"]):
+        rec = out["recovery"]
+        summ = rec.assign(within3_crb=rec["z_crb"].abs() < 3, within3_colored=rec["z_colored"].abs() < 3
+                          ).groupby("kind")[["within3_crb", "within3_colored"]].mean()
+        sections.append(Section("Recovery: estimates against their injected truth",
+                                "Fraction within 3 Cramér-Rao / coloured-residual standard deviations "
+                                "per kind; every estimate in recovery.csv.",
+                                tables=[("Within 3 sigma", summ.reset_index()), ("All", rec.reset_index())],
+                                csv=[("recovery.csv", rec.reset_index())]))
+    out["report"] = write_report(out_dir, title, sections)
+    return out

@@ -1,0 +1,154 @@
+"""The workflow against the truth of a synthetic dataset: what the paper could not measure.
+
+- **True accuracy**: each calibrated channel (the measurement run back through its estimated
+  calibration model, :mod:`estimator.calibrated`) minus the true flow angle at its sensor, 3 sigma
+  per sensor and Mach bin. The model's other inputs (``alpha_t``, the sidewash ``beta_s``, rates,
+  airspeed) are the true ones, and each sample is compared with the truth at the time the channel
+  actually saw (its injected total lag): this is the calibration's angle error, not its timing
+  error (the time shifts are in the recovery table).
+- **Installation biases**: the apportioned per-aircraft installation biases against the injected
+  ones minus the fleet mean (the only part the data can tell apart from a correction-model bias).
+- **Recovery**: every final estimate against its truth (:mod:`campaigns.truth`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from campaigns.truth import _dataset_column, _sensor_col, recovery_table, true_parameters
+from estimator.calibrated import calibrated_channel
+from estimator.io import load_truth
+from estimator.model import Model
+from estimator.workflow import RAD2DEG, REQUIREMENTS, Stage, WorkflowResult, apportion, three_sigma
+
+_TRUE_SIGNAL_KIND = {"alpha_s": "alpha", "beta_s": "beta", "flank_s": "flank"}
+
+
+def calibrated_errors(stage: Stage) -> dict[str, pd.DataFrame]:
+    """Channel -> samples of (calibrated - true flow angle at the sensor): maneuver, t_s,
+    true_rad, error_rad, alpha_t_rad (true angle of attack at the CG)."""
+    problem, result = stage.problem, stage.result
+    model = Model(problem)
+    values = result.values
+    out: dict[str, list[pd.DataFrame]] = {}
+    for k, m in enumerate(problem.maneuvers):
+        tr = load_truth(problem, m.id)
+        t_tr = tr["t_s"].to_numpy()
+        inj = m.meta.get("injected", {})
+        for ch in problem.channels:
+            if ch.measures is None or ch.column not in m.measurements:
+                continue
+            col = _dataset_column(ch.column)
+            shift = float(inj.get(f"time_shift_s.{col}", 0.0))
+            t_seen = m.t_s - shift
+
+            def true(c: str, t_seen=t_seen, tr=tr, t_tr=t_tr) -> np.ndarray:
+                return np.interp(t_seen, t_tr, tr[c].to_numpy())
+
+            target = _sensor_col(_TRUE_SIGNAL_KIND[ch.measures], ch.sensor)
+            if target not in tr:
+                continue
+            sig = {name: true(_sensor_col(kind, ch.sensor)) for name, kind in _TRUE_SIGNAL_KIND.items()
+                   if _sensor_col(kind, ch.sensor) in tr}
+            sig |= {"alpha_t": true("true_alpha_cg_rad"), "beta_t": true("true_beta_cg_rad"),
+                    "tas_t": true("true_tas_mps"), "p": true("true_p_rps"), "q": true("true_q_rps"),
+                    "r": true("true_r_rps")}
+            for name in ch.expression.names - set(sig) - {"z", "zhat"}:
+                if name in problem.parameters.specs:
+                    continue
+                other = next((c.column for c in problem.channels if c.name == name), name)
+                data = m.measurements.get(other, m.signals.get(name))
+                if data is not None:
+                    sig[name] = data
+            params = {n: model.value(values, n, k, ch) for n in ch.expression.names
+                      if n in problem.parameters.specs}
+            tables = {}
+            for n in ch.expression.tables:
+                tab = model._tables[n]
+                tables[n] = (tab, np.array([values[problem.parameters.index(model.key(n, k, ch, e))]
+                                            for e in range(tab.breakpoints.size)]))
+            z = m.measurements[ch.column]
+            keep = np.isfinite(z)
+            x = calibrated_channel(ch, z[keep], {s: v[keep] for s, v in sig.items()}, params, tables)
+            x_true = true(target)[keep]
+            out.setdefault(ch.name, []).append(pd.DataFrame({
+                "maneuver": m.id, "t_s": m.t_s[keep], "true_rad": x_true, "error_rad": x - x_true,
+                "alpha_t_rad": sig["alpha_t"][keep]}))
+    return {c: pd.concat(v, ignore_index=True) for c, v in out.items()}
+
+
+def true_accuracy(wf: WorkflowResult) -> tuple[pd.DataFrame, dict[tuple[float, str], dict]]:
+    """Table 2 against the truth, and the error samples per (Mach, gear) stage for plots."""
+    rows, samples = [], {}
+    limit = wf.nose_probe_alpha_limit_deg
+    for st in (*wf.final, *wf.gear_down):
+        errs = calibrated_errors(st)
+        samples[(st.mach, "down" if st.gear_down else "up")] = errs
+        for name, df in errs.items():
+            req = REQUIREMENTS.get(name)
+            if req is None:
+                continue
+            e = df["error_rad"].to_numpy() * RAD2DEG
+            note = ""
+            if req.low_alpha_only and limit is not None:
+                e = e[df["alpha_t_rad"].to_numpy() * RAD2DEG < limit]
+                note = f"alpha < {limit:.0f} deg"
+            s = three_sigma(e)
+            rows.append({"sensor": req.sensor, "channel": name, "mach": st.mach,
+                         "gear": "down" if st.gear_down else "up", "n": int(e.size),
+                         "three_sigma_deg": s, "desired_deg": req.desired_deg,
+                         "passed": bool(s <= req.desired_deg), "note": note,
+                         "mean_error_deg": float(np.mean(e)) if e.size else math.nan})
+    return pd.DataFrame(rows), samples
+
+
+def installation_recovery(wf: WorkflowResult) -> pd.DataFrame:
+    """Apportioned installation biases against their truth, deg.
+
+    The truth is the same apportionment applied to the *true* vane biases of the reference bin's
+    first estimation (the projection of :mod:`campaigns.truth`): a vane's installation bias reaches
+    the calibrated channel through the airdata computer's local-to-free-stream correction, i.e.
+    scaled by its slope (about 0.8), so the injected raw-angle bias (also listed) is not the
+    channel's; and only deviations from the fleet mean are observable.
+    """
+    if wf.installation.empty:
+        return pd.DataFrame()
+    bl, br = "b_l", "b_r"
+    rows = []
+    for mach, g in wf.installation.groupby("mach"):
+        st = next(s for s in wf.first if s.mach == mach)
+        truth = true_parameters(st.problem).values
+        ac = [a for a in sorted({m.aircraft for m in st.problem.maneuvers})
+              if f"{bl}[{a}]" in truth and f"{br}[{a}]" in truth]
+        ap = apportion({a: truth[f"{bl}[{a}]"] for a in ac}, {a: truth[f"{br}[{a}]"] for a in ac})
+        inj = {}
+        for m in st.problem.maneuvers:
+            i = m.meta.get("injected", {})
+            inj.setdefault(m.aircraft, (i.get("vane_left.installation_bias_rad", math.nan),
+                                        i.get("vane_right.installation_bias_rad", math.nan)))
+        for a in g.index:
+            if a not in ap.index:
+                continue
+            r = wf.installation.loc[a]
+            for side, j in (("left", 0), ("right", 1)):
+                t = ap.loc[a, f"installation_{side}"] * RAD2DEG
+                est, std = r[f"installation_{side}_deg"], r[f"std_installation_{side}_deg"]
+                rows.append({"aircraft": a, "vane": side, "mach": mach, "estimate_deg": est,
+                             "truth_deg": t, "error_deg": est - t, "std_deg": std, "z": (est - t) / std,
+                             "injected_raw_deg": float(inj[a][j]) * RAD2DEG})
+    return pd.DataFrame(rows)
+
+
+def recovery(wf: WorkflowResult) -> pd.DataFrame:
+    """Every final estimate with a truth (calibration parameters, time delays, IMU biases)."""
+    frames = []
+    for st in (*wf.final, *wf.gear_down):
+        t = recovery_table(st.result, true_parameters(st.problem))
+        t = t[t["kind"].isin(["imu_bias", "time_delay", "bias", "scale", "table"])].copy()
+        t.insert(0, "gear", "down" if st.gear_down else "up")
+        t.insert(0, "mach", st.mach)
+        frames.append(t)
+    return pd.concat(frames) if frames else pd.DataFrame()
