@@ -333,12 +333,18 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--workers", type=int, default=None, help="worker processes (default: all CPUs)")
     s = sub.add_parser("show", help="summarise a dataset written by `fpr fly`")
     s.add_argument("dataset", type=Path)
+    from campaigns import montecarlo_cli
+
+    montecarlo_cli.add_parser(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    handlers = {"fly": _fly, "demo": _demo, "show": _show, "calibrate": _calibrate}
+    from campaigns import montecarlo_cli
+
+    handlers = {"fly": _fly, "demo": _demo, "show": _show, "calibrate": _calibrate,
+                **dict.fromkeys(montecarlo_cli.COMMANDS, montecarlo_cli.run)}
     try:
         return handlers[args.command](args)
     except (FileNotFoundError, FileExistsError, ValueError, KeyError) as exc:
