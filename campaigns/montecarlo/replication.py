@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from threadpoolctl import threadpool_limits
 
 # the private helpers of campaigns.truth map a parameter name to its key for a maneuver and a
 # canonical channel to its dataset column; the calibrated-channel errors below use the same keys
@@ -355,6 +356,15 @@ def run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequenc
 
     Exceptions propagate (:func:`run_replication_safely` records them).
     """
+    # one BLAS thread, whatever the executor: a multi-threaded OpenBLAS sums in another order
+    # (Dask workers run single-threaded, local processes do not), which moved the least-squares
+    # truth projection by 1e-13 between executors; the estimator itself already runs on one
+    with threadpool_limits(limits=1):
+        return _run_replication(scenario, index, truths, models)
+
+
+def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequence[TruthTrajectory]],
+                     models: Models | None) -> ReplicationResult:
     t0 = time.perf_counter()
     models = models or Models.of(scenario)
     draw = scenario.draw(index)

@@ -116,7 +116,7 @@ class MonteCarloSummary:
             a.hist(np.clip(z, -6, 6), bins=np.linspace(-6, 6, 49), density=True, color="C0", alpha=0.7)
             a.plot(zz, np.exp(-0.5 * zz**2) / np.sqrt(2 * np.pi), color="k", lw=1)
             a.set_title(f"{kind}: std(z) {np.std(z, ddof=1) if z.size > 1 else np.nan:.2f}", fontsize=9)
-            a.set_xlabel("z (Cramér-Rao)")
+            a.set_xlabel("z (Cramér-Rao), clipped to ±6")
         path = Path(path)
         fig.savefig(path, dpi=110)
         return path
