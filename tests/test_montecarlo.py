@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import copy
 import json
+import shutil
+import tomllib
 
 import numpy as np
 import pandas as pd
@@ -226,3 +228,49 @@ def test_dask_local_cluster_gives_the_local_results(base_run, tmp_path):
     ref, ours = _tables(base_run[0], (0, 1, 2)), _tables(out, (0, 1, 2))
     for k in ref:
         pd.testing.assert_frame_equal(ref[k], ours[k], check_exact=True)
+
+
+SCENARIO_TOML = """
+name = "mc_test"
+seed = 31
+replications = 4
+local_flow_truth = "local_flow_linear"
+adc_baseline = "adc_baseline_linear"
+[environment]
+planet = "flat"
+wind_ned_mps = [5.0, -3.0, 0.0]
+turbulence = "none"
+[errors]
+preset = "typical"
+nose_probe_irregularity = false
+[[flights]]
+configurations = ["PV1-NP"]
+mach = [0.6]
+maneuvers = ["pitch_doublet", "3211"]
+maneuver = { duration_s = 20.0 }
+[draw.errors]
+"imu.accel_bias_mps2" = { dist = "normal", std = 0.05, scope = "maneuver" }
+"sensors.vane_left.delay_ms" = { dist = "uniform", half_width = 15.0 }
+[estimator]
+channels = ["phi", "theta", "psi", "tas", "h", "h_dgps", "alpha_zl", "alpha_zr"]
+max_iterations = 100
+parameters = { f1 = { free = false }, f2 = { free = false } }
+"""
+
+
+def test_cli_resumes_a_run_from_the_scenario_file(base_run, tmp_path, capsys):
+    assert tomllib.loads(SCENARIO_TOML) == RAW  # the file is the scenario of base_run
+    path = tmp_path / "mc_test.toml"
+    path.write_text(SCENARIO_TOML)
+    out = tmp_path / "cli"
+    shutil.copytree(base_run[0], out)  # replications 0..2 done; the file asks for 4
+    status = montecarlo_cli.main(["montecarlo", str(path), "--out", str(out), "--workers", "1"])
+    text = capsys.readouterr().out
+    assert status == 0, text
+    assert "1 replications run now, 3 already done, 4 requested" in text and "tau_alpha_zl" in text
+    assert sorted(finished_replications(out)) == [0, 1, 2, 3]
+    assert (out / "summary.txt").read_text().startswith("Monte Carlo mc_test: 4 replications, 4 converged")
+    # a scenario that is not this one is refused, with the way out named
+    path.write_text(SCENARIO_TOML.replace("seed = 31", "seed = 30"))
+    assert montecarlo_cli.main(["montecarlo", str(path), "--out", str(out), "--workers", "1"]) == 2
+    assert "another scenario" in capsys.readouterr().err

@@ -13,8 +13,10 @@ Every file is written to a temporary name and renamed into place, by the one pro
 the campaign (workers return results; they never write), so an interrupted run leaves whole files
 only. Running the same command again skips the replications that have a file (a failed one too,
 unless ``retry_failed``) and ends with exactly one file per replication. An output directory made
-from another scenario (its hash differs) is refused. A lock (``OUT/.lock``) keeps two runs out of
-one directory.
+from another scenario (its hash differs) is refused. The hash covers the scenario's own tables, not
+the files it names (fleet, local-flow truth, model set) nor the code: after changing those, start a
+new directory rather than resume, or the run mixes results of both. A lock (``OUT/.lock``) keeps
+two runs out of one directory.
 
 Executors: local processes (:class:`concurrent.futures.ProcessPoolExecutor`, the default),
 in-process (``workers=1``, for debugging and tests), or a Dask distributed cluster
