@@ -20,7 +20,7 @@ from estimator.report import (
     figure_time_history,
     write_report,
 )
-from estimator.workflow import RAD2DEG, WorkflowResult, stage_residuals
+from estimator.workflow import RAD2DEG, WorkflowResult
 
 
 def _has_truth(wf: WorkflowResult) -> bool:
@@ -106,7 +106,7 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
                              figures=figs, csv=csvs))
     # Figs. 5 and 7: error cross-plots; Fig. 3: a time-history match
     ref = min(wf.final, key=lambda s: abs(s.mach - 0.5))
-    res = stage_residuals(ref)
+    res = ref.residuals
     figs = []
     for name in ("alpha_zl", "alpha_zr"):
         if name in res:
@@ -114,8 +114,7 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
             figs.append((f"Fig. 5: {name} measurement - model vs model at Mach {ref.mach:.2f}",
                          figure_crossplot(r.y * RAD2DEG, r.e * RAD2DEG, f"{name}, Mach {ref.mach:.2f}",
                                           "model (deg)", "measurement - model (deg)", limit_deg=0.5)))
-    pooled = [stage_residuals(s).get("beta_znp") for s in wf.final]
-    pooled = [p for p in pooled if p is not None]
+    pooled = [s.residuals["beta_znp"] for s in wf.final if "beta_znp" in s.residuals]
     if pooled:
         a = np.concatenate([p.alpha_t_rad for p in pooled]) * RAD2DEG
         e = np.concatenate([p.e for p in pooled]) * RAD2DEG

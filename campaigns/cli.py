@@ -215,18 +215,10 @@ def _calibrate(args: argparse.Namespace) -> int:
     out = args.out or Path("fpr-out") / f"calibrate-{src.stem or src.name}"
     if not args.single:
         return _workflow(problem, out, args)
-    if out.exists() and any(out.iterdir()):
-        ours = {"result.json", "parameters.csv", "residuals.csv", "correlation.csv", "recovery.csv",
-                "time_history_match.png", "residual_crossplots.png"}
-        present = {p.name for p in out.iterdir()}
-        if not args.overwrite or present - ours:
-            print(f"fpr calibrate: {out} is not empty; choose another --out" + (
-                "" if present - ours else " or pass --overwrite to replace the earlier results"),
-                file=sys.stderr)
-            return 2
-        for name in present:  # no stale file of an earlier run survives beside the new results
-            (out / name).unlink()
-    out.mkdir(parents=True, exist_ok=True)
+    single_files = {"result.json", "parameters.csv", "residuals.csv", "correlation.csv", "recovery.csv",
+                    "time_history_match.png", "residual_crossplots.png"}
+    if not _prepare_out(out, args.overwrite, lambda p: p.name in single_files):
+        return 2
     n_samples = sum(m.n for m in problem.maneuvers)
     print(f"{len(problem.maneuvers)} maneuvers, {n_samples} samples, {len(problem.channels)} "
           f"channels, {int(problem.parameters.free_mask.sum())} free parameters")
@@ -252,6 +244,23 @@ def _calibrate(args: argparse.Namespace) -> int:
     return 0 if result.success else 1
 
 
+def _prepare_out(out: Path, overwrite: bool, ours) -> bool:
+    """Make ``out`` ready for new results: an earlier run's files (``ours(path)``) are removed
+    when ``overwrite``, so none survives stale beside the new ones; anything else stays and the
+    command stops (False, after saying why) rather than lose a user's file."""
+    present = list(out.iterdir()) if out.exists() else []
+    if present:
+        foreign = [p for p in present if not ours(p)]
+        if not overwrite or foreign:
+            print(f"fpr calibrate: {out} is not empty; choose another --out" + (
+                "" if foreign else " or pass --overwrite to replace the earlier results"), file=sys.stderr)
+            return False
+        for p in present:
+            p.unlink()
+    out.mkdir(parents=True, exist_ok=True)
+    return True
+
+
 def _fmt_table2(acc, title: str) -> str:
     """Table 2 as text: sensors x Mach, 3 sigma in deg, * where it misses the desired accuracy."""
     if acc is None or acc.empty:
@@ -273,17 +282,11 @@ def _workflow(problem, out: Path, args: argparse.Namespace) -> int:
     from estimator.solver import SolverOptions
     from estimator.workflow import WorkflowOptions, run_workflow
 
-    if out.exists() and any(out.iterdir()) and not args.overwrite:
-        print(f"fpr calibrate: {out} is not empty; choose another --out or pass --overwrite", file=sys.stderr)
+    # an earlier report: report.html beside its CSV tables and figures, nothing else
+    earlier = (out / "report.html").is_file()
+    if not _prepare_out(out, args.overwrite,
+                        lambda p: earlier and p.is_file() and p.suffix in (".csv", ".html", ".png")):
         return 2
-    if out.exists() and args.overwrite and any(out.iterdir()):
-        ours = {p for p in out.iterdir() if p.is_file() and p.suffix in (".csv", ".html", ".png", ".json")}
-        if set(out.iterdir()) - ours:
-            print(f"fpr calibrate: {out} holds files that are not an earlier report's; choose another --out",
-                  file=sys.stderr)
-            return 2
-        for p in ours:
-            p.unlink()
     n_samples = sum(m.n for m in problem.maneuvers)
     print(f"{len(problem.maneuvers)} maneuvers, {n_samples} samples, {len(problem.channels)} channels: "
           "Mach-bin calibration workflow (paper §4)")

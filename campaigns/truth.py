@@ -112,6 +112,41 @@ def _key(problem: Problem, name: str, m, channel=None, element=None) -> str:
     return make_key(name, inst, element)
 
 
+#: model signal -> the truth column it is at the CG (or from the IMU's true rates)
+_TRUE_CG_COLUMNS = {"alpha_t": "true_alpha_cg_rad", "beta_t": "true_beta_cg_rad",
+                    "tas_t": "true_tas_mps", "p": "true_p_rps", "q": "true_q_rps", "r": "true_r_rps"}
+#: sensor signal -> the kind of its truth column (``true_<kind>_<sensor>_rad``)
+SENSOR_SIGNAL_KINDS = {"alpha_s": "alpha", "beta_s": "beta", "flank_s": "flank"}
+
+
+def true_signals(at, columns, sensor: str) -> dict[str, np.ndarray]:
+    """The model's state signals from the truth: each sensor signal the truth has for ``sensor``
+    and the CG ones, each read by ``at(column)`` (e.g. interpolated at the samples wanted)."""
+    sig = {name: at(_sensor_col(kind, sensor)) for name, kind in SENSOR_SIGNAL_KINDS.items()
+           if _sensor_col(kind, sensor) in columns}
+    sig |= {name: at(col) for name, col in _TRUE_CG_COLUMNS.items()}
+    return sig
+
+
+def problem_tables(problem: Problem) -> dict[str, Table]:
+    """Every table family of a problem as a :class:`Table` (its breakpoints)."""
+    return {n: Table(n, np.asarray(s.breakpoints)) for n, s in problem.parameters.specs.items()
+            if s.breakpoints}
+
+
+def channel_values(problem: Problem, theta: np.ndarray, m, ch, tables: dict[str, Table]):
+    """A channel model's parameters and tables for maneuver ``m`` at the values ``theta`` (SI):
+    ``(params, tabs)`` as :meth:`Expression.evaluate` takes them. KeyError if an instance is
+    missing (an aircraft without that parameter)."""
+    ps = problem.parameters
+    expr = ch.expression
+    params = {n: theta[ps.index(_key(problem, n, m, ch))] for n in expr.names if n in ps.specs}
+    tabs = {n: (tables[n], theta[[ps.index(_key(problem, n, m, ch, e))
+                                  for e in range(tables[n].breakpoints.size)]])
+            for n in expr.tables}
+    return params, tabs
+
+
 def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> dict[str, float]:
     """Least-squares fit of the calibration parameters to the clean channels (module docstring).
 
@@ -120,7 +155,7 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> di
     """
     ps = problem.parameters
     calib_kinds = ("table", "bias", "scale")
-    tables = {n: Table(n, np.asarray(s.breakpoints)) for n, s in ps.specs.items() if s.breakpoints}
+    tables = problem_tables(problem)
     cases = []  # (channel, maneuver, signals, clean target)
     for ch in problem.channels:
         if ch.sensor is None:
@@ -132,16 +167,8 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> di
                 continue
             t = tr["t_s"].to_numpy()
             y = tr[clean_col].to_numpy()
-            sig = {
-                name: tr[_sensor_col(kind, ch.sensor)].to_numpy()
-                for name, kind in (("alpha_s", "alpha"), ("beta_s", "beta"), ("flank_s", "flank"))
-                if _sensor_col(kind, ch.sensor) in tr
-            }
-            sig |= {"alpha_t": tr["true_alpha_cg_rad"].to_numpy(),
-                    "beta_t": tr["true_beta_cg_rad"].to_numpy(),
-                    "tas_t": tr["true_tas_mps"].to_numpy(), "z": y, "zhat": y,
-                    "p": tr["true_p_rps"].to_numpy(), "q": tr["true_q_rps"].to_numpy(),
-                    "r": tr["true_r_rps"].to_numpy()}
+            sig = true_signals(lambda c, tr=tr: tr[c].to_numpy(), tr.columns, ch.sensor)
+            sig |= {"z": y, "zhat": y}
             for name in ch.expression.names - set(sig):
                 if name in ps.specs:
                     continue
@@ -160,13 +187,8 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> di
     for _ in range(8):
         rows, rhs = [], []
         for ch, m, sig, y in cases:
-            expr = ch.expression
-            params = {n: theta[ps.index(_key(problem, n, m, ch))] for n in expr.names if n in ps.specs}
-            tabs = {}
-            for n in expr.tables:
-                keys = [_key(problem, n, m, ch, e) for e in range(tables[n].breakpoints.size)]
-                tabs[n] = (tables[n], theta[[ps.index(k) for k in keys]])
-            dual = expr.evaluate(sig, params, tabs)
+            params, tabs = channel_values(problem, theta, m, ch, tables)
+            dual = ch.expression.evaluate(sig, params, tabs)
             r = y - np.broadcast_to(dual.value, y.shape)
             residuals[ch.name] = np.concatenate([residuals.get(ch.name, np.zeros(0)), r])
             A = np.zeros((y.size, len(free_calib)))
@@ -199,12 +221,8 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> di
     # structure error: what the best fit leaves, per channel
     out: dict[str, list[np.ndarray]] = {}
     for ch, m, sig, y in cases:
-        expr = ch.expression
-        params = {n: theta[ps.index(_key(problem, n, m, ch))] for n in expr.names if n in ps.specs}
-        tabs = {n: (tables[n], theta[[ps.index(_key(problem, n, m, ch, e))
-                                      for e in range(tables[n].breakpoints.size)]])
-                for n in expr.tables}
-        fit = np.broadcast_to(expr.evaluate(sig, params, tabs).value, y.shape)
+        params, tabs = channel_values(problem, theta, m, ch, tables)
+        fit = np.broadcast_to(ch.expression.value(sig, params, tabs), y.shape)
         out.setdefault(ch.name, []).append(y - fit)
     return {c: float(np.sqrt(np.mean(np.concatenate(v) ** 2))) for c, v in out.items()}
 

@@ -18,65 +18,61 @@ import math
 import numpy as np
 import pandas as pd
 
-from campaigns.truth import _dataset_column, _sensor_col, recovery_table, true_parameters
+from campaigns.truth import (
+    SENSOR_SIGNAL_KINDS,
+    _dataset_column,
+    _sensor_col,
+    channel_values,
+    problem_tables,
+    recovery_table,
+    true_parameters,
+    true_signals,
+)
 from estimator.calibrated import calibrated_channel
 from estimator.io import load_truth
-from estimator.model import Model
-from estimator.workflow import RAD2DEG, REQUIREMENTS, Stage, WorkflowResult, apportion, three_sigma
+from estimator.problem import Problem
+from estimator.result import EstimationResult
+from estimator.workflow import RAD2DEG, REQUIREMENTS, WorkflowResult, apportion, three_sigma
 
-_TRUE_SIGNAL_KIND = {"alpha_s": "alpha", "beta_s": "beta", "flank_s": "flank"}
 
-
-def calibrated_errors(stage: Stage) -> dict[str, pd.DataFrame]:
+def calibrated_errors(problem: Problem, result: EstimationResult) -> dict[str, pd.DataFrame]:
     """Channel -> samples of (calibrated - true flow angle at the sensor): maneuver, t_s,
     true_rad, error_rad, alpha_t_rad (true angle of attack at the CG)."""
-    problem, result = stage.problem, stage.result
-    model = Model(problem)
     values = result.values
+    tables = problem_tables(problem)
+    chan_col = {c.name: c.column for c in problem.channels}
     out: dict[str, list[pd.DataFrame]] = {}
-    for k, m in enumerate(problem.maneuvers):
+    for m in problem.maneuvers:
         tr = load_truth(problem, m.id)
         t_tr = tr["t_s"].to_numpy()
         inj = m.meta.get("injected", {})
         for ch in problem.channels:
             if ch.measures is None or ch.column not in m.measurements:
                 continue
-            col = _dataset_column(ch.column)
-            shift = float(inj.get(f"time_shift_s.{col}", 0.0))
-            t_seen = m.t_s - shift
-
-            def true(c: str, t_seen=t_seen, tr=tr, t_tr=t_tr) -> np.ndarray:
-                return np.interp(t_seen, t_tr, tr[c].to_numpy())
-
-            target = _sensor_col(_TRUE_SIGNAL_KIND[ch.measures], ch.sensor)
+            target = _sensor_col(SENSOR_SIGNAL_KINDS[ch.measures], ch.sensor)
             if target not in tr:
                 continue
-            sig = {name: true(_sensor_col(kind, ch.sensor)) for name, kind in _TRUE_SIGNAL_KIND.items()
-                   if _sensor_col(kind, ch.sensor) in tr}
-            sig |= {"alpha_t": true("true_alpha_cg_rad"), "beta_t": true("true_beta_cg_rad"),
-                    "tas_t": true("true_tas_mps"), "p": true("true_p_rps"), "q": true("true_q_rps"),
-                    "r": true("true_r_rps")}
+            z = m.measurements[ch.column]
+            keep = np.isfinite(z)
+            # the truth at the time the sensor saw it: the column's injected total lag
+            t_seen = (m.t_s - float(inj.get(f"time_shift_s.{_dataset_column(ch.column)}", 0.0)))[keep]
+
+            def at(c: str, t_seen=t_seen, tr=tr, t_tr=t_tr) -> np.ndarray:
+                return np.interp(t_seen, t_tr, tr[c].to_numpy())
+
+            sig = true_signals(at, tr.columns, ch.sensor)
             for name in ch.expression.names - set(sig) - {"z", "zhat"}:
                 if name in problem.parameters.specs:
                     continue
-                other = next((c.column for c in problem.channels if c.name == name), name)
-                data = m.measurements.get(other, m.signals.get(name))
+                data = m.measurements.get(chan_col.get(name, name), m.signals.get(name))
                 if data is not None:
-                    sig[name] = data
-            params = {n: model.value(values, n, k, ch) for n in ch.expression.names
-                      if n in problem.parameters.specs}
-            tables = {}
-            for n in ch.expression.tables:
-                tab = model._tables[n]
-                tables[n] = (tab, np.array([values[problem.parameters.index(model.key(n, k, ch, e))]
-                                            for e in range(tab.breakpoints.size)]))
-            z = m.measurements[ch.column]
-            keep = np.isfinite(z)
-            x = calibrated_channel(ch, z[keep], {s: v[keep] for s, v in sig.items()}, params, tables)
-            x_true = true(target)[keep]
+                    sig[name] = data[keep]
+            params, tabs = channel_values(problem, values, m, ch, tables)
+            x = calibrated_channel(ch, z[keep], sig, params, tabs)
+            x_true = sig[ch.measures]
             out.setdefault(ch.name, []).append(pd.DataFrame({
                 "maneuver": m.id, "t_s": m.t_s[keep], "true_rad": x_true, "error_rad": x - x_true,
-                "alpha_t_rad": sig["alpha_t"][keep]}))
+                "alpha_t_rad": sig["alpha_t"]}))
     return {c: pd.concat(v, ignore_index=True) for c, v in out.items()}
 
 
@@ -85,7 +81,7 @@ def true_accuracy(wf: WorkflowResult) -> tuple[pd.DataFrame, dict[tuple[float, s
     rows, samples = [], {}
     limit = wf.nose_probe_alpha_limit_deg
     for st in (*wf.final, *wf.gear_down):
-        errs = calibrated_errors(st)
+        errs = calibrated_errors(st.problem, st.result)
         samples[(st.mach, "down" if st.gear_down else "up")] = errs
         for name, df in errs.items():
             req = REQUIREMENTS.get(name)

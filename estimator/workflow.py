@@ -32,7 +32,8 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import pandas as pd
@@ -128,6 +129,11 @@ class Stage:
     problem: Problem = field(repr=False)
     result: EstimationResult = field(repr=False)
 
+    @cached_property
+    def residuals(self) -> dict[str, ChannelResiduals]:
+        """Channel name -> residuals at the estimate (:func:`stage_residuals`), evaluated once."""
+        return stage_residuals(self)
+
 
 @dataclass(frozen=True)
 class WorkflowResult:
@@ -160,6 +166,8 @@ class WorkflowResult:
     nose_probe_alpha_limit_deg: float | None
     notes: tuple[str, ...] = ()
     elapsed_s: float = 0.0
+    #: the table that starts at the identity (its update is shown)
+    identity_table: str = "f1"
 
     @property
     def success(self) -> bool:
@@ -187,9 +195,6 @@ class WorkflowResult:
                                  "std": float(r["std_crb_display"]), "free": bool(r["free"]),
                                  "unit": r["display_unit"]})
         return pd.DataFrame(rows)
-
-    #: the table that starts at the identity (its update is shown)
-    identity_table: str = "f1"
 
     def correction_tables(self) -> dict[str, pd.DataFrame]:
         """Per table, its values (display units, f1 as f1 itself) with breakpoints as rows and
@@ -510,18 +515,17 @@ def alpha_limit(alpha_deg: np.ndarray, err_deg: np.ndarray, desired_deg: float, 
 
 
 def _accuracy(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOptions):
-    res = {id(st): stage_residuals(st) for st in (*final, *gear)}
     np_ch = opt.nose_probe_channel
     growth, limit = pd.DataFrame(), None
     req_np = opt.requirements.get(np_ch)
-    pooled = [r[np_ch] for st in final for r in [res[id(st)]] if np_ch in r]
+    pooled = [st.residuals[np_ch] for st in final if np_ch in st.residuals]
     if pooled and req_np is not None:
         a = np.concatenate([p.alpha_t_rad for p in pooled]) * RAD2DEG
         e = np.concatenate([p.e for p in pooled]) * RAD2DEG
         growth, limit = alpha_limit(a, e, req_np.desired_deg, opt.alpha_band_deg, opt.min_band_samples)
     rows = []
     for st in (*final, *gear):
-        for name, r in res[id(st)].items():
+        for name, r in st.residuals.items():
             req = opt.requirements.get(name)
             if req is None:
                 continue
@@ -541,7 +545,3 @@ def _accuracy(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOption
                          "passed": bool(s <= req.desired_deg), "note": note})
     return pd.DataFrame(rows), growth, limit
 
-
-def with_solver(options: WorkflowOptions, **solver_changes) -> WorkflowOptions:
-    """A copy of the options with some solver settings changed."""
-    return replace(options, solver=replace(options.solver, **solver_changes))

@@ -29,8 +29,14 @@ from threadpoolctl import threadpool_limits
 
 # the private helpers of campaigns.truth map a parameter name to its key for a maneuver and a
 # canonical channel to its dataset column; the calibrated-channel errors below use the same keys
-from campaigns.truth import _dataset_column, _key, _sensor_col, recovery_table, true_parameters
-from estimator.core.expressions import Table
+from campaigns.truth import (
+    _dataset_column,
+    channel_values,
+    problem_tables,
+    recovery_table,
+    true_parameters,
+    true_signals,
+)
 from estimator.io import problem_from_dataset
 from estimator.problem import Problem
 from estimator.result import STATUS_TEXT, EstimationResult
@@ -273,7 +279,7 @@ def calibrated_channel_errors(problem: Problem, result: EstimationResult,
     """
     ps = problem.parameters
     theta = result.values
-    tabs_all = {n: Table(n, np.asarray(s.breakpoints)) for n, s in ps.specs.items() if s.breakpoints}
+    tabs_all = problem_tables(problem)
     chan_col = {c.name: c.column for c in problem.channels}
     out: dict[str, list[np.ndarray]] = {}
     for ch in problem.channels:
@@ -296,12 +302,9 @@ def calibrated_channel_errors(problem: Problem, result: EstimationResult,
             def at(column: str) -> np.ndarray:
                 return np.interp(ts[ok], t_true, df[column].to_numpy())  # noqa: B023 (used at once)
 
-            sig = {a: at(_sensor_col(a.split("_")[0], ch.sensor)) for a in _ANGLE_SIGNALS
-                   if _sensor_col(a.split("_")[0], ch.sensor) in df}
+            sig = true_signals(at, df.columns, ch.sensor)
             clean = at(clean_col)
-            sig |= {"alpha_t": at("true_alpha_cg_rad"), "beta_t": at("true_beta_cg_rad"),
-                    "tas_t": at("true_tas_mps"), "p": at("true_p_rps"), "q": at("true_q_rps"),
-                    "r": at("true_r_rps"), "z": clean, "zhat": clean}
+            sig |= {"z": clean, "zhat": clean}
             for name in expr.names - set(sig):
                 if name in ps.specs:
                     continue
@@ -311,10 +314,7 @@ def calibrated_channel_errors(problem: Problem, result: EstimationResult,
                 elif name in m.signals:
                     sig[name] = m.signals[name][ok]
             try:
-                params = {n: theta[ps.index(_key(problem, n, m, ch))] for n in expr.names if n in ps.specs}
-                tabs = {n: (tabs_all[n], theta[[ps.index(_key(problem, n, m, ch, e))
-                                                 for e in range(tabs_all[n].breakpoints.size)]])
-                        for n in expr.tables}
+                params, tabs = channel_values(problem, theta, m, ch, tabs_all)
             except KeyError:  # a parameter this maneuver's aircraft does not have
                 continue
             if any(a not in sig for a in angles):

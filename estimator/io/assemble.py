@@ -138,7 +138,8 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
     for name, v in table.values.items():
         vi = v[idx]
         not_num = table.not_numeric.get(name, np.zeros(len(v), bool))[idx]
-        keep = np.isfinite(vi) | not_num | np.isinf(vi) if name in own else np.ones(vi.size, bool)
+        # an own-rate column's empty cells are not samples; text and infinities still are bad
+        keep = ~np.isnan(vi) | not_num if name in own else np.ones(vi.size, bool)
         if name in own and np.count_nonzero(keep) < 2:
             raise DataError(f"{where}: {table.labels[name]} (own_rate) has fewer than 2 samples in the "
                             "maneuver; widen the time range or leave the channel out")
