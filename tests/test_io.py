@@ -647,6 +647,12 @@ def test_documented_problem_file_example_works(tmp_path):
     np.testing.assert_allclose(pd1.measurements["tas"], f.loc[sel, "tas"], rtol=1e-9)
     assert prob.parameters["u0[pd1]"].value == 152.0
     assert prob.parameters["b_l[PV1]"].bounds == pytest.approx((-3 * DEG, 3 * DEG))
+    # the GPS height left out of the fitted channels: its empty cells are no error, it is not read
+    text = (tmp_path / "problem.toml").read_text()
+    (tmp_path / "problem.toml").write_text(text.replace('"h", "h_dgps", "alpha_zl"', '"h", "alpha_zl"'))
+    with pytest.warns(DataWarning, match="b_5h"):
+        pd1, _ = load_problem(tmp_path / "problem.toml").maneuvers
+    assert "h_dgps" not in pd1.measurements and "h_dgps" not in pd1.signals
 
 
 def test_estimator_io_imports_neither_synth_nor_jsbsim():

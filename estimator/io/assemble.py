@@ -128,14 +128,18 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
     t_s = table.t_s[idx]
     rows = table.rows[idx]
     own = table.own_rate & set(table.values)
-    bad_own = own & (set(REQUIRED) | {"phi", "theta", "psi"} | (set(table.values) - channel_columns))
+    bad_own = own & (set(REQUIRED) | {"phi", "theta", "psi"})
     if bad_own:
         raise DataError(
-            f"{where}: {sorted(bad_own)} cannot be own_rate columns: the IMU inputs, Euler angles "
-            "and data signals are needed at every sample; resample them onto the time base first "
+            f"{where}: {sorted(bad_own)} cannot be own_rate columns: the IMU inputs and Euler angles "
+            "are needed at every sample; resample them onto the time base first "
             "(own_rate is for slow measured channels such as a GPS height)")
+    # an own-rate column no fitted channel measures (a GPS height left out of `channels`) is not
+    # a data signal a model could read at every sample: it is not imported
+    values = {k: v for k, v in table.values.items() if not (k in own and k not in channel_columns)}
+    own &= channel_columns
     present = {}
-    for name, v in table.values.items():
+    for name, v in values.items():
         vi = v[idx]
         not_num = table.not_numeric.get(name, np.zeros(len(v), bool))[idx]
         # an own-rate column's empty cells are not samples; text and infinities still are bad
@@ -149,7 +153,7 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
         present[name] = keep
     check_sampling(t_s, rows, where, req.resample_hz)
     si = {name: to_si(v[idx], table.units[name], table.labels[name])
-          for name, v in table.values.items() if name != "t"}
+          for name, v in values.items() if name != "t"}
     check_plausible("t", table.labels["t"], t_s, table.units["t"], t_s, rows, where)
     for name, v in si.items():
         if name not in ("ax", "ay", "az"):
