@@ -134,7 +134,8 @@ _FIELD_HELP = {
     "period_s": "period of the load-factor cycle, s",
     "alpha_max_rad": "angle of attack at the end of the wind-up, rad",
     "beta_rad": "sideslip held through the SHSS run, rad (sign = side)",
-    "segment_s": "length of the pieces the SHSS run is split into, s (30-40)",
+    "segment_s": "length of the pieces the SHSS run is split into, s (30-40 as the paper flies; "
+                 "up to duration_s, one unsplit run, for planning studies)",
     "rudder_norm": "rudder doublet amplitude, normalized command (0-1)",
     "delta_mach": "Mach change to reach in the level acceleration/deceleration",
 }
@@ -163,7 +164,8 @@ class ManeuverSpec:
         is the centre of the sweep (:attr:`trim_mach` is where they start).
     altitude_m : trim altitude above mean sea level, m.
     gear_down : landing gear extended (approach / take-off configuration).
-    duration_s : recorded length, s; default per kind (30-40 s, SHSS 105 s split in segments).
+    duration_s : recorded length, s; default per kind (30-40 s, SHSS 105 s split in segments
+        of ``segment_s``, 35 s by default; ``segment_s = duration_s`` flies it as one piece).
     heading_rad : initial true heading, rad.
     delta_nz, pulse_s, nz_max, nz_min, period_s, alpha_max_rad, beta_rad, segment_s,
     rudder_norm, delta_mach : excitation settings; ``None`` takes the kind's default in
@@ -230,7 +232,10 @@ class ManeuverSpec:
 
         d = self.duration_s
         if self.kind == "shss":
-            need(25.0 <= self.segment_s <= 45.0, f"segment_s {self.segment_s} must be 25-45 s "
+            # the paper splits SHSS runs into 30-40 s pieces (the default, 35 s); longer pieces, up
+            # to the whole run (segment_s = duration_s), are allowed so planning studies can fly
+            # the alternative (campaigns/studies/shss_segments.py)
+            need(25.0 <= self.segment_s, f"segment_s {self.segment_s} must be at least 25 s "
                  "(the paper splits SHSS runs into 30-40 s pieces)")
             need(self.segment_s <= d <= 300.0, f"duration_s {d} must be between segment_s and 300 s")
             need(1.0 * _DEG <= abs(self.beta_rad) <= 8.0 * _DEG,

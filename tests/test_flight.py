@@ -183,6 +183,23 @@ def test_shss_segments_hold_sideslip_and_heading(shss):
     assert np.min(np.abs(shss[-1].beta_rad)) >= MIN_SHSS_BETA_RAD
 
 
+def test_shss_flown_unsplit_or_in_longer_pieces(shss):
+    """Planning studies fly the SHSS as one piece (segment_s = duration_s) or in longer pieces:
+    the same run as the paper's 35 s split, cut differently."""
+    spec = dict(kind="shss", mach=0.6, altitude_m=5000.0, heading_rad=1.0)
+    assert ManeuverSpec(**spec, segment_s=52.5).n_segments == 2
+    assert ManeuverSpec(**spec, segment_s=105.0).n_segments == 1
+    (whole,) = _fly(**spec, segment_s=105.0)
+    assert whole.duration_s == pytest.approx(105.0, abs=0.01) and whole.meta["n_segments"] == 1
+    # the same flight: the pieces of the default split are slices of the unsplit run
+    start = round(shss[1].meta["segment_start_s"] / whole.dt_s)
+    np.testing.assert_allclose(whole.beta_rad[start:start + len(shss[1].t_s)], shss[1].beta_rad,
+                               rtol=0, atol=1e-12)
+    for bad, fragment in ((20.0, "at least 25 s"), (120.0, "between segment_s")):
+        with pytest.raises(ValueError, match=fragment):
+            ManeuverSpec(**spec, segment_s=bad)
+
+
 #: the default campaign's atmosphere (campaigns/default.toml): calm air, as calibration maneuvers
 #: are flown (the output-error estimator models no process noise)
 CAMPAIGN_AIR = dict(planet="flat", wind_ned_mps=(6.0, -4.0, 0.0), turbulence="none")
