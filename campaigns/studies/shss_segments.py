@@ -1,0 +1,743 @@
+"""Planning study (a): the steady-heading sideslip flown as one long maneuver or split into segments.
+
+The paper (Saraf & Kumaresan, §3): "In case of steady heading sideslips, the maneuvers have been
+split into multiple maneuvers of 30-40 seconds each. This enables a good match and consistent
+calibration." Here the same 105 s SHSS run is estimated as one maneuver (``1x105``), as two
+52.5 s pieces (``2x52``) or as the paper's three 35 s pieces (``3x35``): the same flight time and
+the same flown data, cut differently (:class:`synth.maneuvers.ManeuverSpec` ``segment_s``). Each
+piece is a maneuver of its own to the estimator, with its own initial conditions, IMU biases,
+pressure-altitude scale factor and DGPS offset.
+
+Every variant flies, per configuration (PV1 with side and nose probes, PT1 with the boom) and
+Mach number, one pitch doublet (so the angle-of-attack parameters are determined the same way in
+every variant) and the SHSS run to both sides (+-4.5 deg). Conditions:
+
+* ``calm``: calm air, steady wind, every typical error of SPEC §6 (IMU noise included: the
+  estimator takes the IMU as a noise-free input, so its noise is integrated over the maneuver),
+  IMU biases drawn per maneuver around the typical values and the estimator started at the
+  typical values (a "warm" start: good to 0.02 deg/s, as a kinematic-consistency pre-pass gives);
+* ``ideal_imu``: as calm with the IMU's noise and quantization off;
+* ``turbulence``: as calm in light turbulence (MIL-F-8785C, a new realisation per replication;
+  the output-error method models none);
+* ``cold_start``: as calm, the IMU biases drawn as in ``campaigns/mc_20maneuvers.toml`` and the
+  estimator started at zero IMU biases, as ``fpr calibrate`` starts every maneuver.
+
+Metrics per variant, over the Monte Carlo replications: the predicted Cramér-Rao deviation (mean
+over the replications) and the Monte Carlo scatter of estimate - truth of the sideslip-relevant
+parameters (side-probe, nose-probe and boom sideslip biases, scale factors and tables, the
+sidewash coupling f2, the vane AOA biases); the residual fit (1-sigma per channel); the accuracy
+of each calibrated sideslip channel against the true flow angle (``|mean| + 3 std``, the same
+definition as study (c)); and how many replications the estimator fitted at all (a fit whose
+attitude residuals exceed :data:`ATTITUDE_FIT_LIMIT_DEG` 3-sigma sits in a wrong minimum, although
+the solver may report convergence).
+
+Run (resumable: the same command again skips finished replications)::
+
+    python -m campaigns.studies.shss_segments --out runs/shss --results campaigns/studies/results
+    python -m campaigns.studies.shss_segments --out /tmp/shss --size tiny --replications 1
+
+It writes ``shss_segments.txt`` (the tables, headed by the command, machine and wall time, ending
+with a conclusion drawn from the numbers) and ``shss_segments.png`` into ``--results`` (default:
+``--out``); each variant's Monte Carlo run stays in ``OUT/runs/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import shlex
+import subprocess
+import sys
+import textwrap
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from campaigns.montecarlo import parse_scenario, run_montecarlo
+from campaigns.montecarlo.replication import ReplicationResult
+from campaigns.montecarlo.summary import load_results, summarize_results
+from synth.campaign import software_versions
+from synth.errors import ErrorConfig
+
+STUDY = "shss_segments"
+SHSS_BETA_DEG = 4.5
+ALTITUDE_M = 6000.0
+WIND_NED_MPS = (6.0, -4.0, 0.0)
+SEED = 2026
+CONDITIONS: dict[str, str] = {
+    "calm": "calm air, typical errors (IMU noise on), warm IMU-bias start",
+    "ideal_imu": "as calm, IMU noise and quantization off",
+    "turbulence": "as calm, light turbulence redrawn every replication",
+    "cold_start": "as calm, mc_20maneuvers' IMU-bias spread, estimator started at zero IMU biases",
+}
+#: IMU-bias spread drawn per maneuver around the typical values: (accel m/s^2, gyro deg/s)
+WARM_IMU_SPREAD = (0.01, 0.02)
+COLD_IMU_SPREAD = (0.05, 0.1)
+#: drawn every replication besides the IMU biases (as campaigns/mc_20maneuvers.toml)
+COMMON_DRAWS: dict[str, dict] = {
+    "sensors.vane_left.delay_ms": {"dist": "uniform", "half_width": 20.0},
+    "sensors.vane_right.delay_ms": {"dist": "uniform", "half_width": 20.0},
+    "recorders.ins.clock_offset_ms": {"dist": "uniform", "low": -20.0, "high": 40.0},
+    "sensors.boom_alpha_vane.scale": {"dist": "normal", "std": 0.01},
+    "sensors.boom_beta_upper_vane.scale": {"dist": "normal", "std": 0.01},
+    "sensors.boom_beta_lower_vane.scale": {"dist": "normal", "std": 0.01},
+}
+MAX_ITERATIONS = 60
+#: an estimate whose phi/theta/psi residual 3-sigma exceeds this sits in a wrong minimum (a good
+#: fit leaves the INS noise, ~0.1 deg; turbulence ~1 deg; a wrong minimum 10 deg and more)
+ATTITUDE_FIT_LIMIT_DEG = 3.0
+#: parameter families the sideslip calibration is about, and the vane AOA biases
+SIDESLIP_FAMILIES = ("b_sb", "b_n", "b_bu", "b_bl", "k_bu", "k_bl", "k_spr", "f4", "f5", "f2")
+VANE_BIAS_FAMILIES = ("b_l", "b_r")
+#: calibrated sideslip channels: label, desired accuracy deg (SPEC §8; None: no requirement)
+SIDESLIP_CHANNELS: dict[str, tuple[str, float | None]] = {
+    "beta_zsp": ("side-probe AOSS", 1.0),
+    "beta_znp": ("nose-probe AOSS", 0.5),
+    "beta_zbu": ("boom AOSS upper", None),
+    "beta_zbl": ("boom AOSS lower", None),
+}
+#: residual channels shown (1-sigma of measurement - model)
+RESIDUAL_CHANNELS = ("phi", "theta", "psi", "tas", "beta_zsp", "beta_zbu")
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One Monte Carlo run of the study: a Mach number, a condition, a split."""
+
+    mach: float
+    condition: str
+    pieces: int
+    duration_s: float
+
+    @property
+    def segment_s(self) -> float:
+        return self.duration_s / self.pieces
+
+    @property
+    def split(self) -> str:
+        """``3x35``: pieces x their length, s."""
+        return f"{self.pieces}x{math.floor(self.segment_s):d}"
+
+    @property
+    def name(self) -> str:
+        """Directory name of its run."""
+        return f"M{self.mach:.2f}_{self.condition}_{self.split}"
+
+    @property
+    def label(self) -> str:
+        return f"M{self.mach:g} {self.condition} {self.split}"
+
+    def cut(self, pieces: int) -> Variant:
+        """The same Mach number and condition, another split."""
+        return Variant(self.mach, self.condition, pieces, self.duration_s)
+
+
+@dataclass(frozen=True)
+class StudyConfig:
+    """What a study size flies (``full``: the committed study; ``tiny``: a smoke run)."""
+
+    configurations: tuple[str, ...]
+    betas_deg: tuple[float, ...]
+    variants: tuple[Variant, ...]
+    replications: int
+    #: pieces of the paper's split (30-40 s each), the reference of the relative columns
+    reference_pieces: int
+
+
+def _variants(duration_s: float, machs: Sequence[float], pieces: Sequence[int], extra: Sequence[str],
+              extra_pieces: Sequence[int]) -> tuple[Variant, ...]:
+    out = [Variant(m, "calm", k, duration_s) for m in machs for k in pieces]
+    out += [Variant(machs[0], c, k, duration_s) for c in extra for k in extra_pieces]
+    return tuple(out)
+
+
+SIZES: dict[str, StudyConfig] = {
+    # the SHSS's default run (105 s) as 1, 2 or 3 maneuvers at Mach 0.5 and 0.7; the other conditions
+    # at Mach 0.5, unsplit and in the paper's split
+    "full": StudyConfig(configurations=("PV1-NP", "PT1-BOOM"), betas_deg=(SHSS_BETA_DEG, -SHSS_BETA_DEG),
+                        variants=_variants(105.0, (0.5, 0.7), (1, 2, 3),
+                                           ("ideal_imu", "turbulence", "cold_start"), (1, 3)),
+                        replications=15, reference_pieces=3),
+    # a smoke run: PV1, one side, a 50 s run as 1 or 2 maneuvers
+    "tiny": StudyConfig(configurations=("PV1-NP",), betas_deg=(SHSS_BETA_DEG,),
+                        variants=_variants(50.0, (0.5,), (1, 2), (), ()),
+                        replications=1, reference_pieces=2),
+}
+
+
+# ---------------------------------------------------------------------------- scenarios
+
+
+def typical_imu_biases() -> tuple[list[float], list[float]]:
+    """The typical preset's IMU biases: accelerometer m/s^2, gyro rad/s."""
+    imu = ErrorConfig.typical().imu
+    return list(imu.accel_bias_mps2), list(imu.gyro_bias_rps)
+
+
+def scenario_raw(variant: Variant, config: StudyConfig, replications: int) -> dict:
+    """The Monte Carlo scenario (TOML tables) of one variant."""
+    cold = variant.condition == "cold_start"
+    accel_std, gyro_std = COLD_IMU_SPREAD if cold else WARM_IMU_SPREAD
+    draws = {"imu.accel_bias_mps2": {"dist": "normal", "std": accel_std, "scope": "maneuver"},
+             "imu.gyro_bias_deg_s": {"dist": "normal", "std": gyro_std, "scope": "maneuver"},
+             **COMMON_DRAWS}
+    errors: dict = {"preset": "typical", "nose_probe_irregularity": False}
+    if variant.condition == "ideal_imu":
+        errors["imu"] = {"accel_noise_mps2": 0.0, "gyro_noise_deg_s": 0.0, "accel_quant_mps2": 0.0,
+                         "gyro_quant_deg_s": 0.0}
+    parameters: dict = {"h0": {"free": True}}
+    if not cold:  # warm start: the typical IMU biases (SI)
+        accel, gyro = typical_imu_biases()
+        for name, value in zip(("dax", "day", "daz", "dp", "dq", "dr"), accel + gyro, strict=True):
+            parameters[name] = {"value": value}
+    configs = list(config.configurations)
+    flights: list[dict] = [{"configurations": configs, "mach": [variant.mach], "maneuvers": ["pitch_doublet"],
+                            "altitude_m": ALTITUDE_M}]
+    for beta in config.betas_deg:
+        flights.append({"configurations": configs, "mach": [variant.mach], "maneuvers": ["shss"],
+                        "altitude_m": ALTITUDE_M,
+                        "maneuver": {"duration_s": variant.duration_s, "segment_s": variant.segment_s,
+                                     "beta_deg": beta}})
+    return {
+        "name": f"{STUDY}_{variant.name}",
+        "description": f"study (a): SHSS {variant.split} s at Mach {variant.mach}, "
+                       f"{CONDITIONS[variant.condition]}",
+        "seed": SEED, "replications": int(replications),
+        "local_flow_truth": "local_flow_linear", "adc_baseline": "adc_baseline_linear",
+        "common_rate_hz": 40.0,
+        "environment": {"planet": "flat", "wind_ned_mps": list(WIND_NED_MPS),
+                        "turbulence": "light" if variant.condition == "turbulence" else "none"},
+        "errors": errors,
+        "flights": flights,
+        "draw": {"errors": draws},
+        "estimator": {"model": "tejas", "max_iterations": MAX_ITERATIONS, "colored": True,
+                      "parameters": parameters},
+    }
+
+
+def run_scenarios(runs: Sequence[tuple[str, dict]], out_dir: Path, replications: int, workers: int) -> float:
+    """Run (or resume) each scenario into ``out_dir/runs/NAME`` with the Monte Carlo engine.
+
+    Returns the wall time, s. Progress goes to stderr.
+    """
+    t0 = time.perf_counter()
+    for k, (name, raw) in enumerate(runs):
+        scenario = parse_scenario(raw, source=f"{raw['name']} (built by campaigns.studies)")
+        report = run_montecarlo(scenario, out_dir / "runs" / name, replications=replications, workers=workers)
+        print(f"[{k + 1}/{len(runs)}] {report.text()}", file=sys.stderr, flush=True)
+    return time.perf_counter() - t0
+
+
+# ---------------------------------------------------------------------------- metrics
+
+
+def fit_ok(result: ReplicationResult) -> bool:
+    """The replication converged and its attitude residuals are those of a fit, not of a wrong minimum."""
+    if not result.ok or not len(result.channels):
+        return False
+    ch = result.channels
+    att = ch[(ch["kind"] == "residual") & ch["name"].isin(["phi", "theta", "psi"])]
+    return bool(len(att)) and float(att["three_sigma"].max()) <= ATTITUDE_FIT_LIMIT_DEG
+
+
+def channel_rows(results: Sequence[ReplicationResult]) -> pd.DataFrame:
+    """Per replication and channel: residual 1-sigma, and the calibrated channel's accuracy against
+    the truth ``|mean| + 3 std`` with its parts (display units)."""
+    rows = []
+    for r in results:
+        for c in r.channels.itertuples():
+            rows.append({"replication": r.index, "name": c.name, "kind": c.kind, "mean": c.mean, "std": c.std,
+                         "accuracy": abs(c.mean) + 3.0 * c.std})
+    return pd.DataFrame(rows, columns=["replication", "name", "kind", "mean", "std", "accuracy"])
+
+
+@dataclass
+class RunMetrics:
+    """What one Monte Carlo run gave (see the module docstring).
+
+    Attributes
+    ----------
+    requested : N.
+    files : replications with a file.
+    failed : replications whose estimation failed or did not converge.
+    wrong_minimum : converged replications whose fit is not one (:func:`fit_ok`).
+    used : replications in the statistics.
+    parameters : the Monte Carlo summary per parameter (crb_mean, mc_std, ratio_crb, ...).
+    channels : per replication and channel (:func:`channel_rows`) of the used replications.
+    elapsed_s : median wall time of a replication, s.
+    """
+
+    requested: int
+    files: int
+    failed: int
+    wrong_minimum: int
+    used: int
+    parameters: pd.DataFrame = field(repr=False)
+    channels: pd.DataFrame = field(repr=False)
+    elapsed_s: float
+
+    def accuracy(self, channel: str) -> float:
+        """Median over the replications of the calibrated channel's ``|mean| + 3 std``, deg."""
+        c = self.channels
+        v = c.loc[(c["name"] == channel) & (c["kind"] == "calibrated"), "accuracy"]
+        return float(v.median()) if len(v) else math.nan
+
+    def residual_std(self, channel: str) -> float:
+        """Median over the replications of the channel's residual 1-sigma (display units)."""
+        c = self.channels
+        v = c.loc[(c["name"] == channel) & (c["kind"] == "residual"), "std"]
+        return float(v.median()) if len(v) else math.nan
+
+
+def run_metrics(run_dir: Path, replications: int) -> RunMetrics:
+    """Read a run's replications 0..N-1 and reduce them to :class:`RunMetrics`."""
+    results = load_results(run_dir, replications) if (run_dir / "replications").is_dir() else []
+    ok = [r for r in results if r.ok]
+    used = [r for r in ok if fit_ok(r)]
+    summary = summarize_results(used) if used else None
+    params = summary.parameters if summary is not None else pd.DataFrame()
+    return RunMetrics(requested=replications, files=len(results), failed=len(results) - len(ok),
+                      wrong_minimum=len(ok) - len(used), used=len(used), parameters=params,
+                      channels=channel_rows(used),
+                      elapsed_s=float(np.median([r.elapsed_s for r in results])) if results else math.nan)
+
+
+def geo_mean(values: Sequence[float]) -> float:
+    """Geometric mean of the finite positive values (NaN if none)."""
+    a = np.asarray(values, dtype=float)
+    a = a[np.isfinite(a) & (a > 0)]
+    return float(np.exp(np.mean(np.log(a)))) if a.size else math.nan
+
+
+def study_parameters(params: pd.DataFrame, families: Sequence[str]) -> list[str]:
+    """The parameters of ``families`` that the estimator determined (finite Cramér-Rao deviation)."""
+    if not len(params):
+        return []
+    p = params[params["family"].isin(families) & np.isfinite(params["crb_mean"])]
+    return list(p.index)
+
+
+def parameter_names(metrics: Mapping[Variant, RunMetrics]) -> tuple[list[str], list[str]]:
+    """The determined parameters of the study's families over every variant (first-seen order), and
+    those of them that are sideslip parameters (the vane AOA biases left out)."""
+    names: list[str] = []
+    for m in metrics.values():
+        names += [n for n in study_parameters(m.parameters, SIDESLIP_FAMILIES + VANE_BIAS_FAMILIES)
+                  if n not in names]
+    return names, [n for n in names if n.split("[")[0] in SIDESLIP_FAMILIES]
+
+
+# ---------------------------------------------------------------------------- machine, formatting
+
+
+def machine_text() -> str:
+    """CPU model, cores, memory, software versions and the code's commit."""
+    cpu = platform.processor() or "?"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    mem = ""
+    try:
+        kib = int(Path("/proc/meminfo").read_text().split()[1])
+        mem = f", {kib / 2**20:.0f} GiB"
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=Path(__file__).parent, check=False).stdout.strip() or "?"
+    except OSError:
+        commit = "?"
+    versions = ", ".join(f"{k} {v}" for k, v in software_versions().items())
+    return (f"machine: {cpu}, {os.cpu_count()} cores{mem}; {versions}\n"
+            f"code: {commit} (the shared working tree)")
+
+
+def fmt(v: float, spec: str = ".3g") -> str:
+    """A number for the tables ('-' when missing)."""
+    return "-" if v is None or not np.isfinite(v) else format(v, spec)
+
+
+def paragraph(text: str, width: int = 108) -> list[str]:
+    """``text`` wrapped, then an empty line."""
+    return [*textwrap.wrap(text, width=width), ""]
+
+
+def load_average() -> float:
+    try:
+        return os.getloadavg()[0]
+    except OSError:
+        return math.nan
+
+
+#: a parameter enters the geometric means when its Cramér-Rao std in the reference run is below
+#: this (display unit -> limit): breakpoints at the edge of the flown range, barely determined,
+#: would otherwise dominate them
+WELL_DETERMINED = {"deg": 0.1, "1": 0.05, "m": 0.5}
+
+
+def collect(config: StudyConfig, out_dir: Path, replications: int) -> dict[Variant, RunMetrics]:
+    """Every variant's metrics."""
+    return {v: run_metrics(out_dir / "runs" / v.name, replications) for v in config.variants}
+
+
+def reference_of(v: Variant, config: StudyConfig, metrics: Mapping[Variant, RunMetrics]) -> RunMetrics | None:
+    """The run of the paper's split at the same Mach number and condition."""
+    return metrics.get(v.cut(config.reference_pieces))
+
+
+def ratios(m: RunMetrics, ref: RunMetrics | None, column: str, names: Sequence[str]) -> np.ndarray:
+    """``column`` of ``m`` over that of the reference run, per well-determined parameter of ``names``."""
+    if ref is None or not len(m.parameters) or not len(ref.parameters):
+        return np.array([])
+    p, q = m.parameters, ref.parameters
+    out = [p.at[n, column] / q.at[n, column] for n in names if n in p.index and n in q.index
+           and q.at[n, "crb_mean"] < WELL_DETERMINED.get(str(q.at[n, "unit"]), math.inf)]
+    a = np.asarray(out, dtype=float)
+    return a[np.isfinite(a) & (a > 0)]
+
+
+def relative(m: RunMetrics, ref: RunMetrics | None, column: str, names: Sequence[str]) -> float:
+    """Geometric mean of :func:`ratios`."""
+    return geo_mean(ratios(m, ref, column, names))
+
+
+def summary_frame(config: StudyConfig, metrics: Mapping[Variant, RunMetrics],
+                  names: Sequence[str]) -> pd.DataFrame:
+    """One row per variant: runs, relative bounds and scatter, residuals, accuracies."""
+    rows = []
+    for k, v in enumerate(config.variants, start=1):
+        m = metrics[v]
+        ref = reference_of(v, config, metrics)
+        p = m.parameters
+        present = [n for n in names if len(p) and n in p.index]
+        scatter_ok = present and m.used > 1
+        row = {"id": f"v{k}", "variant": v.label, "used": f"{m.used}/{m.requested}", "wrong": m.wrong_minimum,
+               "crb_rel": relative(m, ref, "crb_mean", names), "mc_rel": relative(m, ref, "mc_std", names),
+               "mc/crb": float(np.median(p.loc[present, "ratio_crb"])) if scatter_ok else math.nan}
+        for ch in RESIDUAL_CHANNELS:
+            row[f"res_{ch}"] = m.residual_std(ch)
+        for ch in SIDESLIP_CHANNELS:
+            row[f"acc_{ch}"] = m.accuracy(ch)
+        row["acc_alpha_zl"] = m.accuracy("alpha_zl")
+        row["s/rep"] = m.elapsed_s
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+_SHORT = {"res_phi": "r_phi", "res_theta": "r_tht", "res_psi": "r_psi", "res_tas": "r_tas",
+          "res_beta_zsp": "r_bsp", "res_beta_zbu": "r_bbu", "acc_beta_zsp": "a_bsp", "acc_beta_znp": "a_bnp",
+          "acc_beta_zbu": "a_bbu", "acc_beta_zbl": "a_bbl", "acc_alpha_zl": "a_vane"}
+
+
+def summary_text(df: pd.DataFrame) -> str:
+    """The per-variant table, numbers to three significant digits, '-' where there are none."""
+    out = df.rename(columns=_SHORT).copy()
+    for c in out.columns:
+        if out[c].dtype.kind == "f":
+            out[c] = [fmt(x, ".3g") for x in out[c]]
+    return out.to_string(index=False)
+
+
+def grid_text(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names: Sequence[str],
+              column: str) -> str:
+    """Parameters x variants grid of one summary column (display units)."""
+    ids = [f"v{k}" for k in range(1, len(config.variants) + 1)]
+    lines = [f"{'parameter':<12} {'unit':<4}" + "".join(f"{i:>9}" for i in ids)]
+    for n in names:
+        unit, cells = "", []
+        for v in config.variants:
+            p = metrics[v].parameters
+            if len(p) and n in p.index:
+                unit = str(p.at[n, "unit"])
+                cells.append(fmt(float(p.at[n, column]), ".3g"))
+            else:
+                cells.append("-")
+        lines.append(f"{n:<12} {unit:<4}" + "".join(f"{c:>9}" for c in cells))
+    return "\n".join(lines)
+
+
+def _pair(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], v: Variant
+          ) -> tuple[RunMetrics, RunMetrics] | None:
+    """(unsplit, paper's split) runs of ``v``'s Mach number and condition."""
+    long, split = metrics.get(v.cut(1)), metrics.get(v.cut(config.reference_pieces))
+    return (long, split) if long is not None and split is not None else None
+
+
+def _accuracy_ratios(long: RunMetrics, split: RunMetrics) -> np.ndarray:
+    """Calibrated sideslip channels' accuracy, unsplit over split."""
+    a = np.array([long.accuracy(c) / split.accuracy(c) for c in SIDESLIP_CHANNELS])
+    return a[np.isfinite(a)]
+
+
+def _word(ratio: float, tolerance: float) -> str:
+    if not np.isfinite(ratio):
+        return "(not measured)"
+    if ratio < 1.0 / tolerance:
+        return f"{ratio:.2f}x, smaller"
+    if ratio > tolerance:
+        return f"{ratio:.2f}x, larger"
+    return f"{ratio:.2f}x, the same within the run's resolution"
+
+
+def scatter_tolerance(replications: int) -> float:
+    """A scatter ratio this far from 1 is resolved: twice the relative error of a standard deviation
+    from N replications, 1/sqrt(2(N-1)), for each of the two runs compared."""
+    return 1.0 + 2.0 * math.sqrt(2.0) / math.sqrt(2.0 * max(replications - 1, 1))
+
+
+#: a ratio of Cramér-Rao bounds this far from 1 counts (they move with the drawn truths a little)
+CRB_TOLERANCE = 1.1
+#: a calibrated channel this much less accurate counts as worse
+ACCURACY_TOLERANCE = 1.2
+
+
+def conclusion(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names: Sequence[str],
+               replications: int) -> str:
+    """One sentence drawn from the numbers: the unsplit run against the paper's split per condition."""
+    tol = scatter_tolerance(replications)
+    clauses: list[str] = []
+    worse_scatter: list[str] = []
+    better_scatter: list[str] = []
+    worse_accuracy: list[str] = []
+    compared: list[str] = []
+    robust: bool | None = None
+    ref_split = f"{config.reference_pieces} pieces"
+    for v in config.variants:
+        if v.pieces != 1:
+            continue
+        pair = _pair(config, metrics, v)
+        if pair is None:
+            continue
+        long, split = pair
+        where = f"{v.condition.replace('_', ' ')} at Mach {v.mach:g}"
+        if v.condition == "cold_start":
+            robust = long.used < split.used
+            clauses.append(f"{where} the estimator fitted {long.used}/{long.requested} replications of "
+                           f"the unsplit run ({long.wrong_minimum} wrong minima, {long.failed} not "
+                           f"converged) and {split.used}/{split.requested} of the split one")
+            continue
+        if not long.used or not split.used:
+            clauses.append(f"{where}: {long.used} and {split.used} usable replications, no comparison")
+            continue
+        crb = relative(long, split, "crb_mean", names)
+        mc = relative(long, split, "mc_std", names)
+        acc = _accuracy_ratios(long, split)
+        compared.append(v.condition)
+        acc_text = (f"{acc.min():.2f}-{acc.max():.2f}x" if acc.size > 1 else f"{acc[0]:.2f}x"
+                    if acc.size else "(none)")
+        clauses.append(f"{where} the unsplit run's sideslip Cramer-Rao bounds are "
+                       f"{_word(crb, CRB_TOLERANCE)}, its Monte Carlo scatter {_word(mc, tol)}, its "
+                       f"calibrated sideslip accuracy {acc_text} those of the {ref_split}")
+        if np.isfinite(mc) and mc > tol:
+            worse_scatter.append(v.condition)
+        elif np.isfinite(mc) and mc < 1.0 / tol:
+            better_scatter.append(v.condition)
+        if acc.size and acc.max() > ACCURACY_TOLERANCE:
+            worse_accuracy.append(v.condition)
+    verdict = _verdict(compared, worse_scatter, better_scatter, worse_accuracy, robust)
+    return "Conclusion: " + "; ".join(clauses) + " - " + verdict + "."
+
+
+def _verdict(compared: Sequence[str], worse_scatter: Sequence[str], better_scatter: Sequence[str],
+             worse_accuracy: Sequence[str], robust: bool | None) -> str:
+    """The paper's claim held against the comparisons (the conditions compared, those where the
+    unsplit run is worse or better; ``robust``: the split converged more often from a cold start,
+    None: not run)."""
+    parts = []
+    if worse_scatter:
+        where = ", ".join(dict.fromkeys(worse_scatter))
+        why = ""
+        if "calm" in worse_scatter and "ideal_imu" in compared and "ideal_imu" not in worse_scatter:
+            why = (" and not with an ideal IMU, so the cause is the IMU noise the estimator integrates as a "
+                   "noise-free input over the whole run, which the Cramer-Rao bounds do not see")
+        parts.append(f"the paper's split is borne out for the consistency of the calibration: the unsplit "
+                     f"run's parameter scatter is larger ({where}){why}")
+    if worse_accuracy:
+        parts.append("the calibrated sideslip channels are less accurate unsplit ("
+                     + ", ".join(dict.fromkeys(worse_accuracy)) + ")")
+    elif worse_scatter:
+        parts.append("yet the calibrated sideslip channels are as accurate either way, their 3-sigma being "
+                     "sensor noise, not parameter error")
+    if robust:
+        parts.append("and from the usual cold start the unsplit run converges less often")
+    if not parts:
+        return ("the paper's claim is not borne out here: the unsplit run is as accurate"
+                + (" or more" if better_scatter else "")
+                + (" and converges as reliably" if robust is False else ""))
+    return ", ".join(parts)
+
+
+
+# ---------------------------------------------------------------------------- plot
+
+
+def plot(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names: Sequence[str], path: Path,
+         replications: int) -> Path:
+    """Four panels: relative bounds, relative scatter, calibrated sideslip accuracy, residuals."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    variants = list(config.variants)
+    x = np.arange(len(variants))
+    labels = [f"v{k + 1} {v.label}" for k, v in enumerate(variants)]
+    fig = Figure(figsize=(13.0, 9.5), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(2, 2, sharex=True)
+    ref_label = variants[0].cut(config.reference_pieces).split
+    for ax, column, title in ((axes[0, 0], "crb_mean", "predicted Cramér-Rao std"),
+                              (axes[0, 1], "mc_std", "Monte Carlo scatter")):
+        for k, v in enumerate(variants):
+            r = ratios(metrics[v], reference_of(v, config, metrics), column, names)
+            if not r.size:
+                continue
+            ax.plot(k + np.linspace(-0.25, 0.25, r.size), r, ".", color="0.6", ms=4)
+            ax.plot(k, geo_mean(r), "D", color=f"C{v.pieces - 1}", ms=7)
+        ax.axhline(1.0, color="k", lw=0.8)
+        ax.set_yscale("log")
+        ax.set_ylabel(f"relative to {ref_label} (same Mach, condition)")
+        ax.set_title(f"sideslip parameters: {title} (dots: each; diamond: geometric mean)", fontsize=9)
+    ax = axes[1, 0]
+    markers = {"beta_zsp": "o", "beta_znp": "s", "beta_zbu": "^", "beta_zbl": "v"}
+    for ch, (label, req) in SIDESLIP_CHANNELS.items():
+        ax.plot(x, [metrics[v].accuracy(ch) for v in variants], markers[ch], mfc="none", label=label)
+        if req is not None:
+            ax.axhline(req, color="r", lw=0.8, ls="--")
+    ax.set_yscale("log")
+    ax.set_ylabel("|mean| + 3 std of calibrated - true, deg")
+    ax.set_title("calibrated sideslip channels against the truth (median over the replications; dashed: "
+                 "desired 0.5 nose probe, 1 side probe)", fontsize=9)
+    ax.legend(fontsize=8)
+    ax = axes[1, 1]
+    for ch in ("phi", "theta", "psi", "beta_zsp", "beta_zbu"):
+        ax.plot(x, [metrics[v].residual_std(ch) for v in variants], "o-", ms=4, lw=0.6, label=ch)
+    ax.set_yscale("log")
+    ax.set_ylabel("residual 1-sigma, deg")
+    ax.set_title("residual fit (measurement - model), median over the replications", fontsize=9)
+    ax.legend(fontsize=8)
+    for ax in axes[1]:
+        ax.set_xticks(x, labels, rotation=60, ha="right", fontsize=8)
+    fig.suptitle(f"Study (a): the {variants[0].duration_s:g} s SHSS as one maneuver or split "
+                 f"({', '.join(dict.fromkeys(v.split for v in variants))} s); {replications} replications "
+                 "per variant", fontsize=11)
+    fig.savefig(path, dpi=100)
+    return path
+
+
+# ---------------------------------------------------------------------------- report
+
+
+def report(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], replications: int, command: str,
+           wall_s: float, load: tuple[float, float]) -> str:
+    """The text file: header, setup, legend, tables, conclusion."""
+    names, side = parameter_names(metrics)
+    accel, gyro = typical_imu_biases()
+    df = summary_frame(config, metrics, side)
+    legend = ", ".join(f"{r['id']} = {r['variant']}" for _, r in df.iterrows())
+    duration = config.variants[0].duration_s
+    ref = config.variants[0].cut(config.reference_pieces).split
+    limits = ", ".join(f"{v:g} {u}" for u, v in WELL_DETERMINED.items())
+    lines = [
+        *paragraph(f"Planning study (a): the steady-heading sideslip (SHSS) flown as one {duration:g} s "
+                   f"maneuver or split into pieces ({ref} s is the paper's 30-40 s practice). Every "
+                   "variant a Monte Carlo run of campaigns/montecarlo."),
+        f"$ {command}",
+        *machine_text().splitlines(),
+        f"wall {wall_s:.0f} s for the whole study ({replications} replications per variant, "
+        f"{len(config.variants)} variants); load average {load[0]:.1f} at the start, {load[1]:.1f} at "
+        "the end",
+        "",
+        *paragraph(f"flights per variant: {' + '.join(config.configurations)} at the variant's Mach number, "
+                   f"{ALTITUDE_M:g} m: one pitch doublet and the {duration:g} s SHSS at "
+                   f"{', '.join(f'{b:+g}' for b in config.betas_deg)} deg sideslip, cut into the variant's "
+                   "pieces (one flight, cut differently). local_flow_linear / adc_baseline_linear "
+                   "(representable: any error is estimation error); steady wind "
+                   f"{list(WIND_NED_MPS)} m/s; typical errors of SPEC §6 (nose-probe irregularity off) with "
+                   "vane delays, INS clock offset and boom scale factors drawn as in mc_20maneuvers. "
+                   f"Estimator: tejas model set, every channel with data, h0 free, at most {MAX_ITERATIONS} "
+                   "iterations."),
+        *paragraph("conditions: " + "; ".join(f"{k} = {v}" for k, v in CONDITIONS.items())
+                   + f". Warm start: IMU biases drawn per maneuver around the typical values (accel {accel} "
+                   f"m/s^2, gyro {[round(math.degrees(g), 3) for g in gyro]} deg/s) with std "
+                   f"{WARM_IMU_SPREAD[0]:g} m/s^2 / {WARM_IMU_SPREAD[1]:g} deg/s, the estimator started at "
+                   f"the typical values; cold start: std {COLD_IMU_SPREAD[0]:g} / {COLD_IMU_SPREAD[1]:g}, "
+                   "started at zero."),
+        *paragraph(
+            "columns: used = replications in the statistics / N; wrong = converged by the solver's test "
+            f"but attitude residual 3-sigma > {ATTITUDE_FIT_LIMIT_DEG:g} deg (a wrong minimum; left out); "
+            "crb_rel, mc_rel = geometric mean over the sideslip parameters below (vane biases excluded; "
+            f"those with a Cramer-Rao std in the reference run under {limits}) of the mean Cramer-Rao "
+            f"std and of the Monte Carlo scatter relative to {ref} of the same Mach number and "
+            "condition; mc/crb = median over them of scatter / mean Cramer-Rao std; r_* = residual "
+            "1-sigma (phi, theta, psi, side-probe and boom-upper AOSS deg, tas m/s), median over the "
+            "replications; a_* = |mean| + 3 std of (calibrated channel - true flow angle) over every "
+            "sample, deg, median over the replications (bsp side-probe AOSS, desired 1; bnp nose-probe "
+            "AOSS, desired 0.5; bbu/bbl boom AOSS; vane = left vane AOA, desired 0.5); s/rep = median "
+            "wall time of a replication in one process, s."),
+        f"variants: {legend}",
+        "",
+        summary_text(df),
+        "",
+        "predicted Cramer-Rao std (mean over the replications), display units:",
+        grid_text(config, metrics, names, "crb_mean"),
+        "",
+        "Monte Carlo scatter (std of estimate - truth over the replications):",
+        grid_text(config, metrics, names, "mc_std"),
+        "",
+        "scatter / mean Cramer-Rao std:",
+        grid_text(config, metrics, names, "ratio_crb"),
+        "",
+    ]
+    lines += textwrap.wrap(conclusion(config, metrics, side, replications), width=108)
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------------- command line
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m campaigns.studies.shss_segments --out DIR [--replications N] ...``"""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    p = argparse.ArgumentParser(
+        prog="python -m campaigns.studies.shss_segments",
+        description="Planning study (a): the 105 s SHSS as one maneuver or split into 52.5 / 35 s pieces; "
+        "Cramer-Rao bounds, Monte Carlo scatter, residual fit and calibrated sideslip accuracy. Resumable: "
+        "run the same command again.")
+    p.add_argument("--out", required=True, type=Path, help="work directory (each variant's Monte Carlo run)")
+    p.add_argument("--results", type=Path, default=None, help=f"where {STUDY}.txt / .png go (default: --out)")
+    p.add_argument("--replications", type=int, default=None, metavar="N",
+                   help="replications per variant (default: full 15, tiny 1)")
+    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
+                   help="worker processes per Monte Carlo run (default: 2; 1 runs in this process)")
+    p.add_argument("--size", choices=sorted(SIZES), default="full",
+                   help="full: the study; tiny: a smoke run (PV1, one side, a 50 s run as 1 or 2 pieces)")
+    args = p.parse_args(argv)
+    config = SIZES[args.size]
+    n = args.replications or config.replications
+    if n < 1:
+        p.error("--replications must be at least 1")
+    results = args.results or args.out
+    results.mkdir(parents=True, exist_ok=True)
+    command = "python -m campaigns.studies.shss_segments " + shlex.join(argv)
+    load0 = load_average()
+    runs = [(v.name, scenario_raw(v, config, n)) for v in config.variants]
+    wall_s = run_scenarios(runs, args.out, n, args.workers)
+    metrics = collect(config, args.out, n)
+    text = report(config, metrics, n, command, wall_s, (load0, load_average()))
+    (results / f"{STUDY}.txt").write_text(text)
+    plot(config, metrics, parameter_names(metrics)[1], results / f"{STUDY}.png", n)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
