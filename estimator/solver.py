@@ -106,6 +106,9 @@ class _Structure:
                 glob.append(i)
         self.glob = np.array(glob, dtype=int)
         self.local_of_arr = [np.array(v, dtype=int) for v in self.local_of]
+        self.man_of = np.full(n, -1)
+        for k, v in enumerate(self.local_of):
+            self.man_of[v] = k
 
 
 class _Normal:
@@ -140,6 +143,64 @@ class _Normal:
         st = self.st
         scatter_blocks(H, g, colmap, mans.astype(np.int64), float(w), st.gpos, st.lpos,
                        self.HGG, self.gG, self.HLL_all, self.HGL_all, self.gL_all)
+
+
+    def pinned(self, params: np.ndarray) -> _Normal:
+        """A copy whose step leaves ``params`` (parameter indices) where they are.
+
+        Their rows and columns are zeroed with a unit diagonal and a zero gradient: the other
+        parameters' step is then the Gauss-Newton step with these held (an active bound).
+        """
+        st = self.st
+        N = _Normal(st)
+        N.HGG[:], N.gG[:], N.support[:] = self.HGG, self.gG, self.support
+        N.HLL_all[:], N.HGL_all[:], N.gL_all[:] = self.HLL_all, self.HGL_all, self.gL_all
+        for i in params:
+            j = st.gpos[i]
+            if j >= 0:
+                N.HGG[j, :] = N.HGG[:, j] = 0.0
+                N.HGG[j, j] = 1.0
+                N.gG[j] = 0.0
+                N.HGL_all[:, j, :] = 0.0
+            else:
+                k, j = st.man_of[i], st.lpos[i]
+                N.HLL_all[k, j, :] = N.HLL_all[k, :, j] = 0.0
+                N.HLL_all[k, j, j] = 1.0
+                N.gL_all[k, j] = 0.0
+                N.HGL_all[k, :, j] = 0.0
+        return N
+
+
+def _full_step(st: _Structure, dG: np.ndarray, dL: list[np.ndarray], n: int) -> np.ndarray:
+    step = np.zeros(n)
+    step[st.glob] = dG
+    for k, idx in enumerate(st.local_of_arr):
+        step[idx] = dL[k]
+    return step
+
+
+def _bounded_solve(N: _Normal, st: _Structure, theta: np.ndarray, lam: float, rtol: float):
+    """Damped step with active bounds: a parameter on a bound that the step would push outside
+    is held there and the step re-solved without it (a few passes of a simple active-set method).
+
+    Clipping such a step instead would leave the others' step computed as if it moved, and the
+    iteration would crawl: each step's length (in deviations) never shrinks.
+    """
+    tiny = 1e-12 * np.maximum(1.0, np.abs(theta))
+    at_lo = st.free & (theta <= st.lo + tiny)
+    at_hi = st.free & (theta >= st.hi - tiny)
+    active = np.zeros(theta.size, dtype=bool)
+    M = N
+    for _pass in range(4):
+        dG, dL, Sinv, Ainv = _lm_solve(M, lam, rtol)
+        step = _full_step(st, dG, dL, theta.size)
+        out = ~active & ((at_lo & (step < 0)) | (at_hi & (step > 0)))
+        if not out.any():
+            break
+        active |= out
+        M = N.pinned(np.flatnonzero(active))
+    step[active] = 0.0
+    return step, dG, dL, Sinv, Ainv, active
 
 
 def _build_normal(st: _Structure, ev: Evaluation, R: np.ndarray) -> _Normal:
@@ -377,22 +438,20 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
             N = _build_normal(st, evals, R)
             accepted = False
             for attempt in range(12):
-                dG, dL, Sinv, Ainv = _lm_solve(N, lam, opt.rank_rtol)
+                step, dG, dL, Sinv, Ainv, active = _bounded_solve(N, st, theta, lam, opt.rank_rtol)
                 sig = np.sqrt(np.maximum(np.concatenate(
                     [np.diag(Sinv)] + [np.diag(a) for a in Ainv if a.size]), 1e-300))
                 moved = np.abs(np.concatenate([dG] + [d for d in dL if d.size])) / sig
                 if attempt == 0:
                     moved_first = moved.max()
                     # decrease of the cost the undamped Gauss-Newton model predicts, g.d / 2
-                    predicted = 0.5 * (dG @ N.gG + sum(d @ g for d, g in zip(dL, N.gL, strict=True)))
+                    # (parameters held on a bound have a zero step and add nothing)
+                    gfull = _full_step(st, N.gG, N.gL, theta.size)
+                    predicted = 0.5 * (step @ gfull)
                 if moved_first < opt.step_tol_sigma:
                     # the Gauss-Newton step is already negligible against the parameters'
                     # deviations: at the minimum (round-off may keep the cost from decreasing)
                     break
-                step = np.zeros_like(theta)
-                step[st.glob] = dG
-                for k, idx in enumerate(st.local_of_arr):
-                    step[idx] = dL[k]
                 trial = np.clip(theta + step, st.lo, st.hi)
                 # the first trial is usually accepted and is then the next iterate: evaluate it
                 # with the Jacobian right away (the values are the same either way)
