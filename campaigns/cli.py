@@ -306,9 +306,10 @@ def _workflow(problem, out: Path, args: argparse.Namespace) -> int:
         ir = tables["installation_recovery"]
         if ir is not None and len(ir):
             print(f"\ninstallation biases vs truth: {int((ir['z'].abs() < 3).sum())} of {len(ir)} within "
-                  f"3 sigma, largest error {ir['error_deg'].abs().max():.4f} deg")
-            print(ir[["aircraft", "vane", "estimate_deg", "truth_deg", "std_deg", "z"]].to_string(
-                index=False, float_format=lambda v: f"{v: .4f}"))
+                  f"3 Cramer-Rao sigma, {int((ir['z_colored'].abs() < 3).sum())} within 3 coloured-residual "
+                  f"sigma; largest error {ir['error_deg'].abs().max():.4f} deg")
+            print(ir[["aircraft", "vane", "estimate_deg", "truth_deg", "std_deg", "z", "std_colored_deg",
+                      "z_colored"]].to_string(index=False, float_format=lambda v: f"{v: .4f}"))
         rec = tables["recovery"]
         if rec is not None and len(rec):
             summ = rec.assign(crb=rec["z_crb"].abs() < 3, colored=rec["z_colored"].abs() < 3).groupby(

@@ -132,8 +132,10 @@ def installation_recovery(wf: WorkflowResult) -> pd.DataFrame:
             for side, j in (("left", 0), ("right", 1)):
                 t = ap.loc[a, f"installation_{side}"] * RAD2DEG
                 est, std = r[f"installation_{side}_deg"], r[f"std_installation_{side}_deg"]
+                std_col = r.get(f"std_colored_installation_{side}_deg", math.nan)
                 rows.append({"aircraft": a, "vane": side, "mach": mach, "estimate_deg": est,
                              "truth_deg": t, "error_deg": est - t, "std_deg": std, "z": (est - t) / std,
+                             "std_colored_deg": std_col, "z_colored": (est - t) / std_col,
                              "injected_raw_deg": float(inj[a][j]) * RAD2DEG})
     return pd.DataFrame(rows)
 

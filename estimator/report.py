@@ -446,7 +446,8 @@ def accuracy_table_html(acc: pd.DataFrame, title: str) -> str:
     acc : one row per sensor and Mach bin, columns ``sensor`` (str, e.g. "vane AOA left"),
         ``channel`` (str), ``mach`` (float [-]), ``n`` (int, samples), ``three_sigma_deg`` (3 sigma of
         the error [deg]; NaN: not available), ``desired_deg`` (the desired 3-sigma accuracy [deg]),
-        ``passed`` (bool), ``note`` (str, may be empty).
+        ``passed`` (bool), ``note`` (str, may be empty); optionally ``gear`` ("up"/"down": a
+        gear-down bin gets its own column beside the gear-up one of the same Mach).
 
     title : the table's caption.
 
@@ -463,21 +464,27 @@ def accuracy_table_html(acc: pd.DataFrame, title: str) -> str:
     a = acc.copy()
     a["sensor"] = a["sensor"].astype(str)
     a["mach"] = a["mach"].astype(float)
-    dup = a[a.duplicated(["sensor", "mach"], keep=False)]
+    a["gear"] = a["gear"].astype(str) if "gear" in a else "up"
+    dup = a[a.duplicated(["sensor", "mach", "gear"], keep=False)]
     if not dup.empty:
-        pairs = sorted(set(zip(dup["sensor"], dup["mach"], strict=True)))
-        raise ValueError(f"accuracy table: several rows for (sensor, Mach) {pairs}")
+        pairs = sorted(set(zip(dup["sensor"], dup["mach"], dup["gear"], strict=True)))
+        raise ValueError(f"accuracy table: several rows for (sensor, Mach, gear) {pairs}")
+
+    def label(mach: float, down: bool) -> str:
+        return f"M {mach:.2f}" + (" gear down" if down else "")
+
+    a["col"] = [label(m, g == "down") for m, g in zip(a["mach"], a["gear"], strict=True)]
     sensors = list(dict.fromkeys(a["sensor"]))
-    machs = np.sort(a["mach"].unique())
+    machs = [label(m, d) for m, d in sorted(set(zip(a["mach"], a["gear"] == "down", strict=True)))]
     e = html.escape
 
     out = [f'<table class="acc">\n<caption>{e(title)}</caption>\n<thead><tr><th>sensor</th>'
            "<th>channel</th>"]
-    out += [f"<th>M {m:.2f}</th>" for m in machs]
+    out += [f"<th>{e(m).replace(' gear', '<br>gear')}</th>" for m in machs]
     out.append("<th>desired ±<br>[deg]</th></tr></thead>\n<tbody>\n")
     notes: list[str] = []
     for sensor in sensors:
-        rows = a[a["sensor"] == sensor].set_index("mach")
+        rows = a[a["sensor"] == sensor].set_index("col")
         channels = ", ".join(dict.fromkeys(rows["channel"].astype(str)))
         out.append(f"<tr><th>{e(sensor)}</th><td class=\"ch\">{e(channels)}</td>")
         for m in machs:
@@ -489,7 +496,7 @@ def accuracy_table_html(acc: pd.DataFrame, title: str) -> str:
             note = "" if pd.isna(r["note"]) else str(r["note"])
             mark = ""
             if note:
-                notes.append(f"{sensor}, M {m:.2f}: {note}")
+                notes.append(f"{sensor}, {m}: {note}")
                 mark = f"<sup>{len(notes)}</sup>"
             n = int(r["n"]) if pd.notna(r["n"]) else 0
             tip = f"{r['channel']}; n = {n:,}" + (f"; {note}" if note else "")

@@ -244,10 +244,16 @@ def assign_bins(problem: Problem, opt: WorkflowOptions) -> pd.DataFrame:
 
 
 # ---------------------------------------------------------------------------------- apportioning
-def _covariance(result: EstimationResult, keys: Sequence[str]) -> np.ndarray:
-    """Covariance (SI) of some free global/aircraft parameters from the result's correlation."""
+def _covariance(result: EstimationResult, keys: Sequence[str], colored: bool = False) -> np.ndarray:
+    """Covariance (SI) of some free global/aircraft parameters from the result's correlation.
+
+    ``colored``: with the coloured-residual (Morelli-Klein) deviations in place of the Cramér-Rao
+    ones, correlations kept (NaN if the result has none).
+    """
     pos = {k: i for i, k in enumerate(result.correlation_keys)}
-    std = np.array([result.std(k) for k in keys])
+    std = np.array([result.std(k, colored=colored) for k in keys])
+    if colored and not np.all(np.isfinite(std)):
+        return np.full((len(keys), len(keys)), np.nan)
     C = np.zeros((len(keys), len(keys)))
     for i, a in enumerate(keys):
         for j, b in enumerate(keys):
@@ -314,8 +320,10 @@ def _run(problem: Problem, ids: Sequence[str], name: str, mach: float, gear: boo
     return Stage(name, mach, gear, sub, res)
 
 
-def _aircraft_biases(stage: Stage, names: tuple[str, str]) -> tuple[list[str], np.ndarray, np.ndarray]:
-    """Aircraft with both vane biases free and determined in a stage; values and covariance (rad)."""
+def _aircraft_biases(stage: Stage, names: tuple[str, str]
+                     ) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+    """Aircraft with both vane biases free and determined in a stage; values and covariance (rad),
+    Cramér-Rao and coloured-residual."""
     res = stage.result
     ac = sorted({m.aircraft for m in stage.problem.maneuvers})
     ok = []
@@ -325,7 +333,7 @@ def _aircraft_biases(stage: Stage, names: tuple[str, str]) -> tuple[list[str], n
             ok.append(a)
     keys = [f"{names[0]}[{a}]" for a in ok] + [f"{names[1]}[{a}]" for a in ok]
     vals = np.array([res.value(k) for k in keys])
-    return ok, vals, _covariance(res, keys)
+    return ok, vals, _covariance(res, keys), _covariance(res, keys, colored=True)
 
 
 def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> WorkflowResult:
@@ -336,9 +344,10 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     bins = assign_bins(problem, opt)
     left = bins[~bins["used"]]
     if len(left):
-        notes.append(f"{len(left)} maneuver(s) left out: " + "; ".join(
-            f"{r.id} ({r.reason})" for r in left.head(12).itertuples())
-            + (" ..." if len(left) > 12 else ""))
+        per_kind = ", ".join(f"{n} {k}" for k, n in left["kind"].fillna("?").value_counts().items())
+        notes.append(f"{len(left)} maneuver(s) left out ({per_kind}): " + "; ".join(
+            f"{r.id} ({r.reason})" for r in left.head(8).itertuples())
+            + (" ... (all in maneuvers.csv)" if len(left) > 8 else ""))
     up = bins[bins["used"] & ~bins["gear_down"]]
     if up.empty:
         raise ValueError(f"{problem.source}: no gear-up Mach bin has {opt.min_maneuvers} or more maneuvers "
@@ -354,11 +363,15 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     if has_vanes:
         per_bin = {}
         for st in first:
-            ac, vals, cov = _aircraft_biases(st, opt.vane_biases)
+            ac, vals, cov, cov_col = _aircraft_biases(st, opt.vane_biases)
             if not ac:
                 continue
             n = len(ac)
-            ap = apportion(dict(zip(ac, vals[:n], strict=True)), dict(zip(ac, vals[n:], strict=True)), cov)
+            left, right = dict(zip(ac, vals[:n], strict=True)), dict(zip(ac, vals[n:], strict=True))
+            ap = apportion(left, right, cov)
+            col = apportion(left, right, cov_col)
+            for k in ("installation_left", "installation_right", "installation_mean"):
+                ap[f"std_colored_{k}"] = col[f"std_{k}"]
             per_bin[st.mach] = ap
             for a, r in ap.iterrows():
                 vb_rows.append({"mach": st.mach, "aircraft": a, "b_l_deg": r["b_l"] * RAD2DEG,
@@ -388,6 +401,8 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
                          **{f"{k}_deg": r[k] * RAD2DEG for k in ("installation_left", "installation_right",
                                                                   "installation_mean")},
                          **{f"std_{k}_deg": r[f"std_{k}"] * RAD2DEG
+                            for k in ("installation_left", "installation_right", "installation_mean")},
+                         **{f"std_colored_{k}_deg": r[f"std_colored_{k}"] * RAD2DEG
                             for k in ("installation_left", "installation_right", "installation_mean")},
                          "n_aircraft_in_bin": len(per_bin[m])})
         inst = pd.DataFrame(rows).set_index("aircraft") if rows else pd.DataFrame()

@@ -216,6 +216,15 @@ def test_accuracy_table_marks_pass_fail_and_missing(acc):
     assert "AOA &lt; 12 deg &amp; &lt;high&gt;" in text and "<high>" not in text
 
 
+def test_accuracy_table_gear_down_bin_is_its_own_column(acc):
+    # the default campaign flies gear-down maneuvers at Mach 0.3 beside gear-up ones at Mach 0.3
+    down = acc[acc["mach"] == 0.3].assign(gear="down", three_sigma_deg=0.11)
+    text = accuracy_table_html(pd.concat([acc.assign(gear="up"), down]), "t")
+    assert re.findall(r"<th>(M \d\.\d\d(?:<br>gear down)?)</th>", text) == [
+        "M 0.30", "M 0.30<br>gear down", "M 0.60"]
+    assert text.count(">0.11<") == int((acc["mach"] == 0.3).sum())
+
+
 def test_accuracy_table_rejects_duplicate_cells(acc):
     with pytest.raises(ValueError, match="vane AOA left"):
         accuracy_table_html(pd.concat([acc, acc.iloc[[0]]]), "t")
