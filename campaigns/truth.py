@@ -150,8 +150,9 @@ def channel_values(problem: Problem, theta: np.ndarray, m, ch, tables: dict[str,
 def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> dict[str, float]:
     """Least-squares fit of the calibration parameters to the clean channels (module docstring).
 
-    Gauss-Newton from the problem's start values: most calibration models are affine in their
-    parameters, some are not (``f5(alpha_t) * (beta_s + b_n)``).
+    Gauss-Newton from the problem's start values, projected onto the parameters' bounds: most
+    calibration models are affine in their parameters, some are not (``f5(alpha_t) * (beta_s +
+    b_n)``).
     """
     ps = problem.parameters
     calib_kinds = ("table", "bias", "scale")
@@ -211,7 +212,10 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> di
         live = np.abs(A).sum(axis=0) > 0
         step, *_ = np.linalg.lstsq(A[:, live], b, rcond=None)
         for j, k in enumerate(np.array(free_calib)[live]):
-            theta[ps.index(k)] += step[j]
+            # within the parameter's bounds, as the estimator: a breakpoint the samples hardly
+            # reach would otherwise take any value (f2 at -4 deg alpha: -60 on a few samples)
+            lo, hi = ps[k].bounds
+            theta[ps.index(k)] = min(max(theta[ps.index(k)] + step[j], lo), hi)
         residuals = {}
         if np.abs(step).max() < 1e-12:
             break
