@@ -1,0 +1,116 @@
+"""Planning study (c), campaigns/studies/tolerance.py: a tiny run writes sane outputs; the
+conclusions follow the numbers. The full study is a benchmark (campaigns/studies/results/)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from campaigns.studies import tolerance
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("tolerance")
+    assert tolerance.main(["--out", str(out), "--size", "tiny", "--replications", "1", "--workers", "1"]) == 0
+    return out
+
+
+def test_tiny_study_writes_table_plot_and_conclusions(tiny_run):
+    text = (tiny_run / "tolerance.txt").read_text()
+    assert text.splitlines()[4].startswith("$ python -m campaigns.studies.tolerance --out ")
+    assert "machine:" in text and "wall " in text
+    factors = tolerance.TINY.factors
+    conclusions = text.split("conclusions:\n")[1]
+    # one sentence per factor; a variant (IMU biases started at their mean) joins its factor's
+    main = [f for f in factors if f.variant_of is None]
+    assert sum(line.startswith("- ") for line in conclusions.splitlines()) == len(main) < len(factors)
+    for f in main:
+        assert f.title in conclusions
+    png = (tiny_run / "tolerance.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+
+    df = pd.read_csv(tiny_run / "tolerance.csv")
+    assert len(df) == sum(len(f.levels) for f in factors)
+    assert (df["n_ok"] == 1).all() and (df["n_failed"] == 0).all()
+    # the vanes (the only flow channels of the tiny scenario) are calibrated to a tenth of a degree
+    vane = df["acc_vane AOA"].to_numpy()
+    assert np.all((vane > 0.05) & (vane < 0.5)), vane
+    assert df["acc_nose-probe AOSS"].isna().all()
+    # every factor's base level is the base scenario: one run, the same numbers
+    base = df[df["run"] == df["run"].iloc[0]]
+    assert len(base) >= 4 and base["acc_vane AOA"].nunique() == 1
+    # a delay of 100 ms on every flow sensor is estimated: the vane delays to a millisecond
+    delay = df[(df["factor"] == "flow_delay") & (df["level"].astype(str) == "100")].iloc[0]
+    assert delay["tau_err_max_ms"] < 1.0 and delay["tau_at_bound"] == 0
+
+
+def test_tiny_study_resumes_without_recomputing(tiny_run):
+    before = {p: p.stat().st_mtime_ns for p in tiny_run.glob("points/*/replications/*.parquet")}
+    # every level of every factor has its run, except the base levels: they share one
+    levels = sum(len(f.levels) for f in tolerance.TINY.factors)
+    bases = sum(f.base_level in f.levels for f in tolerance.TINY.factors)
+    assert len(before) == levels - bases + 1
+    tolerance.main(["--out", str(tiny_run), "--size", "tiny", "--replications", "1", "--workers", "1"])
+    assert {p: p.stat().st_mtime_ns for p in tiny_run.glob("points/*/replications/*.parquet")} == before
+
+
+def _factor(name: str) -> tolerance.Factor:
+    return next(f for f in tolerance.FULL.factors if f.name == name)
+
+
+def _row(level: str, vane: float, resid: float = 0.15, **extra) -> dict:
+    row = {"factor": "x", "level": level, "n_ok": 10, "n_failed": 0, "resid_vane_deg": resid,
+           "failures": "", **extra}
+    for g in tolerance.SENSOR_GROUPS:
+        row[f"acc_{g}"] = 0.2
+    row["acc_vane AOA"] = vane
+    return row
+
+
+def test_conclusion_names_the_last_passing_level_the_failing_sensor_and_a_bound():
+    f = _factor("flow_delay")
+    rows = pd.DataFrame([_row("0", 0.14), _row("200", 0.3),
+                         _row("400", 2.5, tau_truth_beyond_bound=7, tau_truth_max_ms=392.0)])
+    text = tolerance.conclusion(f, rows)
+    assert "holds up to 200" in text and "at 400" in text and "vane AOA (2.50 > 0.5 deg)" in text
+    assert "the true tau (up to 392 ms) lies beyond its bounds [-300, 300] ms" in text
+    assert "not the method's" in text
+    ok = tolerance.conclusion(f, rows.iloc[:2])
+    assert "whole range swept, up to 200" in ok
+    # no estimation converged: said so, with the failure and the truth beyond the bound
+    none = pd.DataFrame([_row("0", 0.14), _row("400", math.nan, resid=math.nan, n_ok=0, n_failed=10,
+                                               failures="10 estimation iteration limit",
+                                               tau_truth_beyond_bound=7, tau_truth_max_ms=392.0)])
+    text = tolerance.conclusion(f, none)
+    assert "at 400 no estimation converged (10 estimation iteration limit)" in text and "beyond" in text
+
+
+def test_conclusion_tells_a_wrong_minimum_and_the_start_value_from_the_variant():
+    f, v = _factor("imu_bias"), _factor("imu_started")
+    rows = pd.DataFrame([_row("1", 0.14), _row("3", 3.2, resid=11.0), _row("10", 2.1, resid=12.0)])
+    variant = pd.DataFrame([_row("3", 0.15), _row("10", 0.9)])
+    text = tolerance.conclusion(f, rows, variant=(v, variant))
+    assert "holds up to 1" in text and "at 3 it is lost for vane AOA" in text
+    assert "wrong minimum (vane residual 3-sigma 0.15 -> 11.00 deg" in text
+    assert "started at their mean, every requirement holds at 3" in text and "start value" in text
+    assert "at 10 it is still lost for vane AOA" in text
+
+
+def test_conclusion_for_an_unmodelled_factor_cites_the_residuals_and_failed_estimations():
+    f = _factor("turbulence")
+    rows = pd.DataFrame([_row("none", 0.14), _row("light", 0.8, resid=0.9, n_ok=8, n_failed=2,
+                                                  failures="2 estimation iteration limit")])
+    text = tolerance.conclusion(f, rows)
+    assert "already" not in text and "at light it is lost for vane AOA" in text
+    assert "grows from 0.15 to 0.90 deg" in text
+    assert "failed estimations: 2 of 10 at light (2 estimation iteration limit)" in text
+
+
+def test_failing_groups_ignores_missing_sensors():
+    row = _row("1", 0.6)
+    row["acc_side-probe AOA"] = math.nan
+    assert tolerance.failing_groups(row) == ["vane AOA"]
