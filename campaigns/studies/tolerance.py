@@ -43,6 +43,7 @@ import copy
 import math
 import os
 import platform
+import resource
 import shlex
 import subprocess
 import sys
@@ -694,8 +695,25 @@ def plot(df: pd.DataFrame, factors: Sequence[Factor], path: Path, replications: 
     return path
 
 
-def machine_text() -> str:
-    """CPU model, cores, memory, load average, software versions and the code's commit."""
+def code_version() -> str:
+    """The working tree's commit, and whether the code differs from it (``git status``)."""
+    here = Path(__file__).parent
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=here, check=False).stdout.strip() or "?"
+        # the code this study runs: the estimator, the synthesizer, the engine and this file
+        paths = ["estimator", "synth", "aircraft_models", "campaigns/montecarlo", "campaigns/truth.py",
+                 "campaigns/studies/tolerance.py"]
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", *paths], capture_output=True, text=True,
+                               cwd=here.parent.parent, check=False).stdout.strip()
+    except OSError:
+        return "?"
+    return commit + (" with uncommitted changes to the code it runs" if dirty else "")
+
+
+def machine_text(code_at_start: str | None = None) -> str:
+    """CPU model, cores, memory, software versions and the code's commit (at the start and the end
+    of the run: other engineers commit to the shared tree meanwhile)."""
     cpu = platform.processor() or "?"
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -710,14 +728,10 @@ def machine_text() -> str:
         mem = f", {kib / 2**20:.0f} GiB"
     except (OSError, ValueError, IndexError):
         pass
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=Path(__file__).parent, check=False).stdout.strip() or "?"
-    except OSError:
-        commit = "?"
     versions = ", ".join(f"{k} {v}" for k, v in software_versions().items())
-    return (f"machine: {cpu}, {os.cpu_count()} cores{mem}; {versions}\n"
-            f"code: {commit} (the shared working tree)")
+    end = code_version()
+    code = end if code_at_start in (None, end) else f"{code_at_start} at the start, {end} at the end"
+    return f"machine: {cpu}, {os.cpu_count()} cores{mem}; {versions}\ncode: {code} (the shared working tree)"
 
 
 def _typical_delays_text() -> str:
@@ -740,7 +754,7 @@ def _bounds_text(factors: Sequence[Factor]) -> str:
 
 
 def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: str, wall_s: float,
-           load: tuple[float, float]) -> str:
+           load: tuple[float, float], code_at_start: str | None = None, cpu_s: float = math.nan) -> str:
     """The text file: header, metric legend, table, conclusions."""
     base = base_scenario(config)
     flights = "; ".join(f"{'+'.join(b['configurations'])} x Mach {b['mach']} x {', '.join(b['maneuvers'])}"
@@ -758,9 +772,10 @@ def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: st
               "the desired accuracy is lost? One factor at a time around the base scenario; every point "
               "a Monte Carlo run (campaigns/montecarlo)."),
         f"$ {command}",
-        *machine_text().splitlines(),
+        *machine_text(code_at_start).splitlines(),
         f"wall {wall_s:.0f} s for the whole study ({replications} replications per point, {runs} distinct "
-        f"runs); load average {load[0]:.1f} at the start, {load[1]:.1f} at the end",
+        f"runs), CPU {cpu_s:.0f} s in its processes; load average {load[0]:.1f} at the start, "
+        f"{load[1]:.1f} at the end (other jobs share the machine)",
         "",
         *para(f"base scenario: {flights}; errors preset typical (nose-probe irregularity off); "
               f"{base['local_flow_truth']} / {base['adc_baseline']} (representable by the model set: a loss "
@@ -829,7 +844,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         p.error("--replications must be >= 1")
     results = args.results or args.out
     results.mkdir(parents=True, exist_ok=True)
-    t0, load0 = time.perf_counter(), os.getloadavg()[0]
+    t0, load0, code0 = time.perf_counter(), os.getloadavg()[0], code_version()
     points = study_points(config, args.out)
     print(f"{len({q.directory for q in points})} distinct runs x {n} replications into {args.out}/points",
           flush=True)
@@ -838,7 +853,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     wall = time.perf_counter() - t0
     command = "python -m campaigns.studies.tolerance " + " ".join(shlex.quote(a) for a in (
         sys.argv[1:] if argv is None else argv))
-    text = report(df, config, n, command, wall, (load0, os.getloadavg()[0]))
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu_s = own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+    text = report(df, config, n, command, wall, (load0, os.getloadavg()[0]), code0, cpu_s)
     (results / "tolerance.txt").write_text(text)
     df.to_csv(results / "tolerance.csv", index=False)
     plot(df, config.factors, results / "tolerance.png", n)
