@@ -56,6 +56,10 @@ def test_tiny_study_resumes_without_recomputing(tiny_run):
     assert len(before) == levels - bases + 1
     tolerance.main(["--out", str(tiny_run), "--size", "tiny", "--replications", "1", "--workers", "1"])
     assert {p: p.stat().st_mtime_ns for p in tiny_run.glob("points/*/replications/*.parquet")} == before
+    # the header says what this invocation computed and what all of them cost
+    text = (tiny_run / "tolerance.txt").read_text()
+    assert "replications computed;" in text and "over 2 invocations (resumed)" in text
+    assert f"{len(before)} replications in all" in text
 
 
 def _factor(name: str) -> tolerance.Factor:

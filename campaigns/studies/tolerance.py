@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import json
 import math
 import os
 import platform
@@ -51,8 +52,9 @@ import tempfile
 import textwrap
 import time
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -91,6 +93,8 @@ WIND_TOWARDS_DEG = 120.0
 VANE_BIAS_FAMILIES = ("b_l", "b_r")
 
 Level = float | str
+#: one record per invocation of the study on an output directory (its cost, when resumed)
+INVOCATIONS_FILE = "tolerance_invocations.json"
 
 
 # ---------------------------------------------------------------------------- the factors
@@ -308,43 +312,47 @@ def study_points(config: StudyConfig, out_dir: Path) -> list[Point]:
 # ---------------------------------------------------------------------------- running
 
 
-def _run_point(raw: dict, directory: str, replications: int) -> tuple[str, float, str]:
-    """Run (or resume) one point's Monte Carlo in this process: (directory, wall s, error text)."""
+def _run_point(raw: dict, directory: str, replications: int) -> tuple[str, float, str, int]:
+    """Run (or resume) one point's Monte Carlo in this process: (directory, wall s, error text,
+    replications computed now)."""
     t0 = time.perf_counter()
     try:
         scenario = parse_scenario(raw, source=f"campaigns.studies.tolerance:{raw['name']}")
-        run_montecarlo(scenario, directory, replications=replications, workers=1)
+        report = run_montecarlo(scenario, directory, replications=replications, workers=1)
     except ScenarioError as exc:  # a maneuver that cannot be flown in this air: the point says so
-        return directory, time.perf_counter() - t0, str(exc)
-    return directory, time.perf_counter() - t0, ""
+        return directory, time.perf_counter() - t0, str(exc), 0
+    return directory, time.perf_counter() - t0, "", len(report.ran)
 
 
 def run_points(points: Sequence[Point], replications: int, workers: int,
-               log: Callable[[str], None] = print) -> dict[Path, str]:
+               log: Callable[[str], None] = print) -> tuple[dict[Path, str], int]:
     """Run every distinct point's Monte Carlo (each in one process, ``workers`` at a time; the
-    runs are resumable). Returns directory -> error text of the points that could not run."""
+    runs are resumable). Returns directory -> error text of the points that could not run, and
+    the number of replications computed now."""
     unique: dict[Path, dict] = {}
     for p in points:
         unique.setdefault(p.directory, p.raw)
     # the reflown ones (turbulence) first: they are the longest
     order = sorted(unique, key=lambda d: unique[d]["environment"].get("turbulence", "none") == "none")
     errors: dict[Path, str] = {}
+    ran = [0]
 
-    def done(directory: str, wall_s: float, error: str) -> None:
+    def done(directory: str, wall_s: float, error: str, n_ran: int) -> None:
         note = f"  ERROR {error.splitlines()[0]}" if error else ""
-        log(f"  {Path(directory).name}: {wall_s:.1f} s{note}")
+        log(f"  {Path(directory).name}: {n_ran} replications in {wall_s:.1f} s{note}")
+        ran[0] += n_ran
         if error:
             errors[Path(directory)] = error
 
     if workers <= 1:
         for d in order:
             done(*_run_point(unique[d], str(d), replications))
-        return errors
+        return errors, ran[0]
     with ProcessPoolExecutor(max_workers=workers) as pool:
         futures = [pool.submit(_run_point, unique[d], str(d), replications) for d in order]
-        for fut in futures:
+        for fut in as_completed(futures):
             done(*fut.result())
-    return errors
+    return errors, ran[0]
 
 
 # ---------------------------------------------------------------------------- metrics
@@ -650,47 +658,89 @@ def table_text(df: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
+def _typical_flow_delay_ms() -> float:
+    """The mean of the typical preset's flow-sensor delays, ms (where "typical" is plotted)."""
+    return float(np.mean([1e3 * e.delay_s for e in ErrorConfig.typical().sensors.values()]))
+
+
+def _panel(ax, f: Factor, rows: pd.DataFrame, variant: bool = False) -> None:
+    """Draw one factor's accuracies into ``ax`` (a variant: hollow markers, dashed)."""
+    labels = list(rows["level"])
+    if f.numeric:
+        x = np.array([_typical_flow_delay_ms() if v == "typical" else float(v) for v in labels])
+    else:
+        x = np.arange(len(labels), dtype=float)
+    span = float(np.ptp(x)) if len(x) > 1 else 1.0
+    for j, g in enumerate(SENSOR_GROUPS):
+        col = f"acc_{g}"
+        if col not in rows or not np.isfinite(rows[col].to_numpy(dtype=float)).any():
+            continue
+        y = rows[col].to_numpy(dtype=float)
+        top = rows[f"acc_max_{g}"].to_numpy(dtype=float)
+        ax.errorbar(x + (j - 2.5) * 0.006 * span, y, yerr=[np.zeros_like(y), np.maximum(top - y, 0.0)],
+                    marker="os^vDP"[j], ms=5, capsize=2, lw=1.2, color=f"C{j}",
+                    mfc="none" if variant else f"C{j}",
+                    ls="--" if variant else ("-" if g in DESIRED_3SIGMA_DEG else ":"),
+                    label=None if variant else g)
+    for xi, (_, r) in zip(x, rows.iterrows(), strict=True):
+        n_ok, n_failed = int(r.get("n_ok", 0) or 0), int(r.get("n_failed", 0) or 0)
+        if n_failed:
+            ax.annotate(f"{n_failed}/{n_ok + n_failed} failed" + (" (started at mean)" if variant else ""),
+                        (xi, 0.97 if not variant else 0.90), xycoords=("data", "axes fraction"),
+                        ha="center", va="top", fontsize=7, color="C3")
+        if r["level"] == "typical":
+            ax.annotate("typical", (xi, 0.06), xycoords=("data", "axes fraction"), ha="center", fontsize=7)
+    if not f.numeric:
+        ax.set_xticks(x, labels)
+
+
 def plot(df: pd.DataFrame, factors: Sequence[Factor], path: Path, replications: int) -> Path:
     """One panel per factor: each sensor group's accuracy (median over the replications, bar to
-    the worst) against the level, the desired accuracies as dashed lines."""
+    the worst) against the level, the desired accuracies as dashed lines; a variant factor (IMU
+    biases started at their mean) is drawn in its factor's panel with hollow markers; the last
+    panel holds the legend."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.ticker import FormatStrFormatter
 
+    shown = [f for f in factors if f.variant_of is None]
     ncol = 3
-    nrow = math.ceil(len(factors) / ncol)
+    nrow = math.ceil((len(shown) + 1) / ncol)
     fig = Figure(figsize=(5.0 * ncol, 4.0 * nrow), layout="constrained")
     FigureCanvasAgg(fig)
-    for i, f in enumerate(factors):
+    handles: list = []
+    for i, f in enumerate(shown):
         ax = fig.add_subplot(nrow, ncol, i + 1)
-        rows = df[(df["factor"] == f.name) & (df["level"] != "typical")]
-        numeric = f.numeric
-        labels = list(rows["level"])
-        x = (np.array([float(v) for v in labels]) if numeric else np.arange(len(labels), dtype=float))
-        for j, g in enumerate(SENSOR_GROUPS):
-            col = f"acc_{g}"
-            if col not in rows or not np.isfinite(rows[col].to_numpy(dtype=float)).any():
-                continue
-            y = rows[col].to_numpy(dtype=float)
-            top = rows[f"acc_max_{g}"].to_numpy(dtype=float)
-            ax.errorbar(x + (j - 2.5) * 0.006 * (np.ptp(x) or 1.0), y, yerr=[np.zeros_like(y), top - y],
-                        marker="os^vDP"[j], ms=5, capsize=2, lw=1.2, color=f"C{j}",
-                        ls="-" if g in DESIRED_3SIGMA_DEG else ":", label=g)
+        _panel(ax, f, df[df["factor"] == f.name])
+        title = f.title
+        for v in factors:
+            if v.variant_of == f.name and (df["factor"] == v.name).any():
+                _panel(ax, v, df[df["factor"] == v.name], variant=True)
+                title += f"\nhollow, dashed: {v.title.split(', ', 1)[-1]}"
         for req in sorted(set(DESIRED_3SIGMA_DEG.values())):
-            who = " / ".join(g for g, v in DESIRED_3SIGMA_DEG.items() if v == req)
             ax.axhline(req, color="k", ls="--", lw=0.8)
-            ax.text(x.min() if len(x) else 0, req * 1.05, f"desired {req:g} deg: {who}", fontsize=7)
         ax.set_yscale("log")
-        if not numeric:
-            ax.set_xticks(x, labels)
+        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
+        ax.tick_params(axis="y", which="minor", labelsize=6)
         ax.set_xlabel(f.title)
         ax.set_ylabel("|mean| + 3 sigma vs truth, deg")
-        ax.set_title(f"{f.title}", fontsize=10)
+        ax.set_title(title, fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
-        if i == 0:
-            ax.legend(fontsize=7, loc="upper left")
+        if len(ax.get_legend_handles_labels()[0]) > len(handles):
+            handles = list(zip(*ax.get_legend_handles_labels(), strict=True))
+    leg = fig.add_subplot(nrow, ncol, len(shown) + 1)
+    leg.axis("off")
+    if handles:
+        leg.legend([h for h, _ in handles], [lb for _, lb in handles], loc="upper left", fontsize=9,
+                   title="calibrated channel (worst of a pair)")
+    desired = "\n".join(f"  {g}: {v:g} deg" for g, v in DESIRED_3SIGMA_DEG.items())
+    leg.text(0.0, 0.35, f"dashed lines: the desired 3-sigma accuracy\n{desired}\n"
+             "dotted: the boom (no stated requirement)\n"
+             "red: estimations that failed (no accuracy from them)", fontsize=9, va="top",
+             transform=leg.transAxes)
     fig.suptitle("Planning study (c): calibrated-channel accuracy against the truth, median of "
-                 f"{replications} replications (bar to the worst); dotted: the boom (no stated requirement)",
-                 fontsize=10)
+                 f"{replications} replications (bar to the worst)", fontsize=11)
     fig.savefig(path, dpi=100)
     return path
 
@@ -753,9 +803,28 @@ def _bounds_text(factors: Sequence[Factor]) -> str:
     return "; ".join(f"{', '.join(fams)} in [{lo:g}, {hi:g}] {unit}" for (lo, hi, unit), fams in seen.items())
 
 
-def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: str, wall_s: float,
-           load: tuple[float, float], code_at_start: str | None = None, cpu_s: float = math.nan) -> str:
-    """The text file: header, metric legend, table, conclusions."""
+def _invocations_text(invocations: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The cost lines: this invocation, and all of them when the study was resumed."""
+    now = invocations[-1]
+    lines = [f"this invocation: wall {now['wall_s']:.0f} s, CPU {now['cpu_s']:.0f} s in its processes, "
+             f"{now['replications_run']} replications computed; load average {now['load_start']:.1f} at "
+             f"the start, {now['load_end']:.1f} at the end (other jobs share the machine)"]
+    if len(invocations) > 1:
+        lines.append(f"the replications were computed over {len(invocations)} invocations (resumed): wall "
+                     f"{sum(i['wall_s'] for i in invocations):.0f} s, CPU "
+                     f"{sum(i['cpu_s'] for i in invocations):.0f} s, "
+                     f"{sum(i['replications_run'] for i in invocations)} replications in all; code "
+                     + ", ".join(sorted({str(i['code']) for i in invocations})))
+    return lines
+
+
+def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: str,
+           invocations: Sequence[Mapping[str, Any]]) -> str:
+    """The text file: header (command, machine, cost), metric legend, table, conclusions.
+
+    ``invocations``: one record per invocation of the study on this output directory (wall_s,
+    cpu_s, replications_run, load_start, load_end, code), this one last.
+    """
     base = base_scenario(config)
     flights = "; ".join(f"{'+'.join(b['configurations'])} x Mach {b['mach']} x {', '.join(b['maneuvers'])}"
                         for b in base["flights"])
@@ -772,10 +841,9 @@ def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: st
               "the desired accuracy is lost? One factor at a time around the base scenario; every point "
               "a Monte Carlo run (campaigns/montecarlo)."),
         f"$ {command}",
-        *machine_text(code_at_start).splitlines(),
-        f"wall {wall_s:.0f} s for the whole study ({replications} replications per point, {runs} distinct "
-        f"runs), CPU {cpu_s:.0f} s in its processes; load average {load[0]:.1f} at the start, "
-        f"{load[1]:.1f} at the end (other jobs share the machine)",
+        *machine_text(invocations[-1].get("code_start")).splitlines(),
+        f"{replications} replications per point, {runs} distinct runs",
+        *_invocations_text(invocations),
         "",
         *para(f"base scenario: {flights}; errors preset typical (nose-probe irregularity off); "
               f"{base['local_flow_truth']} / {base['adc_baseline']} (representable by the model set: a loss "
@@ -832,7 +900,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--results", type=Path, default=None,
                    help="where tolerance.txt / .png / .csv go (default: --out)")
     p.add_argument("--replications", type=int, default=None, metavar="N",
-                   help="replications per point (default: 10; tiny: 1)")
+                   help=f"replications per point (default: {FULL.replications}; tiny: {TINY.replications})")
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
                    help="points run at once, one process each (default: 2)")
     p.add_argument("--size", choices=sorted(SIZES), default="full",
@@ -845,17 +913,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     results = args.results or args.out
     results.mkdir(parents=True, exist_ok=True)
     t0, load0, code0 = time.perf_counter(), os.getloadavg()[0], code_version()
+    started = datetime.now(UTC).isoformat(timespec="seconds")
     points = study_points(config, args.out)
     print(f"{len({q.directory for q in points})} distinct runs x {n} replications into {args.out}/points",
           flush=True)
-    errors = run_points(points, n, args.workers, log=lambda s: print(s, flush=True))
+    errors, n_ran = run_points(points, n, args.workers, log=lambda s: print(s, flush=True))
     df = collect(points, n, errors)
-    wall = time.perf_counter() - t0
     command = "python -m campaigns.studies.tolerance " + " ".join(shlex.quote(a) for a in (
         sys.argv[1:] if argv is None else argv))
     own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    cpu_s = own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
-    text = report(df, config, n, command, wall, (load0, os.getloadavg()[0]), code0, cpu_s)
+    code1 = code_version()
+    record = {"started_utc": started, "command": command, "wall_s": time.perf_counter() - t0,
+              "cpu_s": own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime,
+              "replications_run": n_ran, "load_start": load0, "load_end": os.getloadavg()[0],
+              "code_start": code0, "code": code1 if code1 == code0 else f"{code0} -> {code1}"}
+    log_path = args.out / INVOCATIONS_FILE
+    invocations = json.loads(log_path.read_text()) if log_path.exists() else []
+    invocations.append(record)
+    log_path.write_text(json.dumps(invocations, indent=1) + "\n")
+    text = report(df, config, n, command, invocations)
     (results / "tolerance.txt").write_text(text)
     df.to_csv(results / "tolerance.csv", index=False)
     plot(df, config.factors, results / "tolerance.png", n)
