@@ -271,6 +271,11 @@ class RunMetrics:
     parameters : the Monte Carlo summary per parameter (crb_mean, mc_std, ratio_crb, ...).
     channels : per replication and channel (:func:`channel_rows`) of the used replications.
     elapsed_s : median wall time of a replication, s.
+    held : used replications in which the estimator held (at its start value, as not determined
+        by the data) a scalar flow-angle calibration parameter (:func:`held_in`) that it estimated
+        in other replications of the run.
+    held_names : those parameters.
+    parameters_unheld : the summary over the used replications without such a held parameter.
     """
 
     requested: int
@@ -281,6 +286,9 @@ class RunMetrics:
     parameters: pd.DataFrame = field(repr=False)
     channels: pd.DataFrame = field(repr=False)
     elapsed_s: float
+    held: int = 0
+    held_names: tuple[str, ...] = ()
+    parameters_unheld: pd.DataFrame = field(default_factory=pd.DataFrame, repr=False)
 
     def accuracy(self, channel: str) -> float:
         """Median over the replications of the calibrated channel's ``|mean| + 3 std``, deg."""
@@ -300,12 +308,39 @@ def run_metrics(run_dir: Path, replications: int) -> RunMetrics:
     results = load_results(run_dir, replications) if (run_dir / "replications").is_dir() else []
     ok = [r for r in results if r.ok]
     used = [r for r in ok if fit_ok(r)]
-    summary = summarize_results(used) if used else None
-    params = summary.parameters if summary is not None else pd.DataFrame()
+    params = summarize_results(used).parameters if used else pd.DataFrame()
+    held = intermittently_held(used)
+    unheld = [r for r in used if not held_in(r) & held]
     return RunMetrics(requested=replications, files=len(results), failed=len(results) - len(ok),
                       wrong_minimum=len(ok) - len(used), used=len(used), parameters=params,
                       channels=channel_rows(used),
-                      elapsed_s=float(np.median([r.elapsed_s for r in results])) if results else math.nan)
+                      elapsed_s=float(np.median([r.elapsed_s for r in results])) if results else math.nan,
+                      held=len(used) - len(unheld), held_names=tuple(sorted(held)),
+                      parameters_unheld=summarize_results(unheld).parameters if unheld else pd.DataFrame())
+
+
+#: the flow sensors' time delays
+FLOW_DELAYS = ("tau_alpha_zl", "tau_alpha_zr", "tau_sp", "tau_np", "tau_ba", "tau_bu", "tau_bl")
+
+
+def held_in(result: ReplicationResult) -> set[str]:
+    """Scalar flow-angle calibration parameters (biases, scale factors, flow-sensor delays) the
+    estimator held in this replication (no Cramér-Rao deviation). Table elements are not counted:
+    breakpoints at the edge of the flown range come and go with the noise; nor are the TAS,
+    altitude and attitude delays, which do not move the flow-angle calibration."""
+    p = result.parameters
+    p = p[p["kind"].isin(("bias", "scale")) | p["family"].isin(FLOW_DELAYS)]
+    p = p[p["family"].isin(SIDESLIP_FAMILIES + VANE_BIAS_FAMILIES + FLOW_DELAYS)]
+    return set(p.loc[~np.isfinite(p["std_crb"].to_numpy(dtype=float)), "name"])
+
+
+def intermittently_held(results: Sequence[ReplicationResult]) -> set[str]:
+    """Calibration parameters held in some replications and estimated in others: the estimator's
+    screening (at the start values) decided differently from one replication to the next."""
+    if not results:
+        return set()
+    sets = [held_in(r) for r in results]
+    return set.union(*sets) - set.intersection(*sets)
 
 
 def geo_mean(values: Sequence[float]) -> float:
@@ -395,20 +430,37 @@ def reference_of(v: Variant, config: StudyConfig, metrics: Mapping[Variant, RunM
     return metrics.get(v.cut(config.reference_pieces))
 
 
-def ratios(m: RunMetrics, ref: RunMetrics | None, column: str, names: Sequence[str]) -> np.ndarray:
-    """``column`` of ``m`` over that of the reference run, per well-determined parameter of ``names``."""
-    if ref is None or not len(m.parameters) or not len(ref.parameters):
+def ratios(m: RunMetrics, ref: RunMetrics | None, column: str, names: Sequence[str],
+           unheld: bool = False) -> np.ndarray:
+    """``column`` of ``m`` over that of the reference run, per well-determined parameter of ``names``
+    (``unheld``: over the replications without an intermittently held parameter)."""
+    if ref is None:
         return np.array([])
-    p, q = m.parameters, ref.parameters
+    p, q = (m.parameters_unheld, ref.parameters_unheld) if unheld else (m.parameters, ref.parameters)
+    if not len(p) or not len(q):
+        return np.array([])
     out = [p.at[n, column] / q.at[n, column] for n in names if n in p.index and n in q.index
            and q.at[n, "crb_mean"] < WELL_DETERMINED.get(str(q.at[n, "unit"]), math.inf)]
     a = np.asarray(out, dtype=float)
     return a[np.isfinite(a) & (a > 0)]
 
 
-def relative(m: RunMetrics, ref: RunMetrics | None, column: str, names: Sequence[str]) -> float:
+def relative(m: RunMetrics, ref: RunMetrics | None, column: str, names: Sequence[str],
+             unheld: bool = False) -> float:
     """Geometric mean of :func:`ratios`."""
-    return geo_mean(ratios(m, ref, column, names))
+    return geo_mean(ratios(m, ref, column, names, unheld))
+
+
+def scatter_over_bound(m: RunMetrics, ref: RunMetrics | None, names: Sequence[str]) -> float:
+    """Median over the well-determined parameters of ``names`` of scatter / mean Cramér-Rao std."""
+    if ref is None or m.used < 2 or not len(ref.parameters):
+        return math.nan
+    p, q = m.parameters, ref.parameters
+    r = [p.at[n, "ratio_crb"] for n in names if n in p.index and n in q.index
+         and q.at[n, "crb_mean"] < WELL_DETERMINED.get(str(q.at[n, "unit"]), math.inf)]
+    r = np.asarray(r, dtype=float)
+    r = r[np.isfinite(r)]
+    return float(np.median(r)) if r.size else math.nan
 
 
 def summary_frame(config: StudyConfig, metrics: Mapping[Variant, RunMetrics],
@@ -418,12 +470,11 @@ def summary_frame(config: StudyConfig, metrics: Mapping[Variant, RunMetrics],
     for k, v in enumerate(config.variants, start=1):
         m = metrics[v]
         ref = reference_of(v, config, metrics)
-        p = m.parameters
-        present = [n for n in names if len(p) and n in p.index]
-        scatter_ok = present and m.used > 1
         row = {"id": f"v{k}", "variant": v.label, "used": f"{m.used}/{m.requested}", "wrong": m.wrong_minimum,
-               "crb_rel": relative(m, ref, "crb_mean", names), "mc_rel": relative(m, ref, "mc_std", names),
-               "mc/crb": float(np.median(p.loc[present, "ratio_crb"])) if scatter_ok else math.nan}
+               "held": m.held, "crb_rel": relative(m, ref, "crb_mean", names),
+               "mc_rel": relative(m, ref, "mc_std", names),
+               "mc_rel*": relative(m, ref, "mc_std", names, unheld=True),
+               "mc/crb": scatter_over_bound(m, ref, names)}
         for ch in RESIDUAL_CHANNELS:
             row[f"res_{ch}"] = m.residual_std(ch)
         for ch in SIDESLIP_CHANNELS:
@@ -501,81 +552,140 @@ CRB_TOLERANCE = 1.1
 ACCURACY_TOLERANCE = 1.2
 
 
-def conclusion(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names: Sequence[str],
-               replications: int) -> str:
-    """One sentence drawn from the numbers: the unsplit run against the paper's split per condition."""
+@dataclass(frozen=True)
+class Comparison:
+    """The unsplit run against the paper's split at one Mach number and condition.
+
+    Attributes
+    ----------
+    where : "calm at Mach 0.5".
+    condition : the condition.
+    crb, mc, mc_unheld : geometric-mean ratios (unsplit / split) of the sideslip parameters' mean
+        Cramér-Rao std, Monte Carlo scatter, and scatter over the replications without an
+        intermittently held parameter.
+    held : replications of the unsplit run with such a held parameter; held_names : which.
+    accuracy : ratios of the calibrated sideslip channels' accuracy.
+    misses : calibrated sideslip channels of the split run that miss their desired accuracy.
+    """
+
+    where: str
+    condition: str
+    crb: float
+    mc: float
+    mc_unheld: float
+    held: int
+    held_names: tuple[str, ...]
+    accuracy: np.ndarray
+    misses: tuple[str, ...]
+
+
+def compare(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], v: Variant,
+            names: Sequence[str]) -> Comparison | None:
+    """:class:`Comparison` of ``v``'s Mach number and condition (None: a run is missing or empty)."""
+    pair = _pair(config, metrics, v)
+    if pair is None or not pair[0].used or not pair[1].used:
+        return None
+    long, split = pair
+    misses = tuple(f"{label} {split.accuracy(ch):.2f} deg"
+                   for ch, (label, req) in SIDESLIP_CHANNELS.items()
+                   if req is not None and split.accuracy(ch) > req)
+    return Comparison(where=f"{v.condition.replace('_', ' ')} at Mach {v.mach:g}", condition=v.condition,
+                      crb=relative(long, split, "crb_mean", names), mc=relative(long, split, "mc_std", names),
+                      mc_unheld=relative(long, split, "mc_std", names, unheld=True), held=long.held,
+                      held_names=long.held_names, accuracy=_accuracy_ratios(long, split), misses=misses)
+
+
+def _clause(c: Comparison, tol: float) -> str:
+    acc = c.accuracy
+    spread = acc.size > 1 and round(acc.min(), 2) != round(acc.max(), 2)
+    acc_text = (f"{acc.min():.2f}-{acc.max():.2f}x" if spread else f"{acc[0]:.2f}x" if acc.size
+                else "(none)")
+    held = (f" ({c.mc_unheld:.2f}x without the {c.held} replications in which the estimator held "
+            f"{', '.join(c.held_names)})" if c.held and np.isfinite(c.mc_unheld) else "")
+    text = (f"{c.where} the unsplit run's sideslip Cramer-Rao bounds are {_word(c.crb, CRB_TOLERANCE)}, "
+            f"its Monte Carlo scatter {_word(c.mc, tol)}{held}, its calibrated sideslip accuracy {acc_text} "
+            "those of the split run")
+    if c.misses:
+        text += f", and neither meets the desired accuracy (split: {', '.join(c.misses)})"
+    return text
+
+
+def findings(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names: Sequence[str],
+             replications: int) -> tuple[list[str], list[Comparison], tuple[RunMetrics, RunMetrics] | None]:
+    """Per condition, a line comparing the unsplit run with the split one; the comparisons; the
+    cold-start pair (None when not run)."""
     tol = scatter_tolerance(replications)
-    clauses: list[str] = []
-    worse_scatter: list[str] = []
-    better_scatter: list[str] = []
-    worse_accuracy: list[str] = []
-    compared: list[str] = []
-    robust: bool | None = None
-    ref_split = f"{config.reference_pieces} pieces"
+    lines: list[str] = []
+    comparisons: list[Comparison] = []
+    cold: tuple[RunMetrics, RunMetrics] | None = None
     for v in config.variants:
         if v.pieces != 1:
             continue
-        pair = _pair(config, metrics, v)
-        if pair is None:
-            continue
-        long, split = pair
-        where = f"{v.condition.replace('_', ' ')} at Mach {v.mach:g}"
         if v.condition == "cold_start":
-            robust = long.used < split.used
-            clauses.append(f"{where} the estimator fitted {long.used}/{long.requested} replications of "
-                           f"the unsplit run ({long.wrong_minimum} wrong minima, {long.failed} not "
-                           f"converged) and {split.used}/{split.requested} of the split one")
+            cold = _pair(config, metrics, v)
+            if cold is not None:
+                long, split = cold
+                lines.append(f"cold start at Mach {v.mach:g}: the estimator fitted {long.used}/"
+                             f"{long.requested} replications of the unsplit run ({long.wrong_minimum} "
+                             f"converged to a wrong minimum, {long.failed} did not converge) and "
+                             f"{split.used}/{split.requested} of the split one")
             continue
-        if not long.used or not split.used:
-            clauses.append(f"{where}: {long.used} and {split.used} usable replications, no comparison")
+        c = compare(config, metrics, v, names)
+        if c is None:
+            lines.append(f"{v.condition} at Mach {v.mach:g}: too few usable replications to compare")
             continue
-        crb = relative(long, split, "crb_mean", names)
-        mc = relative(long, split, "mc_std", names)
-        acc = _accuracy_ratios(long, split)
-        compared.append(v.condition)
-        acc_text = (f"{acc.min():.2f}-{acc.max():.2f}x" if acc.size > 1 else f"{acc[0]:.2f}x"
-                    if acc.size else "(none)")
-        clauses.append(f"{where} the unsplit run's sideslip Cramer-Rao bounds are "
-                       f"{_word(crb, CRB_TOLERANCE)}, its Monte Carlo scatter {_word(mc, tol)}, its "
-                       f"calibrated sideslip accuracy {acc_text} those of the {ref_split}")
-        if np.isfinite(mc) and mc > tol:
-            worse_scatter.append(v.condition)
-        elif np.isfinite(mc) and mc < 1.0 / tol:
-            better_scatter.append(v.condition)
-        if acc.size and acc.max() > ACCURACY_TOLERANCE:
-            worse_accuracy.append(v.condition)
-    verdict = _verdict(compared, worse_scatter, better_scatter, worse_accuracy, robust)
-    return "Conclusion: " + "; ".join(clauses) + " - " + verdict + "."
+        comparisons.append(c)
+        lines.append(_clause(c, tol))
+    return lines, comparisons, cold
 
 
-def _verdict(compared: Sequence[str], worse_scatter: Sequence[str], better_scatter: Sequence[str],
-             worse_accuracy: Sequence[str], robust: bool | None) -> str:
-    """The paper's claim held against the comparisons (the conditions compared, those where the
-    unsplit run is worse or better; ``robust``: the split converged more often from a cold start,
-    None: not run)."""
-    parts = []
-    if worse_scatter:
-        where = ", ".join(dict.fromkeys(worse_scatter))
-        why = ""
-        if "calm" in worse_scatter and "ideal_imu" in compared and "ideal_imu" not in worse_scatter:
-            why = (" and not with an ideal IMU, so the cause is the IMU noise the estimator integrates as a "
-                   "noise-free input over the whole run, which the Cramer-Rao bounds do not see")
-        parts.append(f"the paper's split is borne out for the consistency of the calibration: the unsplit "
-                     f"run's parameter scatter is larger ({where}){why}")
-    if worse_accuracy:
-        parts.append("the calibrated sideslip channels are less accurate unsplit ("
-                     + ", ".join(dict.fromkeys(worse_accuracy)) + ")")
-    elif worse_scatter:
-        parts.append("yet the calibrated sideslip channels are as accurate either way, their 3-sigma being "
-                     "sensor noise, not parameter error")
+def _range(values: Sequence[float]) -> str:
+    a = np.asarray([x for x in values if np.isfinite(x)], dtype=float)
+    if not a.size:
+        return "-"
+    return f"{a.min():.2f}x" if round(a.min(), 2) == round(a.max(), 2) else f"{a.min():.2f}-{a.max():.2f}x"
+
+
+def conclusion(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names: Sequence[str],
+               replications: int) -> str:
+    """One sentence drawn from the numbers: is the paper's split borne out, and why."""
+    tol = scatter_tolerance(replications)
+    _, comparisons, cold = findings(config, metrics, names, replications)
+    calm_air = [c for c in comparisons if c.condition != "turbulence"] or list(comparisons)
+    crb = [c.crb for c in calm_air]
+    acc = [float(x) for c in calm_air for x in c.accuracy]
+    worse = [c for c in comparisons if np.isfinite(c.mc) and c.mc > tol]
+    less_info = any(x > CRB_TOLERANCE for x in crb if np.isfinite(x))
+    less_accurate = any(x > ACCURACY_TOLERANCE for x in acc)
+    robust = cold is not None and cold[0].used < cold[1].used
+    parts = [f"in calm air the unsplit {config.variants[0].duration_s:g} s run carries "
+             + ("less" if less_info else "as much") + " information (sideslip Cramer-Rao bounds "
+             f"{_range(crb)} those of the split run) and calibrates the sideslip channels "
+             + ("less" if less_accurate else "as") + f" accurately ({_range(acc)}, the 3-sigma being mostly "
+             "sensor noise)"]
+    if worse:
+        held = [c for c in worse if c.held]
+        text = ("; its parameter scatter is larger ("
+                + ", ".join(f"{c.where} {c.mc:.2f}x" for c in worse) + ")")
+        if held:
+            text += (", largely from replications in which this estimator held scalar parameters ("
+                     + ", ".join(f"{c.held}/{replications}" for c in held) + ": "
+                     + ", ".join(dict.fromkeys(n for c in held for n in c.held_names)) + ")")
+        parts.append(text)
     if robust:
-        parts.append("and from the usual cold start the unsplit run converges less often")
-    if not parts:
-        return ("the paper's claim is not borne out here: the unsplit run is as accurate"
-                + (" or more" if better_scatter else "")
-                + (" and converges as reliably" if robust is False else ""))
-    return ", ".join(parts)
-
+        parts.append(f"; and from the usual start at zero IMU biases it reached a wrong minimum in "
+                     f"{cold[0].wrong_minimum + cold[0].failed} of {cold[0].requested} replications "
+                     f"against {cold[1].wrong_minimum + cold[1].failed} of {cold[1].requested} split")
+    turbulent = [c for c in comparisons if c.condition == "turbulence" and c.misses]
+    if turbulent:
+        parts.append("; in light turbulence neither meets the desired sideslip accuracy ("
+                     + ", ".join(turbulent[0].misses) + " split)")
+    if robust or worse or less_info or less_accurate:
+        head = ("the paper's split is borne out" + (" - for robustness and consistency, not for accuracy"
+                                                    if not (less_info or less_accurate) else "") + ": ")
+    else:
+        head = "the paper's claim is not borne out here: "
+    return "Conclusion: " + head + "".join(parts) + "."
 
 
 # ---------------------------------------------------------------------------- plot
@@ -602,6 +712,10 @@ def plot(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names: Sequ
                 continue
             ax.plot(k + np.linspace(-0.25, 0.25, r.size), r, ".", color="0.6", ms=4)
             ax.plot(k, geo_mean(r), "D", color=f"C{v.pieces - 1}", ms=7)
+            m = metrics[v]
+            if m.used < m.requested:  # wrong minima or failures left out: say how many are left
+                ax.annotate(f"{m.used}/{m.requested}\nfitted", (k, geo_mean(r)), textcoords="offset points",
+                            xytext=(0, -24), ha="center", fontsize=7, color="r")
         ax.axhline(1.0, color="k", lw=0.8)
         ax.set_yscale("log")
         ax.set_ylabel(f"relative to {ref_label} (same Mach, condition)")
@@ -614,8 +728,8 @@ def plot(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names: Sequ
             ax.axhline(req, color="r", lw=0.8, ls="--")
     ax.set_yscale("log")
     ax.set_ylabel("|mean| + 3 std of calibrated - true, deg")
-    ax.set_title("calibrated sideslip channels against the truth (median over the replications; dashed: "
-                 "desired 0.5 nose probe, 1 side probe)", fontsize=9)
+    ax.set_title("calibrated sideslip channels against the truth, median over the replications\n"
+                 "(dashed: desired, nose probe 0.5, side probe 1 deg)", fontsize=9)
     ax.legend(fontsize=8)
     ax = axes[1, 1]
     for ch in ("phi", "theta", "psi", "beta_zsp", "beta_zbu"):
@@ -674,10 +788,14 @@ def report(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], replicati
         *paragraph(
             "columns: used = replications in the statistics / N; wrong = converged by the solver's test "
             f"but attitude residual 3-sigma > {ATTITUDE_FIT_LIMIT_DEG:g} deg (a wrong minimum; left out); "
+            "held = replications in which the estimator held (at its start value, judged undetermined) a "
+            "scalar flow-angle calibration parameter (sideslip or vane bias, scale factor, flow-sensor "
+            "delay) it estimated in other replications of the run; "
             "crb_rel, mc_rel = geometric mean over the sideslip parameters below (vane biases excluded; "
             f"those with a Cramer-Rao std in the reference run under {limits}) of the mean Cramer-Rao "
             f"std and of the Monte Carlo scatter relative to {ref} of the same Mach number and "
-            "condition; mc/crb = median over them of scatter / mean Cramer-Rao std; r_* = residual "
+            "condition; mc_rel* = the same over the replications without such a held parameter (in both "
+            "runs); mc/crb = median over them of scatter / mean Cramer-Rao std; r_* = residual "
             "1-sigma (phi, theta, psi, side-probe and boom-upper AOSS deg, tas m/s), median over the "
             "replications; a_* = |mean| + 3 std of (calibrated channel - true flow angle) over every "
             "sample, deg, median over the replications (bsp side-probe AOSS, desired 1; bnp nose-probe "
@@ -697,6 +815,10 @@ def report(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], replicati
         grid_text(config, metrics, names, "ratio_crb"),
         "",
     ]
+    lines.append("findings (unsplit run against the paper's split, same flight):")
+    for line in findings(config, metrics, side, replications)[0]:
+        lines += textwrap.wrap(line, width=108, initial_indent="- ", subsequent_indent="  ")
+    lines.append("")
     lines += textwrap.wrap(conclusion(config, metrics, side, replications), width=108)
     return "\n".join(lines) + "\n"
 
