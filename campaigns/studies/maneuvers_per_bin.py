@@ -54,6 +54,7 @@ from campaigns.studies.shss_segments import (
     COMMON_DRAWS,
     SEED,
     WIND_NED_MPS,
+    cost_text,
     fit_ok,
     fmt,
     load_average,
@@ -485,7 +486,7 @@ def plot(config: StudyConfig, metrics: Mapping[ManeuverSet, SetMetrics], path: P
 
 
 def report(config: StudyConfig, metrics: Mapping[ManeuverSet, SetMetrics], replications: int, command: str,
-           wall_s: float, load: tuple[float, float]) -> str:
+           cost: str, load: tuple[float, float]) -> str:
     mix = ", ".join(f"{k + 1} {SHORT_KIND[kind]}{'' if not hdg else f' (heading {hdg:g})'}"
                     for k, (kind, hdg) in enumerate(MIX[: max(config.counts)]))
     lines = [
@@ -494,8 +495,8 @@ def report(config: StudyConfig, metrics: Mapping[ManeuverSet, SetMetrics], repli
                    "campaigns/montecarlo."),
         f"$ {command}",
         *machine_text().splitlines(),
-        f"wall {wall_s:.0f} s for the whole study ({replications} replications per set, {len(config.sets)} "
-        f"sets); load average {load[0]:.1f} at the start, {load[1]:.1f} at the end",
+        *textwrap.wrap(f"{cost}; load average {load[0]:.1f} at the start, {load[1]:.1f} at the end",
+                       width=108),
         "",
         *paragraph(
             f"sets: {config.configuration} flies the first N maneuvers of the mix (nested sets) at "
@@ -558,9 +559,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = "python -m campaigns.studies.maneuvers_per_bin " + shlex.join(argv)
     load0 = load_average()
     runs = [(s.name, scenario_raw(s, config, n)) for s in config.sets]
-    wall_s = run_scenarios(runs, args.out, n, args.workers)
+    wall_s, computed = run_scenarios(runs, args.out, n, args.workers)
+    cost = cost_text(args.out, wall_s, computed, n, len(runs))
     metrics = collect(config, args.out, n)
-    text = report(config, metrics, n, command, wall_s, (load0, load_average()))
+    text = report(config, metrics, n, command, cost, (load0, load_average()))
     (results / f"{STUDY}.txt").write_text(text)
     plot(config, metrics, results / f"{STUDY}.png", n)
     print(text)

@@ -44,6 +44,7 @@ with a conclusion drawn from the numbers) and ``shss_segments.png`` into ``--res
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import platform
@@ -221,17 +222,38 @@ def scenario_raw(variant: Variant, config: StudyConfig, replications: int) -> di
     }
 
 
-def run_scenarios(runs: Sequence[tuple[str, dict]], out_dir: Path, replications: int, workers: int) -> float:
+def run_scenarios(runs: Sequence[tuple[str, dict]], out_dir: Path, replications: int,
+                  workers: int) -> tuple[float, int]:
     """Run (or resume) each scenario into ``out_dir/runs/NAME`` with the Monte Carlo engine.
 
-    Returns the wall time, s. Progress goes to stderr.
+    Returns the wall time, s, and the number of replications computed (not already on disk).
+    Progress goes to stderr.
     """
     t0 = time.perf_counter()
+    computed = 0
     for k, (name, raw) in enumerate(runs):
         scenario = parse_scenario(raw, source=f"{raw['name']} (built by campaigns.studies)")
         report = run_montecarlo(scenario, out_dir / "runs" / name, replications=replications, workers=workers)
+        computed += len(report.ran)
         print(f"[{k + 1}/{len(runs)}] {report.text()}", file=sys.stderr, flush=True)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, computed
+
+
+def cost_text(out_dir: Path, wall_s: float, computed: int, replications: int, runs: int) -> str:
+    """Log this invocation's cost in ``out_dir/invocations.jsonl`` and say what the study cost in all
+    (a resumed study computes only what is missing)."""
+    log = out_dir / "invocations.jsonl"
+    entry = {"wall_s": round(wall_s, 1), "computed": computed, "replications": replications, "runs": runs}
+    with open(log, "a") as fh:
+        fh.write(json.dumps(entry) + "\n")
+    past = [json.loads(line) for line in log.read_text().splitlines() if line.strip()]
+    text = (f"wall {wall_s:.0f} s for the whole study ({replications} replications per run, {runs} runs, "
+            f"{computed} replications computed by this invocation)")
+    if len(past) > 1:
+        total = sum(e["wall_s"] for e in past)
+        text += (f"; over the {len(past)} invocations into this directory: {total:.0f} s, "
+                 f"{sum(e['computed'] for e in past)} replications computed")
+    return text
 
 
 # ---------------------------------------------------------------------------- metrics
@@ -751,7 +773,7 @@ def plot(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names: Sequ
 
 
 def report(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], replications: int, command: str,
-           wall_s: float, load: tuple[float, float]) -> str:
+           cost: str, load: tuple[float, float]) -> str:
     """The text file: header, setup, legend, tables, conclusion."""
     names, side = parameter_names(metrics)
     accel, gyro = typical_imu_biases()
@@ -766,9 +788,8 @@ def report(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], replicati
                    "variant a Monte Carlo run of campaigns/montecarlo."),
         f"$ {command}",
         *machine_text().splitlines(),
-        f"wall {wall_s:.0f} s for the whole study ({replications} replications per variant, "
-        f"{len(config.variants)} variants); load average {load[0]:.1f} at the start, {load[1]:.1f} at "
-        "the end",
+        *textwrap.wrap(f"{cost}; load average {load[0]:.1f} at the start, {load[1]:.1f} at the end",
+                       width=108),
         "",
         *paragraph(f"flights per variant: {' + '.join(config.configurations)} at the variant's Mach number, "
                    f"{ALTITUDE_M:g} m: one pitch doublet and the {duration:g} s SHSS at "
@@ -852,9 +873,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = "python -m campaigns.studies.shss_segments " + shlex.join(argv)
     load0 = load_average()
     runs = [(v.name, scenario_raw(v, config, n)) for v in config.variants]
-    wall_s = run_scenarios(runs, args.out, n, args.workers)
+    wall_s, computed = run_scenarios(runs, args.out, n, args.workers)
+    cost = cost_text(args.out, wall_s, computed, n, len(runs))
     metrics = collect(config, args.out, n)
-    text = report(config, metrics, n, command, wall_s, (load0, load_average()))
+    text = report(config, metrics, n, command, cost, (load0, load_average()))
     (results / f"{STUDY}.txt").write_text(text)
     plot(config, metrics, parameter_names(metrics)[1], results / f"{STUDY}.png", n)
     print(text)
