@@ -95,11 +95,14 @@ def test_conclusion_names_the_last_passing_level_the_failing_sensor_and_a_bound(
 
 def test_conclusion_tells_a_wrong_minimum_and_the_start_value_from_the_variant():
     f, v = _factor("imu_bias"), _factor("imu_started")
-    rows = pd.DataFrame([_row("1", 0.14), _row("3", 3.2, resid=11.0), _row("10", 2.1, resid=12.0)])
+    rows = pd.DataFrame([_row("0", 0.14), _row("1", 0.14), _row("3", 3.2, resid=11.0, n_pass=2),
+                         _row("10", 2.1, resid=12.0)])
     variant = pd.DataFrame([_row("3", 0.15), _row("10", 0.9)])
     text = tolerance.conclusion(f, rows, variant=(v, variant))
-    assert "holds up to 1" in text and "at 3 it is lost for vane AOA" in text
-    assert "wrong minimum (vane residual 3-sigma 0.15 -> 11.00 deg" in text
+    assert "holds up to 1" in text and "at 3 it is lost for vane AOA (3.20 > 0.5 deg)" in text
+    assert "(2 of 10 replications meet every requirement)" in text
+    assert "wrong minimum (median vane residual 3-sigma 0.15 -> 11.00 deg, 10 of 10 reported as " \
+           "converged" in text
     assert "started at their mean, every requirement holds at 3" in text and "start value" in text
     assert "at 10 it is still lost for vane AOA" in text
 
@@ -109,7 +112,7 @@ def test_conclusion_for_an_unmodelled_factor_cites_the_residuals_and_failed_esti
     rows = pd.DataFrame([_row("none", 0.14), _row("light", 0.8, resid=0.9, n_ok=8, n_failed=2,
                                                   failures="2 estimation iteration limit")])
     text = tolerance.conclusion(f, rows)
-    assert "already" not in text and "at light it is lost for vane AOA" in text
+    assert "holds at none" in text and "already at light it is lost for vane AOA" in text
     assert "grows from 0.15 to 0.90 deg" in text
     assert "failed estimations: 2 of 10 at light (2 estimation iteration limit)" in text
 
