@@ -9,6 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from campaigns.montecarlo import read_replication
+from campaigns.montecarlo.runner import replication_file
 from campaigns.studies import tolerance
 
 
@@ -121,3 +123,16 @@ def test_failing_groups_ignores_missing_sensors():
     row = _row("1", 0.6)
     row["acc_side-probe AOA"] = math.nan
     assert tolerance.failing_groups(row) == ["vane AOA"]
+
+
+def test_swept_truth_is_the_truth_the_replication_compared_with(tiny_run):
+    """The projection used for points whose estimations all failed gives the truths a converged
+    replication of the same point holds."""
+    point = next(p for p in tolerance.study_points(tolerance.TINY, tiny_run)
+                 if p.factor.name == "flow_delay" and p.level == 100.0)
+    values, families = tolerance.swept_truth(point)["tau"]
+    rep = read_replication(replication_file(point.directory, 0)).parameters
+    rep = rep[rep["family"].isin(families)]
+    assert len(values) == len(rep) >= 2 and sorted(families) == sorted(rep["family"])
+    np.testing.assert_allclose(np.sort(values), np.sort(rep["truth"].to_numpy()), rtol=1e-9)
+    assert np.all(values > 80.0) and np.all(values < 100.0)  # 100 ms, less the IMU's lag

@@ -871,7 +871,8 @@ def _bounds_text(factors: Sequence[Factor]) -> str:
 
 
 def _invocations_text(invocations: Sequence[Mapping[str, Any]]) -> list[str]:
-    """The cost lines: this invocation, and all of them when the study was resumed."""
+    """The cost lines: this invocation, and every one when the study was resumed (the code each
+    ran, at its start -> end when the shared tree moved meanwhile)."""
     now = invocations[-1]
     lines = [f"this invocation: wall {now['wall_s']:.0f} s, CPU {now['cpu_s']:.0f} s in its processes, "
              f"{now['replications_run']} replications computed; load average {now['load_start']:.1f} at "
@@ -880,8 +881,9 @@ def _invocations_text(invocations: Sequence[Mapping[str, Any]]) -> list[str]:
         lines.append(f"the replications were computed over {len(invocations)} invocations (resumed): wall "
                      f"{sum(i['wall_s'] for i in invocations):.0f} s, CPU "
                      f"{sum(i['cpu_s'] for i in invocations):.0f} s, "
-                     f"{sum(i['replications_run'] for i in invocations)} replications in all; code "
-                     + ", ".join(sorted({str(i['code']) for i in invocations})))
+                     f"{sum(i['replications_run'] for i in invocations)} replications in all:")
+        lines += [f"  {i.get('started_utc', '?')}: {i['replications_run']} replications, wall "
+                  f"{i['wall_s']:.0f} s, CPU {i['cpu_s']:.0f} s, code {i['code']}" for i in invocations]
     return lines
 
 
