@@ -767,7 +767,7 @@ def plot(df: pd.DataFrame, factors: Sequence[Factor], path: Path, replications: 
     panel holds the legend."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-    from matplotlib.ticker import FormatStrFormatter
+    from matplotlib.ticker import FormatStrFormatter, LogLocator
 
     shown = [f for f in factors if f.variant_of is None]
     ncol = 3
@@ -787,8 +787,9 @@ def plot(df: pd.DataFrame, factors: Sequence[Factor], path: Path, replications: 
             ax.axhline(req, color="k", ls="--", lw=0.8)
         ax.set_yscale("log")
         ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.yaxis.set_minor_locator(LogLocator(base=10.0, subs=(2.0, 5.0)))
         ax.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
-        ax.tick_params(axis="y", which="minor", labelsize=6)
+        ax.tick_params(axis="y", which="minor", labelsize=7)
         ax.set_xlabel(f.title)
         ax.set_ylabel("|mean| + 3 sigma vs truth, deg")
         ax.set_title(title, fontsize=9)
