@@ -76,7 +76,8 @@ def test_bins_and_stages(workflow):
     used = workflow.maneuvers[workflow.maneuvers["used"]]
     assert sorted(used[~used["gear_down"]]["bin"].unique()) == [0.5, 0.6]
     assert sorted(used[used["gear_down"]]["bin"].unique()) == [0.3]
-    assert workflow.success, [s.result.message for s in (*workflow.first, *workflow.final, *workflow.gear_down)]
+    stages = (*workflow.first, *workflow.final, *workflow.gear_down)
+    assert workflow.success, [s.result.message for s in stages]
 
 
 def test_installation_biases_recovered(workflow):
@@ -94,7 +95,8 @@ def test_every_sensor_meets_its_accuracy_against_the_truth(workflow):
     acc, _ = true_accuracy(workflow)
     assert set(acc["gear"]) == {"up", "down"}
     failed = acc[~acc["passed"]]
-    assert failed.empty, "calibrated - true flow angle exceeds the desired 3-sigma accuracy:\n" + failed.to_string()
+    assert failed.empty, ("calibrated - true flow angle exceeds the desired 3-sigma accuracy:\n"
+                          + failed.to_string())
 
 
 def test_final_estimates_recovered(workflow):
