@@ -67,7 +67,8 @@ Z_MAX = 3.0
 #: expected by chance); all 50 global ones together chi2 = 65 on 50 (p = 0.07).
 #: Fixed since: the per-maneuver daz/dq of the sharpest pitch maneuvers (|z| 3.0-4.3) and
 #: tau_dgps (z = 5.6) came from the 10 Hz DGPS height being interpolated onto the 40 Hz base (a
-#: low-pass the model read as a delay); it is now fitted at its own samples (own-rate channels), and tau_h, held at 0 while its truth is -7.8 ms, is free.
+#: low-pass the model read as a delay); it is now fitted at its own samples (own-rate channels),
+#: and tau_h, held at 0 while its truth is -7.8 ms, is free.
 #: Other seeds: seed 12 puts the vane biases and f1 off by ~0.005 deg together (one direction of
 #: highly correlated parameters, up to 4.6 sigma): the Monte Carlo campaigns of issue 5 measure
 #: whether the Cramér-Rao bound is honest across replications.
