@@ -243,7 +243,8 @@ def cost_text(out_dir: Path, wall_s: float, computed: int, replications: int, ru
     """Log this invocation's cost in ``out_dir/invocations.jsonl`` and say what the study cost in all
     (a resumed study computes only what is missing)."""
     log = out_dir / "invocations.jsonl"
-    entry = {"wall_s": round(wall_s, 1), "computed": computed, "replications": replications, "runs": runs}
+    entry = {"wall_s": round(wall_s, 1), "computed": computed, "replications": replications, "runs": runs,
+             "code": code_commit()}
     with open(log, "a") as fh:
         fh.write(json.dumps(entry) + "\n")
     past = [json.loads(line) for line in log.read_text().splitlines() if line.strip()]
@@ -251,8 +252,9 @@ def cost_text(out_dir: Path, wall_s: float, computed: int, replications: int, ru
             f"{computed} replications computed by this invocation)")
     if len(past) > 1:
         total = sum(e["wall_s"] for e in past)
+        codes = ", ".join(dict.fromkeys(e.get("code", "?") for e in past if e["computed"]))
         text += (f"; over the {len(past)} invocations into this directory: {total:.0f} s, "
-                 f"{sum(e['computed'] for e in past)} replications computed")
+                 f"{sum(e['computed'] for e in past)} replications computed (code {codes or '-'})")
     return text
 
 
@@ -393,6 +395,15 @@ def parameter_names(metrics: Mapping[Variant, RunMetrics]) -> tuple[list[str], l
 # ---------------------------------------------------------------------------- machine, formatting
 
 
+def code_commit() -> str:
+    """The working tree's commit (short hash), '?' outside git."""
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                              cwd=Path(__file__).parent, check=False).stdout.strip() or "?"
+    except OSError:
+        return "?"
+
+
 def machine_text() -> str:
     """CPU model, cores, memory, software versions and the code's commit."""
     cpu = platform.processor() or "?"
@@ -409,11 +420,7 @@ def machine_text() -> str:
         mem = f", {kib / 2**20:.0f} GiB"
     except (OSError, ValueError, IndexError):
         pass
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=Path(__file__).parent, check=False).stdout.strip() or "?"
-    except OSError:
-        commit = "?"
+    commit = code_commit()
     versions = ", ".join(f"{k} {v}" for k, v in software_versions().items())
     return (f"machine: {cpu}, {os.cpu_count()} cores{mem}; {versions}\n"
             f"code: {commit} (the shared working tree)")
@@ -461,7 +468,10 @@ def ratios(m: RunMetrics, ref: RunMetrics | None, column: str, names: Sequence[s
     p, q = (m.parameters_unheld, ref.parameters_unheld) if unheld else (m.parameters, ref.parameters)
     if not len(p) or not len(q):
         return np.array([])
+    # a parameter held in every replication of either run (no Cramér-Rao std) is not compared: its
+    # "scatter" is that of its truth around the start value
     out = [p.at[n, column] / q.at[n, column] for n in names if n in p.index and n in q.index
+           and np.isfinite(p.at[n, "crb_mean"])
            and q.at[n, "crb_mean"] < WELL_DETERMINED.get(str(q.at[n, "unit"]), math.inf)]
     a = np.asarray(out, dtype=float)
     return a[np.isfinite(a) & (a > 0)]
@@ -681,7 +691,8 @@ def conclusion(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names
     less_accurate = any(x > ACCURACY_TOLERANCE for x in acc)
     robust = cold is not None and cold[0].used < cold[1].used
     parts = [f"in calm air the unsplit {config.variants[0].duration_s:g} s run carries "
-             + ("less" if less_info else "as much") + " information (sideslip Cramer-Rao bounds "
+             + ("less" if less_info else "at least as much" if max(crb, default=1.0) <= 1.0 else "as much")
+             + " information (sideslip Cramer-Rao bounds "
              f"{_range(crb)} those of the split run) and calibrates the sideslip channels "
              + ("less" if less_accurate else "as") + f" accurately ({_range(acc)}, the 3-sigma being mostly "
              "sensor noise)"]
