@@ -346,6 +346,11 @@ def findings(config: StudyConfig, metrics: Mapping[ManeuverSet, SetMetrics]) -> 
                 f"+-{DESIRED_VANE_DEG:g} deg with margin on the alpha range they fly (N={sets[0].n}: median "
                 f"{fmt(acc, '.2f')}, 90 % {fmt(p90, '.2f')} deg, 3 x vane-bias scatter "
                 f"{fmt(3.0 * first.param('b_l[PV1]', 'mc_std'), '.2f')} deg)")
+        lost = [f"{metrics[s].wrong_minimum} wrong minima (reported as converged) and {metrics[s].failed} "
+                f"failures in {metrics[s].requested} replications at N={s.n}"
+                for s in sets if metrics[s].wrong_minimum or metrics[s].failed]
+        if lost:
+            text += " (left out: " + "; ".join(lost) + ")"
         best = smallest_sufficient(config, metrics, sets)
         if best is None:
             lines.append(text + "; no set both covers the bin's alpha range and meets it with margin")
