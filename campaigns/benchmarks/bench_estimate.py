@@ -131,21 +131,11 @@ def _machine() -> list[str]:
     import numpy
     import scipy
 
-    cpu = platform.processor() or "?"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    mem = "?"
-    try:
-        kb = int(next(x for x in Path("/proc/meminfo").read_text().splitlines()
-                      if x.startswith("MemTotal")).split()[1])
-        mem = f"{kb / 1024 ** 2:.1f} GiB"
-    except (OSError, StopIteration):
-        pass
+    from campaigns.machine import cpu_model, memory_gib
+
+    cpu = cpu_model()
+    gib = memory_gib()
+    mem = "?" if gib is None else f"{gib:.1f} GiB"
     blas = "?"
     try:
         cfg = numpy.show_config(mode="dicts")

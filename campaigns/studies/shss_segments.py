@@ -47,7 +47,6 @@ import argparse
 import json
 import math
 import os
-import platform
 import shlex
 import subprocess
 import sys
@@ -60,6 +59,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from campaigns.machine import cpu_model, memory_gib
 from campaigns.montecarlo import parse_scenario, run_montecarlo
 from campaigns.montecarlo.replication import ReplicationResult
 from campaigns.montecarlo.summary import load_results, summarize_results
@@ -406,20 +406,9 @@ def code_commit() -> str:
 
 def machine_text() -> str:
     """CPU model, cores, memory, software versions and the code's commit."""
-    cpu = platform.processor() or "?"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    mem = ""
-    try:
-        kib = int(Path("/proc/meminfo").read_text().split()[1])
-        mem = f", {kib / 2**20:.0f} GiB"
-    except (OSError, ValueError, IndexError):
-        pass
+    cpu = cpu_model()
+    gib = memory_gib()
+    mem = "" if gib is None else f", {gib:.0f} GiB"
     commit = code_commit()
     versions = ", ".join(f"{k} {v}" for k, v in software_versions().items())
     return (f"machine: {cpu}, {os.cpu_count()} cores{mem}; {versions}\n"

@@ -45,7 +45,6 @@ import copy
 import json
 import math
 import os
-import platform
 import resource
 import shlex
 import subprocess
@@ -63,6 +62,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from campaigns.machine import cpu_model, memory_gib
 from campaigns.montecarlo import ScenarioError, parse_scenario, run_montecarlo
 from campaigns.montecarlo.replication import Models, ReplicationResult, fly, write_scratch_dataset
 from campaigns.montecarlo.summary import CALIBRATION_KINDS, load_results, summarize_results
@@ -831,20 +831,9 @@ def code_version() -> str:
 def machine_text(code_at_start: str | None = None) -> str:
     """CPU model, cores, memory, software versions and the code's commit (at the start and the end
     of the run: other engineers commit to the shared tree meanwhile)."""
-    cpu = platform.processor() or "?"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    mem = ""
-    try:
-        kib = int(Path("/proc/meminfo").read_text().split()[1])
-        mem = f", {kib / 2**20:.0f} GiB"
-    except (OSError, ValueError, IndexError):
-        pass
+    cpu = cpu_model()
+    gib = memory_gib()
+    mem = "" if gib is None else f", {gib:.0f} GiB"
     versions = ", ".join(f"{k} {v}" for k, v in software_versions().items())
     end = code_version()
     code = end if code_at_start in (None, end) else f"{code_at_start} at the start, {end} at the end"
