@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 
 from estimator.report import (
+    Banner,
     Section,
     accuracy_table_html,
     figure_bias_vs_mach,
@@ -20,7 +21,37 @@ from estimator.report import (
     figure_time_history,
     write_report,
 )
+from estimator.verdict import Severity, Verdict
 from estimator.workflow import RAD2DEG, WorkflowResult
+
+_LEVEL = {Verdict.SUCCESS: "success", Verdict.SUCCESS_WITH_WARNINGS: "warning", Verdict.FAILURE: "failure"}
+
+
+def verdict_banner(wf: WorkflowResult) -> Banner:
+    """The workflow's verdict and its failures and warnings (most severe first), for the report's top."""
+    v = wf.verdict
+    shown = sorted((f for f in wf.findings if f.severity >= Severity.WARNING), key=lambda f: -int(f.severity))
+    return Banner(_LEVEL[v], f"{v.name.replace('_', ' ')}: {v.text}", tuple(f.text() for f in shown))
+
+
+def _held_parameters(wf: WorkflowResult) -> pd.DataFrame:
+    """Parameters a stage held or left on a bound, with the reason."""
+    frames = []
+    for st in wf.stages:
+        df = st.result.to_pandas()
+        df = df[df["state"].isin(["held", "on_bound"])]
+        if len(df):
+            frames.append(df[["kind", "state", "value_display", "display_unit", "reason"]].assign(
+                stage=st.name, mach=st.mach, gear="down" if st.gear_down else "up"))
+    return pd.concat(frames).reset_index() if frames else pd.DataFrame()
+
+
+def _fit_quality(wf: WorkflowResult) -> pd.DataFrame:
+    """The fit-quality diagnostics of every stage (one row per stage, maneuver and channel)."""
+    frames = [st.result.diagnostics.assign(stage=st.name, mach=st.mach,
+                                           gear="down" if st.gear_down else "up")
+              for st in wf.stages if st.result.diagnostics is not None and len(st.result.diagnostics)]
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
 def _has_truth(wf: WorkflowResult) -> bool:
@@ -44,16 +75,34 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
     summary = (
         f"{len(wf.maneuvers)} maneuvers from {wf.maneuvers['aircraft'].nunique()} aircraft; "
         f"{len(used)} used in {len(counts)} Mach bins ({per_bin}). "
-        f"Workflow wall time {wf.elapsed_s:.0f} s; all estimations converged: {wf.success}.\n"
+        f"Workflow wall time {wf.elapsed_s:.0f} s. Verdict: {wf.verdict.name.replace('_', ' ').lower()} "
+        f"({wf.verdict.text}).\n"
         + "\n".join(wf.notes)
     )
     stages = pd.DataFrame([{"step": s.name, "mach": s.mach, "gear": "down" if s.gear_down else "up",
                             "maneuvers": len(s.problem.maneuvers),
                             "free_parameters": int(s.problem.parameters.free_mask.sum()),
-                            "iterations": s.result.iterations, "status": s.result.message}
-                           for s in (*wf.first, *wf.final, *wf.gear_down)])
-    sections.append(Section("Summary", summary, tables=[("Estimations", stages)],
-                            csv=[("maneuvers.csv", wf.maneuvers)]))
+                            "iterations": s.result.iterations,
+                            "verdict": s.result.verdict.name.replace("_", " ").lower(),
+                            "failures": len(s.result.failures), "warnings": len(s.result.warnings),
+                            "solver": s.result.message}
+                           for s in wf.stages])
+    findings = wf.findings_table()
+    held = _held_parameters(wf)
+    quality = _fit_quality(wf)
+    tables = [("Estimations", stages), ("Failures and warnings", findings)]
+    csvs = [("maneuvers.csv", wf.maneuvers), ("findings.csv", findings)]
+    if len(held):
+        tables.append(("Parameters held (not estimated) or on a bound, and why", held))
+        csvs.append(("held_parameters.csv", held))
+    if len(quality):
+        csvs.append(("fit_quality.csv", quality))
+    sections.append(Section("Summary and verdict", summary, tables=tables, csv=csvs))
+    if not wf.final:
+        out = {"accuracy": wf.accuracy, "true_accuracy": None, "installation_recovery": None,
+               "recovery": None}
+        out["report"] = write_report(out_dir, title, sections, banner=verdict_banner(wf))
+        return out
     sections.append(Section(
         "Table 2: 3-sigma of measurement minus model",
         "Per sensor and Mach bin at the final estimate (installation biases fixed), 3 x rms about zero, "
@@ -156,5 +205,5 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
                                 "per kind; every estimate in recovery.csv.",
                                 tables=[("Within 3 sigma", summ.reset_index()), ("All", rec.reset_index())],
                                 csv=[("recovery.csv", rec.reset_index())]))
-    out["report"] = write_report(out_dir, title, sections)
+    out["report"] = write_report(out_dir, title, sections, banner=verdict_banner(wf))
     return out

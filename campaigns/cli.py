@@ -15,6 +15,14 @@ import sys
 import time
 from pathlib import Path
 
+#: Exit status of ``fpr calibrate`` and ``fpr demo`` per verdict (2: bad input or usage).
+EXIT_STATUS = {"SUCCESS": 0, "SUCCESS_WITH_WARNINGS": 3, "FAILURE": 1}
+
+
+def exit_status(verdict) -> int:
+    """The exit status that carries a verdict (:data:`EXIT_STATUS`)."""
+    return EXIT_STATUS[verdict.name]
+
 FLY_EPILOG = """\
 A campaign TOML names the fleet, Mach numbers, maneuvers, errors and winds; see
 campaigns/default.toml (the default campaign: five aircraft, seven configurations, Mach 0.3-0.9,
@@ -114,7 +122,7 @@ def _demo(args: argparse.Namespace) -> int:
         problem = problem_from_dataset(out)
     report_dir = out.parent / f"{out.name}-report"
     ns = argparse.Namespace(overwrite=True, max_mach_variation=0.05, reference_mach=0.5, max_iterations=40,
-                            no_colored=False, verbose=False)
+                            no_colored=False, verbose=False, robust=False, start="staged")
     code = _workflow(problem, report_dir, ns)
     print(f"fpr demo: {time.perf_counter() - t0:.0f} s in all")
     return code
@@ -136,10 +144,18 @@ sensor positions, CG, the channel models and which parameters are free; see the 
 `fpr fly` works too (then --select-* flags pick maneuvers, and the recovery table compares each
 estimate with the injected truth).
 
-Writes to --out: result.json (everything), parameters.csv (estimates, Cramer-Rao and
-coloured-residual standard deviations), residuals.csv (per maneuver and channel),
-correlation.csv, time_history_match.png, residual_crossplots.png, and for synthetic datasets
-recovery.csv.
+Every estimation ends with a verdict: SUCCESS, SUCCESS WITH WARNINGS (read each warning) or
+FAILURE (do not use the estimates), with its reasons per channel, maneuver and time: the fit is
+judged against each channel's own noise floor (a wrong minimum, a stuck or dead channel, a unit
+or sign error, outliers, turbulence), and every parameter the data do not determine is reported
+as held or on a bound, with why. Exit status: 0 success, 3 success with warnings, 1 failure,
+2 bad input or usage.
+
+Writes to --out: result.json (everything, the verdict first), parameters.csv (estimates,
+Cramer-Rao and coloured-residual standard deviations, state: estimated / held / on_bound / fixed
+and why), findings.csv (the verdict's reasons), fit_quality.csv (per maneuver and channel),
+residuals.csv, correlation.csv, time_history_match.png, residual_crossplots.png, and for synthetic
+datasets recovery.csv.
 
 examples:
   fpr calibrate my_flight.toml --out results/flight421
@@ -169,6 +185,12 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--verbose", action="store_true", help="one line per iteration")
     p.add_argument("--single", action="store_true",
                    help="one estimation over every selected maneuver instead of the Mach-bin workflow")
+    p.add_argument("--robust", action="store_true",
+                   help="exclude the residual outliers the diagnostics find and estimate again (each "
+                   "excluded sample is reported)")
+    p.add_argument("--start", choices=["staged", "given", "both"], default="staged",
+                   help="start: staged (attitude, then speed and height, then flow channels; the "
+                   "default), given (the problem's start values), or both (the better verdict kept)")
     p.add_argument("--max-mach-variation", type=float, default=0.05,
                    help="workflow: leave out maneuvers whose Mach varies by more (default 0.05)")
     p.add_argument("--reference-mach", type=float, default=0.5,
@@ -216,21 +238,23 @@ def _calibrate(args: argparse.Namespace) -> int:
     if not args.single:
         return _workflow(problem, out, args)
     single_files = {"result.json", "parameters.csv", "residuals.csv", "correlation.csv", "recovery.csv",
+                    "findings.csv", "fit_quality.csv",
                     "time_history_match.png", "residual_crossplots.png"}
     if not _prepare_out(out, args.overwrite, lambda p: p.name in single_files):
         return 2
     n_samples = sum(m.n for m in problem.maneuvers)
     print(f"{len(problem.maneuvers)} maneuvers, {n_samples} samples, {len(problem.channels)} "
           f"channels, {int(problem.parameters.free_mask.sum())} free parameters")
-    result = estimate(problem, SolverOptions(max_iterations=args.max_iterations,
-                                             colored=not args.no_colored, verbose=args.verbose))
+    result = estimate(problem, SolverOptions(max_iterations=args.max_iterations, colored=not args.no_colored,
+                                             verbose=args.verbose, robust=args.robust,
+                                             start=_starts(args.start)))
     print(result.summary())
     result.to_json(out / "result.json")
     result.to_csv(out)
     if any("dataset" in m.meta for m in problem.maneuvers):
         from campaigns.truth import recovery_table, true_parameters
 
-        truth = true_parameters(problem)
+        truth = true_parameters(problem, result.free_estimated)
         rec = recovery_table(result, truth)
         rec.to_csv(out / "recovery.csv")
         shown = rec[rec["kind"].isin(["time_delay", "bias", "scale", "table"])]
@@ -241,7 +265,12 @@ def _calibrate(args: argparse.Namespace) -> int:
     if not args.no_plots:
         save_standard_figures(problem, result, out)
     print(f"\nresults in {out}")
-    return 0 if result.success else 1
+    print(f"VERDICT: {result.verdict.name.replace('_', ' ')} — {result.verdict.text}")
+    return exit_status(result.verdict)
+
+
+def _starts(choice: str) -> str | tuple[str, ...]:
+    return ("staged", "given") if choice == "both" else choice
 
 
 def _prepare_out(out: Path, overwrite: bool, ours) -> bool:
@@ -292,12 +321,18 @@ def _workflow(problem, out: Path, args: argparse.Namespace) -> int:
           "Mach-bin calibration workflow (paper §4)")
     opt = WorkflowOptions(max_mach_variation=args.max_mach_variation, reference_mach=args.reference_mach,
                           solver=SolverOptions(max_iterations=args.max_iterations,
-                                               colored=not args.no_colored, verbose=args.verbose),
+                                               colored=not args.no_colored, verbose=args.verbose,
+                                               robust=args.robust, start=_starts(args.start)),
                           progress=print)
     wf = run_workflow(problem, opt)
     print("\n".join(wf.notes))
     print(f"workflow done in {wf.elapsed_s:.0f} s; writing the report")
     tables = build_report(wf, out, f"Flow-angle calibration: {problem.source}")
+    if not wf.final:
+        print()
+        print(_verdict_text(wf))
+        print(f"\nreport: {tables['report']}")
+        return exit_status(wf.verdict)
     print()
     print(_fmt_table2(tables["accuracy"], "Table 2, measurement - model (3-sigma)"))
     if tables["true_accuracy"] is not None:
@@ -317,8 +352,22 @@ def _workflow(problem, out: Path, args: argparse.Namespace) -> int:
             print("\nrecovery: fraction of estimates within 3 Cramer-Rao / coloured-residual sigmas of "
                   "their truth")
             print(summ.to_string(float_format=lambda v: f"{v:.2f}"))
+    print()
+    print(_verdict_text(wf))
     print(f"\nreport: {tables['report']}")
-    return 0 if wf.success else 1
+    return exit_status(wf.verdict)
+
+
+def _verdict_text(wf, max_lines: int = 15) -> str:
+    """The workflow's verdict and its failures and warnings, most severe first."""
+    from estimator.verdict import Severity
+
+    shown = sorted((f for f in wf.findings if f.severity >= Severity.WARNING), key=lambda f: -int(f.severity))
+    lines = [f"VERDICT: {wf.verdict.name.replace('_', ' ')} — {wf.verdict.text}"]
+    lines += [f"  {f.text()}" for f in shown[:max_lines]]
+    if len(shown) > max_lines:
+        lines.append(f"  ... {len(shown) - max_lines} more in findings.csv")
+    return "\n".join(lines)
 
 
 def build_parser() -> argparse.ArgumentParser:

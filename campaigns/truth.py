@@ -58,8 +58,17 @@ def _interp_truth(tr: pd.DataFrame, col: str, t: np.ndarray) -> np.ndarray:
     return np.interp(t, tr["t_s"].to_numpy(), tr[col].to_numpy())
 
 
-def true_parameters(problem: Problem) -> TruthProjection:
-    """True values of the problem's parameters (see the module docstring)."""
+def true_parameters(problem: Problem, estimated: np.ndarray | None = None) -> TruthProjection:
+    """True values of the problem's parameters (see the module docstring).
+
+    Parameters
+    ----------
+    problem : the problem, built from a synthetic dataset.
+    estimated : (P,) the parameters the estimator estimated (``EstimationResult.free_estimated``);
+        the projection frees the same calibration parameters, so that where the estimator held one
+        member of a confounded set (a table value anchoring the biases) the truth is anchored
+        there too. None: the problem's free parameters.
+    """
     ps = problem.parameters
     specs = ps.specs
     values: dict[str, float] = {}
@@ -93,7 +102,8 @@ def true_parameters(problem: Problem) -> TruthProjection:
                 d = lag(inj, _dataset_column(ch.column))
                 if d is not None:
                     values[_key(problem, ch.delay, m, ch)] = d
-    structure = _project_calibration(problem, truths, values, chan_col)
+    free = ps.free_mask if estimated is None else np.asarray(estimated, dtype=bool)
+    structure = _project_calibration(problem, truths, values, chan_col, free)
     return TruthProjection(values=values, structure_rms=structure)
 
 
@@ -147,7 +157,8 @@ def channel_values(problem: Problem, theta: np.ndarray, m, ch, tables: dict[str,
     return params, tabs
 
 
-def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> dict[str, float]:
+def _project_calibration(problem: Problem, truths, values: dict, chan_col, free: np.ndarray
+                         ) -> dict[str, float]:
     """Least-squares fit of the calibration parameters to the clean channels (module docstring).
 
     Gauss-Newton from the problem's start values, projected onto the parameters' bounds: most
@@ -180,7 +191,7 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> di
                     sig[name] = np.interp(t, m.t_s, m.signals[name])
             cases.append((ch, m, sig, y))
     theta = ps.values.copy()
-    free_calib = [p.key for p in ps if p.free and p.kind in calib_kinds]
+    free_calib = [p.key for p, f in zip(ps, free, strict=True) if f and p.kind in calib_kinds]
     index = {k: i for i, k in enumerate(free_calib)}
     if not free_calib or not cases:
         return {}
@@ -232,10 +243,10 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col) -> di
 
 
 def recovery_table(result: EstimationResult, truth: TruthProjection) -> pd.DataFrame:
-    """Estimate, truth, Cramér-Rao and coloured deviations and z-scores of every free parameter
-    that has a truth, in display units."""
+    """Estimate, truth, Cramér-Rao and coloured deviations and z-scores of every estimated
+    parameter that has a truth, in display units (a held one has no deviation to judge it by)."""
     df = result.to_pandas()
-    df = df[df["free"] & df.index.isin(list(truth.values))].copy()
+    df = df[df["estimated"] & df.index.isin(list(truth.values))].copy()
     df["truth_display"] = [truth.values[k] * result.parameters[k].display_scale for k in df.index]
     df["error_display"] = df["value_display"] - df["truth_display"]
     df["z_crb"] = df["error_display"] / df["std_crb_display"]

@@ -116,7 +116,7 @@ def installation_recovery(wf: WorkflowResult) -> pd.DataFrame:
     rows = []
     for mach, g in wf.installation.groupby("mach"):
         st = next(s for s in wf.first if s.mach == mach)
-        truth = true_parameters(st.problem).values
+        truth = true_parameters(st.problem, st.result.free_estimated).values
         ac = [a for a in sorted({m.aircraft for m in st.problem.maneuvers})
               if f"{bl}[{a}]" in truth and f"{br}[{a}]" in truth]
         ap = apportion({a: truth[f"{bl}[{a}]"] for a in ac}, {a: truth[f"{br}[{a}]"] for a in ac})
@@ -144,7 +144,7 @@ def recovery(wf: WorkflowResult) -> pd.DataFrame:
     """Every final estimate with a truth (calibration parameters, time delays, IMU biases)."""
     frames = []
     for st in (*wf.final, *wf.gear_down):
-        t = recovery_table(st.result, true_parameters(st.problem))
+        t = recovery_table(st.result, true_parameters(st.problem, st.result.free_estimated))
         t = t[t["kind"].isin(["imu_bias", "time_delay", "bias", "scale", "table"])].copy()
         t.insert(0, "gear", "down" if st.gear_down else "up")
         t.insert(0, "mach", st.mach)

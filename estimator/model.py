@@ -59,8 +59,10 @@ _FLOW_KIND = {"alpha_s": "alpha", "beta_s": "beta", "flank_s": "flank",
 _ORIGIN = np.zeros(3)
 #: Problems with at least this many samples evaluate their channels on two threads.
 _THREADED_SAMPLES = 20000
-#: Fixed-point iterations at most for an implicit (``zhat``) model, and their tolerance.
+#: Newton iterations at most for an implicit (``zhat``) model, plain fixed-point iterations at most
+#: after them (a safeguard), and their tolerance.
 IMPLICIT_ITERATIONS = 30
+IMPLICIT_FIXED_POINT_ITERATIONS = 300
 IMPLICIT_TOL = 1e-13
 
 
@@ -408,6 +410,18 @@ class Model:
             lay = self._layouts[ks] = _Layout(self, ks)
         return lay
 
+    def channel_layout(self) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
+        """The static structure of every channel over all maneuvers, as :meth:`evaluate_all` gives it.
+
+        Returns
+        -------
+        One ``(channel, mans, colmap, rseg)`` per channel present: channel index, (B,) maneuver
+        indices of its blocks, (B, m) parameter index of each Jacobian slot per block, (B+1,) row
+        offsets of the blocks in the cost.
+        """
+        lay = self._layout(tuple(range(len(self.problem.maneuvers))))
+        return [(cl.c, cl.mans, cl.colmap, cl.rseg) for cl in lay.channels]
+
     # ------------------------------------------------------------------ evaluation
     def integrate(self, values: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """States (N, 7) and sensitivities (N, 7, 13) of maneuver k (with the "imu_point" lever
@@ -600,10 +614,11 @@ class Model:
 
         ``zhat`` is the noise-free model of the measurement: a table of the measured angle,
         evaluated at the *modelled* angle, avoids the errors-in-variables bias that the noisy
-        measurement ``z`` as argument causes (SPEC §5). Fixed-point iteration from ``z``, each
-        maneuver until its own iterates agree to ``IMPLICIT_TOL`` (the iteration is sample-wise, so
-        all maneuvers iterate together and a converged one is held); the derivatives follow from
-        ``dy = dF + F_zhat dy``, i.e. ``dy = dF / (1 - F_zhat)``.
+        measurement ``z`` as argument causes (SPEC §5). Newton's method on ``y - F(y) = 0`` from
+        ``z`` (then, should it not settle, fixed-point iteration), each maneuver until its own steps
+        are below ``IMPLICIT_TOL`` (the iteration is sample-wise, so all maneuvers iterate together
+        and a converged one is held); the derivatives follow from ``dy = dF + F_zhat dy``, i.e.
+        ``dy = dF / (1 - F_zhat)``.
 
         Returns
         -------
@@ -614,15 +629,35 @@ class Model:
         y = np.asarray(cl.z, dtype=float)
         active = np.ones(cl.lens.size, dtype=bool)
         starts = cl.cseg[:-1]
+        zhat = frozenset({"zhat"})
+
+        def settle(step: np.ndarray) -> bool:
+            """Apply a step where the maneuver is still iterating; True when all have converged."""
+            nonlocal y, active
+            dev = np.maximum.reduceat(np.abs(step), starts) if starts.size else np.zeros(0)
+            y = np.where(np.repeat(active, cl.lens), y - step, y)
+            active &= ~(dev < IMPLICIT_TOL)
+            return not active.any()
+
+        done = False
+        # Newton on y - F(y) = 0: a plain fixed-point iteration contracts only by |dF/dzhat| per
+        # step, too slowly once a table's slope approaches its bound (f4 = 0.5); where 1 - F' is
+        # (next to) zero it takes the plain step
         for _ in range(IMPLICIT_ITERATIONS):
             sig["zhat"] = y
-            y_new = np.broadcast_to(expr.value(sig, params, tables), y.shape)
-            dev = np.maximum.reduceat(np.abs(y_new - y), starts) if starts.size else np.zeros(0)
-            y = np.where(np.repeat(active, cl.lens), y_new, y)
-            active &= ~(dev < IMPLICIT_TOL)
-            if not active.any():
+            d = expr.evaluate(sig, params, tables, zhat)
+            r = y - np.broadcast_to(d.value, y.shape)
+            denom = 1.0 - np.broadcast_to(d.dsignal.get("zhat", 0.0), y.shape)
+            if settle(np.where(np.abs(denom) > 1e-3, r / np.where(denom == 0.0, 1.0, denom), r)):
+                done = True
                 break
-        else:
+        # a safeguard for a piecewise-linear table whose kinks make Newton cycle: the fixed point
+        for _ in range(0 if done else IMPLICIT_FIXED_POINT_ITERATIONS):
+            sig["zhat"] = y
+            if settle(y - np.broadcast_to(expr.value(sig, params, tables), y.shape)):
+                done = True
+                break
+        if not done:
             raise ModelEvaluationError(
                 f"channel {ch.name}: the implicit model {ch.model!r} does not converge (its "
                 "dependence on zhat must be weaker than 1:1); use z instead of zhat or bound the tables"

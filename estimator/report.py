@@ -35,6 +35,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 __all__ = [
+    "Banner",
     "Section",
     "accuracy_table_html",
     "figure_bias_vs_mach",
@@ -520,6 +521,26 @@ def accuracy_table_html(acc: pd.DataFrame, title: str) -> str:
 
 
 @dataclass(frozen=True)
+class Banner:
+    """The verdict at the top of the report.
+
+    Attributes
+    ----------
+    level : "success", "warning" or "failure" (its colour).
+    headline : one line, e.g. "FAILURE: do not use these estimates".
+    lines : the reasons, one per line (failures first).
+    """
+
+    level: str
+    headline: str
+    lines: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.level not in ("success", "warning", "failure"):
+            raise ValueError(f"Banner.level must be success, warning or failure, got {self.level!r}")
+
+
+@dataclass(frozen=True)
 class Section:
     """One section of the report, rendered in this order: text, tables, figures, CSV links.
 
@@ -567,7 +588,25 @@ p.legend span { padding: 0 0.3em; }
 p.note, ol.notes { font-size: 0.88em; color: #555; }
 ul.csv { font-size: 0.92em; }
 .tablewrap { overflow-x: auto; }
+div.verdict { border: 2px solid; border-radius: 4px; padding: 0.5em 1em; margin: 1em 0; }
+div.verdict h2 { border: none; margin: 0.2em 0; }
+div.verdict.success { border-color: #2e7d32; background: #e8f5e9; }
+div.verdict.warning { border-color: #e6a100; background: #fff8e1; }
+div.verdict.failure { border-color: #c62828; background: #ffebee; }
+div.verdict li { font-size: 0.92em; }
 """
+
+
+def _banner_html(banner: Banner | None, max_lines: int) -> str:
+    if banner is None:
+        return ""
+    e = html.escape
+    items = "".join(f"<li>{e(line)}</li>" for line in banner.lines[:max_lines])
+    more = len(banner.lines) - max_lines
+    if more > 0:
+        items += f"<li>... and {more} more (all in findings.csv)</li>"
+    return (f'<div class="verdict {banner.level}"><h2>{e(banner.headline)}</h2>'
+            + (f"<ul>{items}</ul>" if items else "") + "</div>\n")
 
 
 def _paragraphs(text: str) -> str:
@@ -608,6 +647,8 @@ def write_report(
     dpi: float = DEFAULT_DPI,
     max_table_rows: int = DEFAULT_MAX_TABLE_ROWS,
     float_format: Callable[[float], str] = "{:.4g}".format,
+    banner: Banner | None = None,
+    max_banner_lines: int = 25,
 ) -> Path:
     """Write the report: ``out_dir/report.html`` and the sections' CSV files.
 
@@ -625,6 +666,8 @@ def write_report(
     dpi : resolution of the embedded PNGs [dots per inch].
     max_table_rows : rows of a DataFrame shown in the HTML.
     float_format : formats floats in DataFrame tables.
+    banner : the verdict, shown above everything else.
+    max_banner_lines : reasons shown in the banner (the rest are counted).
 
     Returns
     -------
@@ -696,7 +739,8 @@ def write_report(
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
         f"<title>{e(title)}</title>\n<style>{_CSS}</style>\n</head>\n<body>\n"
         f"<header><h1>{e(title)}</h1><p>generated {now}</p></header>\n"
-        f"<nav><h2>Contents</h2><ol>{''.join(toc)}</ol></nav>\n"
+        + _banner_html(banner, max_banner_lines)
+        + f"<nav><h2>Contents</h2><ol>{''.join(toc)}</ol></nav>\n"
         + "".join(body)
         + "</body>\n</html>\n"
     )

@@ -1,14 +1,19 @@
-"""The estimation result: immutable, named, with units, deviations, status and message.
+"""The estimation result: immutable, named, with units, deviations, a verdict and a message.
 
-``EstimationResult.to_pandas()`` gives one row per parameter (SI and display units);
-``residuals_table()`` one row per maneuver and channel; ``to_json`` / ``to_csv`` write them.
-Status: 1 converged, 0 iteration limit, 2 no further decrease possible, -1 failed.
+``EstimationResult.to_pandas()`` gives one row per parameter (SI and display units, and what the
+estimator did with it: estimated, on a bound, held and why, or fixed); ``residuals_table()`` one
+row per maneuver and channel; ``findings_table()`` the findings behind the verdict;
+``diagnostics`` the fit-quality table; ``to_json`` / ``to_csv`` write them.
+
+``status`` is the solver's (:class:`~estimator.verdict.Status`: positive = converged);
+``verdict`` (:class:`~estimator.verdict.Verdict`) is what to act on: a converged fit can still be
+a failure (a wrong minimum, a stuck vane).
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -16,13 +21,18 @@ import pandas as pd
 
 from estimator.parameters import ParameterSet
 from estimator.problem import Problem
+from estimator.verdict import Finding, Severity, Status, Verdict, findings_frame, judge
 
-STATUS_TEXT = {1: "converged", 0: "iteration limit", 2: "stalled", -1: "failed"}
+#: Short text of each solver status code (for tables that store the code).
+STATUS_TEXT = {s.value: s.name.lower().replace("_", " ") for s in Status}
+#: What the estimator did with a parameter (:attr:`EstimationResult.state`).
+STATES = ("estimated", "on_bound", "held", "fixed", "not estimated")
 
 
 @dataclass(frozen=True)
 class Confounding:
-    """Parameters the data cannot separate: ``kind`` is "unidentifiable" or "correlated"."""
+    """Parameters the data cannot determine or separate: ``kind`` is "no_data", "undetermined",
+    "unidentifiable" or "correlated"."""
 
     parameters: tuple[str, ...]
     kind: str
@@ -55,6 +65,13 @@ class EstimationResult:
     residuals : per maneuver and channel residual statistics.
     iterations, cost_history, status, message, confounding, elapsed_s : how it went.
     g_mps2, source : the gravity used and where the problem came from.
+    free_estimated : (P,) the parameters estimated (free and not held).
+    state, state_reason : per parameter, one of :data:`STATES` and why (held: no data,
+        undetermined, unidentifiable; on a bound: which).
+    findings : what the fit-quality and identifiability checks found (the verdict's reasons).
+    verdict : success, success with warnings, or failure.
+    diagnostics : the fit-quality table, one row per maneuver and channel (None if not run).
+    outliers : (maneuver, channel) -> times (s) of the residual outliers the diagnostics found.
     """
 
     parameters: ParameterSet
@@ -66,7 +83,7 @@ class EstimationResult:
     residuals: tuple[ResidualStats, ...] = field(repr=False)
     iterations: int = 0
     cost_history: tuple[float, ...] = ()
-    status: int = -1
+    status: Status = Status.MODEL_ERROR
     message: str = ""
     confounding: tuple[Confounding, ...] = ()
     elapsed_s: float = 0.0
@@ -74,6 +91,12 @@ class EstimationResult:
     source: str = ""
     channel_display: dict[str, tuple[float, str]] = field(default_factory=dict, repr=False)
     free_estimated: np.ndarray | None = field(default=None, repr=False)
+    state: tuple[str, ...] = field(default=(), repr=False)
+    state_reason: tuple[str, ...] = field(default=(), repr=False)
+    findings: tuple[Finding, ...] = field(default=(), repr=False)
+    verdict: Verdict = Verdict.FAILURE
+    diagnostics: pd.DataFrame | None = field(default=None, repr=False)
+    outliers: dict[tuple[str, str], np.ndarray] = field(default_factory=dict, repr=False)
 
     @classmethod
     def build(cls, problem: Problem, values: np.ndarray, **kw) -> EstimationResult:
@@ -89,7 +112,27 @@ class EstimationResult:
 
     @property
     def success(self) -> bool:
-        return self.status == 1
+        """The verdict is a success (with or without warnings): see :attr:`verdict`."""
+        return self.verdict.success
+
+    @property
+    def converged(self) -> bool:
+        """The solver converged (which alone does not make a trustworthy result)."""
+        return Status(self.status).converged
+
+    @property
+    def warnings(self) -> tuple[Finding, ...]:
+        return tuple(f for f in self.findings if f.severity == Severity.WARNING)
+
+    @property
+    def failures(self) -> tuple[Finding, ...]:
+        return tuple(f for f in self.findings if f.severity == Severity.FAILURE)
+
+    def with_findings(self, more: tuple[Finding, ...], iterations: int = 0) -> EstimationResult:
+        """A copy with more findings (the verdict judged again) and ``iterations`` more iterations."""
+        findings = self.findings + tuple(more)
+        return replace(self, findings=findings, verdict=judge(Status(self.status), findings),
+                       iterations=self.iterations + iterations)
 
     @property
     def values(self) -> np.ndarray:
@@ -103,18 +146,30 @@ class EstimationResult:
         return float((self.std_colored if colored else self.std_crb)[i])
 
     def to_pandas(self) -> pd.DataFrame:
-        """One row per parameter, indexed by key."""
+        """One row per parameter, indexed by key: value and deviations (SI and display units),
+        ``free`` (asked for by the problem), ``estimated`` (estimated here) and ``state`` /
+        ``reason`` (estimated, on_bound, held, fixed: why)."""
         rows = []
+        n = len(self.parameters)
+        state = self.state or tuple("estimated" if p.free else "fixed" for p in self.parameters)
+        reason = self.state_reason or ("",) * n
+        est = (self.free_estimated if self.free_estimated is not None
+               else np.array([p.free for p in self.parameters]))
         for i, p in enumerate(self.parameters):
             s = p.display_scale
             rows.append({
                 "key": p.key, "name": p.name, "instance": p.instance, "element": p.element,
-                "kind": p.kind, "scope": p.scope, "free": p.free, "unit": p.unit,
+                "kind": p.kind, "scope": p.scope, "free": p.free, "estimated": bool(est[i]),
+                "state": state[i], "reason": reason[i], "unit": p.unit,
                 "value": p.value, "std_crb": self.std_crb[i], "std_colored": self.std_colored[i],
                 "display_unit": p.display_unit, "value_display": p.value * s,
                 "std_crb_display": self.std_crb[i] * s, "std_colored_display": self.std_colored[i] * s,
             })
         return pd.DataFrame(rows).set_index("key")
+
+    def findings_table(self) -> pd.DataFrame:
+        """The findings behind the verdict, most severe first."""
+        return findings_frame(self.findings)
 
     def residuals_table(self) -> pd.DataFrame:
         df = pd.DataFrame([r.__dict__ for r in self.residuals])
@@ -129,19 +184,33 @@ class EstimationResult:
         return pd.DataFrame(self.correlation, index=self.correlation_keys, columns=self.correlation_keys)
 
     def summary(self, kinds: tuple[str, ...] = ("imu_bias", "time_delay", "bias", "scale", "table"),
-                max_rows: int = 60) -> str:
-        """A readable text summary (free parameters of the given kinds, in display units)."""
+                max_rows: int = 60, max_findings: int = 15) -> str:
+        """A readable text summary: the verdict and its reasons first, then the estimates (free
+        parameters of the given kinds, display units, with their state where not estimated)."""
         df = self.to_pandas()
         df = df[df["free"] & df["kind"].isin(kinds)]
+        counts = pd.Series([s for s, f in zip(self.state or (), self.parameters.free_mask, strict=False)
+                            if f]).value_counts()
         lines = [
-            f"status: {STATUS_TEXT.get(self.status, self.status)} after {self.iterations} iterations "
+            f"VERDICT: {self.verdict.name.replace('_', ' ')} — {self.verdict.text}",
+            f"solver: {Status(self.status).name.lower()} after {self.iterations} iterations "
             f"({self.elapsed_s:.2f} s) — {self.message}",
-            f"g = {self.g_mps2} m/s^2; {int(self.parameters.free_mask.sum())} free parameters",
+            f"g = {self.g_mps2} m/s^2; {int(self.parameters.free_mask.sum())} free parameters"
+            + (": " + ", ".join(f"{n} {s}" for s, n in counts.items()) if len(counts) else ""),
         ]
-        if self.confounding:
-            lines.append(f"confounding ({len(self.confounding)}):")
-            lines += [f"  {c.kind}: {', '.join(c.parameters)} — {c.detail}" for c in self.confounding[:10]]
-        show = df[["value_display", "std_crb_display", "std_colored_display", "display_unit"]]
+        shown = sorted((f for f in self.findings if f.severity >= Severity.WARNING),
+                       key=lambda f: -int(f.severity))
+        if shown:
+            lines.append(f"failures and warnings ({len(shown)}):")
+            lines += [f"  {f.text()}" for f in shown[:max_findings]]
+            if len(shown) > max_findings:
+                lines.append(f"  ... {len(shown) - max_findings} more in findings.csv / result.json")
+        info = [f for f in self.findings if f.severity == Severity.INFO]
+        if info:
+            lines.append(f"notes ({len(info)}):")
+            lines += [f"  {f.message}" for f in info[:max_findings]]
+        cols = ["value_display", "std_crb_display", "std_colored_display", "display_unit", "state"]
+        show = df[cols]
         if len(show) > max_rows:
             lines.append(f"(first {max_rows} of {len(show)} parameters)")
             show = show.head(max_rows)
@@ -149,14 +218,18 @@ class EstimationResult:
         return "\n".join(lines)
 
     def to_json(self, path: str | Path) -> None:
+        """Everything, with the verdict and its findings at the top."""
         def clean(v):
             if isinstance(v, float) and not np.isfinite(v):
                 return None
             return v
         doc = {
-            "status": self.status, "status_text": STATUS_TEXT.get(self.status), "message": self.message,
-            "iterations": self.iterations, "elapsed_s": self.elapsed_s, "g_mps2": self.g_mps2,
-            "source": self.source, "cost_history": list(self.cost_history),
+            "verdict": self.verdict.name, "verdict_code": self.verdict.code,
+            "verdict_text": self.verdict.text,
+            "findings": [f.to_dict() for f in sorted(self.findings, key=lambda f: -int(f.severity))],
+            "status": int(self.status), "status_text": STATUS_TEXT.get(int(self.status)),
+            "message": self.message, "iterations": self.iterations, "elapsed_s": self.elapsed_s,
+            "g_mps2": self.g_mps2, "source": self.source, "cost_history": list(self.cost_history),
             "R": self.R,
             "parameters": [
                 {k: clean(v) for k, v in row.items()}
@@ -168,13 +241,20 @@ class EstimationResult:
                 "matrix": np.where(np.isfinite(self.correlation), self.correlation, 0.0).tolist(),
             },
             "residuals": [r.__dict__ for r in self.residuals],
+            "fit_quality": ([] if self.diagnostics is None else
+                            [{k: clean(v) for k, v in row.items()}
+                             for row in self.diagnostics.to_dict(orient="records")]),
         }
         text = json.dumps(doc, indent=1, default=lambda o: o.item() if hasattr(o, "item") else str(o))
         Path(path).write_text(text)
 
     def to_csv(self, directory: str | Path) -> None:
+        """parameters.csv, residuals.csv, correlation.csv, findings.csv and fit_quality.csv."""
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
         self.to_pandas().to_csv(d / "parameters.csv")
         self.residuals_table().to_csv(d / "residuals.csv", index=False)
         self.correlation_frame().to_csv(d / "correlation.csv")
+        self.findings_table().to_csv(d / "findings.csv", index=False)
+        if self.diagnostics is not None:
+            self.diagnostics.to_csv(d / "fit_quality.csv", index=False)

@@ -19,25 +19,47 @@ structure; the local blocks are eliminated maneuver by maneuver (Schur complemen
 
 so an iteration costs time linear in the number of maneuvers and no Jacobian of everything is
 ever formed. A Levenberg-Marquardt damping ``lambda diag(M)`` keeps a bad start from diverging;
-bounds are enforced by projection.
+bounds are an active set (a parameter on a bound that the step pushes outward is held there).
+
+Convergence is judged on the *undamped* Gauss-Newton step ``M^-1 g`` (bounds active), never on a
+step the damping shrank: converged when it is below ``step_tol_sigma`` Cramér-Rao deviations for
+every parameter, or when the decrease it predicts, ``g^T M^-1 g / 2`` (log-likelihood units), is
+below ``decrease_tol``. Status codes follow scipy's convention (:class:`~estimator.verdict.Status`:
+positive = converged). A converged minimum may still be wrong: the verdict
+(:mod:`estimator.verdict`) also weighs the fit-quality diagnostics (:mod:`estimator.diagnostics`:
+residuals against each channel's own noise floor, stuck channels, unit errors, outliers,
+turbulence) and the identifiability checks.
+
+Start: by default a staged, data-driven start (:mod:`estimator.start`) fits the attitude, then
+speed and height, then the flow channels before the full estimation, so that large IMU biases
+from zero start values reach the right minimum.
+
+Identifiability is judged where it matters, at the solution (and, for what needs no residuals,
+before the iterations): parameters no sample depends on (a table breakpoint beyond the flown
+range) and combinations the data cannot separate (a free table offset beside free biases: one
+member of each such set is held, the fewest that restore the rank) are held at their start
+values; at the solution, a parameter whose Cramér-Rao deviation exceeds half its allowed range is
+held too, and the estimation iterates again. Each held parameter keeps its reason
+(:attr:`EstimationResult.state`).
 
 Standard deviations: Cramér-Rao, ``sqrt(diag(M^-1))``; and corrected for coloured residuals
-(Morelli & Klein 1997, "Accuracy of aircraft parameter estimates from flight test data")::
+(Morelli & Klein 1997, "Accuracy of aircraft parameter estimates from flight test data", the
+matrix form of NASA SIDPAC's ``m_colores``)::
 
-    Cov = M^-1 [ sum_i sum_j J_i^T R^-1 r(i - j) R^-1 J_j ] M^-1
+    Cov = M^-1 [ sum_i sum_j J_i^T R^-1 Rvv(i - j) R^-1 J_j ] M^-1
 
-with ``r`` the residual autocorrelation of each channel and maneuver (every lag), evaluated by
-FFT per channel block in the block's own Jacobian columns and projected onto the globals per
-maneuver (see :func:`_colored_std`). Rank deficiency of ``S`` or of a local block (a free table
-offset beside a free bias, a time shift with no excitation) is detected on the scaled matrix and
-reported with the parameters involved; the step then uses the pseudo-inverse and their deviations
-are NaN.
+with ``Rvv(k)`` the residual auto- *and cross-* correlation matrix of all channels of a maneuver
+at lag ``k`` (every lag), evaluated by FFT per maneuver in the parameters its channels depend on
+and projected onto the globals per maneuver (see :func:`_colored_std`). Residuals of different
+maneuvers are uncorrelated. Rank deficiency of ``S`` or of a local block is detected on the
+scaled matrix and reported with the parameters involved.
 """
 
 from __future__ import annotations
 
+import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import fft as sfft
@@ -47,6 +69,11 @@ from estimator.core.assembly import scatter_blocks
 from estimator.model import Evaluation, Model, ModelEvaluationError
 from estimator.problem import Problem
 from estimator.result import Confounding, EstimationResult, ResidualStats
+from estimator.start import staged_plan
+from estimator.verdict import Finding, Severity, Status, judge
+
+#: Start strategies: the staged, data-driven start (:mod:`estimator.start`) or the problem's values.
+STARTS = ("staged", "given")
 
 
 @dataclass(frozen=True)
@@ -55,9 +82,12 @@ class SolverOptions:
 
     Attributes
     ----------
-    max_iterations : Gauss-Newton iterations at most.
-    rtol_cost : converged when the relative cost decrease of an accepted step is below this ...
-    step_tol_sigma : ... and no parameter moved by more than this many Cramér-Rao deviations.
+    max_iterations : Gauss-Newton iterations at most (per stage of the start, and per round of
+        the estimation).
+    step_tol_sigma : converged when the undamped Gauss-Newton step is below this many Cramér-Rao
+        deviations for every parameter ...
+    decrease_tol : ... or when the cost decrease it predicts is below this (log-likelihood units:
+        0.001 is a change of 0.002 in chi-square, statistically nothing).
     lm_lambda0 : initial Levenberg-Marquardt damping (relative to diag M).
     rank_rtol : eigenvalues of the scaled information matrix below ``rank_rtol * max`` are treated
         as zero (unidentifiable directions).
@@ -66,18 +96,42 @@ class SolverOptions:
         set it to fit their noise.
     correlation_warn : |correlation| above this is reported as a confounded pair.
     colored : compute the Morelli-Klein coloured-residual deviations.
+    colored_cross_channel : with the residual cross-correlations between the channels of a
+        maneuver (the full matrix form); False: each channel alone.
+    start : "staged" (default), "given", or a tuple of them: one estimation from each, the best
+        verdict kept (then the lowest cost).
+    robust : exclude the residual outliers the diagnostics find and estimate again (reported).
+    diagnose : run the fit-quality diagnostics (the verdict then rests on the convergence and the
+        identifiability checks alone if False).
+    screen_rounds : estimations at most when the identifiability screen at the solution holds
+        further parameters.
     verbose : print one line per iteration.
     """
 
     max_iterations: int = 40
-    rtol_cost: float = 1e-7
     step_tol_sigma: float = 0.01
+    decrease_tol: float = 1e-3
     lm_lambda0: float = 1e-4
     rank_rtol: float = 1e-10
     correlation_warn: float = 0.995
     min_support_samples: int = 40
     colored: bool = True
+    colored_cross_channel: bool = True
+    start: str | tuple[str, ...] = "staged"
+    robust: bool = False
+    diagnose: bool = False
+    screen_rounds: int = 3
     verbose: bool = False
+
+    def __post_init__(self) -> None:
+        starts = (self.start,) if isinstance(self.start, str) else tuple(self.start)
+        bad = [s for s in starts if s not in STARTS]
+        if bad or not starts:
+            raise ValueError(f"SolverOptions: start must be one of {STARTS} or a tuple of them, "
+                             f"got {self.start!r}")
+        if self.max_iterations < 1:
+            raise ValueError(f"SolverOptions: max_iterations must be >= 1, got {self.max_iterations}")
+
 
 
 class _Structure:
@@ -254,21 +308,6 @@ def _sym_inverse_many(mats: list[np.ndarray], rtol: float) -> tuple[list[np.ndar
     return inv, null
 
 
-def _confounded_sets(null: np.ndarray, keys: list[str], where: str) -> list[Confounding]:
-    out = []
-    for j in range(null.shape[1]):
-        v = null[:, j]
-        big = np.argsort(-np.abs(v))
-        members = [keys[i] for i in big if abs(v[i]) > 0.15 * np.abs(v).max()][:8]
-        out.append(Confounding(
-            parameters=tuple(members),
-            kind="unidentifiable",
-            detail=(f"{where}: the data cannot tell these parameters apart (a combination of them "
-                    "leaves every output unchanged); fix all but one of them, or add maneuvers that "
-                    "excite them differently"),
-        ))
-    return out
-
 
 def _lm_solve(N: _Normal, lam: float, rtol: float, extra: dict | None = None):
     """Damped Schur-complement solve. Returns (delta_G, [delta_L_k], S^-1, [A_k^-1]).
@@ -318,16 +357,70 @@ def _cost(sse, cnt, R):
     return 0.5 * np.sum(sse[used] / R[used]) + 0.5 * np.sum(cnt[used] * np.log(R[used]))
 
 
-def _screen(problem, st: _Structure, evals, R, opt: SolverOptions):
-    """Hold parameters the data do not determine; returns the new structure and the reports.
+
+def _variances(sse: np.ndarray, cnt: np.ndarray) -> np.ndarray:
+    """Closed-form residual variance per channel (the relaxation step), SI^2."""
+    return np.maximum(np.where(cnt > 0, sse / np.maximum(cnt, 1), 1.0), 1e-16)
+
+
+def _confounded_sets(null: np.ndarray, idx: np.ndarray, problem: Problem, where: str
+                     ) -> list[tuple[Confounding, int]]:
+    """Each null direction as a confounded set, with the one member to hold so the rank returns.
+
+    The member held is one that takes a large part in the direction (at least half the largest
+    component), a table value before a bias or scale (a free table offset beside free biases:
+    anchoring the table keeps the biases, which carry the installation, free), then the largest.
+    The outputs are the same whichever member is held: only how the set shares the combination.
+    """
+    ps = problem.parameters
+    out = []
+    chosen: set[int] = set()
+    for j in range(null.shape[1]):
+        v = np.abs(null[:, j])
+        order = np.argsort(-v)
+        members = [int(idx[i]) for i in order if v[i] > 0.15 * v.max()]
+        cands = [int(idx[i]) for i in order if v[i] >= 0.5 * v.max() and int(idx[i]) not in chosen]
+        cands = cands or [m for m in members if m not in chosen] or members
+        hold = min(cands, key=lambda i: (ps.parameters[i].kind != "table", cands.index(i)))
+        chosen.add(hold)
+        names = [ps.parameters[i].key for i in members]
+        out.append((Confounding(
+            parameters=tuple(names[:8]) + (("...",) if len(names) > 8 else ()),
+            kind="unidentifiable",
+            detail=(f"{where}: the data cannot tell {', '.join(names[:8])} apart (a combination of "
+                    f"them leaves every output unchanged); {ps.parameters[hold].key} is held at its "
+                    "start value to anchor the others, whose estimates are relative to it. Fix one "
+                    "of them yourself, or fly maneuvers that excite them differently"),
+        ), hold))
+    return out
+
+
+@dataclass(frozen=True)
+class _Hold:
+    """Parameters held at their start values by the identifiability screen, and why."""
+
+    params: tuple[int, ...]
+    kind: str  # "no_data", "unidentifiable" or "undetermined"
+    confounding: Confounding
+
+
+def _screen(problem: Problem, st: _Structure, evals: Evaluation, R: np.ndarray, opt: SolverOptions,
+            loose: bool) -> tuple[_Structure, list[_Hold]]:
+    """Hold the parameters the data do not determine; returns the new structure and the holds.
 
     Parameters no sample depends on (a table breakpoint beyond the flown range, a bias of a sensor
-    an aircraft does not carry), and combinations the data cannot separate (a free table offset
-    beside a free bias), are held at their start values and reported instead of "estimated".
+    an aircraft does not carry) and combinations the data cannot separate (one member per null
+    direction) are held. With ``loose``, so is a parameter whose Cramér-Rao deviation exceeds half
+    its allowed range (a pressure-altitude scale in level flight). Judged away from the solution,
+    where ``R`` holds the residuals of a wrong trajectory, the deviations are inflated: the
+    estimation therefore judges every requested parameter again at its solution.
     """
-    keys = problem.parameters.keys
-    found: list[Confounding] = []
-    for _ in range(6):
+    ps = problem.parameters
+    keys = ps.keys
+    holds: list[_Hold] = []
+    for _ in range(12):
+        if not st.free.any():
+            break
         N = _build_normal(st, evals, R)
         info = np.zeros(len(keys))
         info[st.glob] = np.diag(N.HGG)
@@ -335,42 +428,189 @@ def _screen(problem, st: _Structure, evals, R, opt: SolverOptions):
             info[idx] = np.diag(N.HLL[k])
         no_data = st.free & ~((info > 0.0) & (N.support >= opt.min_support_samples))
         if no_data.any():
-            found.append(Confounding(
-                parameters=tuple(keys[i] for i in np.nonzero(no_data)[0]), kind="no_data",
+            held = tuple(int(i) for i in np.nonzero(no_data)[0])
+            holds.append(_Hold(held, "no_data", Confounding(
+                parameters=tuple(keys[i] for i in held), kind="no_data",
                 detail=(f"fewer than {opt.min_support_samples} samples depend on these parameters "
                         "(e.g. a table breakpoint outside the flown range, or a sensor this aircraft "
-                        "does not carry); held at their start values"),
-            ))
+                        "does not carry); held at their start values"))))
             st = _Structure(problem, st.free & ~no_data)
             continue
-        cov_G, cov_L, conf = _covariance(N, st, keys, problem, opt)
-        conf = [c for c in conf if c.kind == "unidentifiable"]
-        if not conf:
-            # a parameter whose Cramér-Rao deviation exceeds half its allowed range is not
-            # determined by these data (a pressure-altitude scale in level flight): hold it
-            std = np.full(len(keys), np.nan)
-            std[st.glob] = np.sqrt(np.maximum(np.diag(cov_G), 0.0))
-            for k, idx in enumerate(st.local_of_arr):
-                if idx.size:
-                    std[idx] = np.sqrt(np.maximum(np.diag(cov_L[k]), 0.0))
-            width = st.hi - st.lo
-            loose = st.free & np.isfinite(width) & (std > 0.5 * width)
-            if not loose.any():
-                break
-            found.append(Confounding(
-                parameters=tuple(keys[i] for i in np.nonzero(loose)[0]), kind="no_data",
-                detail=("the data barely depend on these parameters: their Cramér-Rao deviation "
-                        "exceeds half their allowed range (bounds); held at their start values"),
-            ))
-            st = _Structure(problem, st.free & ~loose)
+        cov_G, cov_L, unident, _ = _covariance(N, st, problem, opt)
+        if unident:
+            free = st.free.copy()
+            for conf, hold in unident:
+                free[hold] = False
+                holds.append(_Hold((hold,), "unidentifiable", conf))
+            st = _Structure(problem, free)
             continue
-        free = st.free.copy()
-        for c in conf:
-            free[[problem.parameters.index(k) for k in c.parameters]] = False
-            found.append(Confounding(c.parameters, c.kind,
-                                     c.detail + "; all of them were held at their start values"))
-        st = _Structure(problem, free)
-    return st, found
+        if loose:
+            std = _std_of(st, cov_G, cov_L, len(keys))
+            width = st.hi - st.lo
+            bad = st.free & np.isfinite(width) & (std > 0.5 * width)
+            if bad.any():
+                held = tuple(int(i) for i in np.nonzero(bad)[0])
+                holds.append(_Hold(held, "undetermined", Confounding(
+                    parameters=tuple(keys[i] for i in held), kind="undetermined",
+                    detail=("the data barely depend on these parameters: at the solution their "
+                            "Cramér-Rao deviation exceeds half their allowed range (bounds); held at "
+                            "their start values"))))
+                st = _Structure(problem, st.free & ~bad)
+                continue
+        break
+    return st, holds
+
+
+def _std_of(st: _Structure, cov_G: np.ndarray, cov_L: list[np.ndarray], n: int) -> np.ndarray:
+    std = np.full(n, np.nan)
+    std[st.glob] = np.sqrt(np.maximum(np.diag(cov_G), 0.0))
+    for k, idx in enumerate(st.local_of_arr):
+        if idx.size:
+            std[idx] = np.sqrt(np.maximum(np.diag(cov_L[k]), 0.0))
+    return std
+
+
+@dataclass
+class _Iterated:
+    """What a Gauss-Newton run left: the iterate, its evaluation and how it ended."""
+
+    theta: np.ndarray
+    evals: Evaluation
+    sse: np.ndarray
+    cnt: np.ndarray
+    status: Status
+    message: str
+    iterations: int
+    history: list[float]
+    step_sigma: float  # the last undamped Gauss-Newton step, in deviations (largest)
+    poor: tuple[str, ...] = ()  # where that step exceeded a deviation at convergence (poor model)
+
+
+def _evaluate(model: Model, theta: np.ndarray, jacobian: bool) -> Evaluation:
+    # the iterations need each block's normal-equation terms, not the Jacobian itself: fresh
+    # memory for it each time costs more (page by page from the operating system) than
+    # evaluating the last iterate once more for the Morelli-Klein deviations
+    return model.evaluate_all(theta, jacobian=jacobian, keep_jacobian=False)
+
+
+def _gauss_newton(model: Model, theta: np.ndarray, st: _Structure, opt: SolverOptions,
+                  evals: Evaluation | None = None, label: str = "") -> _Iterated:
+    """Levenberg-Marquardt-safeguarded Gauss-Newton iterations with relaxation of ``R`` (module
+    docstring) until the undamped step is negligible."""
+    nch = len(model.problem.channels)
+    keys = model.problem.parameters.keys
+    theta = theta.copy()
+    if evals is None:
+        evals = _evaluate(model, theta, True)
+    sse, cnt = _residuals(evals, nch)
+    lam = opt.lm_lambda0
+    history: list[float] = []
+    status, message = Status.ITERATION_LIMIT, ""
+    moved_max = np.inf
+    poor: tuple[str, ...] = ()
+    it = 0
+    order = np.concatenate([st.glob] + [v for v in st.local_of_arr if v.size]).astype(int)
+    for it in range(1, opt.max_iterations + 1):
+        R = _variances(sse, cnt)
+        cost0 = _cost(sse, cnt, R)
+        history.append(cost0)
+        N = _build_normal(st, evals, R)
+        # the undamped Gauss-Newton step judges convergence: a damped one shrinks with the damping
+        gn, _, _, Sinv, Ainv, active = _bounded_solve(N, st, theta, 0.0, opt.rank_rtol)
+        sig = np.zeros(theta.size)
+        sig[st.glob] = np.diag(Sinv)
+        for k, idx in enumerate(st.local_of_arr):
+            if idx.size:
+                sig[idx] = np.diag(Ainv[k])
+        sig = np.sqrt(np.maximum(sig, 1e-300))
+        moved = np.abs(gn[order]) / sig[order]
+        moved_max = float(moved.max()) if moved.size else 0.0
+        predicted = 0.5 * float(gn @ _full_step(st, N.gG, N.gL, theta.size))
+        if moved_max < opt.step_tol_sigma:
+            status = Status.CONVERGED_STEP
+            message = (f"converged: the undamped Gauss-Newton step is {moved_max:.1e} deviations at "
+                       f"most (< {opt.step_tol_sigma})")
+            break
+        if predicted < opt.decrease_tol:
+            status = Status.CONVERGED_DECREASE
+            message = (f"converged: the Gauss-Newton model predicts a further cost decrease of "
+                       f"{max(predicted, 0.0):.1e} (< {opt.decrease_tol}); largest step "
+                       f"{moved_max:.1e} deviations")
+            break
+        best = None  # (decrease, iterate, its evaluation, sse, cnt, evaluated with the Jacobian)
+        evaluated = 0  # trial points the model could be evaluated at
+        for attempt in range(12):
+            step = _bounded_solve(N, st, theta, lam, opt.rank_rtol)[0]
+            trial = np.clip(theta + step, st.lo, st.hi)
+            try:
+                # the first trial is usually accepted and is then the next iterate: evaluate it
+                # with the Jacobian right away (the values are the same either way)
+                trial_ev = _evaluate(model, trial, attempt == 0)
+            except ModelEvaluationError:
+                # the step left the model's domain (e.g. a table steeper than 1:1 in an implicit
+                # model): a rejected step, damped further
+                lam = max(lam, 1e-6) * 10.0
+                continue
+            evaluated += 1
+            sse_t, cnt_t = _residuals(trial_ev, nch)
+            cost_t = _cost(sse_t, cnt_t, R)
+            if np.isfinite(cost_t) and cost_t < cost0:
+                best = (cost0 - cost_t, trial, trial_ev, sse_t, cnt_t, attempt == 0)
+                break
+            lam = max(lam, 1e-6) * 10.0
+        if best is None or best[0] < max(opt.decrease_tol, 0.1 * predicted):
+            # the damped steps achieve (next to) nothing: search along the undamped Gauss-Newton
+            # direction itself, whose quadratic model can be poor along a parameter the data barely
+            # determine (one that enters the outputs only to second order, like v0 without a
+            # sideslip channel). What no step achieves, the minimum does not offer either.
+            for t in 10.0 ** -np.arange(0, 9):
+                trial = np.clip(theta + t * gn, st.lo, st.hi)
+                try:
+                    trial_ev = _evaluate(model, trial, False)
+                except ModelEvaluationError:
+                    continue
+                evaluated += 1
+                sse_t, cnt_t = _residuals(trial_ev, nch)
+                cost_t = _cost(sse_t, cnt_t, R)
+                if np.isfinite(cost_t) and cost0 - cost_t > (best[0] if best else 0.0):
+                    best = (cost0 - cost_t, trial, trial_ev, sse_t, cnt_t, False)
+        if not evaluated:
+            status = Status.STALLED
+            message = ("stalled: the model cannot be evaluated at any step from here (each leaves its "
+                       f"domain; e.g. an implicit model that does not converge); the undamped "
+                       f"Gauss-Newton step is {moved_max:.2g} deviations")
+            break
+        if best is None or best[0] < opt.decrease_tol:
+            if best is not None:  # take the little there is
+                theta, sse, cnt = best[1], best[3], best[4]
+                evals = _evaluate(model, theta, True)
+            achieved = best[0] if best is not None else 0.0
+            poor = tuple(keys[order[i]] for i in np.argsort(-moved) if moved[i] >= 1.0)
+            if moved_max < 10.0 * opt.step_tol_sigma:
+                # within a tenth of a deviation of the minimum, where round-off (or a kink of an
+                # interpolated delay or table) keeps the cost from decreasing any further
+                status = Status.CONVERGED_STEP
+                message = (f"converged: the undamped Gauss-Newton step is {moved_max:.1e} deviations "
+                           f"at most; no step decreases the cost by more than {achieved:.1e} (round-off)")
+            else:
+                status = Status.CONVERGED_DECREASE
+                message = (f"converged: no step decreases the cost by more than {achieved:.1e} "
+                           f"(< {opt.decrease_tol}), although the Gauss-Newton model predicts "
+                           f"{predicted:.3g} with a step of {moved_max:.2g} deviations "
+                           f"({', '.join(poor[:4]) or keys[order[int(np.argmax(moved))]]}): the "
+                           "quadratic model is poor there")
+            break
+        decrease, theta, trial_ev, sse, cnt, with_jac = best
+        lam = max(lam * 0.1, 1e-9)
+        evals = trial_ev if with_jac else _evaluate(model, theta, True)
+        if opt.verbose:
+            rel = decrease / max(abs(cost0), 1e-300)
+            print(f"{label}iteration {it:3d}: cost {cost0: .6e}, rel. decrease {rel:.2e}, undamped step "
+                  f"{moved_max:.2e} sigma ({keys[order[int(np.argmax(moved))]]}), lambda {lam:.1e}")
+    else:
+        message = (f"not converged: iteration limit ({opt.max_iterations}) reached; the undamped "
+                   f"Gauss-Newton step is still {moved_max:.2g} deviations")
+    return _Iterated(theta, evals, sse, cnt, status, message, it, history, moved_max, poor)
 
 
 def estimate(problem: Problem, options: SolverOptions | None = None) -> EstimationResult:
@@ -384,186 +624,423 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
     Returns
     -------
     EstimationResult with estimates, Cramér-Rao and coloured-residual deviations, correlations,
-    residual statistics, iterations, status and message.
+    residual statistics, the solver status, the fit-quality findings and the verdict.
 
     Notes
     -----
     Runs with one BLAS thread (restored on return): every matrix here is small, and waking
     OpenBLAS's worker threads for each of them costs more than the arithmetic.
     """
+    opt = options or SolverOptions()
+    starts = (opt.start,) if isinstance(opt.start, str) else tuple(dict.fromkeys(opt.start))
     with threadpool_limits(limits=1, user_api="blas"):
-        return _estimate(problem, options or SolverOptions())
+        best: EstimationResult | None = None
+        tried = []
+        for s in starts:
+            res = _estimate_robust(problem, replace(opt, start=s))
+            tried.append(f"{s}: {res.verdict.name.lower()}, cost {_final_cost(res):.6g}")
+            if best is None or _rank(res) < _rank(best):
+                best = res
+        assert best is not None
+        if len(starts) > 1:
+            best = best.with_findings((Finding(
+                "starts", Severity.INFO,
+                f"estimated from {len(starts)} starts ({'; '.join(tried)}); the best verdict, then the "
+                "lowest cost, is kept"),))
+        return best
+
+
+def _final_cost(res: EstimationResult) -> float:
+    return res.cost_history[-1] if res.cost_history else np.inf
+
+
+def _rank(res: EstimationResult) -> tuple[int, float]:
+    order = {1: 0, 2: 1, -1: 2}
+    return order.get(res.verdict.code, 3), _final_cost(res)
+
+
+def _estimate_robust(problem: Problem, opt: SolverOptions) -> EstimationResult:
+    """:func:`_estimate`, and with ``opt.robust`` once more without the outliers it found."""
+    res = _estimate(problem, opt)
+    if not opt.robust or not res.outliers:
+        return res
+    excluded = dict(res.outliers)
+    sub = _without_samples(problem, excluded)
+    sub = replace(sub, parameters=sub.parameters.with_values(res.values))
+    again = _estimate(sub, replace(opt, start="given"))
+    notes = tuple(Finding(
+        "excluded", Severity.INFO,
+        f"robust option: {t.size} outlier sample(s) of {ch} in maneuver {man} excluded from the fit "
+        f"(at t = {', '.join(f'{v:.3f}' for v in t[:5])}{' ...' if t.size > 5 else ''} s)",
+        channel=ch, maneuver=man, t_s=tuple(float(v) for v in t)) for (man, ch), t in excluded.items())
+    return again.with_findings(notes, iterations=res.iterations)
+
+
+def _without_samples(problem: Problem, samples: dict[tuple[str, str], np.ndarray]) -> Problem:
+    """The problem with some samples of some channels removed (NaN: not in the cost)."""
+    col = {c.name: c.column for c in problem.channels}
+    mans = []
+    for m in problem.maneuvers:
+        meas = dict(m.measurements)
+        for (man, ch), t in samples.items():
+            if man != m.id or col.get(ch) not in meas:
+                continue
+            v = np.array(meas[col[ch]], dtype=float)
+            idx = np.searchsorted(m.t_s, t)
+            idx = idx[(idx < m.t_s.size)]
+            idx = idx[np.isclose(m.t_s[idx], t[: idx.size], atol=1e-9 + 1e-6 * m.dt_s)]
+            v[idx] = np.nan
+            meas[col[ch]] = v
+        mans.append(replace(m, measurements=meas))
+    return replace(problem, maneuvers=tuple(mans))
+
+
+def _staged_start(problem: Problem, theta: np.ndarray, free: np.ndarray, opt: SolverOptions
+                  ) -> tuple[np.ndarray, list[str]]:
+    """Run the stages of :func:`estimator.start.staged_plan` from ``theta``; returns the last
+    stage's estimate and one line per stage."""
+    notes = []
+    for stage in staged_plan(problem, free):
+        sub = replace(problem, channels=tuple(problem.channels[i] for i in stage.channels))
+        model = Model(sub)
+        try:
+            ev = _evaluate(model, theta, True)
+        except ModelEvaluationError as exc:
+            notes.append(f"start stage {stage.name}: skipped ({exc})")
+            continue
+        st = _Structure(sub, stage.free)
+        # a stage frees only what its channels depend on; the rest waits for a later stage
+        N = _build_normal(st, ev, np.ones(len(sub.channels)))
+        info = np.zeros(theta.size)
+        info[st.glob] = np.diag(N.HGG)
+        for k, idx in enumerate(st.local_of_arr):
+            info[idx] = np.diag(N.HLL[k])
+        st = _Structure(sub, stage.free & (info > 0) & (N.support >= opt.min_support_samples))
+        if not st.free.any():
+            continue
+        it = _gauss_newton(model, theta, st, opt, ev, label=f"start ({stage.name}) ")
+        theta = it.theta
+        notes.append(f"start stage {stage.name}: {len(stage.channels)} channels, {int(st.free.sum())} "
+                     f"free, {it.iterations} iterations, {it.status.name.lower()}")
+        if opt.verbose:
+            print(notes[-1])
+    return theta, notes
 
 
 def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
     t0 = time.perf_counter()
     model = Model(problem)
     ps = problem.parameters
-    keys = ps.keys
     nch = len(problem.channels)
-    st = _Structure(problem, ps.free_mask)
-    start = np.clip(ps.values, st.lo, st.hi)
-    if not st.free.any():
+    requested = ps.free_mask
+    if not requested.any():
         raise ValueError(f"{problem.source}: no free parameters; free some in the problem file")
-
-    def evaluate_all(th, jac):
-        # the iterations need each block's normal-equation terms, not the Jacobian itself: fresh
-        # memory for it each time costs more (page by page from the operating system) than
-        # evaluating the last iterate once more for the Morelli-Klein deviations
-        return model.evaluate_all(th, jacobian=jac, keep_jacobian=False)
-
-    def variances(sse, cnt):
-        return np.maximum(np.where(cnt > 0, sse / np.maximum(cnt, 1), 1.0), 1e-16)
-
+    lo = np.array([p.bounds[0] for p in ps])
+    hi = np.array([p.bounds[1] for p in ps])
+    start = np.clip(ps.values, lo, hi)
     theta = start.copy()
-    evals = evaluate_all(theta, True)
+    try:
+        evals = _evaluate(model, theta, True)
+    except ModelEvaluationError as exc:
+        return _failed(problem, start, t0, f"the model cannot be evaluated at the start values: {exc}",
+                       "check the units and signs of the channel named (a measurement far outside its "
+                       "model's range cannot be fitted), or give start values closer to the data")
     sse, cnt = _residuals(evals, nch)
     if not cnt.any():
         raise ValueError(f"{problem.source}: no channel has data in any maneuver")
-    st, confounding = _screen(problem, st, evals, variances(sse, cnt), opt)
-    lam = opt.lm_lambda0
-    history: list[float] = []
-    it_total = 0
-    for _round in range(3):
-        if not st.free.any():
-            raise ValueError(f"{problem.source}: no identifiable free parameter left; see the "
-                             "confounding report: " + "; ".join(", ".join(c.parameters) for c in confounding))
-        status, message = 0, f"iteration limit ({opt.max_iterations}) reached before convergence"
-        for _it in range(opt.max_iterations):
-            it_total += 1
-            # relaxation: R from the current residuals, then a Gauss-Newton step for theta
-            R = variances(sse, cnt)
-            cost0 = _cost(sse, cnt, R)
-            history.append(cost0)
-            N = _build_normal(st, evals, R)
-            accepted = False
-            for attempt in range(12):
-                step, dG, dL, Sinv, Ainv, active = _bounded_solve(N, st, theta, lam, opt.rank_rtol)
-                sig = np.sqrt(np.maximum(np.concatenate(
-                    [np.diag(Sinv)] + [np.diag(a) for a in Ainv if a.size]), 1e-300))
-                moved = np.abs(np.concatenate([dG] + [d for d in dL if d.size])) / sig
-                if attempt == 0:
-                    moved_first = moved.max()
-                    # decrease of the cost the undamped Gauss-Newton model predicts, g.d / 2
-                    # (parameters held on a bound have a zero step and add nothing)
-                    gfull = _full_step(st, N.gG, N.gL, theta.size)
-                    predicted = 0.5 * (step @ gfull)
-                if moved_first < opt.step_tol_sigma:
-                    # the Gauss-Newton step is already negligible against the parameters'
-                    # deviations: at the minimum (round-off may keep the cost from decreasing)
-                    break
-                trial = np.clip(theta + step, st.lo, st.hi)
-                # the first trial is usually accepted and is then the next iterate: evaluate it
-                # with the Jacobian right away (the values are the same either way)
-                try:
-                    trial_ev = evaluate_all(trial, attempt == 0)
-                except ModelEvaluationError:
-                    # the step left the model's domain (e.g. a table steeper than 1:1 in an
-                    # implicit model): a rejected step, damped further
-                    lam = max(lam, 1e-6) * 10.0
-                    continue
-                sse_t, cnt_t = _residuals(trial_ev, nch)
-                cost_t = _cost(sse_t, cnt_t, R)
-                if np.isfinite(cost_t) and cost_t <= cost0:
-                    accepted = True
-                    break
-                lam = max(lam, 1e-6) * 10.0
-            if not accepted:
-                if moved_first < opt.step_tol_sigma:
-                    status, message = 1, (f"converged: the Gauss-Newton step ({moved_first:.1e} "
-                                          f"sigma) is below {opt.step_tol_sigma} sigma")
-                else:
-                    status, message = 2, ("no step decreases the cost any further (damping grew to "
-                                          f"{lam:.1e}): a minimum, or the model cannot fit the data "
-                                          "better")
-                break
-            # convergence: small relative decrease and steps small against their deviations
-            theta = trial
-            lam = max(lam * 0.1, 1e-9)
-            evals = trial_ev if attempt == 0 else evaluate_all(theta, True)
-            sse, cnt = sse_t, cnt_t
-            rel = (cost0 - _cost(sse, cnt, R)) / max(abs(cost0), 1e-300)
-            if opt.verbose:
-                order = np.concatenate([st.glob] + [v for v in st.local_of_arr if v.size])
-                print(f"iteration {it_total:3d}: cost {cost0: .6e}, rel. decrease {rel:.2e}, "
-                      f"max step {moved.max():.2e} sigma ({keys[order[np.argmax(moved)]]}), "
-                      f"lambda {lam:.1e}")
-            pred_rel = abs(predicted) / max(abs(cost0), 1e-300)
-            if rel < opt.rtol_cost and (moved.max() < opt.step_tol_sigma or pred_rel < opt.rtol_cost):
-                status, message = 1, (f"converged: relative cost decrease {rel:.1e} < "
-                                      f"{opt.rtol_cost:.0e}, and largest step {moved.max():.1e} "
-                                      f"sigma or predicted further decrease {pred_rel:.1e} small")
-                break
-        # the trajectory moved: a breakpoint may have lost its data, or a combination its
-        # excitation; hold those, restore their start values, and iterate again
-        st_new, found = _screen(problem, st, evals, variances(sse, cnt), opt)
-        if not found:
+    stage_notes: list[str] = []
+    if opt.start == "staged":
+        theta, stage_notes = _staged_start(problem, theta, requested, opt)
+        evals = _evaluate(model, theta, True)
+        sse, cnt = _residuals(evals, nch)
+    # the screen before the iterations also holds what looks undetermined there, which keeps a
+    # parameter the data hardly see from wandering to a bound on the way; the screen at the
+    # solution judges every requested parameter again, and frees what the data determine there
+    st, holds = _screen(problem, _Structure(problem, requested), evals, _variances(sse, cnt), opt,
+                        loose=True)
+    if not st.free.any():
+        raise ValueError(f"{problem.source}: no identifiable free parameter left; see the confounding "
+                         "report: " + "; ".join(", ".join(h.confounding.parameters) for h in holds))
+    held = requested & ~st.free
+    if np.any(theta[held] != start[held]):
+        theta[held] = start[held]
+        evals = _evaluate(model, theta, True)
+    iterations, history = 0, []
+    for rnd in range(1, max(opt.screen_rounds, 1) + 1):
+        try:
+            it = _gauss_newton(model, theta, st, opt, evals)
+        except ModelEvaluationError as exc:  # cannot happen after a successful start: a safeguard
+            return _failed(problem, theta, t0, str(exc), "report this as a bug, with the data")
+        theta, evals = it.theta, it.evals
+        iterations += it.iterations
+        history += it.history
+        if not it.status.converged or rnd == opt.screen_rounds:
             break
-        confounding += found
+        # identifiability at the solution: the whole screen again, from the requested free set
+        st_new, holds_new = _screen(problem, _Structure(problem, requested), evals,
+                                    _variances(it.sse, it.cnt), opt, loose=True)
+        if np.array_equal(st_new.free, st.free):
+            holds = holds_new
+            break
         newly_held = st.free & ~st_new.free
         theta[newly_held] = start[newly_held]
-        st = st_new
-        evals = evaluate_all(theta, True)
-        sse, cnt = _residuals(evals, nch)
+        st, holds = st_new, holds_new
+        evals = _evaluate(model, theta, True)
+    return _finish(problem, model, theta, start, st, holds, evals, it, iterations, history, stage_notes,
+                   opt, t0)
 
-    # final R and undamped information matrix at the estimate
-    R = variances(sse, cnt)
-    history.append(_cost(sse, cnt, R))
+
+def _failed(problem: Problem, theta: np.ndarray, t0: float, why: str, advice: str) -> EstimationResult:
+    """A result for an estimation that could not run at all (the model fails at the start)."""
+    n = len(problem.parameters)
+    nan = np.full(n, np.nan)
+    requested = problem.parameters.free_mask
+    return EstimationResult.build(
+        problem=problem, values=theta, std_crb=nan, std_colored=nan, correlation_keys=(),
+        correlation=np.zeros((0, 0)), R={}, residuals=(), iterations=0, cost_history=(),
+        status=Status.MODEL_ERROR, message=why, confounding=(), elapsed_s=time.perf_counter() - t0,
+        free_estimated=np.zeros(n, dtype=bool),
+        state=tuple("fixed" if not f else "not estimated" for f in requested),
+        state_reason=tuple("" if not f else "the estimation failed" for f in requested),
+        findings=(Finding("model_error", Severity.FAILURE, why, advice),),
+    )
+
+
+def _finish(problem, model, theta, start, st, holds, evals, it, iterations, history, stage_notes, opt, t0
+            ) -> EstimationResult:
+    """Covariances, diagnostics, findings and verdict at the estimate."""
+    ps = problem.parameters
+    keys = ps.keys
+    requested = ps.free_mask
+    R = _variances(it.sse, it.cnt)
+    history = history + [_cost(it.sse, it.cnt, R)]
     N = _build_normal(st, evals, R)
-    cov_G, cov_L, final_conf = _covariance(N, st, keys, problem, opt)
-    confounding += final_conf
-    std = np.full(len(keys), np.nan)
-    std[st.glob] = np.sqrt(np.maximum(np.diag(cov_G), 0.0))
-    for k, idx in enumerate(st.local_of_arr):
-        if idx.size:
-            std[idx] = np.sqrt(np.maximum(np.diag(cov_L[k]), 0.0))
-    for c in final_conf:
-        if c.kind == "unidentifiable":  # correlated parameters keep their (large) deviations
-            std[[ps.index(k) for k in c.parameters]] = np.nan
+    cov_G, cov_L, unident, correlated = _covariance(N, st, problem, opt)
+    std = _std_of(st, cov_G, cov_L, len(keys))
+    confounding = [h.confounding for h in holds]
+    for conf, _ in unident:  # only after the last rounds' limit: reported, deviations NaN
+        confounding.append(conf)
+        std[[ps.index(k) for k in conf.parameters if k in ps]] = np.nan
     dg = np.sqrt(np.maximum(np.diag(cov_G), 1e-300))
     corr_G = cov_G / np.outer(dg, dg)
-    confounding += _high_correlations(corr_G, [keys[i] for i in st.glob], opt.correlation_warn)
+    correlated = correlated + _high_correlations(corr_G, [keys[i] for i in st.glob], opt.correlation_warn)
+    confounding += correlated
     std_col = np.full(len(keys), np.nan)
     if opt.colored:
         std_col = _colored_std(model, theta, N, st, R, len(keys), opt)
-    if any(c.kind in ("unidentifiable", "no_data") for c in confounding):
-        message += "; some parameters were held because the data do not determine them (see confounding)"
+    # what each parameter is: estimated, on a bound, held (why) or fixed
+    state, reason = [], []
+    why = {i: h for h in holds for i in h.params}
+    tiny = 1e-9 * np.maximum(1.0, np.abs(theta))
+    for i, p in enumerate(ps):
+        if not requested[i]:
+            state.append("fixed")
+            reason.append("fixed in the problem (model set or problem file)")
+        elif not st.free[i]:
+            h = why.get(i)
+            state.append("held")
+            reason.append({"no_data": f"no data: fewer than {opt.min_support_samples} samples depend on it",
+                           "undetermined": "undetermined: its Cramér-Rao deviation exceeds half its "
+                                           "allowed range",
+                           "unidentifiable": "unidentifiable: " + (h.confounding.detail if h else "")
+                           }.get(h.kind if h else "", "held"))
+        elif theta[i] <= st.lo[i] + tiny[i] or theta[i] >= st.hi[i] - tiny[i]:
+            state.append("on_bound")
+            side = "lower" if theta[i] <= st.lo[i] + tiny[i] else "upper"
+            reason.append(f"on its {side} bound {theta[i]:.6g} {p.unit}: the data push it beyond; the "
+                          "estimate is the bound")
+        else:
+            state.append("estimated")
+            reason.append("")
+    findings = _parameter_findings(problem, holds, unident, correlated, state, reason, opt)
+    findings += [Finding("start", Severity.INFO, "; ".join(stage_notes))] if stage_notes else []
+    if it.poor:
+        findings.append(Finding(
+            "poor_model", Severity.WARNING,
+            f"at the estimate the Gauss-Newton model is poor along {', '.join(it.poor[:6])}: it predicts a "
+            f"step of {it.step_sigma:.2g} deviations, yet no step decreases the cost; the data barely "
+            "determine these parameters (to first order), so their deviations are not to be trusted",
+            "fix them at known values, or add channels or maneuvers that see them (e.g. a sideslip "
+            "sensor for v0)", parameters=it.poor))
+    if not it.status.converged:
+        findings.append(Finding(
+            "not_converged", Severity.FAILURE, it.message,
+            "raise --max-iterations if the step was still shrinking; otherwise read the other findings: "
+            "a fault in the data or a wrong minimum stops the iteration too"))
+    diagnosis_table, outliers = None, {}
+    if opt.diagnose:
+        from estimator.diagnostics import diagnose
+
+        diagnosis = diagnose(*_fit_traces(problem, evals, st))
+        findings += list(diagnosis.findings)
+        diagnosis_table, outliers = diagnosis.table, dict(diagnosis.outliers)
+    verdict = judge(it.status, findings)
+    message = it.message
     return EstimationResult.build(
         problem=problem, values=theta, std_crb=std, std_colored=std_col,
         correlation_keys=tuple(keys[i] for i in st.glob), correlation=corr_G,
         R=dict(zip((c.name for c in problem.channels), R, strict=True)),
-        residuals=_stats(problem, evals), iterations=it_total, cost_history=tuple(history),
-        status=status, message=message, confounding=tuple(confounding),
-        elapsed_s=time.perf_counter() - t0, free_estimated=st.free.copy(),
+        residuals=_stats(problem, evals), iterations=iterations, cost_history=tuple(history),
+        status=it.status, message=message, confounding=tuple(confounding),
+        elapsed_s=time.perf_counter() - t0, free_estimated=st.free.copy(), state=tuple(state),
+        state_reason=tuple(reason), findings=tuple(findings), verdict=verdict,
+        diagnostics=diagnosis_table, outliers=outliers,
     )
 
 
-def _covariance(N: _Normal, st: _Structure, keys, problem: Problem, opt: SolverOptions):
-    """Undamped Cramér-Rao covariance of the global block and of each local block."""
+def _parameter_findings(problem, holds, unident, correlated, state, reason, opt) -> list[Finding]:
+    """Findings of the identifiability checks: held parameters (INFO when the data simply do not
+    reach them, WARNING when a confounded set was anchored), parameters on a bound (WARNING),
+    highly correlated pairs (INFO: their deviations already say it)."""
+    ps = problem.parameters
+    out = []
+    # the screen holds one member of a confounded set at a time: overlapping sets are one finding
+    groups: list[tuple[set[str], list[str]]] = []
+    for h in holds:
+        if h.kind != "unidentifiable":
+            continue
+        members = {k for k in h.confounding.parameters if k != "..."}
+        held = [ps.parameters[i].key for i in h.params]
+        for g in groups:
+            if g[0] & members:
+                g[0].update(members)
+                g[1].extend(held)
+                break
+        else:
+            groups.append((members, held))
+    for members, held in groups:
+        names = sorted(members, key=ps.index)
+        out.append(Finding(
+            "unidentifiable", Severity.WARNING,
+            f"the data cannot tell {', '.join(names[:10])}{' ...' if len(names) > 10 else ''} apart "
+            f"(combinations of them leave every output unchanged): {', '.join(held)} "
+            f"{'is' if len(held) == 1 else 'are'} held at the start value(s), the fewest that make the "
+            "rest determined, whose estimates are then relative to them",
+            "fix the one you know in the problem file, or fly maneuvers that excite them differently",
+            parameters=tuple(names)))
+    for h in holds:
+        names = ", ".join(h.confounding.parameters[:12]) + (" ..." if len(h.params) > 12 else "")
+        if h.kind == "unidentifiable":
+            continue
+        elif h.kind == "no_data":
+            out.append(Finding("held", Severity.INFO, f"held at their start values, no data: {names} "
+                               f"({h.confounding.detail.split(';')[0]})",
+                               parameters=h.confounding.parameters))
+        else:
+            out.append(Finding("held", Severity.INFO, f"held at their start values, undetermined: {names} "
+                               "(their Cramér-Rao deviation exceeds half their allowed range)",
+                               "fly maneuvers that excite them, or fix them at known values",
+                               parameters=h.confounding.parameters))
+    for conf, _ in unident:
+        out.append(Finding("unidentifiable", Severity.WARNING, conf.detail,
+                           "fix one of them in the problem file", parameters=conf.parameters))
+    for i, s in enumerate(state):
+        if s == "on_bound":
+            out.append(Finding("on_bound", Severity.WARNING, f"{ps.parameters[i].key} is {reason[i]}",
+                               "the data want it outside its physical range: check the data of the "
+                               "channels it enters (units, signs, a fault) before widening the bounds",
+                               parameters=(ps.parameters[i].key,)))
+    # a calibration parameter that trades against a maneuver's initial condition is the confounding
+    # an engineer must not miss (a sideslip bias against the initial sideslip where the sideslip
+    # barely varies): its value rests on weak kinematic couplings, any error of which goes into it
+    calib = {p.key for p in ps if p.kind in ("bias", "scale", "table") and p.scope != "maneuver"}
+    ics = {p.key for p in ps if p.kind == "initial_condition"}
+    against: dict[str, list[str]] = {}
+    for c in correlated:
+        a, b = c.parameters
+        if a in ics and b in calib:
+            against.setdefault(b, []).append(a)
+        elif b in ics and a in calib:
+            against.setdefault(a, []).append(b)
+        else:
+            out.append(Finding("correlated", Severity.INFO, f"{' and '.join(c.parameters)}: {c.detail}",
+                               parameters=c.parameters))
+    for key, partners in against.items():
+        out.append(Finding(
+            "confounded", Severity.WARNING,
+            f"{key} is confounded with the initial condition(s) {', '.join(partners[:6])}"
+            f"{' ...' if len(partners) > 6 else ''} (|correlation| > {opt.correlation_warn}): the flow "
+            "angle it offsets barely varies in those maneuvers, so the data separate the two only "
+            "through weak kinematic couplings, and any error there goes into it",
+            "fly maneuvers that vary that flow angle (a steady-heading sideslip for a sideslip bias, "
+            "a pull-up for an angle-of-attack bias), or fix it at a known value",
+            parameters=(key, *partners)))
+    return out
+
+
+def _fit_traces(problem: Problem, ev: Evaluation, st: _Structure):
+    """The diagnostics' inputs: every channel of every maneuver at the estimate, and each
+    maneuver's IMU inputs and reconstructed states."""
+    from estimator.diagnostics import ChannelFit, ManeuverInputs
+
+    ps = problem.parameters
+    keys = ps.keys
+    fits = []
+    for ce in ev.channels:
+        ch = problem.channels[ce.channel]
+        for b, k in enumerate(ce.mans):
+            m = problem.maneuvers[int(k)]
+            r0, r1 = ce.rseg[b], ce.rseg[b + 1]
+            rows = ce.rows[r0:r1]
+            meas = np.asarray(m.measurements[ch.column], dtype=float)
+            fin = np.isfinite(meas)
+            # the channel model's own free parameters (not the state equations')
+            params = tuple(dict.fromkeys(keys[i] for i in ce.colmap[b]
+                                         if st.free[i] and ps.parameters[i].name not in _STATE_FAMILIES))
+            fits.append(ChannelFit(
+                maneuver=m.id, channel=ch.name, flow=ch.sensor is not None, t_s=m.t_s[rows],
+                z=ce.z[r0:r1], y=ce.y[r0:r1], measured_t_s=m.t_s[fin], measured=meas[fin], unit=ch.unit,
+                display_scale=ch.display_scale, display_unit=ch.display_unit, parameters=params))
+    pos = {int(k): i for i, k in enumerate(ev.maneuvers)}
+    col = {c.name: c.column for c in problem.channels}
+    inputs = []
+    for k, m in enumerate(problem.maneuvers):
+        if k not in pos:
+            continue
+        X = ev.X[ev.seg[pos[k]]:ev.seg[pos[k] + 1]]
+        eul = np.full((m.n, 3), np.nan)
+        for j, name in enumerate(("phi", "theta", "psi")):
+            c = col.get(name)
+            if c is not None and c in m.measurements:
+                eul[:, j] = m.measurements[c]
+        inputs.append(ManeuverInputs(maneuver=m.id, t_s=m.t_s, accel_imu_mps2=m.accel_imu_mps2,
+                                     omega_rps=m.omega_rps, states=X, euler_measured_rad=eul))
+    return fits, inputs
+
+
+_STATE_FAMILIES = frozenset({"u0", "v0", "w0", "phi0", "theta0", "psi0", "h0",
+                             "dax", "day", "daz", "dp", "dq", "dr"})
+
+
+def _covariance(N: _Normal, st: _Structure, problem: Problem, opt: SolverOptions):
+    """Undamped Cramér-Rao covariance of the global block and of each local block.
+
+    Returns
+    -------
+    (S^-1, [cov_L_k], unidentifiable sets with the member to hold, correlated global-local pairs)
+    """
+    keys = problem.parameters.keys
     extra: dict = {}
-    dG, dL, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol, extra)
-    confounding: list[Confounding] = []
+    _, _, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol, extra)
     # rank checks: the Schur complement (globals) and each local block (undamped: lambda = 0)
     _, null = _sym_inverse(extra["S"], opt.rank_rtol)
-    confounding += _confounded_sets(null, [keys[i] for i in st.glob], "global parameters")
+    unident = _confounded_sets(null, st.glob, problem, "global parameters")
     cov_L = []
     for k, Ai in enumerate(Ainv):
         idx = st.local_of_arr[k]
         if not idx.size:
             cov_L.append(np.zeros((0, 0)))
             continue
-        nullk = extra["null_L"][k]
-        confounding += _confounded_sets(nullk, [keys[i] for i in idx],
-                                        f"maneuver {problem.maneuvers[k].id}")
+        unident += _confounded_sets(extra["null_L"][k], idx, problem, f"maneuver {problem.maneuvers[k].id}")
         B = Ai @ N.HGL[k].T
         cov_L.append(Ai + B @ Sinv @ B.T)
-    del dG, dL
     # correlations across the blocks: Cov(local_k, global) = -A_k^-1 M_LkG S^-1. A per-maneuver
     # initial condition that trades against a fleet-wide bias is exactly the confounding an
     # engineer must see (SPEC §5), and it lives in these blocks, not in the global one
     thr = opt.correlation_warn
     sd_g = np.sqrt(np.maximum(np.diag(Sinv), 1e-300))
     gkeys = [keys[i] for i in st.glob]
+    correlated = []
     for k, Ai in enumerate(Ainv):
         idx = st.local_of_arr[k]
         if not idx.size or not sd_g.size:
@@ -572,12 +1049,12 @@ def _covariance(N: _Normal, st: _Structure, keys, problem: Problem, opt: SolverO
         sd_l = np.sqrt(np.maximum(np.diag(cov_L[k]), 1e-300))
         corr = cross / sd_l[:, None] / sd_g[None, :]
         for a, b in zip(*np.nonzero(np.abs(corr) > thr), strict=True):
-            confounding.append(Confounding(
+            correlated.append(Confounding(
                 parameters=(keys[idx[a]], gkeys[b]), kind="correlated",
                 detail=(f"correlation {corr[a, b]:+.4f}: the data barely separate {keys[idx[a]]} "
                         f"from {gkeys[b]}; their individual values are uncertain"),
             ))
-    return Sinv, cov_L, confounding
+    return Sinv, cov_L, unident, correlated
 
 
 def _high_correlations(corr: np.ndarray, keys: list[str], thr: float) -> list[Confounding]:
@@ -595,87 +1072,102 @@ def _high_correlations(corr: np.ndarray, keys: list[str], thr: float) -> list[Co
     return out
 
 
-def _block_autocov(JT: np.ndarray, e: np.ndarray, rseg: np.ndarray, chunk: int = 8) -> np.ndarray:
-    """``sum_i sum_j J_i^T r(i - j) J_j`` per block, ``r`` the block's biased residual autocorrelation.
-
-    Every lag is kept (as in Morelli & Klein 1997). With both sequences zero-padded to
-    ``L >= 2 n - 1`` the circular convolution is the linear one and the transform of ``r`` is the
-    periodogram ``|E_f|^2 / n``, so by Parseval::
-
-        sum_ij J_i^T r(i - j) J_j = 1/(n L) sum_f |E_f|^2 Re(conj(F_f)^T F_f),   F = DFT(J)
-
-    one forward transform per column and a weighted Gram matrix, batched over the blocks.
-
-    Parameters
-    ----------
-    JT : (m, n) Jacobian of all blocks, slot by slot; e : (n,) residuals; rseg : (B+1,) block row
-        offsets.
-
-    Returns
-    -------
-    (B, m, m)
-    """
-    nb = rseg.size - 1
-    m = JT.shape[0]
-    lens = np.diff(rseg)
-    out = np.zeros((nb, m, m))
-    if nb == 0 or m == 0 or lens.max() == 0:
-        return out
-    L = sfft.next_fast_len(2 * int(lens.max()) - 1, real=True)
-    nf = L // 2 + 1
-    wt = np.full(nf, 2.0)  # one-sided spectrum: every bin but DC (and Nyquist) stands for two
+def _one_sided_weights(L: int) -> np.ndarray:
+    """Weights of a real signal's one-sided spectrum of length ``L``: every bin but DC (and Nyquist)
+    stands for two."""
+    wt = np.full(L // 2 + 1, 2.0)
     wt[0] = 1.0
     if L % 2 == 0:
         wt[-1] = 1.0
-    for c0 in range(0, nb, chunk):
-        bl = range(c0, min(nb, c0 + chunk))
-        Jp = np.zeros((len(bl), m, L))
-        ep = np.zeros((len(bl), L))
-        for i, b in enumerate(bl):
-            Jp[i, :, :lens[b]] = JT[:, rseg[b]:rseg[b + 1]]
-            ep[i, :lens[b]] = e[rseg[b]:rseg[b + 1]]
-        Jf = sfft.rfft(Jp, axis=-1)
-        Ef = sfft.rfft(ep, axis=-1)
-        D = np.sqrt((Ef.real ** 2 + Ef.imag ** 2) * wt / (lens[c0:c0 + len(bl), None] * L))
-        Jf *= D[:, None, :]
-        # (real, imag) interleaved: the Gram of the real view is sum_f Re(conj(F_p) F_q) D_f^2
-        Y = Jf.view(np.float64)
-        for i, b in enumerate(bl):
-            out[b] = Y[i] @ Y[i].T
-    return out
+    return wt
 
 
 def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R, nparam,
                  opt) -> np.ndarray:
-    """Morelli-Klein standard deviations for every free parameter (sandwich covariance).
+    r"""Morelli-Klein standard deviations for every free parameter (sandwich covariance).
 
-    With the arrow structure, ``Cov = M^-1 C M^-1`` needs, per maneuver, only the residual
-    autocovariance ``C`` of its own rows in their own Jacobian columns (residuals of different
-    channels or maneuvers are uncorrelated in the estimate): each channel block's
-    ``J^T R^-1 r R^-1 J`` in slot space (:func:`_block_autocov`), gathered like the normal
-    equations into a global part, a coupling part and a local part. The Schur projection of the
-    globals' sensitivities, ``J_G - J_L A^-1 M_LG``, is then applied to these small matrices per
-    maneuver instead of to the rows.
+    The middle matrix of maneuver ``k`` is ``sum_i sum_j J_i^T W Rvv(i - j) W J_j`` over the
+    maneuver's samples, ``W = R^-1`` and ``Rvv`` the biased auto- and cross-correlation estimate of
+    its channels' residuals (every lag). With each channel's Jacobian and residual placed on the
+    maneuver's sample grid (zero where the channel has no sample in the cost) and zero-padded to
+    ``L >= 2 n - 1``, circular convolution is linear, the transform of the cross-correlation of
+    channels ``c, d`` is ``E_c conj(E_d) / n`` and, by Parseval::
+
+        middle_k = 1/(n L) sum_f Re( G_f G_f^H ),     G_f = sum_c s_c W_c F_c,f conj(E_c,f)
+
+    a weighted Gram matrix of the sum over channels of one vector per frequency (``F = DFT(J)``),
+    in the parameters the maneuver's channels depend on. ``s_c = sqrt(n / n_c)`` normalises a
+    channel with ``n_c`` samples in the cost (own-rate channels, guard bands) by its own count, so
+    that its autocorrelation is its own biased estimate; the cross-correlation of an own-rate
+    channel with a full-rate one is then normalised by ``sqrt(n n_c)`` instead of ``n_c``, which
+    keeps the sum positive semi-definite at the price of understating that one cross term by
+    ``sqrt(n_c / n)``. With ``colored_cross_channel = False`` each channel's Gram matrix is taken
+    alone (cross terms zero). The per-maneuver middle matrices are gathered like the normal
+    equations and the Schur projection of the globals' sensitivities, ``J_G - J_L A^-1 M_LG``, is
+    applied to these small matrices per maneuver instead of to the rows.
     """
     _, _, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol)
+    p = model.problem
+    nman = len(p.maneuvers)
+    n_of = np.array([m.n for m in p.maneuvers], dtype=np.int64)
+    L_of = np.array([sfft.next_fast_len(max(2 * int(n) - 1, 1), real=True) for n in n_of], dtype=np.int64)
+    members: list[set[int]] = [set() for _ in range(nman)]
+    for _, mans, colmap, _ in model.channel_layout():
+        for b, k in enumerate(mans):
+            members[int(k)].update(int(i) for i in colmap[b] if st.free[i])
+    union = [np.array(sorted(s), dtype=np.intp) for s in members]
+    cross = opt.colored_cross_channel
+    G = [np.zeros((u.size, int(L_of[k]) // 2 + 1), dtype=complex) if cross else None
+         for k, u in enumerate(union)]
     C = _Normal(st)
-    done: dict[int, tuple] = {}
+    lock = threading.Lock()
 
-    def autocov(ce):
+    def spectra(ce) -> None:
         # only the slots that are free somewhere: fixed columns drop out of the sandwich
         keep = np.nonzero(st.free[ce.colmap].any(axis=0))[0]
         if keep.size:
-            done[ce.channel] = (ce, keep, _block_autocov(ce.JT[keep], ce.e, ce.rseg))
+            w = 1.0 / R[ce.channel]
+            JT = ce.JT[keep]
+            e = ce.e
+            for b, k in enumerate(ce.mans):
+                k = int(k)
+                r0, r1 = int(ce.rseg[b]), int(ce.rseg[b + 1])
+                if r1 == r0:
+                    continue
+                rows = ce.rows[r0:r1]
+                Lk = int(L_of[k])
+                Jp = np.zeros((keep.size, Lk))
+                Jp[:, rows] = JT[:, r0:r1]
+                ep = np.zeros(Lk)
+                ep[rows] = e[r0:r1]
+                F = sfft.rfft(Jp, axis=-1)
+                F *= np.conj(sfft.rfft(ep)) * (w * np.sqrt(n_of[k] / (r1 - r0)))
+                pidx = ce.colmap[b, keep]
+                ok = st.free[pidx]
+                if cross:
+                    pos = np.searchsorted(union[k], pidx[ok])
+                    with lock:
+                        np.add.at(G[k], pos, F[ok])  # slots of one parameter add up
+                else:
+                    Y = (F[ok] * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
+                    with lock:
+                        C.add_blocks((Y @ Y.T)[None], np.zeros((1, int(ok.sum()))),
+                                     np.ascontiguousarray(pidx[ok][None, :]), np.array([k]), 1.0)
         ce.JT = None  # used once: do not hold every channel's Jacobian at the same time
 
-    # the last iterate once more, now with its Jacobian, each channel's autocovariance computed
-    # (on the evaluation's worker threads) as soon as the channel is done
-    model.evaluate_all(theta, jacobian=True, keep_jacobian=True, on_channel=autocov)
-    for c in sorted(done):
-        ce, keep, Cb = done[c]
-        w = 1.0 / R[c]
-        C.add_blocks(Cb, np.zeros((Cb.shape[0], keep.size)), np.ascontiguousarray(ce.colmap[:, keep]),
-                     ce.mans, w * w)
+    # the last iterate once more, now with its Jacobian, each channel's spectra computed (on the
+    # evaluation's worker threads) as soon as the channel is done
+    model.evaluate_all(theta, jacobian=True, keep_jacobian=True, on_channel=spectra)
+    if cross:
+        for k in range(nman):
+            u = union[k]
+            if not u.size:
+                continue
+            Lk = int(L_of[k])
+            Y = (G[k] * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
+            C.add_blocks((Y @ Y.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
+                         np.array([k]), 1.0)
+            G[k] = None
     CGG = C.HGG.copy()
     per_k = []
     for k, lidx in enumerate(st.local_of_arr):
@@ -696,8 +1188,8 @@ def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R,
             continue
         Bk, CLL, CLG = item
         Ai = Ainv[k]
-        cross = Ai @ CLG @ Sinv @ Bk.T
-        cov = Ai @ CLL @ Ai - cross - cross.T + Bk @ covG @ Bk.T
+        cross_k = Ai @ CLG @ Sinv @ Bk.T
+        cov = Ai @ CLL @ Ai - cross_k - cross_k.T + Bk @ covG @ Bk.T
         std[st.local_of_arr[k]] = np.sqrt(np.maximum(np.diag(cov), 0.0))
     return std
 

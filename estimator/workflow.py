@@ -23,6 +23,11 @@ r"""The paper's calibration workflow over a fleet (Saraf & Kumaresan §3-4; SPEC
    (paper Fig. 7): the highest alpha up to which every 2-degree alpha band keeps its 3 sigma
    within the desired value.
 
+Every estimation carries a verdict (:mod:`estimator.verdict`). A bin whose first estimation is a
+failure is left out of the apportionment and the later steps (its biases are not to be trusted),
+and the workflow's own verdict is then a failure, with every stage's failures and warnings as its
+reasons: the workflow never reports a calibration built on a failed estimation as a success.
+
 Everything here runs on flight data alone (no truth); comparisons with a synthetic truth live in
 ``campaigns/``.
 """
@@ -32,7 +37,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -43,6 +48,8 @@ from estimator.model import Model
 from estimator.problem import Problem
 from estimator.result import EstimationResult
 from estimator.solver import SolverOptions, estimate
+from estimator.verdict import Finding, Severity, Verdict, findings_frame, judge
+from estimator.verdict import Status as _Status
 
 RAD2DEG = 180.0 / math.pi
 
@@ -93,7 +100,8 @@ class WorkflowOptions:
     alpha_band_deg : width of the alpha bands of that search, deg.
     min_band_samples : bands with fewer samples are not judged.
     requirements : channel -> desired accuracy.
-    solver : estimator settings for every estimation.
+    solver : estimator settings for every estimation (the steps that start from an earlier
+        step's estimate start from it: ``start = "given"``).
     progress : called with a line of text as the workflow proceeds.
     """
 
@@ -153,6 +161,8 @@ class WorkflowResult:
     nose_probe_alpha_limit_deg : its usable alpha limit (None without nose-probe data).
     notes : what a reader must know (exclusions, fallbacks).
     elapsed_s : wall time.
+    findings : the workflow's own findings (a failed bin left out) and every stage's warnings and
+        failures, each message prefixed with its stage.
     """
 
     maneuvers: pd.DataFrame
@@ -168,10 +178,25 @@ class WorkflowResult:
     elapsed_s: float = 0.0
     #: the table that starts at the identity (its update is shown)
     identity_table: str = "f1"
+    findings: tuple[Finding, ...] = ()
+
+    @property
+    def stages(self) -> tuple[Stage, ...]:
+        return (*self.first, *self.final, *self.gear_down)
+
+    @property
+    def verdict(self) -> Verdict:
+        """Failure if any estimation failed (or a bin was left out for it), success with warnings
+        if any warned, else success."""
+        return judge(_Status.CONVERGED_STEP, self.findings)
 
     @property
     def success(self) -> bool:
-        return all(s.result.success for s in (*self.first, *self.final, *self.gear_down))
+        return self.verdict.success
+
+    def findings_table(self) -> pd.DataFrame:
+        """Every finding of the workflow, most severe first, with its stage."""
+        return findings_frame(self.findings)
 
     def table_updates(self) -> pd.DataFrame:
         """Every table of the final and gear-down estimations: table, breakpoint_deg, mach, gear,
@@ -313,11 +338,31 @@ def _run(problem: Problem, ids: Sequence[str], name: str, mach: float, gear: boo
          values: Mapping[str, float] | None = None, free: Mapping[str, bool] | None = None) -> Stage:
     t0 = time.perf_counter()
     sub = subproblem(problem, list(ids), values=values, free=free)
-    res = estimate(sub, opt.solver)
+    # a later step starts from an earlier one's estimate: that is its start
+    solver = opt.solver if values is None else replace(opt.solver, start="given")
+    res = estimate(sub, solver)
+    n_warn, n_fail = len(res.warnings), len(res.failures)
     _say(opt, f"  Mach {mach:.2f} gear {'down' if gear else 'up'}, {name}: {len(ids)} maneuvers, "
               f"{int(sub.parameters.free_mask.sum())} free parameters, {res.iterations} iterations, "
-              f"{time.perf_counter() - t0:.1f} s, {'converged' if res.success else res.message}")
+              f"{time.perf_counter() - t0:.1f} s: {res.verdict.name.replace('_', ' ')}"
+              + (f" ({n_fail} failure(s), {n_warn} warning(s))" if n_warn or n_fail else ""))
+    for f in (*res.failures, *res.warnings)[:3]:
+        _say(opt, f"      {f.text()[:300]}")
     return Stage(name, mach, gear, sub, res)
+
+
+def _stage_label(st: Stage) -> str:
+    return f"Mach {st.mach:.2f} gear {'down' if st.gear_down else 'up'}, {st.name}"
+
+
+def _stage_findings(stages: Sequence[Stage]) -> list[Finding]:
+    """Every stage's warnings and failures, each message prefixed with its stage."""
+    out = []
+    for st in stages:
+        for f in st.result.findings:
+            if f.severity >= Severity.WARNING:
+                out.append(replace(f, message=f"{_stage_label(st)}: {f.message}"))
+    return out
 
 
 def _aircraft_biases(stage: Stage, names: tuple[str, str]
@@ -358,11 +403,21 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     _say(opt, "step 2: every aircraft together, vane biases free")
     first = tuple(_run(problem, g["id"].tolist(), "biases free", float(b), False, opt)
                   for b, g in up.groupby("bin"))
+    findings: list[Finding] = []
+    failed = [st for st in first if not st.result.success]
+    for st in failed:
+        why = "; ".join(f.message for f in st.result.failures[:3]) or st.result.message
+        findings.append(Finding(
+            "bin_failed", Severity.FAILURE,
+            f"the Mach {st.mach:.2f} gear-up bin's estimation failed ({why}); it is left out of the "
+            "vane-bias apportionment and of the later steps", "read its findings, mend the data or the "
+            "problem and run the workflow again"))
+    first_ok = tuple(st for st in first if st.result.success)
     # ---- step 3
     vb_rows, inst = [], pd.DataFrame()
     if has_vanes:
         per_bin = {}
-        for st in first:
+        for st in first_ok:
             ac, vals, cov, cov_col = _aircraft_biases(st, opt.vane_biases)
             if not ac:
                 continue
@@ -380,8 +435,9 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
                                 "fleet_mean_deg": r["fleet_mean"] * RAD2DEG,
                                 "deviation_deg": r["installation_mean"] * RAD2DEG,
                                 "std_deviation_deg": r["std_installation_mean"] * RAD2DEG})
-        if not per_bin:
+        if not per_bin and not failed:
             raise ValueError(f"{problem.source}: no bin determines the vane biases {bl}, {br}")
+    if has_vanes and per_bin:
         ref = min(per_bin, key=lambda m: (abs(m - opt.reference_mach), m))
         if abs(ref - opt.reference_mach) > 1e-9:
             notes.append(f"no Mach {opt.reference_mach} bin: installation biases taken at Mach {ref:.2f}")
@@ -418,7 +474,7 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
                                                if t in problem.parameters.specs}
     _say(opt, "step 4: installation biases fixed, correction tables free")
     final = []
-    for st in first:
+    for st in first_ok:
         start = dict(zip(st.result.parameters.keys, st.result.values, strict=True))
         fm = [r["fleet_mean_deg"] for r in vb_rows if r["mach"] == st.mach]
         if fm and "f1" in problem.parameters.specs:  # start f1 where the fleet-mean bias puts it
@@ -434,6 +490,9 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     if len(down):
         _say(opt, "step 5: gear-down maneuvers, installation biases fixed")
     for b, g in down.groupby("bin"):
+        if not final:
+            notes.append(f"Mach {b:.2f} gear down: no gear-up bin succeeded to start it from; left out")
+            continue
         near = min(final, key=lambda s: (abs(s.mach - b), s.mach))
         start = dict(zip(near.result.parameters.keys, near.result.values, strict=True))
         gear.append(_run(problem, g["id"].tolist(), "gear down", float(b), True, opt,
@@ -441,10 +500,11 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     # ---- step 6
     acc, growth, limit = _accuracy(final, tuple(gear), opt)
     vb = pd.DataFrame(vb_rows)
+    findings += _stage_findings((*first, *final, *gear))
     return WorkflowResult(maneuvers=bins, first=first, final=final, gear_down=tuple(gear), vane_bias=vb,
                           installation=inst, accuracy=acc, nose_probe_growth=growth,
                           nose_probe_alpha_limit_deg=limit, notes=tuple(notes),
-                          elapsed_s=time.perf_counter() - t_start)
+                          elapsed_s=time.perf_counter() - t_start, findings=tuple(findings))
 
 
 # --------------------------------------------------------------------------------------- accuracy

@@ -85,7 +85,7 @@ def recovery(tmp_path_factory) -> pd.DataFrame:
         warnings.simplefilter("ignore")
         problem = problem_from_dataset(out, overrides={"h0": {"free": True}})
         result = estimate(problem, SolverOptions())
-    table = recovery_table(result, true_parameters(problem))
+    table = recovery_table(result, true_parameters(problem, result.free_estimated))
     with pd.option_context("display.width", 200, "display.max_rows", 500):
         shown = table[~table["kind"].isin(["initial_condition"])]
         print(f"\nflown in {t_fly:.1f} s, estimated in {time.perf_counter() - t0 - t_fly:.1f} s "

@@ -1,0 +1,147 @@
+"""The verdict of an estimation: what an engineer can act on, and why.
+
+A converged solver is not a trustworthy result: a wrong minimum converges too, and so does a fit
+to a stuck vane. The verdict joins the solver's :class:`Status` (did the iteration reach a
+minimum?) with the findings of the fit-quality diagnostics (does the minimum explain the data?)
+and of the identifiability checks (is every estimate determined by the data?):
+
+=======================  ======  ===========================================================
+verdict                  code    when
+=======================  ======  ===========================================================
+SUCCESS                   1      converged, and no finding is a warning or a failure
+SUCCESS_WITH_WARNINGS     2      converged, at least one warning, no failure
+FAILURE                  -1      not converged, or at least one failure
+=======================  ======  ===========================================================
+
+Codes follow scipy's convention: positive is success. Each :class:`Finding` names what it found,
+where (channel, maneuver, times), how large, and what to do.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+import pandas as pd
+
+
+class Status(enum.IntEnum):
+    """How the Gauss-Newton iteration ended (scipy's convention: positive = converged).
+
+    Each member carries a short text (``.text``); the result's message adds the numbers.
+    """
+
+    CONVERGED_STEP = 1, "converged: the undamped Gauss-Newton step is negligible against every deviation"
+    CONVERGED_DECREASE = 2, "converged: the Gauss-Newton model predicts a negligible further cost decrease"
+    ITERATION_LIMIT = 0, "not converged: iteration limit reached"
+    STALLED = -2, "not converged: no step decreases the cost, yet the Gauss-Newton step is not negligible"
+    MODEL_ERROR = -3, "failed: the model cannot be evaluated at these parameter values"
+
+    def __new__(cls, value: int, text: str):
+        obj = int.__new__(cls, value)
+        obj._value_ = value
+        obj.text = text
+        return obj
+
+    @property
+    def converged(self) -> bool:
+        return self.value > 0
+
+
+class Severity(enum.IntEnum):
+    """How much a finding weighs: INFO is reported only, WARNING and FAILURE set the verdict."""
+
+    INFO = 0
+    WARNING = 1
+    FAILURE = 2
+
+
+class Verdict(enum.Enum):
+    """The overall judgement (``.code`` follows scipy's convention, ``.text`` says what it means)."""
+
+    SUCCESS = 1, "success: converged, and the fit explains the data"
+    SUCCESS_WITH_WARNINGS = 2, "success with warnings: read each warning before using the estimates"
+    FAILURE = -1, "failure: do not use these estimates"
+
+    def __init__(self, code: int, text: str):
+        self.code = code
+        self.text = text
+
+    @property
+    def success(self) -> bool:
+        return self.code > 0
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One thing the checks found.
+
+    Attributes
+    ----------
+    code : what kind of finding, a short identifier (``"stuck_channel"``, ``"outlier"``,
+        ``"wrong_minimum"``, ``"turbulence"``, ``"unit_error"``, ``"held"``, ``"on_bound"``, ...).
+    severity : INFO, WARNING or FAILURE.
+    message : what was found, with its numbers and where, as a full sentence.
+    advice : what to do about it.
+    channel : the channel (or IMU input, e.g. ``"az_imu"``) concerned, or None.
+    maneuver : the maneuver id, or None (all / not maneuver-specific).
+    t_s : the times concerned, s (an outlier's samples; a time range as ``(start, end)``).
+    parameters : parameter keys concerned.
+    value : the finding's key number (a ratio, a count, a slope), for tables.
+    """
+
+    code: str
+    severity: Severity
+    message: str
+    advice: str = ""
+    channel: str | None = None
+    maneuver: str | None = None
+    t_s: tuple[float, ...] = ()
+    parameters: tuple[str, ...] = ()
+    value: float | None = None
+
+    def text(self) -> str:
+        """One line: severity, message and advice."""
+        out = f"{self.severity.name.lower()}: {self.message}"
+        return out + (f" — {self.advice}" if self.advice else "")
+
+    def to_dict(self) -> dict:
+        return {"code": self.code, "severity": self.severity.name, "channel": self.channel,
+                "maneuver": self.maneuver, "t_s": list(self.t_s), "parameters": list(self.parameters),
+                "value": self.value, "message": self.message, "advice": self.advice}
+
+
+def judge(status: Status, findings: Iterable[Finding]) -> Verdict:
+    """The verdict of a solver status and the findings (module docstring)."""
+    worst = max((f.severity for f in findings), default=Severity.INFO)
+    if not status.converged or worst >= Severity.FAILURE:
+        return Verdict.FAILURE
+    if worst >= Severity.WARNING:
+        return Verdict.SUCCESS_WITH_WARNINGS
+    return Verdict.SUCCESS
+
+
+def findings_frame(findings: Sequence[Finding]) -> pd.DataFrame:
+    """One row per finding, most severe first (columns of :meth:`Finding.to_dict`)."""
+    cols = ["code", "severity", "channel", "maneuver", "t_s", "parameters", "value", "message", "advice"]
+    rows = [f.to_dict() for f in sorted(findings, key=lambda f: -int(f.severity))]
+    return pd.DataFrame(rows, columns=cols)
+
+
+@dataclass(frozen=True)
+class VerdictReport:
+    """A verdict with its findings, for whatever produced one (an estimation, a workflow)."""
+
+    verdict: Verdict
+    findings: tuple[Finding, ...] = field(default=())
+
+    def summary(self, max_lines: int = 12) -> str:
+        """The verdict and its warnings and failures, most severe first, one line each."""
+        shown = [f for f in sorted(self.findings, key=lambda f: -int(f.severity))
+                 if f.severity >= Severity.WARNING]
+        lines = [f"verdict: {self.verdict.text}"]
+        lines += [f"  {f.text()}" for f in shown[:max_lines]]
+        if len(shown) > max_lines:
+            lines.append(f"  ... and {len(shown) - max_lines} more (all in findings)")
+        return "\n".join(lines)
