@@ -429,6 +429,14 @@ class Model:
         lay = self._layout((k,))
         return integrate_many(lay.inputs, values[lay.state_idx], self.problem.g_mps2, sensitivities=True)
 
+    def state_sensitivities(self, values: np.ndarray, maneuvers: tuple[int, ...]) -> list[np.ndarray]:
+        """The sensitivities ``dX/d(x0, IMU biases)`` (N_k, 7, 13) of some maneuvers (one
+        integration of the set, as :meth:`evaluate_all` of the same maneuvers integrates them)."""
+        lay = self._layout(tuple(int(k) for k in maneuvers))
+        values = np.asarray(values, dtype=float)
+        _, S = integrate_many(lay.inputs, values[lay.state_idx], self.problem.g_mps2, sensitivities=True)
+        return [S[lay.seg[i]:lay.seg[i + 1]] for i in range(len(lay.ks))]
+
     def evaluate(self, values: np.ndarray, k: int, jacobian: bool = True) -> ManeuverEval:
         """Outputs (and Jacobian blocks) of every channel present in maneuver ``k``."""
         ev = self.evaluate_all(values, jacobian, maneuvers=(k,))

@@ -59,7 +59,8 @@ class EstimationResult:
     ----------
     parameters : the parameter set at the estimate (values SI, free/fixed, scopes, units).
     std_crb : (P,) Cramér-Rao standard deviations, SI (NaN for fixed or unidentifiable).
-    std_colored : (P,) deviations corrected for coloured residuals (Morelli-Klein), SI.
+    std_colored : (P,) honest deviations, SI: corrected for coloured and cross-correlated residuals
+        (Morelli-Klein, matrix form), never below the Cramér-Rao bound, plus the IMU noise's share.
     correlation_keys, correlation : correlation matrix of the free non-per-maneuver parameters.
     R : channel -> residual variance (SI^2) at the estimate.
     residuals : per maneuver and channel residual statistics.
@@ -72,6 +73,10 @@ class EstimationResult:
     verdict : success, success with warnings, or failure.
     diagnostics : the fit-quality table, one row per maneuver and channel (None if not run).
     outliers : (maneuver, channel) -> times (s) of the residual outliers the diagnostics found.
+    std_imu_noise : (P,) the share of ``std_colored`` that the IMU's noise, integrated as process
+        noise, contributes (``std_colored^2 = max(Morelli-Klein, Cramér-Rao)^2 + std_imu_noise^2``).
+    imu_noise_psd : aircraft -> (6,) the IMU white-noise densities used (accelerometers m^2/s^3,
+        gyros rad^2/s), or None.
     """
 
     parameters: ParameterSet
@@ -97,10 +102,14 @@ class EstimationResult:
     verdict: Verdict = Verdict.FAILURE
     diagnostics: pd.DataFrame | None = field(default=None, repr=False)
     outliers: dict[tuple[str, str], np.ndarray] = field(default_factory=dict, repr=False)
+    std_imu_noise: np.ndarray | None = field(default=None, repr=False)
+    imu_noise_psd: dict[str, np.ndarray] | None = field(default=None, repr=False)
 
     @classmethod
     def build(cls, problem: Problem, values: np.ndarray, **kw) -> EstimationResult:
-        for a in ("std_crb", "std_colored", "correlation"):
+        for a in ("std_crb", "std_colored", "correlation", "std_imu_noise"):
+            if kw.get(a) is None:
+                continue
             kw[a] = np.asarray(kw[a])
             kw[a].setflags(write=False)
         return cls(
@@ -155,6 +164,7 @@ class EstimationResult:
         reason = self.state_reason or ("",) * n
         est = (self.free_estimated if self.free_estimated is not None
                else np.array([p.free for p in self.parameters]))
+        imu = self.std_imu_noise if self.std_imu_noise is not None else np.full(n, np.nan)
         for i, p in enumerate(self.parameters):
             s = p.display_scale
             rows.append({
@@ -164,6 +174,7 @@ class EstimationResult:
                 "value": p.value, "std_crb": self.std_crb[i], "std_colored": self.std_colored[i],
                 "display_unit": p.display_unit, "value_display": p.value * s,
                 "std_crb_display": self.std_crb[i] * s, "std_colored_display": self.std_colored[i] * s,
+                "std_imu_noise": imu[i], "std_imu_noise_display": imu[i] * s,
             })
         return pd.DataFrame(rows).set_index("key")
 

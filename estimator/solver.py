@@ -66,6 +66,7 @@ from scipy import fft as sfft
 from threadpoolctl import threadpool_limits
 
 from estimator.core.assembly import scatter_blocks
+from estimator.core.process_noise import input_increments, suffix_middle_factor, white_noise_psd
 from estimator.model import Evaluation, Model, ModelEvaluationError
 from estimator.problem import Problem
 from estimator.result import Confounding, EstimationResult, ResidualStats
@@ -98,6 +99,10 @@ class SolverOptions:
     colored : compute the Morelli-Klein coloured-residual deviations.
     colored_cross_channel : with the residual cross-correlations between the channels of a
         maneuver (the full matrix form); False: each channel alone.
+    imu_noise : the IMU noise whose integration adds to the coloured deviations (process noise,
+        :mod:`estimator.core.process_noise`): "estimate" (from the IMU data, per aircraft), "none",
+        or ``(accel_psd, gyro_psd)``, the white-noise densities in m^2/s^3 and rad^2/s (a
+        datasheet's velocity and angle random walk, squared, in SI).
     start : "staged" (default), "given", or a tuple of them: one estimation from each, the best
         verdict kept (then the lowest cost).
     robust : exclude the residual outliers the diagnostics find and estimate again (reported).
@@ -117,9 +122,10 @@ class SolverOptions:
     min_support_samples: int = 40
     colored: bool = True
     colored_cross_channel: bool = True
+    imu_noise: str | tuple[float, float] = "estimate"
     start: str | tuple[str, ...] = "staged"
     robust: bool = False
-    diagnose: bool = False
+    diagnose: bool = True
     screen_rounds: int = 3
     verbose: bool = False
 
@@ -129,6 +135,13 @@ class SolverOptions:
         if bad or not starts:
             raise ValueError(f"SolverOptions: start must be one of {STARTS} or a tuple of them, "
                              f"got {self.start!r}")
+        if isinstance(self.imu_noise, str):
+            if self.imu_noise not in ("estimate", "none"):
+                raise ValueError(f"SolverOptions: imu_noise must be 'estimate', 'none' or (accel_psd, "
+                                 f"gyro_psd), got {self.imu_noise!r}")
+        elif len(self.imu_noise) != 2 or not all(np.isfinite(v) and v >= 0 for v in self.imu_noise):
+            raise ValueError(f"SolverOptions: imu_noise = {self.imu_noise!r}: two densities >= 0, "
+                             "(m^2/s^3, rad^2/s)")
         if self.max_iterations < 1:
             raise ValueError(f"SolverOptions: max_iterations must be >= 1, got {self.max_iterations}")
 
@@ -826,8 +839,10 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     correlated = correlated + _high_correlations(corr_G, [keys[i] for i in st.glob], opt.correlation_warn)
     confounding += correlated
     std_col = np.full(len(keys), np.nan)
+    std_imu = np.full(len(keys), np.nan)
+    imu_psd = _imu_noise_psd(problem, opt) if opt.colored else None
     if opt.colored:
-        std_col = _colored_std(model, theta, N, st, R, len(keys), opt)
+        std_col, std_imu = _colored_std(model, theta, N, st, R, len(keys), opt, std, imu_psd)
     # what each parameter is: estimated, on a bound, held (why) or fixed
     state, reason = [], []
     why = {i: h for h in holds for i in h.params}
@@ -852,7 +867,26 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         else:
             state.append("estimated")
             reason.append("")
-    findings = _parameter_findings(problem, holds, unident, correlated, state, reason, opt)
+    # which maneuvers inform each global parameter (its coupling block with their locals)
+    informs = {keys[g]: {problem.maneuvers[k].id for k in range(len(problem.maneuvers))
+                         if N.HGL[k].shape[1] and np.any(N.HGL[k][j] != 0.0)}
+               for j, g in enumerate(st.glob)}
+    findings = _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs)
+    if imu_psd is not None and np.isfinite(std_imu).any():
+        inflation = np.where(st.free, np.sqrt(1.0 + (std_imu / np.where(std > 0, std, np.nan)) ** 2), np.nan)
+        worst = int(np.nanargmax(inflation)) if np.isfinite(inflation).any() else -1
+        levels = "; ".join(f"{a}: accelerometers {np.sqrt(v[:3]).max():.2g} m/s/sqrt(s), gyros "
+                           f"{np.degrees(np.sqrt(v[3:])).max() * 60.0:.2g} deg/sqrt(h)"
+                           for a, v in imu_psd.items())
+        source = "from the data" if opt.imu_noise == "estimate" else "as given"
+        most = (f", most to {keys[worst]} ({inflation[worst]:.2g} x its Cramér-Rao deviation)"
+                if worst >= 0 else "")
+        findings.append(Finding(
+            "imu_noise", Severity.INFO,
+            f"IMU noise integrated as process noise ({source}: {levels}) adds to the coloured "
+            f"deviations{most}",
+            "give the IMU's datasheet random walks (SolverOptions.imu_noise) if the data's own level, "
+            "which counts vibration as noise, is too pessimistic"))
     findings += [Finding("start", Severity.INFO, "; ".join(stage_notes))] if stage_notes else []
     if it.poor:
         findings.append(Finding(
@@ -877,6 +911,7 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     verdict = judge(it.status, findings)
     message = it.message
     return EstimationResult.build(
+        std_imu_noise=std_imu, imu_noise_psd=imu_psd,
         problem=problem, values=theta, std_crb=std, std_colored=std_col,
         correlation_keys=tuple(keys[i] for i in st.glob), correlation=corr_G,
         R=dict(zip((c.name for c in problem.channels), R, strict=True)),
@@ -888,7 +923,7 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     )
 
 
-def _parameter_findings(problem, holds, unident, correlated, state, reason, opt) -> list[Finding]:
+def _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs) -> list[Finding]:
     """Findings of the identifiability checks: held parameters (INFO when the data simply do not
     reach them, WARNING when a confounded set was anchored), parameters on a bound (WARNING),
     highly correlated pairs (INFO: their deviations already say it)."""
@@ -936,13 +971,19 @@ def _parameter_findings(problem, holds, unident, correlated, state, reason, opt)
                            "fix one of them in the problem file", parameters=conf.parameters))
     for i, s in enumerate(state):
         if s == "on_bound":
-            out.append(Finding("on_bound", Severity.WARNING, f"{ps.parameters[i].key} is {reason[i]}",
+            p = ps.parameters[i]
+            # a calibration result (a table value, a bias, a delay, an IMU bias) on its bound is not a
+            # measurement; a maneuver's nuisance scale or offset (k_h in level flight) is only noted
+            nuisance = p.scope == "maneuver" and p.kind in ("scale", "bias")
+            out.append(Finding("on_bound", Severity.INFO if nuisance else Severity.WARNING,
+                               f"{p.key} is {reason[i]}",
                                "the data want it outside its physical range: check the data of the "
                                "channels it enters (units, signs, a fault) before widening the bounds",
-                               parameters=(ps.parameters[i].key,)))
-    # a calibration parameter that trades against a maneuver's initial condition is the confounding
-    # an engineer must not miss (a sideslip bias against the initial sideslip where the sideslip
-    # barely varies): its value rests on weak kinematic couplings, any error of which goes into it
+                               parameters=(p.key,)))
+    # a calibration parameter that trades against the initial conditions of every maneuver that
+    # informs it is the confounding an engineer must not miss (a sideslip bias against the initial
+    # sideslip): no maneuver separates the two but through weak kinematic couplings, and any
+    # error of those goes into it
     calib = {p.key for p in ps if p.kind in ("bias", "scale", "table") and p.scope != "maneuver"}
     ics = {p.key for p in ps if p.kind == "initial_condition"}
     against: dict[str, list[str]] = {}
@@ -955,13 +996,21 @@ def _parameter_findings(problem, holds, unident, correlated, state, reason, opt)
         else:
             out.append(Finding("correlated", Severity.INFO, f"{' and '.join(c.parameters)}: {c.detail}",
                                parameters=c.parameters))
+    man_of = {p.key: p.instance for p in ps if p.scope == "maneuver"}
     for key, partners in against.items():
+        if not informs.get(key) or not informs[key] <= {man_of[k] for k in partners}:
+            for k in partners:
+                out.append(Finding("correlated", Severity.INFO, f"{k} and {key}: correlation above "
+                                   f"{opt.correlation_warn}; the data barely separate them in that "
+                                   "maneuver (other maneuvers do)", parameters=(k, key)))
+            continue
         out.append(Finding(
             "confounded", Severity.WARNING,
             f"{key} is confounded with the initial condition(s) {', '.join(partners[:6])}"
-            f"{' ...' if len(partners) > 6 else ''} (|correlation| > {opt.correlation_warn}): the flow "
-            "angle it offsets barely varies in those maneuvers, so the data separate the two only "
-            "through weak kinematic couplings, and any error there goes into it",
+            f"{' ...' if len(partners) > 6 else ''} of every maneuver that informs it (|correlation| > "
+            f"{opt.correlation_warn}): the data separate the offset it adds to the flow angle from the "
+            "maneuvers' own initial flow angle only through weak kinematic couplings, and any error "
+            "there goes into it",
             "fly maneuvers that vary that flow angle (a steady-heading sideslip for a sideslip bias, "
             "a pull-up for an angle-of-attack bias), or fix it at a known value",
             parameters=(key, *partners)))
@@ -1082,16 +1131,18 @@ def _one_sided_weights(L: int) -> np.ndarray:
     return wt
 
 
-def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R, nparam,
-                 opt) -> np.ndarray:
-    r"""Morelli-Klein standard deviations for every free parameter (sandwich covariance).
+def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R, nparam, opt,
+                 std_crb: np.ndarray, imu_psd: dict[str, np.ndarray] | None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    r"""Honest standard deviations: Morelli-Klein (coloured residuals, cross-channel) and the IMU noise.
 
-    The middle matrix of maneuver ``k`` is ``sum_i sum_j J_i^T W Rvv(i - j) W J_j`` over the
-    maneuver's samples, ``W = R^-1`` and ``Rvv`` the biased auto- and cross-correlation estimate of
-    its channels' residuals (every lag). With each channel's Jacobian and residual placed on the
-    maneuver's sample grid (zero where the channel has no sample in the cost) and zero-padded to
-    ``L >= 2 n - 1``, circular convolution is linear, the transform of the cross-correlation of
-    channels ``c, d`` is ``E_c conj(E_d) / n`` and, by Parseval::
+    **Coloured residuals.** The middle matrix of maneuver ``k`` is ``sum_i sum_j J_i^T W Rvv(i - j)
+    W J_j`` over the maneuver's samples, ``W = R^-1`` and ``Rvv`` the biased auto- and
+    cross-correlation estimate of its channels' residuals (every lag). With each channel's
+    Jacobian and residual placed on the maneuver's sample grid (zero where the channel has no
+    sample in the cost) and zero-padded to ``L >= 2 n - 1``, circular convolution is linear, the
+    transform of the cross-correlation of channels ``c, d`` is ``E_c conj(E_d) / n`` and, by
+    Parseval::
 
         middle_k = 1/(n L) sum_f Re( G_f G_f^H ),     G_f = sum_c s_c W_c F_c,f conj(E_c,f)
 
@@ -1102,9 +1153,24 @@ def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R,
     channel with a full-rate one is then normalised by ``sqrt(n n_c)`` instead of ``n_c``, which
     keeps the sum positive semi-definite at the price of understating that one cross term by
     ``sqrt(n_c / n)``. With ``colored_cross_channel = False`` each channel's Gram matrix is taken
-    alone (cross terms zero). The per-maneuver middle matrices are gathered like the normal
-    equations and the Schur projection of the globals' sensitivities, ``J_G - J_L A^-1 M_LG``, is
-    applied to these small matrices per maneuver instead of to the rows.
+    alone (cross terms zero).
+
+    **IMU noise** (:mod:`estimator.core.process_noise`): ``C_proc = sum_j V_j V_j^T`` per maneuver,
+    from the initial-condition columns of the Jacobian, the state sensitivities and the IMU's
+    white-noise level ``imu_psd`` (aircraft -> (6,) SI^2 s; None: left out).
+
+    Both middles are gathered like the normal equations and the Schur projection of the globals'
+    sensitivities is applied per maneuver (:func:`_sandwich_std`). The Morelli-Klein deviation is
+    floored at the Cramér-Rao bound (which no unbiased estimate beats; the all-lags estimate runs
+    low for parameters whose sensitivity is a ramp, because the residuals have lost exactly that
+    low-frequency content to the parameters), and the IMU noise's variance is added.
+
+    Maneuvers are taken in chunks whose spectra and factors are reduced to per-maneuver matrices
+    and dropped before the next chunk, so memory does not grow with the problem.
+
+    Returns
+    -------
+    (honest deviations, the IMU noise's share alone), (P,) each, SI, NaN where not estimated.
     """
     _, _, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol)
     p = model.problem
@@ -1117,57 +1183,123 @@ def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R,
             members[int(k)].update(int(i) for i in colmap[b] if st.free[i])
     union = [np.array(sorted(s), dtype=np.intp) for s in members]
     cross = opt.colored_cross_channel
-    G = [np.zeros((u.size, int(L_of[k]) // 2 + 1), dtype=complex) if cross else None
-         for k, u in enumerate(union)]
     C = _Normal(st)
+    Cp = _Normal(st) if imu_psd is not None else None
     lock = threading.Lock()
+    chunks, cur, size = [], [], 0
+    for k in range(nman):
+        cur.append(k)
+        size += int(n_of[k])
+        if size >= _COLORED_CHUNK_SAMPLES:
+            chunks.append(tuple(cur))
+            cur, size = [], 0
+    if cur:
+        chunks.append(tuple(cur))
+    for chunk in chunks:
+        G = ({k: np.zeros((union[k].size, int(L_of[k]) // 2 + 1), dtype=complex) for k in chunk}
+             if cross else {})
+        V: dict[int, np.ndarray] = {}
+        dEq: dict[int, np.ndarray] = {}
+        if Cp is not None:
+            for k, Sk in zip(chunk, model.state_sensitivities(theta, chunk), strict=True):
+                m = p.maneuvers[k]
+                q = np.sqrt(imu_psd[m.aircraft] / m.dt_s)
+                dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
+                V[k] = np.zeros((m.n, union[k].size, 6))
 
-    def spectra(ce) -> None:
-        # only the slots that are free somewhere: fixed columns drop out of the sandwich
-        keep = np.nonzero(st.free[ce.colmap].any(axis=0))[0]
-        if keep.size:
-            w = 1.0 / R[ce.channel]
-            JT = ce.JT[keep]
-            e = ce.e
-            for b, k in enumerate(ce.mans):
-                k = int(k)
-                r0, r1 = int(ce.rseg[b]), int(ce.rseg[b + 1])
-                if r1 == r0:
-                    continue
-                rows = ce.rows[r0:r1]
-                Lk = int(L_of[k])
-                Jp = np.zeros((keep.size, Lk))
-                Jp[:, rows] = JT[:, r0:r1]
-                ep = np.zeros(Lk)
-                ep[rows] = e[r0:r1]
-                F = sfft.rfft(Jp, axis=-1)
-                F *= np.conj(sfft.rfft(ep)) * (w * np.sqrt(n_of[k] / (r1 - r0)))
-                pidx = ce.colmap[b, keep]
-                ok = st.free[pidx]
-                if cross:
+        def spectra(ce, G=G, V=V, dEq=dEq) -> None:
+            # only the slots that are free somewhere: fixed columns drop out of the sandwich
+            keep = np.nonzero(st.free[ce.colmap].any(axis=0))[0]
+            if keep.size:
+                w = 1.0 / R[ce.channel]
+                JT = ce.JT
+                e = ce.e
+                for b, k in enumerate(ce.mans):
+                    k = int(k)
+                    r0, r1 = int(ce.rseg[b]), int(ce.rseg[b + 1])
+                    if r1 == r0:
+                        continue
+                    rows = ce.rows[r0:r1]
+                    pidx = ce.colmap[b, keep]
+                    ok = st.free[pidx]
+                    Jb = JT[keep[ok], r0:r1]
                     pos = np.searchsorted(union[k], pidx[ok])
-                    with lock:
-                        np.add.at(G[k], pos, F[ok])  # slots of one parameter add up
-                else:
-                    Y = (F[ok] * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
-                    with lock:
-                        C.add_blocks((Y @ Y.T)[None], np.zeros((1, int(ok.sum()))),
-                                     np.ascontiguousarray(pidx[ok][None, :]), np.array([k]), 1.0)
-        ce.JT = None  # used once: do not hold every channel's Jacobian at the same time
+                    if k in V:  # the IMU noise: J^T W J_IC on the grid, its suffix sums times dE Q^1/2
+                        bb = np.zeros((int(n_of[k]), Jb.shape[0], 7))
+                        bb[rows] = np.einsum("sn,cn->nsc", Jb, JT[:7, r0:r1]) * w
+                        Vc = suffix_middle_factor(bb, dEq[k])
+                        with lock:
+                            if np.unique(pos).size == pos.size:
+                                V[k][:, pos, :] += Vc
+                            else:  # slots of one parameter add up
+                                np.add.at(V[k], (slice(None), pos), Vc)
+                    Lk = int(L_of[k])
+                    Jp = np.zeros((Jb.shape[0], Lk))
+                    Jp[:, rows] = Jb
+                    ep = np.zeros(Lk)
+                    ep[rows] = e[r0:r1]
+                    F = sfft.rfft(Jp, axis=-1)
+                    F *= np.conj(sfft.rfft(ep)) * (w * np.sqrt(n_of[k] / (r1 - r0)))
+                    if cross:
+                        with lock:
+                            np.add.at(G[k], pos, F)  # slots of one parameter add up
+                    else:
+                        Y = (F * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
+                        with lock:
+                            C.add_blocks((Y @ Y.T)[None], np.zeros((1, pos.size)),
+                                         np.ascontiguousarray(pidx[ok][None, :]), np.array([k]), 1.0)
+            ce.JT = None  # used once: do not hold every channel's Jacobian at the same time
 
-    # the last iterate once more, now with its Jacobian, each channel's spectra computed (on the
-    # evaluation's worker threads) as soon as the channel is done
-    model.evaluate_all(theta, jacobian=True, keep_jacobian=True, on_channel=spectra)
-    if cross:
-        for k in range(nman):
+        # the chunk once more, now with its Jacobian, each channel's spectra computed (on the
+        # evaluation's worker threads) as soon as the channel is done
+        model.evaluate_all(theta, jacobian=True, keep_jacobian=True, maneuvers=chunk, on_channel=spectra)
+        for k in chunk:
             u = union[k]
             if not u.size:
                 continue
-            Lk = int(L_of[k])
-            Y = (G[k] * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
-            C.add_blocks((Y @ Y.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
-                         np.array([k]), 1.0)
-            G[k] = None
+            if cross:
+                Lk = int(L_of[k])
+                Y = (G.pop(k) * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
+                C.add_blocks((Y @ Y.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
+                             np.array([k]), 1.0)
+            if k in V:
+                Y = np.ascontiguousarray(V.pop(k).transpose(1, 0, 2)).reshape(u.size, -1)
+                Cp.add_blocks((Y @ Y.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
+                              np.array([k]), 1.0)
+    std_mk = _sandwich_std(N, st, C, Sinv, Ainv, nparam)
+    std_imu = (_sandwich_std(N, st, Cp, Sinv, Ainv, nparam) if Cp is not None
+               else np.where(np.isfinite(std_mk), 0.0, np.nan))
+    floor = np.where(np.isfinite(std_crb), std_crb, 0.0)
+    honest = np.sqrt(np.maximum(std_mk, floor) ** 2 + std_imu ** 2)
+    return honest, std_imu
+
+
+#: Maneuvers are taken in chunks of about this many samples for the coloured deviations.
+_COLORED_CHUNK_SAMPLES = 30000
+
+
+def _imu_noise_psd(problem: Problem, opt: SolverOptions) -> dict[str, np.ndarray] | None:
+    """The IMU's white-noise level per aircraft, (6,) SI^2 s (accelerometers, gyros), or None."""
+    if isinstance(opt.imu_noise, str):
+        if opt.imu_noise == "none":
+            return None
+        per: dict[str, list[np.ndarray]] = {}
+        for m in problem.maneuvers:
+            u = np.hstack([m.accel_imu_mps2, m.omega_rps])
+            per.setdefault(m.aircraft, []).append([white_noise_psd(u[:, j], m.dt_s) for j in range(6)])
+        # one IMU per aircraft: the median over its maneuvers is robust to one whose sharp inputs
+        # leak into the band
+        return {a: np.nan_to_num(np.nanmedian(np.array(v), axis=0)) for a, v in per.items()}
+    accel, gyro = opt.imu_noise
+    psd = np.array([accel] * 3 + [gyro] * 3, dtype=float)
+    return {m.aircraft: psd for m in problem.maneuvers}
+
+
+def _sandwich_std(N: _Normal, st: _Structure, C: _Normal, Sinv: np.ndarray, Ainv: list[np.ndarray],
+                  nparam: int) -> np.ndarray:
+    """Standard deviations of ``M^-1 C M^-1`` for a middle matrix ``C`` gathered like the normal
+    equations (global, coupling and per-maneuver local blocks), through the Schur structure of
+    ``M`` (``S^-1`` and the local blocks' inverses ``A_k^-1``)."""
     CGG = C.HGG.copy()
     per_k = []
     for k, lidx in enumerate(st.local_of_arr):

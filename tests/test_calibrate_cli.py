@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from campaigns.cli import main
+from campaigns.cli import EXIT_STATUS, main
 from synth.campaign import fly_campaign, parse_campaign
 from synth.dataset import load_dataset
 
@@ -111,11 +111,12 @@ def test_calibrate_a_problem_file_of_user_data(dataset, tmp_path, capsys):
     out = tmp_path / "results"
     code = main(["calibrate", str(problem), "--single", "--out", str(out), "--no-plots"])
     text = capsys.readouterr().out
-    assert code == 0, text
-    for name in ("result.json", "parameters.csv", "residuals.csv", "correlation.csv"):
+    for name in ("result.json", "parameters.csv", "residuals.csv", "correlation.csv", "findings.csv"):
         assert (out / name).exists(), name
     doc = json.loads((out / "result.json").read_text())
-    assert doc["status"] == 1
+    # the exit status carries the verdict, which must be a success here (clean data, linear flow)
+    assert doc["status"] > 0 and doc["verdict_code"] > 0, text
+    assert code == EXIT_STATUS[doc["verdict"]], text
     params = pd.read_csv(out / "parameters.csv", index_col="key")
     inj = ds.manifest["maneuvers"][0]["injected"]
     truth = dict(zip(("dax", "day", "daz"), inj["imu.accel_bias_mps2"], strict=True))
@@ -139,7 +140,10 @@ def test_calibrate_a_dataset_writes_the_recovery_table(dataset, tmp_path, capsys
     out = tmp_path / "res"
     code = main(["calibrate", str(dataset), "--single", "--free", "h0", "--out", str(out)])
     text = capsys.readouterr().out
-    assert code == 0, text
+    # a pitch doublet and a pull-up with rudder doublets: nothing separates the sideslip sensors'
+    # biases from each maneuver's initial sideslip but kinematic couplings; the verdict says so
+    assert code == EXIT_STATUS["SUCCESS_WITH_WARNINGS"], text
+    assert "b_sb[PV1] is confounded with the initial condition(s) v0[m0000], v0[m0001]" in text
     assert "recovery against the injected truth" in text
     rec = pd.read_csv(out / "recovery.csv", index_col=0)
     delays = rec[rec["kind"] == "time_delay"]
@@ -157,12 +161,13 @@ def test_calibrate_says_what_is_wrong_with_a_missing_file(tmp_path, capsys):
 @pytest.mark.slow
 def test_calibrate_never_mixes_results_of_two_runs(dataset, tmp_path, capsys):
     out = tmp_path / "res"
-    assert main(["calibrate", str(dataset), "--single", "--out", str(out), "--no-colored"]) == 0
+    assert main(["calibrate", str(dataset), "--single", "--out", str(out), "--no-colored"]) in (0, 3)
     assert (out / "recovery.csv").exists()
     # a second run into the same directory must be asked for, and then replaces everything
     assert main(["calibrate", str(dataset), "--single", "--out", str(out), "--no-plots"]) == 2
     assert "--overwrite" in capsys.readouterr().err
-    assert main(["calibrate", str(dataset), "--single", "--out", str(out), "--no-plots", "--overwrite"]) == 0
+    again = ["calibrate", str(dataset), "--single", "--out", str(out), "--no-plots", "--overwrite"]
+    assert main(again) in (0, 3)  # a success: with or without warnings
     assert not (out / "time_history_match.png").exists(), "a stale figure survived"
     # a directory holding anything else is never touched
     other = tmp_path / "mine"

@@ -122,7 +122,9 @@ class StudyConfig:
 
 SIZES: dict[str, StudyConfig] = {
     "full": StudyConfig("PV1-NP", ("linear", "realistic"), (0.5, 0.7), (1, 2, 4, 8, 16), 20),
-    "tiny": StudyConfig("PV1-NP", ("linear",), (0.5,), (1, 2), 1),
+    # N = 1 (a lone pitch doublet) leaves the sideslip biases confounded with the initial sideslip
+    # and the solver does not converge in its iteration budget: a failure, rightly; N >= 2 does
+    "tiny": StudyConfig("PV1-NP", ("linear",), (0.5,), (2, 3), 1),
 }
 
 
@@ -553,7 +555,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
                    help="worker processes per Monte Carlo run (default: 2; 1 runs in this process)")
     p.add_argument("--size", choices=sorted(SIZES), default="full",
-                   help="full: the study; tiny: a smoke run (linear world, Mach 0.5, N = 1 and 2)")
+                   help="full: the study; tiny: a smoke run (linear world, Mach 0.5, N = 2 and 3)")
     args = p.parse_args(argv)
     config = SIZES[args.size]
     n = args.replications or config.replications

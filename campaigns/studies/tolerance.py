@@ -120,8 +120,10 @@ def _set_imu_bias(raw: dict, scale: Level) -> None:
     imu["accel_bias_mps2"] = [s * a for a in accel_mps2]
     imu["gyro_bias_deg_s"] = [s * g for g in gyro_deg_s]
     draws = raw["draw"].setdefault("errors", {})
-    draws["imu.accel_bias_mps2"] = {"dist": "normal", "std": s * IMU_SPREAD_ACCEL_MPS2, "scope": "maneuver"}
-    draws["imu.gyro_bias_deg_s"] = {"dist": "normal", "std": s * IMU_SPREAD_GYRO_DEG_S, "scope": "maneuver"}
+    draws["imu.accel_bias_mps2"] = {"dist": "normal", "std": abs(s) * IMU_SPREAD_ACCEL_MPS2,
+                                     "scope": "maneuver"}
+    draws["imu.gyro_bias_deg_s"] = {"dist": "normal", "std": abs(s) * IMU_SPREAD_GYRO_DEG_S,
+                                    "scope": "maneuver"}
 
 
 def _set_imu_bias_started(raw: dict, scale: Level) -> None:
