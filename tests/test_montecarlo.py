@@ -1,14 +1,18 @@
-"""Monte Carlo engine (issue 5): determinism, resume after interruption, failures, Dask = local.
+"""Monte Carlo engine (issue 5): determinism, resume after interruption, failures, Dask = local;
+the summary (issue 10): per-kind coverage, held parameters, verdicts, the accuracy definition.
 
 A tiny scenario: one configuration, two 20 s maneuvers at Mach 0.6, the attitude, air-data and
 vane channels only, the vane tables fixed (a few free calibration parameters), drawn IMU biases and
-vane delays. A replication takes about a second.
+vane delays. A replication takes about a second. The summary's statistics are also checked on
+small synthetic replication tables, where every number is known.
 """
 
 from __future__ import annotations
 
 import copy
 import json
+import math
+import pickle
 import shutil
 import tomllib
 
@@ -16,10 +20,20 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from campaigns import montecarlo_cli
-from campaigns.montecarlo import ScenarioError, parse_scenario, run_montecarlo, runner, summarize
+from campaigns import montecarlo_cli, workflow_truth
+from campaigns.montecarlo import (
+    ReplicationResult,
+    ScenarioError,
+    parse_scenario,
+    run_montecarlo,
+    runner,
+    summarize,
+    summarize_results,
+)
 from campaigns.montecarlo import replication as replication_module
 from campaigns.montecarlo.runner import finished_replications, read_replication, replication_file
+from campaigns.montecarlo.summary import kind_table, load_results
+from estimator import workflow
 
 RAW = {
     "name": "mc_test",
@@ -117,8 +131,10 @@ def test_same_seed_gives_identical_replications_in_any_order(base_run, tmp_path)
     assert r0.noise_seed != r1.noise_seed
     assert not np.array_equal(r0.draws["value"], r1.draws["value"])
     p0, p1 = (r.parameters.set_index("name") for r in (r0, r1))
-    determined = np.isfinite(p0["std_crb"])  # the others are held at their start values
-    assert determined.sum() > 20 and (p0["estimate"][determined] != p1["estimate"][determined]).all()
+    # the parameters both estimated (a held one is left out of the table, or has no deviation)
+    both = [k for k in p0.index.intersection(p1.index)
+            if np.isfinite(p0.loc[k, "std_crb"]) and np.isfinite(p1.loc[k, "std_crb"])]
+    assert len(both) > 20 and (p0.loc[both, "estimate"] != p1.loc[both, "estimate"]).all()
     # the tables hold what the summary needs: free calibration parameters with truth and deviations
     p = r0.parameters.set_index("name")
     assert {"b_l[PV1]", "b_r[PV1]", "tau_alpha_zl", "dax[m0000]"} <= set(p.index)
@@ -126,6 +142,10 @@ def test_same_seed_gives_identical_replications_in_any_order(base_run, tmp_path)
     ch = r0.channels.set_index(["name", "kind"])
     assert ("alpha_zl", "calibrated") in ch.index and ("theta", "residual") in ch.index
     assert 0.0 < ch.loc[("alpha_zl", "calibrated"), "three_sigma"] < 1.0  # deg
+    # the estimator's verdict is recorded beside its solver status
+    for r in (r0, r1):
+        assert r.verdict_code in (1, 2) and r.n_failures == 0 and r.n_warnings == len(r.findings)
+        assert r.meta()["verdict"] in ("success", "success with warnings")
 
 
 def test_interrupted_run_resumes_to_exactly_n_files(base_run, tmp_path, monkeypatch):
@@ -194,6 +214,11 @@ def test_non_converged_estimation_is_a_failure_with_the_estimators_message(tmp_p
     assert report.failed == (0,)
     record = json.loads(replication_file(tmp_path / "nc", 0, failed=True).read_text())
     assert record["status"] == 0 and "iteration limit" in record["message"]
+    assert record["verdict_code"] == -1 and record["verdict"] == "failure"
+    # the summary reads the failure record whole: counted as a failure verdict, left out
+    summary = summarize(tmp_path / "nc")
+    assert summary.n_ok == 0 and summary.n_failure_verdict == 1
+    assert "1 left out of the statistics because their verdict was failure" in summary.text()
 
 
 def test_another_scenario_is_refused_in_the_same_directory(base_run):
@@ -215,7 +240,13 @@ def test_summary_and_cli(base_run, capsys):
     status = montecarlo_cli.run(parser.parse_args(["montecarlo-summary", str(out)]))
     text = capsys.readouterr().out
     assert status == 0 and "b_l[PV1]" in text and "ratio_crb" in text and "alpha_zl" in text
+    assert "per parameter kind" in text and "within_3colored" in text
     assert (out / "summary.png").stat().st_size > 10_000 and (out / "summary_parameters.csv").exists()
+    kinds = summary.kinds
+    assert {"imu_bias", "time_delay", "bias", "initial_condition"} <= set(kinds.index)
+    assert list(kinds.index[:3]) == ["imu_bias", "time_delay", "bias"]
+    assert (kinds["n"] > 0).all() and ((kinds["within_3crb"] >= 0) & (kinds["within_3crb"] <= 1)).all()
+    assert kinds.loc["time_delay", "n"] == 3 * kinds.loc["time_delay", "parameters"]
 
 
 def test_dask_local_cluster_gives_the_local_results(base_run, tmp_path):
@@ -269,8 +300,145 @@ def test_cli_resumes_a_run_from_the_scenario_file(base_run, tmp_path, capsys):
     assert status == 0, text
     assert "1 replications run now, 3 already done, 4 requested" in text and "tau_alpha_zl" in text
     assert sorted(finished_replications(out)) == [0, 1, 2, 3]
-    assert (out / "summary.txt").read_text().startswith("Monte Carlo mc_test: 4 replications, 4 converged")
+    assert (out / "summary.txt").read_text().startswith("Monte Carlo mc_test: 4 replications, 4 summarised")
     # a scenario that is not this one is refused, with the way out named
     path.write_text(SCENARIO_TOML.replace("seed = 31", "seed = 30"))
     assert montecarlo_cli.main(["montecarlo", str(path), "--out", str(out), "--workers", "1"]) == 2
     assert "another scenario" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------- the summary's statistics
+
+
+def _result(index: int, rows: list[tuple], ok: bool = True, verdict: int | None = 1,
+            findings: tuple = ()) -> ReplicationResult:
+    """A replication with parameter rows (name, kind, error, std_crb, std_colored)."""
+    params = pd.DataFrame([{
+        "name": name, "family": name.split("[")[0], "kind": kind, "unit": "deg", "estimate": 1.0 + err,
+        "truth": 1.0, "error": err, "std_crb": crb, "std_colored": col, "z_crb": err / crb,
+        "z_colored": err / col} for name, kind, err, crb, col in rows])
+    n_fail = sum(f[0] == "failure" for f in findings)
+    return ReplicationResult(index=index, ok=ok, status=1, message="", noise_seed=index, scenario_hash="h",
+                             parameters=params if ok else pd.DataFrame(), verdict_code=verdict,
+                             n_warnings=len(findings) - n_fail, n_failures=n_fail, findings=findings)
+
+
+def test_kind_table_on_a_synthetic_replication_table():
+    # imu_bias: z_crb = -4, -2, 0, 1, 3.5 (3 of 5 within 3); coloured deviations twice as large
+    # (z = -2, -1, 0, 0.5, 1.75: all within); a held row (no deviation) is not an estimate
+    imu = [("dax[m0]", "imu_bias", e, 0.1, 0.2) for e in (-0.4, -0.2, 0.0, 0.1, 0.35)]
+    rows = [*imu, ("tau_x", "time_delay", 1.0, 2.0, 2.0), ("tau_x", "time_delay", -1.0, 2.0, 2.0),
+            ("dax[m1]", "imu_bias", 7.0, math.nan, math.nan), ("f1[0]", "table", 0.5, 0.1, 1.0),
+            ("zz", "other_kind", 0.1, 0.1, 0.1), ("u0[m0]", "initial_condition", 0.0, 1.0, 1.0)]
+    params = pd.concat([_result(0, rows).parameters], ignore_index=True)
+    k = kind_table(params)
+    assert list(k.index) == ["imu_bias", "time_delay", "table", "initial_condition", "other_kind"]
+    imu_row = k.loc["imu_bias"]
+    assert imu_row["n"] == 5 and imu_row["parameters"] == 1  # the held dax[m1] is no estimate
+    assert imu_row["within_3crb"] == pytest.approx(0.6) and imu_row["within_3colored"] == 1.0
+    z = np.array([-4.0, -2.0, 0.0, 1.0, 3.5])
+    assert imu_row["z_std_crb"] == pytest.approx(np.std(z, ddof=1))
+    assert imu_row["z_std_colored"] == pytest.approx(np.std(z / 2, ddof=1))
+    assert imu_row["median_abs_z_crb"] == pytest.approx(2.0)
+    assert imu_row["median_abs_z_colored"] == pytest.approx(1.0)
+    assert k.loc["time_delay", "z_std_crb"] == pytest.approx(np.std([0.5, -0.5], ddof=1))
+    assert k.loc["table", "within_3crb"] == 0.0 and k.loc["table", "within_3colored"] == 1.0
+    assert math.isnan(k.loc["initial_condition", "z_std_crb"])  # one estimate: no spread
+
+
+def test_a_held_parameter_is_left_out_of_every_statistic_alike():
+    # b in five replications: estimated in three (errors 0.1, 0.2, 0.6; CRB 0.1, 0.2, 0.3), held
+    # at its start value in two (start - truth = 5, no deviation); absent from a sixth (as the
+    # estimator's recovery table leaves a held parameter out)
+    errs, crbs = (0.1, 0.2, 0.6), (0.1, 0.2, 0.3)
+    results = [_result(i, [("b[A]", "bias", e, c, 2 * c)])
+               for i, (e, c) in enumerate(zip(errs, crbs, strict=True))]
+    results += [_result(3 + i, [("b[A]", "bias", 5.0, math.nan, math.nan)]) for i in range(2)]
+    results += [_result(5, [("tau", "time_delay", 0.0, 1.0, 1.0)])]
+    s = summarize_results(results, name="held")
+    row = s.parameters.loc["b[A]"]
+    assert row["n"] == 3 and row["n_not_estimated"] == 3
+    assert row["bias"] == pytest.approx(np.mean(errs))
+    assert row["mc_std"] == pytest.approx(np.std(errs, ddof=1))
+    assert row["rmse"] == pytest.approx(np.sqrt(np.mean(np.square(errs))))
+    assert row["crb_mean"] == pytest.approx(np.mean(crbs)) and row["colored_mean"] == pytest.approx(0.4)
+    assert row["ratio_crb"] == pytest.approx(np.std(errs, ddof=1) / np.mean(crbs))
+    assert row["truth_mean"] == pytest.approx(1.0) and row["within_3sigma"] == 1.0
+    assert (s.z.loc[s.z["name"] == "b[A]", "replication"].tolist() == [0, 1, 2])
+    fam = s.families.loc["b"]
+    assert fam["n"] == 3 and fam["bias"] == pytest.approx(np.mean(errs))
+    assert s.kinds.loc["bias", "n"] == 3
+
+
+def test_verdicts_are_counted_and_failures_left_out(tmp_path):
+    warn = (("warning", "turbulence", "residual whiteness ratio 1.4 in theta"),)
+    fail = (("failure", "wrong_minimum", "attitude residual 3 deg\nsecond line"),
+            ("warning", "turbulence", "residual whiteness ratio 2.0"))
+    results = [_result(0, [("b[A]", "bias", 0.1, 0.1, 0.1)]),
+               _result(1, [("b[A]", "bias", 0.2, 0.1, 0.1)], verdict=2, findings=warn),
+               _result(2, [], ok=False, verdict=-1, findings=fail),
+               _result(3, [], ok=False, verdict=None)]
+    s = summarize_results(results, name="verdicts")
+    assert s.n_ok == 2 and s.n_failed == 2 and s.n_failure_verdict == 1
+    assert s.verdicts["replications"].to_dict() == {"success": 1, "success with warnings": 1, "failure": 1,
+                                                    "none (raised, or no verdict recorded)": 1}
+    assert s.verdicts["in_statistics"].to_dict()["failure"] == 0
+    assert s.parameters.loc["b[A]", "n"] == 2
+    text = s.text()
+    assert "verdicts: 1 success, 1 success with warnings, 1 failure" in text
+    assert ("1 left out of the statistics because their verdict was failure, 1 because they failed "
+            "otherwise") in text
+    f = s.findings.set_index("code")
+    assert list(s.findings["code"]) == ["wrong_minimum", "turbulence"]  # failures first
+    assert f.loc["turbulence", "replications"] == 2 and f.loc["turbulence", "findings"] == 2
+    assert f.loc["wrong_minimum", "example"] == "attitude residual 3 deg"  # the first line
+    # a failure record keeps its verdict through the file
+    (tmp_path / "replications").mkdir()
+    for r in results[2:]:
+        runner.write_replication(tmp_path, r)
+    back = load_results(tmp_path)
+    assert [(r.index, r.verdict_code, r.n_failures, r.findings) for r in back] == [
+        (2, -1, 1, results[2].findings), (3, None, 0, ())]
+
+
+def test_channel_accuracy_is_three_rms_about_zero(base_run):
+    # one definition, imported: the workflow's Table 2 (3 x rms about zero; a mean offset counts)
+    assert replication_module.three_sigma is workflow.three_sigma
+    e = np.array([0.3, 0.5, 0.1, 0.7])  # mean 0.4, std 0.2236
+    row = replication_module._accuracy_row("x", "calibrated", "deg", e)
+    assert row["three_sigma"] == pytest.approx(3.0 * np.sqrt(np.mean(e**2)))
+    assert row["three_sigma"] == pytest.approx(3.0 * math.hypot(row["mean"], row["std"]))
+    assert row["three_sigma"] > 3.0 * row["std"] * 1.5  # the mean offset counts (3 std alone: 0.67)
+    ch = read_replication(replication_file(base_run[0], 0)).channels
+    np.testing.assert_allclose(ch["three_sigma"], 3.0 * np.hypot(ch["mean"], ch["std"]), rtol=1e-9)
+
+
+def test_calibrated_channels_are_the_workflow_reports_and_a_flat_segment_is_a_note(base_run, monkeypatch):
+    out, _ = base_run
+    scenario = _scenario()
+    truths = {j: pickle.loads((out / "flights" / f"j{j:04d}.pkl").read_bytes()) for j in (0, 1)}
+    seen = {}
+
+    def recorded(problem, result):
+        seen.update(workflow_truth.calibrated_errors(problem, result))
+        return seen
+
+    monkeypatch.setattr(replication_module, "calibrated_errors", recorded)
+    r = replication_module.run_replication(scenario, 0, truths)
+    # in this process, the table of the reference run's worker: bit-identical
+    pd.testing.assert_frame_equal(r.to_pandas(), read_replication(replication_file(out, 0)).to_pandas(),
+                                  check_exact=True)
+    cal = r.channels[r.channels["kind"] == "calibrated"].set_index("name")
+    assert set(cal.index) == set(seen) >= {"alpha_zl", "alpha_zr"}
+    for name, df in seen.items():
+        e_deg = np.degrees(df["error_rad"].to_numpy())
+        assert cal.loc[name, "three_sigma"] == pytest.approx(workflow.three_sigma(e_deg), rel=1e-12)
+        assert cal.loc[name, "n"] == e_deg.size
+
+    def flat(problem, result):
+        raise ValueError("channel alpha_zl: its model does not depend on alpha_s at some samples")
+
+    monkeypatch.setattr(replication_module, "calibrated_errors", flat)
+    r = replication_module.run_replication(scenario, 0, truths)
+    assert r.ok and len(r.parameters) and not (r.channels["kind"] == "calibrated").any()
+    assert any("calibrated channels not computed" in w and "alpha_zl" in w for w in r.warnings)

@@ -4,11 +4,14 @@
 changes), instruments every maneuver with the replication's drawn errors and noise seeds, writes
 them as a scratch ``fpr fly`` dataset (the estimator reads flight data only through the documented
 format, so a replication sees exactly what a user's calibration would), builds the estimation
-problem, estimates, and returns a :class:`ReplicationResult`: every free parameter's estimate
+problem, estimates, and returns a :class:`ReplicationResult`: every estimated parameter's estimate
 beside its truth with its Cramér-Rao and coloured-residual deviations and z-scores
-(:func:`campaigns.truth.recovery_table`), and per channel the scatter of the residuals (the
-paper's Table 2) and of the calibrated channel against the true flow angle
-(:func:`calibrated_channel_errors`).
+(:func:`campaigns.truth.recovery_table`), the estimator's verdict and how many warnings and
+failures it found, and per channel the accuracy of the residuals (measurement - model, the paper's
+Table 2, :func:`estimator.workflow.stage_residuals`) and of the calibrated channel against the true
+flow angle at its sensor (:func:`campaigns.workflow_truth.calibrated_errors`, the workflow
+report's own computation). Every accuracy is :func:`estimator.workflow.three_sigma`, 3 x the rms
+about zero (a mean offset is an error too), the definition of the rest of the project.
 """
 
 from __future__ import annotations
@@ -27,20 +30,13 @@ import numpy as np
 import pandas as pd
 from threadpoolctl import threadpool_limits
 
-# the private helpers of campaigns.truth map a parameter name to its key for a maneuver and a
-# canonical channel to its dataset column; the calibrated-channel errors below use the same keys
-from campaigns.truth import (
-    _dataset_column,
-    channel_values,
-    problem_tables,
-    recovery_table,
-    true_parameters,
-    true_signals,
-)
+from campaigns.truth import TruthProjection, recovery_table, true_parameters
+from campaigns.workflow_truth import calibrated_errors
 from estimator.io import problem_from_dataset
 from estimator.problem import Problem
 from estimator.result import STATUS_TEXT, EstimationResult
 from estimator.solver import SolverOptions, estimate
+from estimator.workflow import stage_residuals, three_sigma
 from synth.campaign import software_versions
 from synth.dataset import FORMAT, FORMAT_VERSION, write_maneuver, write_manifest
 from synth.flight import fly_maneuver
@@ -54,9 +50,8 @@ from .scenario import ManeuverDraw, Scenario, draws_table
 #: columns of the per-replication table (one row per parameter, channel accuracy or drawn value)
 COLUMNS = ("replication", "record", "name", "family", "kind", "unit", "estimate", "truth", "error",
            "std_crb", "std_colored", "z_crb", "z_colored", "mean", "std", "three_sigma", "n")
-#: the angle signals a flow channel's model may take; the calibrated channel estimates the one its
-#: model depends on most
-_ANGLE_SIGNALS = ("alpha_s", "beta_s", "flank_s")
+#: the estimator's verdict codes (:class:`estimator.verdict.Verdict`) -> their names, for tables
+VERDICT_NAMES = {1: "success", 2: "success with warnings", -1: "failure"}
 #: maneuver keys: one per (job, segment), as synth.campaign numbers them (so the noise of a
 #: maneuver does not depend on which other maneuvers are flown)
 _SEGMENTS_PER_JOB = 64
@@ -69,9 +64,11 @@ class ReplicationResult:
     Attributes
     ----------
     index : the replication.
-    ok : the estimation converged and the tables are filled.
-    status : the estimator's status (1 converged, 0 iteration limit, 2 stalled, -1 failed) or -1
-        when the replication raised before or during estimation.
+    ok : the estimator's verdict is a success (with or without warnings) and the tables are
+        filled; a failure verdict is a failed replication, left out of the statistics.
+    status : the solver's status (:class:`estimator.verdict.Status`: positive = converged, 0
+        iteration limit, negative = stalled or failed) or -1 when the replication raised before or
+        during estimation.
     message : the estimator's message, or the error and its traceback.
     noise_seed : the master seed of the replication's noise sources.
     scenario_hash : the scenario it belongs to.
@@ -79,7 +76,11 @@ class ReplicationResult:
     parameters : one row per free parameter with a truth (see :data:`COLUMNS`).
     channels : per channel and kind ("residual", "calibrated"): mean, std, three_sigma, n.
     draws : the drawn values (path, instance, component, value SI).
-    warnings : what the data import warned about.
+    warnings : what the data import warned about (and what could not be computed).
+    verdict_code : the estimator's verdict (:data:`VERDICT_NAMES`: 1 success, 2 success with
+        warnings, -1 failure), or None when no estimation finished (the replication raised).
+    n_warnings, n_failures : the estimator's findings of severity warning and failure.
+    findings : (severity, code, message) of each warning and failure finding, most severe first.
     """
 
     index: int
@@ -93,13 +94,41 @@ class ReplicationResult:
     channels: pd.DataFrame = field(default_factory=pd.DataFrame, repr=False)
     draws: pd.DataFrame = field(default_factory=pd.DataFrame, repr=False)
     warnings: tuple[str, ...] = ()
+    verdict_code: int | None = None
+    n_warnings: int = 0
+    n_failures: int = 0
+    findings: tuple[tuple[str, str, str], ...] = ()
+
+    @property
+    def verdict(self) -> str:
+        """The verdict's name ("success", "success with warnings", "failure"; "none" without one)."""
+        return "none" if self.verdict_code is None else VERDICT_NAMES.get(self.verdict_code,
+                                                                          str(self.verdict_code))
 
     def meta(self) -> dict:
         """The scalars, JSON-ready (stored in the Parquet file's metadata / the failure record)."""
         return {"replication": self.index, "ok": self.ok, "status": self.status,
                 "status_text": STATUS_TEXT.get(self.status, str(self.status)), "message": self.message,
                 "noise_seed": self.noise_seed, "scenario_hash": self.scenario_hash,
-                "elapsed_s": self.elapsed_s, "warnings": list(self.warnings)}
+                "elapsed_s": self.elapsed_s, "warnings": list(self.warnings),
+                "verdict_code": self.verdict_code, "verdict": self.verdict,
+                "n_warnings": self.n_warnings, "n_failures": self.n_failures,
+                "findings": [list(f) for f in self.findings]}
+
+    @classmethod
+    def from_meta(cls, meta: Mapping, **tables: pd.DataFrame) -> ReplicationResult:
+        """A result from its :meth:`meta` (a failure record) and, for a finished one, its tables
+        (``parameters``, ``channels``, ``draws``); keys a file of an older version lacks take
+        their defaults."""
+        code = meta.get("verdict_code")
+        return cls(index=int(meta["replication"]), ok=bool(meta["ok"]), status=int(meta["status"]),
+                   message=str(meta["message"]), noise_seed=int(meta["noise_seed"]),
+                   scenario_hash=str(meta["scenario_hash"]), elapsed_s=float(meta.get("elapsed_s", 0.0)),
+                   warnings=tuple(meta.get("warnings", ())),
+                   verdict_code=None if code is None else int(code),
+                   n_warnings=int(meta.get("n_warnings", 0)), n_failures=int(meta.get("n_failures", 0)),
+                   findings=tuple(tuple(str(x) for x in f) for f in meta.get("findings", ())),
+                   **tables)
 
     def to_pandas(self) -> pd.DataFrame:
         """One long table: parameter rows, channel rows and drawn-value rows (:data:`COLUMNS`)."""
@@ -141,11 +170,7 @@ class ReplicationResult:
                               "instance": [m.group(1) or "" for m in parts],
                               "component": [int(m.group(2)) for m in parts],
                               "value": d["estimate"].to_numpy()})
-        return cls(index=int(meta["replication"]), ok=bool(meta["ok"]), status=int(meta["status"]),
-                   message=str(meta["message"]), noise_seed=int(meta["noise_seed"]),
-                   scenario_hash=str(meta["scenario_hash"]), elapsed_s=float(meta.get("elapsed_s", 0)),
-                   parameters=p, channels=c, draws=draws.reset_index(drop=True),
-                   warnings=tuple(meta.get("warnings", ())))
+        return cls.from_meta(meta, parameters=p, channels=c, draws=draws.reset_index(drop=True))
 
 
 # ---------------------------------------------------------------------------- the worker's state
@@ -206,8 +231,9 @@ def write_scratch_dataset(scenario: Scenario, draws: Sequence[ManeuverDraw],
                           directory: Path) -> dict[str, pd.DataFrame]:
     """Instrument every maneuver with its drawn errors and write an ``fpr fly`` dataset.
 
-    Returns maneuver id -> its table (measured and ``true_*`` columns), kept for the accuracy
-    against the truth.
+    Returns maneuver id -> its table (measured and ``true_*`` columns), for callers that want the
+    truth in memory (the replication's accuracy reads it back from the files, as the workflow
+    report does).
     """
     fleet = scenario.campaign.fleet
     (directory / "maneuvers").mkdir(parents=True, exist_ok=True)
@@ -241,103 +267,111 @@ def write_scratch_dataset(scenario: Scenario, draws: Sequence[ManeuverDraw],
 
 # ---------------------------------------------------------------------------- accuracy tables
 
-
-def residual_accuracy(result: EstimationResult) -> pd.DataFrame:
-    """Per channel, the residual (measurement - model) pooled over the maneuvers: mean, std,
-    3-sigma (the paper's Table 2 scatter), in display units."""
-    rows = []
-    res = result.residuals_table()
-    if not len(res):
-        return pd.DataFrame(columns=["name", "kind", "unit", "mean", "std", "three_sigma", "n"])
-    for ch, g in res.groupby("channel", sort=True):
-        n = g["n"].to_numpy(dtype=float)
-        mean = float(np.sum(n * g["mean"]) / n.sum())
-        ms = float(np.sum(n * g["rms"] ** 2) / n.sum())
-        std = float(np.sqrt(max(ms - mean * mean, 0.0)))
-        scale, unit = result.channel_display.get(ch, (1.0, ""))
-        rows.append({"name": ch, "kind": "residual", "unit": unit, "mean": mean * scale,
-                     "std": std * scale, "three_sigma": 3.0 * std * scale, "n": n.sum()})
-    return pd.DataFrame(rows)
+#: columns of the accuracy tables (one row per channel)
+_ACCURACY_COLUMNS = ["name", "kind", "unit", "mean", "std", "three_sigma", "n"]
 
 
-def calibrated_channel_errors(problem: Problem, result: EstimationResult,
-                              tables: Mapping[str, pd.DataFrame]) -> dict[str, np.ndarray]:
-    """The error of each calibrated flow channel against the true flow angle at its sensor, SI.
+def _accuracy_row(name: str, kind: str, unit: str, e_display: np.ndarray) -> dict:
+    """Mean, (population) std, 3-sigma (:func:`estimator.workflow.three_sigma`, 3 x rms about zero)
+    and sample count of errors already in display units."""
+    return {"name": name, "kind": kind, "unit": unit, "mean": float(np.mean(e_display)),
+            "std": float(np.std(e_display)), "three_sigma": three_sigma(e_display),
+            "n": float(e_display.size)}
 
-    The calibrated channel inverts the estimated model: the angle ``a_hat`` at which the model
-    gives the measurement ``z``. To first order (the errors are tenths of a degree, the tables'
-    curvature over that is negligible) ``a_hat - a_true = (z - y_hat(a_true)) / (dy_hat/da)``, with
-    ``y_hat`` the model at the estimate evaluated on the true flow at the sensor. The measurement
-    is compared with the truth at the channel's true lag (``time_shift_s`` of its column): this is
-    the error in the value, not in the timing. The model's other inputs (CG angles, TAS, rates)
-    are their true values. Small and replaceable: issue 4 builds the proper calibrated-channel
-    function in ``campaigns/``.
+
+def residual_accuracy(problem: Problem, result: EstimationResult) -> pd.DataFrame:
+    """Per channel, the residual (measurement - model) pooled over the maneuvers at the estimate.
+
+    The residuals are the workflow's (:func:`estimator.workflow.stage_residuals`, the samples of
+    the paper's Table 2).
+
+    Parameters
+    ----------
+    problem : the estimated problem.
+    result : its estimate.
 
     Returns
     -------
-    channel name -> errors over every maneuver's samples (rad).
+    One row per channel: name, kind ("residual"), unit (display), mean, std, three_sigma (3 x rms
+    about zero), all in display units (deg for angles, m/s, m), and n (samples).
     """
-    ps = problem.parameters
-    theta = result.values
-    tabs_all = problem_tables(problem)
-    chan_col = {c.name: c.column for c in problem.channels}
-    out: dict[str, list[np.ndarray]] = {}
-    for ch in problem.channels:
-        if ch.sensor is None:
-            continue
-        expr = ch.expression
-        angles = [a for a in _ANGLE_SIGNALS if a in expr.names]
-        col = _dataset_column(ch.column)
-        for m in problem.maneuvers:
-            df = tables.get(m.id)
-            clean_col = f"true_clean_{col}"
-            if df is None or ch.column not in m.measurements or clean_col not in df or not angles:
-                continue
-            lag = float(m.meta.get("injected", {}).get(f"time_shift_s.{col}", 0.0))
-            t_true = df["t_s"].to_numpy()
-            z = m.measurements[ch.column]
-            ts = m.t_s - lag
-            ok = (ts >= t_true[0]) & (ts <= t_true[-1]) & np.isfinite(z)
-
-            def at(column: str) -> np.ndarray:
-                return np.interp(ts[ok], t_true, df[column].to_numpy())  # noqa: B023 (used at once)
-
-            sig = true_signals(at, df.columns, ch.sensor)
-            clean = at(clean_col)
-            sig |= {"z": clean, "zhat": clean}
-            for name in expr.names - set(sig):
-                if name in ps.specs:
-                    continue
-                other = chan_col.get(name, name)
-                if other in m.measurements:  # another channel's measurement (f4(alpha_zsp))
-                    sig[name] = m.measurements[other][ok]
-                elif name in m.signals:
-                    sig[name] = m.signals[name][ok]
-            try:
-                params, tabs = channel_values(problem, theta, m, ch, tabs_all)
-            except KeyError:  # a parameter this maneuver's aircraft does not have
-                continue
-            if any(a not in sig for a in angles):
-                continue
-            dual = expr.evaluate(sig, params, tabs, state_signals=frozenset(angles))
-            slopes = {a: np.broadcast_to(dual.dsignal.get(a, 0.0), clean.shape) for a in angles}
-            main = max(angles, key=lambda a: float(np.mean(np.abs(slopes[a]))))
-            y_hat = np.broadcast_to(dual.value, clean.shape)
-            out.setdefault(ch.name, []).append((z[ok] - y_hat) / slopes[main])
-    return {c: np.concatenate(v) for c, v in out.items()}
-
-
-def calibrated_accuracy(problem: Problem, result: EstimationResult,
-                        tables: Mapping[str, pd.DataFrame]) -> pd.DataFrame:
-    """Per flow channel: mean, std and 3-sigma of (calibrated channel - true angle), display units."""
-    display = {c.name: (c.display_scale, c.display_unit) for c in problem.channels}
     rows = []
-    for ch, e in sorted(calibrated_channel_errors(problem, result, tables).items()):
+    for ch, r in sorted(stage_residuals((problem, result)).items()):
+        e = r.e[np.isfinite(r.e)]
+        if not e.size:
+            continue
+        scale, unit = result.channel_display.get(ch, (1.0, ""))
+        rows.append(_accuracy_row(ch, "residual", unit, e * scale))
+    return pd.DataFrame(rows, columns=_ACCURACY_COLUMNS)
+
+
+def calibrated_accuracy(problem: Problem, result: EstimationResult) -> tuple[pd.DataFrame, tuple[str, ...]]:
+    """Per flow channel, the calibrated channel minus the true flow angle at its sensor.
+
+    The errors are the workflow report's (:func:`campaigns.workflow_truth.calibrated_errors`): the
+    measurement run back through the estimated calibration model exactly
+    (:func:`estimator.calibrated.calibrated_channel`), the model's other inputs at their true
+    values, compared with the truth at the time the sensor saw it (its injected total lag) — the
+    calibration's error in the value, not in the timing. The problem must come from a synthetic
+    dataset that is still on disk (the truth is read from its files).
+
+    Parameters
+    ----------
+    problem : the estimated problem (from a synthetic dataset).
+    result : its estimate.
+
+    Returns
+    -------
+    (table, notes): one row per flow channel — name, kind ("calibrated"), unit, mean, std,
+    three_sigma (3 x rms about zero), display units (deg), n (samples) — and what could not be
+    computed: a model that does not depend on its flow angle somewhere (a table segment estimated
+    flat) cannot be inverted; the table is then empty and the note says why.
+    """
+    display = {c.name: (c.display_scale, c.display_unit) for c in problem.channels}
+    try:
+        errors = calibrated_errors(problem, result)
+    except ValueError as exc:
+        return pd.DataFrame(columns=_ACCURACY_COLUMNS), (f"calibrated channels not computed: {exc}",)
+    rows = []
+    for ch, df in sorted(errors.items()):
+        e = df["error_rad"].to_numpy(dtype=float)
+        e = e[np.isfinite(e)]
+        if not e.size:
+            continue
         scale, unit = display[ch]
-        rows.append({"name": ch, "kind": "calibrated", "unit": unit, "mean": float(np.mean(e)) * scale,
-                     "std": float(np.std(e)) * scale, "three_sigma": 3.0 * float(np.std(e)) * scale,
-                     "n": float(e.size)})
-    return pd.DataFrame(rows)
+        rows.append(_accuracy_row(ch, "calibrated", unit, e * scale))
+    return pd.DataFrame(rows, columns=_ACCURACY_COLUMNS), ()
+
+
+# ---------------------------------------------------------------------------- the estimator's verdict
+
+
+def verdict_of(result: EstimationResult) -> tuple[int, int, int, tuple[tuple[str, str, str], ...]]:
+    """The estimator's verdict code, its warning and failure counts, and those findings.
+
+    Parameters
+    ----------
+    result : an estimate.
+
+    Returns
+    -------
+    (code, n_warnings, n_failures, findings): ``result.verdict.code`` (1 success, 2 success with
+    warnings, -1 failure), the numbers of findings of severity warning and failure, and
+    (severity, code, message) of each of those, most severe first.
+    """
+    shown = []
+    for f in result.findings:
+        severity = f.severity.name.lower()
+        if severity in ("warning", "failure"):
+            shown.append((severity, str(f.code), str(f.message)))
+    shown.sort(key=lambda f: f[0] != "failure")  # stable: failures first, the estimator's order kept
+    n_fail = sum(f[0] == "failure" for f in shown)
+    return int(result.verdict.code), len(shown) - n_fail, n_fail, tuple(shown)
+
+
+def _truth_of(problem: Problem, result: EstimationResult) -> TruthProjection:
+    """The truth of the problem's parameters, anchored where the estimator held a parameter."""
+    return true_parameters(problem, result.free_estimated)
 
 
 # ---------------------------------------------------------------------------- the replication
@@ -374,7 +408,7 @@ def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequen
             own[md.job.index] = fly(scenario, md)
     est = scenario.estimator
     with tempfile.TemporaryDirectory(prefix=f"fpr-mc-r{index:05d}-") as tmp:
-        tables = write_scratch_dataset(scenario, draw.maneuvers, own, models, Path(tmp))
+        write_scratch_dataset(scenario, draw.maneuvers, own, models, Path(tmp))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             problem = problem_from_dataset(
@@ -382,18 +416,25 @@ def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequen
                 overrides=est.parameters or None, lever_arm=est.lever_arm, g_mps2=est.g_mps2)
             result = estimate(problem, SolverOptions(max_iterations=est.max_iterations,
                                                      colored=est.colored))
-            truth = true_parameters(problem) if result.success else None
+            truth = _truth_of(problem, result) if result.success else None
         # the scratch directory's name differs per run: keep it out of the (compared) messages
         notes = tuple(dict.fromkeys(str(w.message).replace(tmp, "<replication data>") for w in caught))
+        status = int(result.status)
+        code, n_warn, n_fail, findings = verdict_of(result)
+        judged = {"verdict_code": code, "n_warnings": n_warn, "n_failures": n_fail, "findings": findings}
         if not result.success:
+            why = "".join(f"; {sev}: {msg}" for sev, _, msg in findings
+                          if sev == "failure" and msg not in result.message)
             return ReplicationResult(
-                index=index, ok=False, status=result.status,
-                message=f"estimation {STATUS_TEXT.get(result.status, result.status)}: {result.message}",
+                index=index, ok=False, status=status,
+                message=f"estimation verdict {VERDICT_NAMES.get(code, code)} (solver: "
+                        f"{STATUS_TEXT.get(status, status)}): {result.message}{why}",
                 noise_seed=draw.noise_seed, scenario_hash=scenario.hash,
-                elapsed_s=time.perf_counter() - t0, draws=pd.DataFrame(draws_table(draw)), warnings=notes)
+                elapsed_s=time.perf_counter() - t0, draws=pd.DataFrame(draws_table(draw)), warnings=notes,
+                **judged)
         rec = recovery_table(result, truth)
-        channels = pd.concat([residual_accuracy(result), calibrated_accuracy(problem, result, tables)],
-                             ignore_index=True)
+        calibrated, not_computed = calibrated_accuracy(problem, result)
+        channels = pd.concat([residual_accuracy(problem, result), calibrated], ignore_index=True)
     params = pd.DataFrame({
         "name": rec.index.astype(str), "family": [k.split("[")[0] for k in rec.index],
         "kind": rec["kind"].astype(str), "unit": rec["display_unit"].astype(str),
@@ -403,9 +444,9 @@ def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequen
     }).reset_index(drop=True)
     channels["family"] = channels["name"]
     return ReplicationResult(
-        index=index, ok=True, status=result.status, message=result.message, noise_seed=draw.noise_seed,
+        index=index, ok=True, status=status, message=result.message, noise_seed=draw.noise_seed,
         scenario_hash=scenario.hash, elapsed_s=time.perf_counter() - t0, parameters=params,
-        channels=channels, draws=pd.DataFrame(draws_table(draw)), warnings=notes)
+        channels=channels, draws=pd.DataFrame(draws_table(draw)), warnings=notes + not_computed, **judged)
 
 
 def run_replication_safely(scenario: Scenario, index: int,

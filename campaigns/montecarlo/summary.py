@@ -1,30 +1,46 @@
 """Summary of a Monte Carlo run: bias, RMSE and scatter against the Cramér-Rao bounds; accuracies.
 
-Per parameter, over the converged replications (display units): the bias (mean of estimate -
-truth), the RMSE, the Monte Carlo scatter (standard deviation of estimate - truth: the truth
-itself may be drawn), the mean Cramér-Rao and coloured-residual deviations the estimator reported,
-and their ratios — 1 when the reported error bars are honest, above 1 when they are optimistic.
-Per-maneuver parameters (initial conditions, IMU biases) are also pooled per family through their
-z-scores (the standard deviation of z is the same ratio). Per channel, the distribution over
-replications of the 3-sigma of the residuals (the paper's Table 2) and of the calibrated channel
-against the true flow angle.
+Which replications count. The statistics are taken over the replications whose estimator verdict
+is a success (with or without warnings); those with a failure verdict, or that raised, are
+counted per verdict and left out. Within them, a parameter counts only in the replications that
+*estimated* it (a finite Cramér-Rao deviation): one the estimator held at its start value (no data,
+undetermined) has no deviation to judge it by, and its start-minus-truth is no estimation error,
+so every statistic of a parameter — bias, RMSE, scatter, mean deviations, z-scores — is taken over
+the same replications, and ``n_not_estimated`` says how many were left out.
+
+Per parameter (display units): the bias (mean of estimate - truth), the RMSE, the Monte Carlo
+scatter (standard deviation of estimate - truth: the truth itself may be drawn), the mean
+Cramér-Rao and coloured-residual deviations the estimator reported, and their ratios — 1 when the
+reported error bars are honest, above 1 when they are optimistic. Per-maneuver parameters (initial
+conditions, IMU biases) are also pooled per family through their z-scores (the standard deviation
+of z is the same ratio). Per parameter kind (imu_bias, time_delay, bias, scale, table,
+initial_condition): the fraction of estimates within 3 reported deviations (Cramér-Rao and
+coloured) of their truth, the z-score standard deviations and median |z|. Per channel, the
+distribution over replications of the 3-sigma accuracy — :func:`estimator.workflow.three_sigma`,
+3 x the rms about zero, computed by the replication — of the residuals (the paper's Table 2) and
+of the calibrated channel against the true flow angle.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from .replication import ReplicationResult
+from .replication import VERDICT_NAMES, ReplicationResult
 from .runner import finished_replications, read_replication, read_state, replication_file
 
 #: the parameter kinds of the calibration proper (shown one by one in the text summary)
 CALIBRATION_KINDS = ("time_delay", "bias", "scale", "table")
 #: kinds of per-maneuver parameters, shown pooled per family
 POOLED_KINDS = ("imu_bias", "initial_condition")
+#: the order of the per-kind table (kinds not listed follow, alphabetically)
+KIND_ORDER = ("imu_bias", "time_delay", "bias", "scale", "table", "initial_condition")
+#: a reported deviation "covers" an error within this many deviations
+COVERAGE_SIGMAS = 3.0
 
 
 @dataclass(frozen=True)
@@ -34,16 +50,25 @@ class MonteCarloSummary:
     Attributes
     ----------
     name : the scenario.
-    n_ok, n_failed : converged and failed replications summarised.
-    parameters : one row per parameter key: kind, unit, n, truth_mean, bias, rmse, mc_std,
-        crb_mean, colored_mean, ratio_crb (= mc_std / crb_mean), ratio_colored, z_mean, z_std,
-        within_3sigma (fraction of |z_crb| < 3), bias_t (bias / its standard error).
+    n_ok, n_failed : replications summarised (verdict success, with or without warnings) and
+        failed ones (failure verdict, or raised), left out of the statistics.
+    parameters : one row per parameter key, over the replications that estimated it: kind, unit,
+        n, n_not_estimated (summarised replications that held it or lacked it), truth_mean, bias,
+        rmse, mc_std, crb_mean, colored_mean, ratio_crb (= mc_std / crb_mean), ratio_colored,
+        z_mean, z_std, within_3sigma (fraction of |z_crb| < 3), bias_t (bias / its standard error).
     families : per parameter family (``dax``, ``u0``, ``f1``, ...): instances, n, bias, rmse,
         crb_rms, z_std_crb, z_std_colored, within_3sigma.
     channels : per channel and kind ("residual", "calibrated"): unit, n, median_3sigma,
-        p90_3sigma, max_3sigma, median_mean.
-    failures : replication, status, message (first line).
-    z : the per-replication rows (replication, name, family, kind, error, z_crb, z_colored), for plots.
+        p90_3sigma, max_3sigma (3-sigma = 3 x rms about zero), median_mean.
+    failures : replication, status, verdict, message (first line).
+    z : the per-replication rows of estimated parameters (replication, name, family, kind, error,
+        z_crb, z_colored), for plots.
+    kinds : per parameter kind (:func:`kind_table`): parameters, n, within_3crb, within_3colored,
+        z_std_crb, z_std_colored, median_abs_z_crb, median_abs_z_colored.
+    verdicts : per verdict (success, success with warnings, failure, none): replications, and
+        whether they are in the statistics.
+    findings : per (severity, code) of the estimator's warnings and failures: the replications
+        that had it and how often.
     """
 
     name: str
@@ -54,35 +79,57 @@ class MonteCarloSummary:
     channels: pd.DataFrame
     failures: pd.DataFrame
     z: pd.DataFrame = field(repr=False)
+    kinds: pd.DataFrame = field(default_factory=pd.DataFrame)
+    verdicts: pd.DataFrame = field(default_factory=pd.DataFrame)
+    findings: pd.DataFrame = field(default_factory=pd.DataFrame)
+
+    @property
+    def n_failure_verdict(self) -> int:
+        """Replications left out of the statistics because the estimator's verdict was failure."""
+        v = self.verdicts
+        return int(v.loc["failure", "replications"]) if len(v) and "failure" in v.index else 0
 
     def to_pandas(self) -> pd.DataFrame:
         """The per-parameter table, indexed by parameter key."""
         return self.parameters
 
     def text(self, kinds: tuple[str, ...] = CALIBRATION_KINDS, max_rows: int = 80) -> str:
-        """A readable summary: calibration parameters one by one, per-maneuver families pooled,
-        channel accuracies, failures."""
+        """A readable summary: verdicts, the per-kind table, calibration parameters one by one,
+        per-maneuver families pooled, channel accuracies, the estimator's findings, failures."""
         fmt = {"float_format": lambda v: f"{v: .4g}"}
         lines = [f"Monte Carlo {self.name}: {self.n_ok + self.n_failed} replications, {self.n_ok} "
-                 f"converged, {self.n_failed} failed"]
+                 f"summarised (verdict success, with or without warnings), {self.n_failed} failed"]
+        if len(self.verdicts):
+            counts = ", ".join(f"{int(r.replications)} {v}" for v, r in self.verdicts.iterrows())
+            lines.append(f"verdicts: {counts}; {self.n_failure_verdict} left out of the statistics "
+                         "because their verdict was failure"
+                         + (f", {self.n_failed - self.n_failure_verdict} because they failed otherwise "
+                            "(raised, or no verdict)" if self.n_failed > self.n_failure_verdict else ""))
+        if len(self.kinds):
+            lines += ["", f"per parameter kind, estimates within {COVERAGE_SIGMAS:g} reported deviations of "
+                      "their truth (Cramer-Rao, coloured-residual), z-score std and median |z|:",
+                      self.kinds.to_string(**fmt)]
         p = self.parameters[self.parameters["kind"].isin(kinds)]
         if len(p):
-            cols = ["kind", "unit", "n", "truth_mean", "bias", "rmse", "mc_std", "crb_mean",
-                    "colored_mean", "ratio_crb", "ratio_colored", "within_3sigma"]
+            cols = ["kind", "unit", "n", "n_not_estimated", "truth_mean", "bias", "rmse", "mc_std",
+                    "crb_mean", "colored_mean", "ratio_crb", "ratio_colored", "within_3sigma"]
             shown = p[cols].head(max_rows)
-            lines += ["", "parameters (display units): bias and RMSE of estimate - truth, Monte Carlo "
-                      "scatter, mean Cramer-Rao and coloured deviations, scatter / mean deviation, "
-                      "fraction within 3 CRB sigmas" + (f" (first {max_rows} of {len(p)})"
-                                                         if len(p) > max_rows else ""),
+            lines += ["", "parameters (display units), over the replications that estimated each: bias "
+                      "and RMSE of estimate - truth, Monte Carlo scatter, mean Cramer-Rao and coloured "
+                      "deviations, scatter / mean deviation, fraction within 3 CRB sigmas"
+                      + (f" (first {max_rows} of {len(p)})" if len(p) > max_rows else ""),
                       shown.to_string(**fmt)]
         f = self.families[self.families["kind"].isin(POOLED_KINDS)]
         if len(f):
             lines += ["", "per-maneuver parameters pooled per family (z_std = scatter / deviation):",
                       f.to_string(**fmt)]
         if len(self.channels):
-            lines += ["", "channels: 3-sigma over the replications (residual = measurement - model, "
-                      "the paper's Table 2; calibrated = calibrated channel - true flow angle):",
-                      self.channels.to_string(**fmt)]
+            lines += ["", "channels: 3-sigma (3 x rms about zero) over the replications (residual = "
+                      "measurement - model, the paper's Table 2; calibrated = calibrated channel - true "
+                      "flow angle):", self.channels.to_string(**fmt)]
+        if len(self.findings):
+            lines += ["", "the estimator's warnings and failures (replications that had each):",
+                      self.findings.head(30).to_string(index=False)]
         if len(self.failures):
             lines += ["", f"failed replications ({len(self.failures)}):",
                       self.failures.head(20).to_string(index=False)]
@@ -144,29 +191,124 @@ def _rms(a) -> float:
 
 
 def _within3(z) -> float:
+    """Fraction of the finite z-scores with |z| < 3 (NaN without any)."""
     z = _finite(z)
-    return float(np.mean(np.abs(z) < 3.0)) if z.size else np.nan
+    return float(np.mean(np.abs(z) < COVERAGE_SIGMAS)) if z.size else np.nan
 
 
-def _parameter_table(rows: pd.DataFrame) -> pd.DataFrame:
+def _median_abs(z) -> float:
+    z = _finite(z)
+    return float(np.median(np.abs(z))) if z.size else np.nan
+
+
+def estimated_rows(rows: pd.DataFrame) -> pd.Series:
+    """Which parameter rows were estimated: a finite error and a finite, positive Cramér-Rao
+    deviation (a held parameter has none, a fixed one is not in the table)."""
+    crb = pd.to_numeric(rows["std_crb"], errors="coerce").to_numpy(dtype=float)
+    err = pd.to_numeric(rows["error"], errors="coerce").to_numpy(dtype=float)
+    return pd.Series(np.isfinite(err) & np.isfinite(crb) & (crb > 0), index=rows.index)
+
+
+def _parameter_table(rows: pd.DataFrame, n_replications: int | None = None) -> pd.DataFrame:
+    """Per parameter, over the replications that estimated it (``rows`` holds estimated rows
+    only); ``n_replications`` (the replications summarised) gives n_not_estimated."""
     out = []
     for key, g in rows.groupby("name", sort=False):
         e = g["error"].to_numpy(dtype=float)
-        n = int(np.isfinite(e).sum())
+        n = len(g)
         bias, mc_std = _mean(e), _std(e)
         crb_mean, col_mean = _mean(g["std_crb"]), _mean(g["std_colored"])
         out.append({
             "parameter": key, "family": g["family"].iloc[0], "kind": g["kind"].iloc[0],
-            "unit": g["unit"].iloc[0], "n": n, "truth_mean": _mean(g["truth"]), "bias": bias,
+            "unit": g["unit"].iloc[0], "n": n,
+            "n_not_estimated": (n_replications - n) if n_replications is not None else 0,
+            "truth_mean": _mean(g["truth"]), "bias": bias,
             "rmse": _rms(e), "mc_std": mc_std, "crb_mean": crb_mean, "colored_mean": col_mean,
             "ratio_crb": mc_std / crb_mean, "ratio_colored": mc_std / col_mean,
             "z_mean": _mean(g["z_crb"]), "z_std": _std(g["z_crb"]), "within_3sigma": _within3(g["z_crb"]),
             # the bias in units of its own standard error: |bias_t| > 3 is a bias the run resolves
             "bias_t": bias / (mc_std / np.sqrt(n)) if n > 1 and mc_std > 0 else np.nan,
         })
-    cols = ["parameter", "family", "kind", "unit", "n", "truth_mean", "bias", "rmse", "mc_std", "crb_mean",
-            "colored_mean", "ratio_crb", "ratio_colored", "z_mean", "z_std", "within_3sigma", "bias_t"]
+    cols = ["parameter", "family", "kind", "unit", "n", "n_not_estimated", "truth_mean", "bias", "rmse",
+            "mc_std", "crb_mean", "colored_mean", "ratio_crb", "ratio_colored", "z_mean", "z_std",
+            "within_3sigma", "bias_t"]
     return pd.DataFrame(out, columns=cols).set_index("parameter")
+
+
+def kind_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per parameter kind, how honest the reported deviations are.
+
+    Parameters
+    ----------
+    rows : per-replication parameter rows (columns name, kind, error, std_crb, z_crb, z_colored);
+        rows that were not estimated (:func:`estimated_rows`) are left out.
+
+    Returns
+    -------
+    Indexed by kind (:data:`KIND_ORDER` first): parameters (distinct keys), n (estimates),
+    within_3crb and within_3colored (fraction of |z| < 3 with the Cramér-Rao and the
+    coloured-residual deviation; 0.9973 for honest Gaussian deviations), z_std_crb and
+    z_std_colored (sample std of z: the scatter / reported deviation ratio, 1 when honest),
+    median_abs_z_crb and median_abs_z_colored (0.674 when honest; robust to a few wild
+    replications). Dimensionless.
+    """
+    cols = ["kind", "parameters", "n", "within_3crb", "within_3colored", "z_std_crb", "z_std_colored",
+            "median_abs_z_crb", "median_abs_z_colored"]
+    if not len(rows):
+        return pd.DataFrame(columns=cols).set_index("kind")
+    rows = rows[estimated_rows(rows)]
+    present = sorted(set(rows["kind"]), key=lambda k: (KIND_ORDER.index(k) if k in KIND_ORDER
+                                                       else len(KIND_ORDER), k))
+    out = []
+    for kind in present:
+        g = rows[rows["kind"] == kind]
+        zc, zk = g["z_crb"].to_numpy(dtype=float), g["z_colored"].to_numpy(dtype=float)
+        out.append({"kind": kind, "parameters": g["name"].nunique(), "n": len(g),
+                    "within_3crb": _within3(zc), "within_3colored": _within3(zk),
+                    "z_std_crb": _std(zc), "z_std_colored": _std(zk),
+                    "median_abs_z_crb": _median_abs(zc), "median_abs_z_colored": _median_abs(zk)})
+    return pd.DataFrame(out, columns=cols).set_index("kind")
+
+
+def _verdict_label(r: ReplicationResult) -> str:
+    if r.verdict_code is not None:
+        return VERDICT_NAMES.get(r.verdict_code, str(r.verdict_code))
+    return "not recorded" if r.ok else "none (raised, or no verdict recorded)"
+
+
+def verdict_table(results: list[ReplicationResult]) -> pd.DataFrame:
+    """Replications per verdict (success, success with warnings, failure; none when the
+    replication raised or its file predates verdicts) and whether they are in the statistics."""
+    order = [*VERDICT_NAMES.values(), "not recorded", "none (raised, or no verdict recorded)"]
+    counts: dict[str, list[int]] = {}
+    for r in results:
+        c = counts.setdefault(_verdict_label(r), [0, 0])
+        c[0] += 1
+        c[1] += int(r.ok)
+    rows = [{"verdict": v, "replications": counts[v][0], "in_statistics": counts[v][1]}
+            for v in sorted(counts, key=lambda v: order.index(v) if v in order else len(order))]
+    return pd.DataFrame(rows, columns=["verdict", "replications", "in_statistics"]).set_index("verdict")
+
+
+def findings_table(results: list[ReplicationResult]) -> pd.DataFrame:
+    """Per (severity, code) of the estimator's warning and failure findings: the replications that
+    had it, how many findings in all, and the first message seen."""
+    seen: dict[tuple[str, str], dict] = {}
+    for r in results:
+        codes = set()
+        for severity, code, message in r.findings:
+            d = seen.setdefault((severity, code), {"severity": severity, "code": code, "replications": 0,
+                                                   "findings": 0, "example": message.splitlines()[0][:160]
+                                                   if message else ""})
+            d["findings"] += 1
+            codes.add((severity, code))
+        for k in codes:
+            seen[k]["replications"] += 1
+    cols = ["severity", "code", "replications", "findings", "example"]
+    df = pd.DataFrame(list(seen.values()), columns=cols)
+    return df.sort_values(["severity", "replications", "code"], ascending=[True, False, True],
+                          key=lambda c: c.map({"failure": 0, "warning": 1}) if c.name == "severity" else c,
+                          ignore_index=True)
 
 
 def _family_table(rows: pd.DataFrame) -> pd.DataFrame:
@@ -184,6 +326,8 @@ def _family_table(rows: pd.DataFrame) -> pd.DataFrame:
 
 def _channel_table(rows: pd.DataFrame) -> pd.DataFrame:
     out = []
+    if not len(rows):
+        rows = pd.DataFrame(columns=["name", "kind", "unit", "three_sigma", "mean"])
     for (name, kind), g in rows.groupby(["name", "kind"], sort=True):
         s = g["three_sigma"].to_numpy()
         out.append({"channel": name, "kind": kind, "unit": g["unit"].iloc[0], "n": len(g),
@@ -194,29 +338,49 @@ def _channel_table(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def summarize_results(results: list[ReplicationResult], name: str = "") -> MonteCarloSummary:
-    """Summarise replication results (finished and failed)."""
+    """Summarise replication results (finished and failed).
+
+    Parameters
+    ----------
+    results : the replications; those not ``ok`` (a failure verdict, or raised) are counted and
+        left out of the statistics.
+    name : the scenario's name, for the text.
+    """
     ok = [r for r in results if r.ok]
     failed = [r for r in results if not r.ok]
     params = pd.concat([r.parameters.assign(replication=r.index) for r in ok], ignore_index=True) \
         if ok else pd.DataFrame(columns=["replication", "name", "family", "kind", "unit", "error",
                                          "truth", "std_crb", "std_colored", "z_crb", "z_colored"])
+    # one set of replications per parameter for every statistic: those that estimated it
+    params = params[estimated_rows(params)] if len(params) else params
     chans = pd.concat([r.channels.assign(replication=r.index) for r in ok], ignore_index=True) \
         if ok else pd.DataFrame(columns=["name", "kind", "unit", "three_sigma", "mean"])
-    failures = pd.DataFrame([{"replication": r.index, "status": r.status,
+    failures = pd.DataFrame([{"replication": r.index, "status": r.status, "verdict": _verdict_label(r),
                               "message": (r.message.splitlines() or [""])[0]} for r in failed],
-                            columns=["replication", "status", "message"])
+                            columns=["replication", "status", "verdict", "message"])
     return MonteCarloSummary(
-        name=name, n_ok=len(ok), n_failed=len(failed), parameters=_parameter_table(params),
+        name=name, n_ok=len(ok), n_failed=len(failed), parameters=_parameter_table(params, len(ok)),
         families=_family_table(params), channels=_channel_table(chans), failures=failures,
-        z=params[["replication", "name", "family", "kind", "error", "z_crb", "z_colored"]].copy())
+        z=params[["replication", "name", "family", "kind", "error", "z_crb", "z_colored"]].copy(),
+        kinds=kind_table(params), verdicts=verdict_table(results), findings=findings_table(results))
 
 
 def load_results(out_dir: str | Path, replications: int | None = None) -> list[ReplicationResult]:
-    """Every replication file of a run (of 0..N-1 when ``replications`` is given), in index order."""
+    """Every replication file of a run (of 0..N-1 when ``replications`` is given), in index order.
+
+    A failure record is read whole (:meth:`ReplicationResult.from_meta`: its verdict and findings
+    too)."""
     out_dir = Path(out_dir)
     have = finished_replications(out_dir)
     keys = sorted(k for k in have if replications is None or k < replications)
-    return [read_replication(replication_file(out_dir, k, failed=have[k] == "failed")) for k in keys]
+    out = []
+    for k in keys:
+        if have[k] == "failed":
+            meta = json.loads(replication_file(out_dir, k, failed=True).read_text())
+            out.append(ReplicationResult.from_meta(meta))
+        else:
+            out.append(read_replication(replication_file(out_dir, k)))
+    return out
 
 
 def summarize(out_dir: str | Path, replications: int | None = None) -> MonteCarloSummary:
