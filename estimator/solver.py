@@ -67,6 +67,12 @@ from threadpoolctl import threadpool_limits
 
 from estimator.core.assembly import scatter_blocks
 from estimator.core.process_noise import input_increments, suffix_middle_factor, white_noise_psd
+from estimator.core.residual_spectrum import (
+    AR_MAX_ORDER,
+    ARModel,
+    ar_from_autocovariance,
+    innovation_cross_spectrum,
+)
 from estimator.model import Evaluation, Model, ModelEvaluationError
 from estimator.problem import Problem
 from estimator.result import Confounding, EstimationResult, ResidualStats
@@ -99,6 +105,9 @@ class SolverOptions:
     colored : compute the Morelli-Klein coloured-residual deviations.
     colored_cross_channel : with the residual cross-correlations between the channels of a
         maneuver (the full matrix form); False: each channel alone.
+    colored_spectrum : the residuals' spectrum in the coloured deviations: "ar" (autoregressive
+        models fitted to the residuals, :mod:`estimator.core.residual_spectrum`) or "periodogram"
+        (their own correlation at every lag, the original plug-in: biased low).
     imu_noise : the IMU noise whose integration adds to the coloured deviations (process noise,
         :mod:`estimator.core.process_noise`): "estimate" (from the IMU data, per aircraft), "none",
         or ``(accel_psd, gyro_psd)``, the white-noise densities in m^2/s^3 and rad^2/s (a
@@ -122,6 +131,7 @@ class SolverOptions:
     min_support_samples: int = 40
     colored: bool = True
     colored_cross_channel: bool = True
+    colored_spectrum: str = "ar"
     imu_noise: str | tuple[float, float] = "estimate"
     start: str | tuple[str, ...] = "staged"
     robust: bool = False
@@ -142,6 +152,9 @@ class SolverOptions:
         elif len(self.imu_noise) != 2 or not all(np.isfinite(v) and v >= 0 for v in self.imu_noise):
             raise ValueError(f"SolverOptions: imu_noise = {self.imu_noise!r}: two densities >= 0, "
                              "(m^2/s^3, rad^2/s)")
+        if self.colored_spectrum not in ("ar", "periodogram"):
+            raise ValueError(f"SolverOptions: colored_spectrum must be 'ar' or 'periodogram', got "
+                             f"{self.colored_spectrum!r}")
         if self.max_iterations < 1:
             raise ValueError(f"SolverOptions: max_iterations must be >= 1, got {self.max_iterations}")
 
@@ -1134,39 +1147,38 @@ def _one_sided_weights(L: int) -> np.ndarray:
 def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R, nparam, opt,
                  std_crb: np.ndarray, imu_psd: dict[str, np.ndarray] | None
                  ) -> tuple[np.ndarray, np.ndarray]:
-    r"""Honest standard deviations: Morelli-Klein (coloured residuals, cross-channel) and the IMU noise.
+    r"""Honest standard deviations: coloured, cross-correlated residuals and the IMU's noise.
 
-    **Coloured residuals.** The middle matrix of maneuver ``k`` is ``sum_i sum_j J_i^T W Rvv(i - j)
-    W J_j`` over the maneuver's samples, ``W = R^-1`` and ``Rvv`` the biased auto- and
-    cross-correlation estimate of its channels' residuals (every lag). With each channel's
-    Jacobian and residual placed on the maneuver's sample grid (zero where the channel has no
-    sample in the cost) and zero-padded to ``L >= 2 n - 1``, circular convolution is linear, the
-    transform of the cross-correlation of channels ``c, d`` is ``E_c conj(E_d) / n`` and, by
-    Parseval::
+    **Coloured residuals** (Morelli & Klein 1997, matrix form). The middle matrix of maneuver ``k``
+    is ``J^T W Sigma W J`` over its samples and channels, ``W = R^-1``. With each channel's Jacobian
+    placed on the maneuver's sample grid (zero where the channel has no sample in the cost),
+    zero-padded to ``L >= 2 n - 1`` and transformed (``F_c``), and ``S(f)`` the channels'
+    cross-spectral matrix per sample, by Parseval::
 
-        middle_k = 1/(n L) sum_f Re( G_f G_f^H ),     G_f = sum_c s_c W_c F_c,f conj(E_c,f)
+        middle_k = 1/L sum_f Re( F_f^H W S(f) W F_f ) = 1/L sum_f Re( Y_f Y_f^H ),
+        Y_f = sum_c W_c F_c,f B_c(f),      S_cd(f) = B_c(f) B_d(f)^H
 
-    a weighted Gram matrix of the sum over channels of one vector per frequency (``F = DFT(J)``),
-    in the parameters the maneuver's channels depend on. ``s_c = sqrt(n / n_c)`` normalises a
-    channel with ``n_c`` samples in the cost (own-rate channels, guard bands) by its own count, so
-    that its autocorrelation is its own biased estimate; the cross-correlation of an own-rate
-    channel with a full-rate one is then normalised by ``sqrt(n n_c)`` instead of ``n_c``, which
-    keeps the sum positive semi-definite at the price of understating that one cross term by
-    ``sqrt(n_c / n)``. With ``colored_cross_channel = False`` each channel's Gram matrix is taken
-    alone (cross terms zero).
+    ``colored_spectrum = "ar"`` (the default) models ``S`` (:mod:`estimator.core.residual_spectrum`):
+    each channel an autoregressive model fitted to its residual periodogram *corrected for what the
+    fit absorbed*, ``I_c(f) / (1 - h_c(f))`` with ``h_c(f) = W_c / n_c F_c,f^H Cov(theta) F_c,f``
+    the leverage of the fit at frequency ``f`` (the expected periodogram of the residuals of a
+    linear fit to white noise is ``sigma^2 (1 - h(f))``); the channels correlated through their
+    innovations, whose coherence is a smoothed cross-periodogram (``B_c = Lambda_c(f) / A_c(f)``,
+    ``Gamma(f) = Lambda Lambda^H``). Without the correction the residuals' missing low-frequency
+    noise would be modelled as absent. ``"periodogram"`` takes the residuals' own
+    cross-periodogram (the original all-lags plug-in, biased low: ``B_c = s_c conj(E_c) /
+    sqrt(n)``, one column, ``s_c = sqrt(n / n_c)``). ``colored_cross_channel = False`` leaves out
+    the cross-channel terms.
 
     **IMU noise** (:mod:`estimator.core.process_noise`): ``C_proc = sum_j V_j V_j^T`` per maneuver,
     from the initial-condition columns of the Jacobian, the state sensitivities and the IMU's
     white-noise level ``imu_psd`` (aircraft -> (6,) SI^2 s; None: left out).
 
     Both middles are gathered like the normal equations and the Schur projection of the globals'
-    sensitivities is applied per maneuver (:func:`_sandwich_std`). The Morelli-Klein deviation is
-    floored at the Cramér-Rao bound (which no unbiased estimate beats; the all-lags estimate runs
-    low for parameters whose sensitivity is a ramp, because the residuals have lost exactly that
-    low-frequency content to the parameters), and the IMU noise's variance is added.
-
-    Maneuvers are taken in chunks whose spectra and factors are reduced to per-maneuver matrices
-    and dropped before the next chunk, so memory does not grow with the problem.
+    sensitivities is applied per maneuver (:func:`_sandwich_std`). The coloured deviation is
+    floored at the Cramér-Rao bound (which no unbiased estimate beats) and the IMU noise's
+    variance is added. Maneuvers are taken in chunks whose spectra are reduced to per-maneuver
+    matrices and dropped before the next chunk, so memory does not grow with the problem.
 
     Returns
     -------
@@ -1178,26 +1190,31 @@ def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R,
     n_of = np.array([m.n for m in p.maneuvers], dtype=np.int64)
     L_of = np.array([sfft.next_fast_len(max(2 * int(n) - 1, 1), real=True) for n in n_of], dtype=np.int64)
     members: list[set[int]] = [set() for _ in range(nman)]
+    n_chan = np.zeros(nman, dtype=np.int64)
     for _, mans, colmap, _ in model.channel_layout():
         for b, k in enumerate(mans):
             members[int(k)].update(int(i) for i in colmap[b] if st.free[i])
+            n_chan[int(k)] += 1
     union = [np.array(sorted(s), dtype=np.intp) for s in members]
     cross = opt.colored_cross_channel
+    ar = opt.colored_spectrum == "ar"
     C = _Normal(st)
     Cp = _Normal(st) if imu_psd is not None else None
     lock = threading.Lock()
-    chunks, cur, size = [], [], 0
+    chunks, cur, size = [], [], 0.0
     for k in range(nman):
         cur.append(k)
-        size += int(n_of[k])
-        if size >= _COLORED_CHUNK_SAMPLES:
+        # the Jacobian spectra held until the maneuver's model is fitted, or the factor Y
+        size += union[k].size * (int(L_of[k]) // 2 + 1) * max(int(n_chan[k]), 1) * 16.0
+        if size >= _COLORED_CHUNK_BYTES:
             chunks.append(tuple(cur))
-            cur, size = [], 0
+            cur, size = [], 0.0
     if cur:
         chunks.append(tuple(cur))
     for chunk in chunks:
-        G = ({k: np.zeros((union[k].size, int(L_of[k]) // 2 + 1), dtype=complex) for k in chunk}
-             if cross else {})
+        held: dict[int, list] = {k: [] for k in chunk}  # "ar": each channel's spectra, for later
+        Y = ({k: np.zeros((union[k].size, int(L_of[k]) // 2 + 1), dtype=complex) for k in chunk}
+             if cross and not ar else {})
         V: dict[int, np.ndarray] = {}
         dEq: dict[int, np.ndarray] = {}
         if Cp is not None:
@@ -1207,7 +1224,7 @@ def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R,
                 dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
                 V[k] = np.zeros((m.n, union[k].size, 6))
 
-        def spectra(ce, G=G, V=V, dEq=dEq) -> None:
+        def spectra(ce, held=held, Y=Y, V=V, dEq=dEq) -> None:
             # only the slots that are free somewhere: fixed columns drop out of the sandwich
             keep = np.nonzero(st.free[ce.colmap].any(axis=0))[0]
             if keep.size:
@@ -1229,24 +1246,26 @@ def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R,
                         bb[rows] = np.einsum("sn,cn->nsc", Jb, JT[:7, r0:r1]) * w
                         Vc = suffix_middle_factor(bb, dEq[k])
                         with lock:
-                            if np.unique(pos).size == pos.size:
-                                V[k][:, pos, :] += Vc
-                            else:  # slots of one parameter add up
-                                np.add.at(V[k], (slice(None), pos), Vc)
+                            np.add.at(V[k], (slice(None), pos), Vc)  # slots of one parameter add up
                     Lk = int(L_of[k])
                     Jp = np.zeros((Jb.shape[0], Lk))
                     Jp[:, rows] = Jb
+                    F = sfft.rfft(Jp, axis=-1)
                     ep = np.zeros(Lk)
                     ep[rows] = e[r0:r1]
-                    F = sfft.rfft(Jp, axis=-1)
-                    F *= np.conj(sfft.rfft(ep)) * (w * np.sqrt(n_of[k] / (r1 - r0)))
+                    Ef = sfft.rfft(ep)
+                    if ar:
+                        with lock:
+                            held[k].append((ce.channel, pos, F, Ef, rows, e[r0:r1].copy(), w))
+                        continue
+                    F *= np.conj(Ef) * (w * np.sqrt(n_of[k] / (r1 - r0)))
                     if cross:
                         with lock:
-                            np.add.at(G[k], pos, F)  # slots of one parameter add up
+                            np.add.at(Y[k], pos, F)  # slots of one parameter add up
                     else:
-                        Y = (F * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
+                        Yc = (F * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
                         with lock:
-                            C.add_blocks((Y @ Y.T)[None], np.zeros((1, pos.size)),
+                            C.add_blocks((Yc @ Yc.T)[None], np.zeros((1, pos.size)),
                                          np.ascontiguousarray(pidx[ok][None, :]), np.array([k]), 1.0)
             ce.JT = None  # used once: do not hold every channel's Jacobian at the same time
 
@@ -1257,14 +1276,24 @@ def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R,
             u = union[k]
             if not u.size:
                 continue
-            if cross:
-                Lk = int(L_of[k])
-                Y = (G.pop(k) * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
-                C.add_blocks((Y @ Y.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
+            Lk = int(L_of[k])
+            if ar and held[k]:
+                items = sorted(held.pop(k), key=lambda it: it[0])
+                cov_u = _union_covariance(st, Sinv, Ainv, N, k, u)
+                Yk = _ar_factor(items, cov_u, u.size, int(n_of[k]), Lk, p.maneuvers[k].dt_s, cross)
+                norm = 1.0 / Lk
+            elif k in Y:
+                Yk, norm = Y.pop(k)[:, :, None], 1.0 / (n_of[k] * Lk)
+            else:
+                Yk = None
+            if Yk is not None:
+                Yk = Yk * np.sqrt(_one_sided_weights(Lk) * norm)[None, :, None]
+                Yr = np.ascontiguousarray(Yk).view(np.float64).reshape(u.size, -1)
+                C.add_blocks((Yr @ Yr.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
                              np.array([k]), 1.0)
             if k in V:
-                Y = np.ascontiguousarray(V.pop(k).transpose(1, 0, 2)).reshape(u.size, -1)
-                Cp.add_blocks((Y @ Y.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
+                Yv = np.ascontiguousarray(V.pop(k).transpose(1, 0, 2)).reshape(u.size, -1)
+                Cp.add_blocks((Yv @ Yv.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
                               np.array([k]), 1.0)
     std_mk = _sandwich_std(N, st, C, Sinv, Ainv, nparam)
     std_imu = (_sandwich_std(N, st, Cp, Sinv, Ainv, nparam) if Cp is not None
@@ -1274,8 +1303,79 @@ def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R,
     return honest, std_imu
 
 
-#: Maneuvers are taken in chunks of about this many samples for the coloured deviations.
-_COLORED_CHUNK_SAMPLES = 30000
+def _union_covariance(st: _Structure, Sinv: np.ndarray, Ainv: list[np.ndarray], N: _Normal, k: int,
+                      u: np.ndarray) -> np.ndarray:
+    """The Cramér-Rao covariance of the parameters ``u`` (indices) of maneuver ``k``: its locals and
+    the globals its channels depend on (``Cov_LL = A^-1 + B S^-1 B^T``, ``Cov_LG = -B S^-1``,
+    ``B = A^-1 M_LG``)."""
+    g = st.gpos[u]
+    isg = g >= 0
+    out = np.zeros((u.size, u.size))
+    gi = g[isg]
+    out[np.ix_(isg, isg)] = Sinv[np.ix_(gi, gi)]
+    if st.local_of_arr[k].size:
+        isl = ~isg
+        lp = st.lpos[u[isl]]
+        B = Ainv[k] @ N.HGL[k].T  # (L, G)
+        out[np.ix_(isl, isl)] = (Ainv[k] + B @ Sinv @ B.T)[np.ix_(lp, lp)]
+        cov_lg = -(B @ Sinv)[np.ix_(lp, gi)]
+        out[np.ix_(isl, isg)] = cov_lg
+        out[np.ix_(isg, isl)] = cov_lg.T
+    return out
+
+
+def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: float, cross: bool
+               ) -> np.ndarray:
+    """``Y_f`` (U, nf, r) of one maneuver from its channels' Jacobian spectra and autoregressive
+    residual models (:func:`_colored_std`, ``colored_spectrum = "ar"``).
+
+    Each channel's residual periodogram is corrected for the fit's leverage ``h_c(f)`` (capped at
+    0.95: the few bins the parameters empty almost completely carry no information either way)
+    before its model is fitted; full-rate channels share a smoothed innovation coherence (with
+    ``cross``), a channel recorded every ``s``-th sample is modelled on its own samples and alone.
+    """
+    nf = L // 2 + 1
+    models, alone = [], []
+    for _, pos, F, Ef, rows, e, w in items:
+        steps = np.diff(rows)
+        stride = int(steps[0]) if steps.size and np.all(steps == steps[0]) else 0
+        nc = rows.size
+        if stride == 0:  # irregular samples: no correlation model, the residual variance
+            models.append(ARModel(np.zeros(0), float(e @ e) / nc, 1))
+            alone.append(True)
+            continue
+        G = cov_u[np.ix_(pos, pos)] @ F
+        h = np.minimum(w / nc * np.real(np.sum(np.conj(F) * G, axis=0)), 0.95)
+        I_corr = (np.abs(Ef) ** 2 / nc) / (1.0 - h)
+        r = sfft.irfft(I_corr, L)[:(AR_MAX_ORDER + 1) * stride:stride]
+        models.append(ar_from_autocovariance(r, nc, stride=stride))
+        alone.append(stride != 1 or not cross)
+    together = [i for i, a in enumerate(alone) if not a]
+    cols = sum(alone) + len(together)
+    factors = np.zeros((len(items), nf, cols), dtype=complex)
+    j = 0
+    for i, a in enumerate(alone):
+        if a:
+            factors[i, :, j] = models[i].inverse_filter(L) * np.sqrt(models[i].innovation_var)
+            j += 1
+    if together:
+        U = np.zeros((n, len(together)))
+        for t, i in enumerate(together):
+            rows, e, m = items[i][4], items[i][5], models[i]
+            U[rows[m.order:], t] = m.innovations(e)  # the samples in the cost are contiguous
+        gam = innovation_cross_spectrum(U, np.array([models[i].innovation_var for i in together]), L, dt_s)
+        lam, vec = np.linalg.eigh(gam)  # per frequency
+        Lam = vec * np.sqrt(np.maximum(lam, 0.0))[:, None, :]  # (nf, Ct, Ct)
+        for t, i in enumerate(together):
+            factors[i, :, j:] = models[i].inverse_filter(L)[:, None] * Lam[:, t, :]
+    Y = np.zeros((nu, nf, cols), dtype=complex)
+    for i, (_, pos, F, _, _, _, w) in enumerate(items):
+        np.add.at(Y, pos, (w * F)[:, :, None] * factors[i][None, :, :])  # slots of one parameter add up
+    return Y
+
+
+#: Maneuvers are taken in chunks whose spectral factors take about this much memory.
+_COLORED_CHUNK_BYTES = 256e6
 
 
 def _imu_noise_psd(problem: Problem, opt: SolverOptions) -> dict[str, np.ndarray] | None:
