@@ -154,6 +154,24 @@ class EstimationResult:
         i = self.parameters.index(key)
         return float((self.std_colored if colored else self.std_crb)[i])
 
+    def covariance(self, keys: list[str] | tuple[str, ...], colored: bool = False) -> np.ndarray:
+        """Covariance (SI) of some estimated global parameters, from their correlations and deviations.
+
+        ``colored``: with the honest (coloured-residual and IMU-noise) deviations in place of the
+        Cramér-Rao ones, correlations kept (NaN if any of them has none). Parameters outside the
+        correlation matrix (per-maneuver ones) are taken as uncorrelated with the others.
+        """
+        pos = {k: i for i, k in enumerate(self.correlation_keys)}
+        std = np.array([self.std(k, colored=colored) for k in keys])
+        if colored and not np.all(np.isfinite(std)):
+            return np.full((len(keys), len(keys)), np.nan)
+        C = np.zeros((len(keys), len(keys)))
+        for i, a in enumerate(keys):
+            for j, b in enumerate(keys):
+                rho = self.correlation[pos[a], pos[b]] if a in pos and b in pos else float(i == j)
+                C[i, j] = rho * std[i] * std[j]
+        return np.nan_to_num(C)
+
     def to_pandas(self) -> pd.DataFrame:
         """One row per parameter, indexed by key: value and deviations (SI and display units),
         ``free`` (asked for by the problem), ``estimated`` (estimated here) and ``state`` /

@@ -269,24 +269,6 @@ def assign_bins(problem: Problem, opt: WorkflowOptions) -> pd.DataFrame:
 
 
 # ---------------------------------------------------------------------------------- apportioning
-def _covariance(result: EstimationResult, keys: Sequence[str], colored: bool = False) -> np.ndarray:
-    """Covariance (SI) of some free global/aircraft parameters from the result's correlation.
-
-    ``colored``: with the coloured-residual (Morelli-Klein) deviations in place of the Cramér-Rao
-    ones, correlations kept (NaN if the result has none).
-    """
-    pos = {k: i for i, k in enumerate(result.correlation_keys)}
-    std = np.array([result.std(k, colored=colored) for k in keys])
-    if colored and not np.all(np.isfinite(std)):
-        return np.full((len(keys), len(keys)), np.nan)
-    C = np.zeros((len(keys), len(keys)))
-    for i, a in enumerate(keys):
-        for j, b in enumerate(keys):
-            rho = result.correlation[pos[a], pos[b]] if a in pos and b in pos else float(i == j)
-            C[i, j] = rho * std[i] * std[j]
-    return np.nan_to_num(C)
-
-
 def apportion(biases_left: Mapping[str, float], biases_right: Mapping[str, float],
               covariance: np.ndarray | None = None) -> pd.DataFrame:
     """Split per-aircraft vane biases into a fleet mean and per-aircraft installation biases.
@@ -365,20 +347,21 @@ def _stage_findings(stages: Sequence[Stage]) -> list[Finding]:
     return out
 
 
-def _aircraft_biases(stage: Stage, names: tuple[str, str]
-                     ) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
-    """Aircraft with both vane biases free and determined in a stage; values and covariance (rad),
-    Cramér-Rao and coloured-residual."""
-    res = stage.result
-    ac = sorted({m.aircraft for m in stage.problem.maneuvers})
+def vane_biases(problem: Problem, result: EstimationResult, names: tuple[str, str] = ("b_l", "b_r")
+                ) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+    """Aircraft whose two vane biases were estimated (and determined) in an estimation, their values
+    (all left biases, then all right ones, rad) and covariance, Cramér-Rao and honest (coloured)."""
+    ac = sorted({m.aircraft for m in problem.maneuvers})
     ok = []
     for a in ac:
         keys = [f"{n}[{a}]" for n in names]
-        if all(k in res.parameters and res.parameters[k].free and np.isfinite(res.std(k)) for k in keys):
+        est = result.free_estimated if result.free_estimated is not None else result.parameters.free_mask
+        if all(k in result.parameters and est[result.parameters.index(k)] and np.isfinite(result.std(k))
+               for k in keys):
             ok.append(a)
     keys = [f"{names[0]}[{a}]" for a in ok] + [f"{names[1]}[{a}]" for a in ok]
-    vals = np.array([res.value(k) for k in keys])
-    return ok, vals, _covariance(res, keys), _covariance(res, keys, colored=True)
+    vals = np.array([result.value(k) for k in keys])
+    return ok, vals, result.covariance(keys), result.covariance(keys, colored=True)
 
 
 def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> WorkflowResult:
@@ -418,7 +401,7 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     if has_vanes:
         per_bin = {}
         for st in first_ok:
-            ac, vals, cov, cov_col = _aircraft_biases(st, opt.vane_biases)
+            ac, vals, cov, cov_col = vane_biases(st.problem, st.result, opt.vane_biases)
             if not ac:
                 continue
             n = len(ac)

@@ -36,7 +36,7 @@ from estimator.io import problem_from_dataset
 from estimator.problem import Problem
 from estimator.result import STATUS_TEXT, EstimationResult
 from estimator.solver import SolverOptions, estimate
-from estimator.workflow import stage_residuals, three_sigma
+from estimator.workflow import RAD2DEG, apportion, stage_residuals, three_sigma, vane_biases
 from synth.campaign import software_versions
 from synth.dataset import FORMAT, FORMAT_VERSION, write_maneuver, write_manifest
 from synth.flight import fly_maneuver
@@ -442,11 +442,39 @@ def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequen
         "std_crb": rec["std_crb_display"], "std_colored": rec["std_colored_display"],
         "z_crb": rec["z_crb"], "z_colored": rec["z_colored"],
     }).reset_index(drop=True)
+    params = pd.concat([params, installation_rows(problem, result, truth)], ignore_index=True)
     channels["family"] = channels["name"]
     return ReplicationResult(
         index=index, ok=True, status=status, message=result.message, noise_seed=draw.noise_seed,
         scenario_hash=scenario.hash, elapsed_s=time.perf_counter() - t0, parameters=params,
         channels=channels, draws=pd.DataFrame(draws_table(draw)), warnings=notes + not_computed, **judged)
+
+
+def installation_rows(problem: Problem, result: EstimationResult, truth: TruthProjection) -> pd.DataFrame:
+    """The vane installation biases (paper §4.1: each aircraft's vane bias minus the fleet mean of
+    ``(b_l + b_r) / 2``, :func:`estimator.workflow.apportion`) against the same apportionment of
+    the true biases, as parameter rows (kind ``installation_bias``, deg): the quantity the fleet
+    calibration fixes, free of the correction-model part every aircraft shares (and of the share
+    of a model-structure error they share). Empty with fewer than two aircraft."""
+    ac, vals, cov, cov_col = vane_biases(problem, result)
+    keys = [f"b_l[{a}]" for a in ac] + [f"b_r[{a}]" for a in ac]
+    if len(ac) < 2 or not all(k in truth.values for k in keys):
+        return pd.DataFrame(columns=["name", "family", "kind", "unit", "estimate", "truth", "error",
+                                     "std_crb", "std_colored", "z_crb", "z_colored"])
+    n = len(ac)
+    est = apportion(dict(zip(ac, vals[:n], strict=True)), dict(zip(ac, vals[n:], strict=True)), cov)
+    col = apportion(dict(zip(ac, vals[:n], strict=True)), dict(zip(ac, vals[n:], strict=True)), cov_col)
+    tru = apportion({a: truth.values[f"b_l[{a}]"] for a in ac}, {a: truth.values[f"b_r[{a}]"] for a in ac})
+    rows = []
+    for a in ac:
+        for side in ("left", "right"):
+            k = f"installation_{side}"
+            e, t = est.loc[a, k] * RAD2DEG, tru.loc[a, k] * RAD2DEG
+            s_crb, s_col = est.loc[a, f"std_{k}"] * RAD2DEG, col.loc[a, f"std_{k}"] * RAD2DEG
+            rows.append({"name": f"{k}[{a}]", "family": k, "kind": "installation_bias", "unit": "deg",
+                         "estimate": e, "truth": t, "error": e - t, "std_crb": s_crb, "std_colored": s_col,
+                         "z_crb": (e - t) / s_crb, "z_colored": (e - t) / s_col})
+    return pd.DataFrame(rows)
 
 
 def run_replication_safely(scenario: Scenario, index: int,
