@@ -18,4 +18,12 @@ table and a PNG plot; the committed results are in ``campaigns/studies/results/`
     may be before the desired accuracy is lost::
 
         python -m campaigns.studies.tolerance --out runs/tolerance --results campaigns/studies/results
+
+(d) :mod:`campaigns.studies.robustness` — IMU biases of 1, 2, 3 and -3 times the typical values
+    from zero start values: does the estimator reach the true minimum, and does it ever call a
+    wrong one a success (issue 10)::
+
+        python -m campaigns.studies.robustness --out runs/robustness --results campaigns/studies/results
+
+:mod:`campaigns.studies.invocations` records what each run cost and which code ran it.
 """

@@ -78,7 +78,6 @@ import dataclasses
 import json
 import math
 import os
-import resource
 import shlex
 import sys
 import tempfile
@@ -88,7 +87,6 @@ import traceback
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -100,16 +98,14 @@ from campaigns.montecarlo import Scenario, parse_scenario
 from campaigns.montecarlo.replication import Models, fly, write_scratch_dataset
 from campaigns.montecarlo.runner import _atomic_write, _Lock, prepare_output
 from campaigns.montecarlo.scenario import scenario_hash
+from campaigns.studies.invocations import Invocation, invocations_text, machine_text
 from campaigns.studies.shss_segments import fmt, paragraph
 from campaigns.studies.tolerance import (
     IMU_SPREAD_ACCEL_MPS2,
     IMU_SPREAD_GYRO_DEG_S,
     VANE_BIAS_FAMILIES,
-    _invocations_text,
     _set_imu_bias,
     _typical_imu,
-    code_version,
-    machine_text,
 )
 from campaigns.truth import true_parameters
 from estimator.io import problem_from_dataset
@@ -846,9 +842,9 @@ def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: st
         *paragraph("Robustness (issue 10): fits from the estimator's default (zero) start with the IMU "
                    "biases at k x typical, judged against a fit started from the truth (the true minimum)."),
         f"$ {command}",
-        *machine_text(invocations[-1].get("code_start")).splitlines(),
+        *machine_text(__file__, invocations[-1].get("code_start")).splitlines(),
         f"{replications} replications per scale, {len(config.scales)} scales",
-        *_invocations_text(invocations),
+        *invocations_text(invocations),
         "",
         *paragraph(f"setting: {flights}{shss}; the default campaign's world: "
                    "typical errors, local_flow_truth / adc_baseline, steady wind (6, -4, 0) m/s, calm air, "
@@ -915,20 +911,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     results = args.results or args.out
     results.mkdir(parents=True, exist_ok=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    t0, load0, code0 = time.perf_counter(), os.getloadavg()[0], code_version()
-    started = datetime.now(UTC).isoformat(timespec="seconds")
+    invocation = Invocation(__file__)
     n_ran = run_study(config, args.out, n, args.workers, log=lambda s: print(s, file=sys.stderr, flush=True))
     command = f"python -m campaigns.studies.{STUDY} " + shlex.join(argv)
-    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    code1 = code_version()
-    record = {"started_utc": started, "command": command, "wall_s": time.perf_counter() - t0,
-              "cpu_s": own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime,
-              "replications_run": n_ran, "load_start": load0, "load_end": os.getloadavg()[0],
-              "code_start": code0, "code": code1 if code1 == code0 else f"{code0} -> {code1}"}
-    log_path = args.out / INVOCATIONS_FILE
-    invocations = json.loads(log_path.read_text()) if log_path.exists() else []
-    invocations.append(record)
-    _atomic_write(log_path, (json.dumps(invocations, indent=1) + "\n").encode())
+    invocations = invocation.finish(args.out / INVOCATIONS_FILE, command, n_ran)
     df = records_frame(load_records(config, args.out, n))
     text = report(df, config, n, command, invocations)
     (results / f"{STUDY}.txt").write_text(text)

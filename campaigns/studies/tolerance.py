@@ -42,12 +42,9 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
 import math
 import os
-import resource
 import shlex
-import subprocess
 import sys
 import tempfile
 import textwrap
@@ -55,21 +52,19 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from campaigns.machine import cpu_model, memory_gib
 from campaigns.montecarlo import ScenarioError, parse_scenario, run_montecarlo
 from campaigns.montecarlo.replication import Models, ReplicationResult, fly, write_scratch_dataset
 from campaigns.montecarlo.summary import CALIBRATION_KINDS, load_results, summarize_results
+from campaigns.studies.invocations import Invocation, invocations_text, machine_text
 from campaigns.truth import true_parameters
 from estimator.io import problem_from_dataset
 from estimator.modelfile import load_model_set
-from synth.campaign import software_versions
 from synth.errors import PROBE_SENSORS, VANE_SENSORS, ErrorConfig
 
 #: desired 3-sigma accuracy per requirement group, deg (paper Table 2)
@@ -817,34 +812,6 @@ def plot(df: pd.DataFrame, factors: Sequence[Factor], path: Path, replications: 
     return path
 
 
-def code_version() -> str:
-    """The working tree's commit, and whether the code differs from it (``git status``)."""
-    here = Path(__file__).parent
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=here, check=False).stdout.strip() or "?"
-        # the code this study runs: the estimator, the synthesizer, the engine and this file
-        paths = ["estimator", "synth", "aircraft_models", "campaigns/montecarlo", "campaigns/truth.py",
-                 "campaigns/studies/tolerance.py"]
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", *paths], capture_output=True, text=True,
-                               cwd=here.parent.parent, check=False).stdout.strip()
-    except OSError:
-        return "?"
-    return commit + (" with uncommitted changes to the code it runs" if dirty else "")
-
-
-def machine_text(code_at_start: str | None = None) -> str:
-    """CPU model, cores, memory, software versions and the code's commit (at the start and the end
-    of the run: other engineers commit to the shared tree meanwhile)."""
-    cpu = cpu_model()
-    gib = memory_gib()
-    mem = "" if gib is None else f", {gib:.0f} GiB"
-    versions = ", ".join(f"{k} {v}" for k, v in software_versions().items())
-    end = code_version()
-    code = end if code_at_start in (None, end) else f"{code_at_start} at the start, {end} at the end"
-    return f"machine: {cpu}, {os.cpu_count()} cores{mem}; {versions}\ncode: {code} (the shared working tree)"
-
-
 def _typical_delays_text() -> str:
     """The typical preset's flow-sensor delays and recorder latencies, ms."""
     typ = ErrorConfig.typical()
@@ -863,23 +830,6 @@ def _bounds_text(factors: Sequence[Factor]) -> str:
                 if fam not in seen.setdefault((lo, hi, unit), []):
                     seen[(lo, hi, unit)].append(fam)
     return "; ".join(f"{', '.join(fams)} in [{lo:g}, {hi:g}] {unit}" for (lo, hi, unit), fams in seen.items())
-
-
-def _invocations_text(invocations: Sequence[Mapping[str, Any]]) -> list[str]:
-    """The cost lines: this invocation, and every one when the study was resumed (the code each
-    ran, at its start -> end when the shared tree moved meanwhile)."""
-    now = invocations[-1]
-    lines = [f"this invocation: wall {now['wall_s']:.0f} s, CPU {now['cpu_s']:.0f} s in its processes, "
-             f"{now['replications_run']} replications computed; load average {now['load_start']:.1f} at "
-             f"the start, {now['load_end']:.1f} at the end (other jobs share the machine)"]
-    if len(invocations) > 1:
-        lines.append(f"the replications were computed over {len(invocations)} invocations (resumed): wall "
-                     f"{sum(i['wall_s'] for i in invocations):.0f} s, CPU "
-                     f"{sum(i['cpu_s'] for i in invocations):.0f} s, "
-                     f"{sum(i['replications_run'] for i in invocations)} replications in all:")
-        lines += [f"  {i.get('started_utc', '?')}: {i['replications_run']} replications, wall "
-                  f"{i['wall_s']:.0f} s, CPU {i['cpu_s']:.0f} s, code {i['code']}" for i in invocations]
-    return lines
 
 
 def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: str,
@@ -905,9 +855,9 @@ def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: st
               "the desired accuracy is lost? One factor at a time around the base scenario; every point "
               "a Monte Carlo run (campaigns/montecarlo)."),
         f"$ {command}",
-        *machine_text(invocations[-1].get("code_start")).splitlines(),
+        *machine_text(__file__, invocations[-1].get("code_start")).splitlines(),
         f"{replications} replications per point, {runs} distinct runs",
-        *_invocations_text(invocations),
+        *invocations_text(invocations),
         "",
         *para(f"base scenario: {flights}; errors preset typical (nose-probe irregularity off); "
               f"{base['local_flow_truth']} / {base['adc_baseline']} (representable by the model set: a loss "
@@ -980,8 +930,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         p.error("--replications must be >= 1")
     results = args.results or args.out
     results.mkdir(parents=True, exist_ok=True)
-    t0, load0, code0 = time.perf_counter(), os.getloadavg()[0], code_version()
-    started = datetime.now(UTC).isoformat(timespec="seconds")
+    invocation = Invocation(__file__)
     points = study_points(config, args.out)
     print(f"{len({q.directory for q in points})} distinct runs x {n} replications into {args.out}/points",
           flush=True)
@@ -989,16 +938,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     df = collect(points, n, errors)
     command = "python -m campaigns.studies.tolerance " + " ".join(shlex.quote(a) for a in (
         sys.argv[1:] if argv is None else argv))
-    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    code1 = code_version()
-    record = {"started_utc": started, "command": command, "wall_s": time.perf_counter() - t0,
-              "cpu_s": own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime,
-              "replications_run": n_ran, "load_start": load0, "load_end": os.getloadavg()[0],
-              "code_start": code0, "code": code1 if code1 == code0 else f"{code0} -> {code1}"}
-    log_path = args.out / INVOCATIONS_FILE
-    invocations = json.loads(log_path.read_text()) if log_path.exists() else []
-    invocations.append(record)
-    log_path.write_text(json.dumps(invocations, indent=1) + "\n")
+    invocations = invocation.finish(args.out / INVOCATIONS_FILE, command, n_ran)
     text = report(df, config, n, command, invocations)
     (results / "tolerance.txt").write_text(text)
     df.to_csv(results / "tolerance.csv", index=False)
