@@ -1,34 +1,23 @@
-r"""Maximum-likelihood output-error estimation for many maneuvers at once.
+r"""Maximum-likelihood output-error estimation for many maneuvers at once: :func:`estimate`.
 
 Cost (Jategaonkar 2006, §4.3), residuals ``e = z - y`` of channel ``c`` at sample ``i``::
 
     J(theta, R) = 1/2 sum_c sum_i e_ci^2 / R_c + 1/2 sum_c N_c ln R_c
 
 ``R`` (diagonal, one variance per channel) is estimated in closed form from the residuals between
-Gauss-Newton steps, ``R_c = sum_i e_ci^2 / N_c`` (relaxation strategy, §4.10). For fixed ``R`` the
-Gauss-Newton step solves ``M dtheta = g`` with::
-
-    M = sum J^T R^-1 J,     g = sum J^T R^-1 e
-
-Parameters are *global* (any scope but per maneuver) or *local* (one maneuver's initial conditions,
-IMU biases, ...). Local parameters touch only their maneuver's rows, so ``M`` has an arrow
-structure; the local blocks are eliminated maneuver by maneuver (Schur complement)::
-
-    S  = M_GG - sum_k M_GLk M_LLk^-1 M_LkG,       S dG = g_G - sum_k M_GLk M_LLk^-1 g_Lk
-    dL_k = M_LLk^-1 (g_Lk - M_LkG dG)
-
-so an iteration costs time linear in the number of maneuvers and no Jacobian of everything is
-ever formed. A Levenberg-Marquardt damping ``lambda diag(M)`` keeps a bad start from diverging;
-bounds are an active set (a parameter on a bound that the step pushes outward is held there).
+Gauss-Newton steps (relaxation strategy, §4.10); the Gauss-Newton steps solve the normal equations
+in their arrow structure (:mod:`estimator.normal_equations`), Levenberg-Marquardt-damped, bounds
+as an active set.
 
 Convergence is judged on the *undamped* Gauss-Newton step ``M^-1 g`` (bounds active), never on a
 step the damping shrank: converged when it is below ``step_tol_sigma`` Cramér-Rao deviations for
 every parameter, or when the decrease it predicts, ``g^T M^-1 g / 2`` (log-likelihood units), is
-below ``decrease_tol``. Status codes follow scipy's convention (:class:`~estimator.verdict.Status`:
-positive = converged). A converged minimum may still be wrong: the verdict
-(:mod:`estimator.verdict`) also weighs the fit-quality diagnostics (:mod:`estimator.diagnostics`:
-residuals against each channel's own noise floor, stuck channels, unit errors, outliers,
-turbulence) and the identifiability checks.
+below ``decrease_tol``, or when no step achieves more than ``decrease_tol`` (then along the
+undamped direction too; a poor quadratic model there is reported). Status codes follow scipy's
+convention (:class:`~estimator.verdict.Status`: positive = converged). A converged minimum may
+still be wrong: the verdict (:mod:`estimator.verdict`) also weighs the fit-quality diagnostics
+(:mod:`estimator.diagnostics`: residuals against each channel's own noise floor, stuck channels,
+unit errors, outliers, turbulence) and the identifiability checks.
 
 Start: by default a staged, data-driven start (:mod:`estimator.start`) fits the attitude, then
 speed and height, then the flow channels before the full estimation, so that large IMU biases
@@ -42,41 +31,36 @@ values; at the solution, a parameter whose Cramér-Rao deviation exceeds half it
 held too, and the estimation iterates again. Each held parameter keeps its reason
 (:attr:`EstimationResult.state`).
 
-Standard deviations: Cramér-Rao, ``sqrt(diag(M^-1))``; and corrected for coloured residuals
-(Morelli & Klein 1997, "Accuracy of aircraft parameter estimates from flight test data", the
-matrix form of NASA SIDPAC's ``m_colores``)::
-
-    Cov = M^-1 [ sum_i sum_j J_i^T R^-1 Rvv(i - j) R^-1 J_j ] M^-1
-
-with ``Rvv(k)`` the residual auto- *and cross-* correlation matrix of all channels of a maneuver
-at lag ``k`` (every lag), evaluated by FFT per maneuver in the parameters its channels depend on
-and projected onto the globals per maneuver (see :func:`_colored_std`). Residuals of different
-maneuvers are uncorrelated. Rank deficiency of ``S`` or of a local block is detected on the
-scaled matrix and reported with the parameters involved.
+Standard deviations: Cramér-Rao, ``sqrt(diag(M^-1))``, with the correlations; and the honest ones
+(:mod:`estimator.uncertainty`): coloured and cross-correlated residuals with a modelled spectrum,
+and the IMU's noise as process noise.
 """
 
 from __future__ import annotations
 
-import threading
 import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import fft as sfft
 from threadpoolctl import threadpool_limits
 
-from estimator.core.assembly import scatter_blocks
-from estimator.core.process_noise import input_increments, suffix_middle_factor, white_noise_psd
-from estimator.core.residual_spectrum import (
-    AR_MAX_ORDER,
-    ARModel,
-    ar_from_autocovariance,
-    innovation_cross_spectrum,
-)
 from estimator.model import Evaluation, Model, ModelEvaluationError
+from estimator.normal_equations import (
+    NormalEquations,
+    Structure,
+    bounded_solve,
+    build_normal,
+    channel_variances,
+    full_step,
+    lm_solve,
+    ml_cost,
+    residual_sums,
+    sym_inverse,
+)
 from estimator.problem import Problem
 from estimator.result import Confounding, EstimationResult, ResidualStats
 from estimator.start import staged_plan
+from estimator.uncertainty import honest_std, imu_noise_psd
 from estimator.verdict import Finding, Severity, Status, judge
 
 #: Start strategies: the staged, data-driven start (:mod:`estimator.start`) or the problem's values.
@@ -160,235 +144,6 @@ class SolverOptions:
 
 
 
-class _Structure:
-    """Which free parameters are global and which belong to which maneuver."""
-
-    def __init__(self, problem: Problem, free: np.ndarray):
-        ps = problem.parameters
-        self.free = free
-        self.lo = np.array([p.bounds[0] for p in ps])
-        self.hi = np.array([p.bounds[1] for p in ps])
-        man_index = {m.id: k for k, m in enumerate(problem.maneuvers)}
-        n = len(ps)
-        self.gpos = np.full(n, -1)
-        self.lpos = np.full(n, -1)
-        self.local_of: list[list[int]] = [[] for _ in problem.maneuvers]
-        glob: list[int] = []
-        for i, p in enumerate(ps):
-            if not free[i]:
-                continue
-            if p.scope == "maneuver":
-                k = man_index[p.instance]
-                self.lpos[i] = len(self.local_of[k])
-                self.local_of[k].append(i)
-            else:
-                self.gpos[i] = len(glob)
-                glob.append(i)
-        self.glob = np.array(glob, dtype=int)
-        self.local_of_arr = [np.array(v, dtype=int) for v in self.local_of]
-        self.man_of = np.full(n, -1)
-        for k, v in enumerate(self.local_of):
-            self.man_of[v] = k
-
-
-class _Normal:
-    """Arrow-structured normal equations: global block, per-maneuver local and coupling blocks.
-
-    The local blocks of all maneuvers live in padded arrays (``HLL_all[k, :n_k, :n_k]``) so that
-    the compiled scatter fills them in one call; ``HLL[k]``, ``HGL[k]``, ``gL[k]`` are views.
-    """
-
-    def __init__(self, st: _Structure):
-        ng = st.glob.size
-        nl = np.array([v.size for v in st.local_of_arr], dtype=np.intp)
-        lmax = int(nl.max()) if nl.size else 0
-        self.st = st
-        self.HGG = np.zeros((ng, ng))
-        self.gG = np.zeros(ng)
-        self.HLL_all = np.zeros((nl.size, lmax, lmax))
-        self.HGL_all = np.zeros((nl.size, ng, lmax))
-        self.gL_all = np.zeros((nl.size, lmax))
-        self.HLL = [self.HLL_all[k, :n, :n] for k, n in enumerate(nl)]
-        self.HGL = [self.HGL_all[k, :, :n] for k, n in enumerate(nl)]
-        self.gL = [self.gL_all[k, :n] for k, n in enumerate(nl)]
-        self.support = np.zeros(st.free.size, dtype=np.int64)
-
-    def add_blocks(self, H: np.ndarray, g: np.ndarray, colmap: np.ndarray, mans: np.ndarray,
-                   w: float) -> None:
-        """Add ``w`` times slot-space blocks (``J^T J``, ``J^T e`` per maneuver) of a channel.
-
-        Slot ``s`` of block ``b`` is parameter ``colmap[b, s]``; fixed parameters are left out and
-        a parameter that several slots reach gets their sum (as a merged Jacobian column would).
-        """
-        st = self.st
-        scatter_blocks(H, g, colmap, mans.astype(np.int64), float(w), st.gpos, st.lpos,
-                       self.HGG, self.gG, self.HLL_all, self.HGL_all, self.gL_all)
-
-
-    def pinned(self, params: np.ndarray) -> _Normal:
-        """A copy whose step leaves ``params`` (parameter indices) where they are.
-
-        Their rows and columns are zeroed with a unit diagonal and a zero gradient: the other
-        parameters' step is then the Gauss-Newton step with these held (an active bound).
-        """
-        st = self.st
-        N = _Normal(st)
-        N.HGG[:], N.gG[:], N.support[:] = self.HGG, self.gG, self.support
-        N.HLL_all[:], N.HGL_all[:], N.gL_all[:] = self.HLL_all, self.HGL_all, self.gL_all
-        for i in params:
-            j = st.gpos[i]
-            if j >= 0:
-                N.HGG[j, :] = N.HGG[:, j] = 0.0
-                N.HGG[j, j] = 1.0
-                N.gG[j] = 0.0
-                N.HGL_all[:, j, :] = 0.0
-            else:
-                k, j = st.man_of[i], st.lpos[i]
-                N.HLL_all[k, j, :] = N.HLL_all[k, :, j] = 0.0
-                N.HLL_all[k, j, j] = 1.0
-                N.gL_all[k, j] = 0.0
-                N.HGL_all[k, :, j] = 0.0
-        return N
-
-
-def _full_step(st: _Structure, dG: np.ndarray, dL: list[np.ndarray], n: int) -> np.ndarray:
-    step = np.zeros(n)
-    step[st.glob] = dG
-    for k, idx in enumerate(st.local_of_arr):
-        step[idx] = dL[k]
-    return step
-
-
-def _bounded_solve(N: _Normal, st: _Structure, theta: np.ndarray, lam: float, rtol: float):
-    """Damped step with active bounds: a parameter on a bound that the step would push outside
-    is held there and the step re-solved without it (a few passes of a simple active-set method).
-
-    Clipping such a step instead would leave the others' step computed as if it moved, and the
-    iteration would crawl: each step's length (in deviations) never shrinks.
-    """
-    tiny = 1e-12 * np.maximum(1.0, np.abs(theta))
-    at_lo = st.free & (theta <= st.lo + tiny)
-    at_hi = st.free & (theta >= st.hi - tiny)
-    active = np.zeros(theta.size, dtype=bool)
-    M = N
-    for _pass in range(4):
-        dG, dL, Sinv, Ainv = _lm_solve(M, lam, rtol)
-        step = _full_step(st, dG, dL, theta.size)
-        out = ~active & ((at_lo & (step < 0)) | (at_hi & (step > 0)))
-        if not out.any():
-            break
-        active |= out
-        M = N.pinned(np.flatnonzero(active))
-    step[active] = 0.0
-    return step, dG, dL, Sinv, Ainv, active
-
-
-def _build_normal(st: _Structure, ev: Evaluation, R: np.ndarray) -> _Normal:
-    N = _Normal(st)
-    for ce in ev.channels:
-        H, g, cnt = ce.block_normals()
-        np.add.at(N.support, ce.colmap.ravel(), cnt.ravel())
-        N.add_blocks(H, g, ce.colmap, ce.mans, 1.0 / R[ce.channel])
-    return N
-
-
-def _sym_inverse(H: np.ndarray, rtol: float) -> tuple[np.ndarray, np.ndarray]:
-    """Pseudo-inverse of a symmetric PSD matrix via the scaled eigen-decomposition.
-
-    Returns the inverse and the null-space directions (columns, in the unscaled coordinates'
-    scaled form, i.e. of ``D^-1/2 H D^-1/2``) whose eigenvalues fall below ``rtol * max``.
-    """
-    inv, null = _sym_inverse_many([H], rtol)
-    return inv[0], null[0]
-
-
-def _sym_inverse_many(mats: list[np.ndarray], rtol: float) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """:func:`_sym_inverse` of each matrix; matrices of one size are decomposed in one stacked call
-    (one per maneuver: a Python loop of small ``eigh`` calls costs more than the arithmetic)."""
-    inv: list = [None] * len(mats)
-    null: list = [None] * len(mats)
-    sizes: dict[int, list[int]] = {}
-    for i, H in enumerate(mats):
-        sizes.setdefault(H.shape[0], []).append(i)
-    for n, idx in sizes.items():
-        if n == 0:
-            for i in idx:
-                inv[i], null[i] = np.zeros((0, 0)), np.zeros((0, 0))
-            continue
-        H = np.stack([mats[i] for i in idx])
-        diag = np.diagonal(H, axis1=1, axis2=2)
-        live = diag > 1e-300 * np.maximum(diag.max(axis=1), 1e-300)[:, None]
-        # rows with no information at all get a zero inverse (no step) and count as null directions
-        d = np.where(live, np.sqrt(np.where(live, diag, 1.0)), 1.0)
-        Hs = H / d[:, :, None] / d[:, None, :]
-        Hs = np.where(live[:, :, None] & live[:, None, :], Hs, 0.0)
-        lam, V = np.linalg.eigh(Hs)
-        thr = rtol * np.maximum(lam[:, -1], 1e-300)
-        ok = lam > thr[:, None]
-        scale = np.divide(1.0, lam, out=np.zeros_like(lam), where=ok)
-        inv_s = (V * scale[:, None, :]) @ np.swapaxes(V, 1, 2)
-        inv_all = inv_s / d[:, :, None] / d[:, None, :]
-        for j, i in enumerate(idx):
-            inv[i] = inv_all[j]
-            null[i] = V[j][:, ~ok[j]]
-    return inv, null
-
-
-
-def _lm_solve(N: _Normal, lam: float, rtol: float, extra: dict | None = None):
-    """Damped Schur-complement solve. Returns (delta_G, [delta_L_k], S^-1, [A_k^-1]).
-
-    ``extra``, if given, receives the Schur complement ``"S"`` and the null directions of the
-    (damped) local blocks ``"null_L"``, for the rank checks.
-    """
-    ng = N.HGG.shape[0]
-    S = N.HGG.copy()
-    S[np.diag_indices(ng)] *= 1.0 + lam
-    r = N.gG.copy()
-    damped = []
-    for A in N.HLL:
-        A = A.copy()
-        A[np.diag_indices(A.shape[0])] *= 1.0 + lam
-        damped.append(A)
-    Ainv, null_L = _sym_inverse_many(damped, rtol)
-    for k, Ai in enumerate(Ainv):
-        if Ai.shape[0] == 0:
-            continue
-        B = N.HGL[k] @ Ai
-        S -= B @ N.HGL[k].T
-        r -= B @ N.gL[k]
-    if extra is not None:
-        extra["S"], extra["null_L"] = S.copy(), null_L
-    Sinv, _ = _sym_inverse(S, rtol)
-    dG = Sinv @ r
-    dL = [Ai @ (gl - hgl.T @ dG) for Ai, gl, hgl in zip(Ainv, N.gL, N.HGL, strict=True)]
-    return dG, dL, Sinv, Ainv
-
-
-def _residuals(ev: Evaluation, n_channels: int):
-    sse = np.zeros(n_channels)
-    cnt = np.zeros(n_channels)
-    for ce in ev.channels:
-        e = ce.e
-        # block by block, in maneuver order: the sums of a per-maneuver evaluation, bit for bit
-        for b in range(ce.mans.size):
-            eb = e[ce.rseg[b]:ce.rseg[b + 1]]
-            sse[ce.channel] += eb @ eb
-            cnt[ce.channel] += eb.size
-    return sse, cnt
-
-
-def _cost(sse, cnt, R):
-    used = cnt > 0
-    return 0.5 * np.sum(sse[used] / R[used]) + 0.5 * np.sum(cnt[used] * np.log(R[used]))
-
-
-
-def _variances(sse: np.ndarray, cnt: np.ndarray) -> np.ndarray:
-    """Closed-form residual variance per channel (the relaxation step), SI^2."""
-    return np.maximum(np.where(cnt > 0, sse / np.maximum(cnt, 1), 1.0), 1e-16)
-
-
 def _confounded_sets(null: np.ndarray, idx: np.ndarray, problem: Problem, where: str
                      ) -> list[tuple[Confounding, int]]:
     """Each null direction as a confounded set, with the one member to hold so the rank returns.
@@ -430,8 +185,8 @@ class _Hold:
     confounding: Confounding
 
 
-def _screen(problem: Problem, st: _Structure, evals: Evaluation, R: np.ndarray, opt: SolverOptions,
-            loose: bool) -> tuple[_Structure, list[_Hold]]:
+def _screen(problem: Problem, st: Structure, evals: Evaluation, R: np.ndarray, opt: SolverOptions,
+            loose: bool) -> tuple[Structure, list[_Hold]]:
     """Hold the parameters the data do not determine; returns the new structure and the holds.
 
     Parameters no sample depends on (a table breakpoint beyond the flown range, a bias of a sensor
@@ -447,7 +202,7 @@ def _screen(problem: Problem, st: _Structure, evals: Evaluation, R: np.ndarray, 
     for _ in range(12):
         if not st.free.any():
             break
-        N = _build_normal(st, evals, R)
+        N = build_normal(st, evals, R)
         info = np.zeros(len(keys))
         info[st.glob] = np.diag(N.HGG)
         for k, idx in enumerate(st.local_of_arr):
@@ -460,7 +215,7 @@ def _screen(problem: Problem, st: _Structure, evals: Evaluation, R: np.ndarray, 
                 detail=(f"fewer than {opt.min_support_samples} samples depend on these parameters "
                         "(e.g. a table breakpoint outside the flown range, or a sensor this aircraft "
                         "does not carry); held at their start values"))))
-            st = _Structure(problem, st.free & ~no_data)
+            st = Structure(problem, st.free & ~no_data)
             continue
         cov_G, cov_L, unident, _ = _covariance(N, st, problem, opt)
         if unident:
@@ -468,7 +223,7 @@ def _screen(problem: Problem, st: _Structure, evals: Evaluation, R: np.ndarray, 
             for conf, hold in unident:
                 free[hold] = False
                 holds.append(_Hold((hold,), "unidentifiable", conf))
-            st = _Structure(problem, free)
+            st = Structure(problem, free)
             continue
         if loose:
             std = _std_of(st, cov_G, cov_L, len(keys))
@@ -481,13 +236,13 @@ def _screen(problem: Problem, st: _Structure, evals: Evaluation, R: np.ndarray, 
                     detail=("the data barely depend on these parameters: at the solution their "
                             "Cramér-Rao deviation exceeds half their allowed range (bounds); held at "
                             "their start values"))))
-                st = _Structure(problem, st.free & ~bad)
+                st = Structure(problem, st.free & ~bad)
                 continue
         break
     return st, holds
 
 
-def _std_of(st: _Structure, cov_G: np.ndarray, cov_L: list[np.ndarray], n: int) -> np.ndarray:
+def _std_of(st: Structure, cov_G: np.ndarray, cov_L: list[np.ndarray], n: int) -> np.ndarray:
     std = np.full(n, np.nan)
     std[st.glob] = np.sqrt(np.maximum(np.diag(cov_G), 0.0))
     for k, idx in enumerate(st.local_of_arr):
@@ -519,7 +274,7 @@ def _evaluate(model: Model, theta: np.ndarray, jacobian: bool) -> Evaluation:
     return model.evaluate_all(theta, jacobian=jacobian, keep_jacobian=False)
 
 
-def _gauss_newton(model: Model, theta: np.ndarray, st: _Structure, opt: SolverOptions,
+def _gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOptions,
                   evals: Evaluation | None = None, label: str = "") -> _Iterated:
     """Levenberg-Marquardt-safeguarded Gauss-Newton iterations with relaxation of ``R`` (module
     docstring) until the undamped step is negligible."""
@@ -528,7 +283,7 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: _Structure, opt: SolverOp
     theta = theta.copy()
     if evals is None:
         evals = _evaluate(model, theta, True)
-    sse, cnt = _residuals(evals, nch)
+    sse, cnt = residual_sums(evals, nch)
     lam = opt.lm_lambda0
     history: list[float] = []
     status, message = Status.ITERATION_LIMIT, ""
@@ -537,12 +292,12 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: _Structure, opt: SolverOp
     it = 0
     order = np.concatenate([st.glob] + [v for v in st.local_of_arr if v.size]).astype(int)
     for it in range(1, opt.max_iterations + 1):
-        R = _variances(sse, cnt)
-        cost0 = _cost(sse, cnt, R)
+        R = channel_variances(sse, cnt)
+        cost0 = ml_cost(sse, cnt, R)
         history.append(cost0)
-        N = _build_normal(st, evals, R)
+        N = build_normal(st, evals, R)
         # the undamped Gauss-Newton step judges convergence: a damped one shrinks with the damping
-        gn, _, _, Sinv, Ainv, active = _bounded_solve(N, st, theta, 0.0, opt.rank_rtol)
+        gn, _, _, Sinv, Ainv, active = bounded_solve(N, st, theta, 0.0, opt.rank_rtol)
         sig = np.zeros(theta.size)
         sig[st.glob] = np.diag(Sinv)
         for k, idx in enumerate(st.local_of_arr):
@@ -551,7 +306,7 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: _Structure, opt: SolverOp
         sig = np.sqrt(np.maximum(sig, 1e-300))
         moved = np.abs(gn[order]) / sig[order]
         moved_max = float(moved.max()) if moved.size else 0.0
-        predicted = 0.5 * float(gn @ _full_step(st, N.gG, N.gL, theta.size))
+        predicted = 0.5 * float(gn @ full_step(st, N.gG, N.gL, theta.size))
         if moved_max < opt.step_tol_sigma:
             status = Status.CONVERGED_STEP
             message = (f"converged: the undamped Gauss-Newton step is {moved_max:.1e} deviations at "
@@ -566,7 +321,7 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: _Structure, opt: SolverOp
         best = None  # (decrease, iterate, its evaluation, sse, cnt, evaluated with the Jacobian)
         evaluated = 0  # trial points the model could be evaluated at
         for attempt in range(12):
-            step = _bounded_solve(N, st, theta, lam, opt.rank_rtol)[0]
+            step = bounded_solve(N, st, theta, lam, opt.rank_rtol)[0]
             trial = np.clip(theta + step, st.lo, st.hi)
             try:
                 # the first trial is usually accepted and is then the next iterate: evaluate it
@@ -578,8 +333,8 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: _Structure, opt: SolverOp
                 lam = max(lam, 1e-6) * 10.0
                 continue
             evaluated += 1
-            sse_t, cnt_t = _residuals(trial_ev, nch)
-            cost_t = _cost(sse_t, cnt_t, R)
+            sse_t, cnt_t = residual_sums(trial_ev, nch)
+            cost_t = ml_cost(sse_t, cnt_t, R)
             if np.isfinite(cost_t) and cost_t < cost0:
                 best = (cost0 - cost_t, trial, trial_ev, sse_t, cnt_t, attempt == 0)
                 break
@@ -596,8 +351,8 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: _Structure, opt: SolverOp
                 except ModelEvaluationError:
                     continue
                 evaluated += 1
-                sse_t, cnt_t = _residuals(trial_ev, nch)
-                cost_t = _cost(sse_t, cnt_t, R)
+                sse_t, cnt_t = residual_sums(trial_ev, nch)
+                cost_t = ml_cost(sse_t, cnt_t, R)
                 if np.isfinite(cost_t) and cost0 - cost_t > (best[0] if best else 0.0):
                     best = (cost0 - cost_t, trial, trial_ev, sse_t, cnt_t, False)
         if not evaluated:
@@ -734,14 +489,14 @@ def _staged_start(problem: Problem, theta: np.ndarray, free: np.ndarray, opt: So
         except ModelEvaluationError as exc:
             notes.append(f"start stage {stage.name}: skipped ({exc})")
             continue
-        st = _Structure(sub, stage.free)
+        st = Structure(sub, stage.free)
         # a stage frees only what its channels depend on; the rest waits for a later stage
-        N = _build_normal(st, ev, np.ones(len(sub.channels)))
+        N = build_normal(st, ev, np.ones(len(sub.channels)))
         info = np.zeros(theta.size)
         info[st.glob] = np.diag(N.HGG)
         for k, idx in enumerate(st.local_of_arr):
             info[idx] = np.diag(N.HLL[k])
-        st = _Structure(sub, stage.free & (info > 0) & (N.support >= opt.min_support_samples))
+        st = Structure(sub, stage.free & (info > 0) & (N.support >= opt.min_support_samples))
         if not st.free.any():
             continue
         it = _gauss_newton(model, theta, st, opt, ev, label=f"start ({stage.name}) ")
@@ -771,18 +526,18 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         return _failed(problem, start, t0, f"the model cannot be evaluated at the start values: {exc}",
                        "check the units and signs of the channel named (a measurement far outside its "
                        "model's range cannot be fitted), or give start values closer to the data")
-    sse, cnt = _residuals(evals, nch)
+    sse, cnt = residual_sums(evals, nch)
     if not cnt.any():
         raise ValueError(f"{problem.source}: no channel has data in any maneuver")
     stage_notes: list[str] = []
     if opt.start == "staged":
         theta, stage_notes = _staged_start(problem, theta, requested, opt)
         evals = _evaluate(model, theta, True)
-        sse, cnt = _residuals(evals, nch)
+        sse, cnt = residual_sums(evals, nch)
     # the screen before the iterations also holds what looks undetermined there, which keeps a
     # parameter the data hardly see from wandering to a bound on the way; the screen at the
     # solution judges every requested parameter again, and frees what the data determine there
-    st, holds = _screen(problem, _Structure(problem, requested), evals, _variances(sse, cnt), opt,
+    st, holds = _screen(problem, Structure(problem, requested), evals, channel_variances(sse, cnt), opt,
                         loose=True)
     if not st.free.any():
         raise ValueError(f"{problem.source}: no identifiable free parameter left; see the confounding "
@@ -803,8 +558,8 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         if not it.status.converged or rnd == opt.screen_rounds:
             break
         # identifiability at the solution: the whole screen again, from the requested free set
-        st_new, holds_new = _screen(problem, _Structure(problem, requested), evals,
-                                    _variances(it.sse, it.cnt), opt, loose=True)
+        st_new, holds_new = _screen(problem, Structure(problem, requested), evals,
+                                    channel_variances(it.sse, it.cnt), opt, loose=True)
         if np.array_equal(st_new.free, st.free):
             holds = holds_new
             break
@@ -838,9 +593,9 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     ps = problem.parameters
     keys = ps.keys
     requested = ps.free_mask
-    R = _variances(it.sse, it.cnt)
-    history = history + [_cost(it.sse, it.cnt, R)]
-    N = _build_normal(st, evals, R)
+    R = channel_variances(it.sse, it.cnt)
+    history = history + [ml_cost(it.sse, it.cnt, R)]
+    N = build_normal(st, evals, R)
     cov_G, cov_L, unident, correlated = _covariance(N, st, problem, opt)
     std = _std_of(st, cov_G, cov_L, len(keys))
     confounding = [h.confounding for h in holds]
@@ -853,9 +608,11 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     confounding += correlated
     std_col = np.full(len(keys), np.nan)
     std_imu = np.full(len(keys), np.nan)
-    imu_psd = _imu_noise_psd(problem, opt) if opt.colored else None
+    imu_psd = imu_noise_psd(problem, opt.imu_noise) if opt.colored else None
     if opt.colored:
-        std_col, std_imu = _colored_std(model, theta, N, st, R, len(keys), opt, std, imu_psd)
+        std_col, std_imu = honest_std(model, theta, N, st, R, std, imu_psd, rank_rtol=opt.rank_rtol,
+                                      cross_channel=opt.colored_cross_channel,
+                                      spectrum=opt.colored_spectrum)
     # what each parameter is: estimated, on a bound, held (why) or fixed
     state, reason = [], []
     why = {i: h for h in holds for i in h.params}
@@ -1030,7 +787,7 @@ def _parameter_findings(problem, holds, unident, correlated, state, reason, opt,
     return out
 
 
-def _fit_traces(problem: Problem, ev: Evaluation, st: _Structure):
+def _fit_traces(problem: Problem, ev: Evaluation, st: Structure):
     """The diagnostics' inputs: every channel of every maneuver at the estimate, and each
     maneuver's IMU inputs and reconstructed states."""
     from estimator.diagnostics import ChannelFit, ManeuverInputs
@@ -1074,7 +831,7 @@ _STATE_FAMILIES = frozenset({"u0", "v0", "w0", "phi0", "theta0", "psi0", "h0",
                              "dax", "day", "daz", "dp", "dq", "dr"})
 
 
-def _covariance(N: _Normal, st: _Structure, problem: Problem, opt: SolverOptions):
+def _covariance(N: NormalEquations, st: Structure, problem: Problem, opt: SolverOptions):
     """Undamped Cramér-Rao covariance of the global block and of each local block.
 
     Returns
@@ -1083,9 +840,9 @@ def _covariance(N: _Normal, st: _Structure, problem: Problem, opt: SolverOptions
     """
     keys = problem.parameters.keys
     extra: dict = {}
-    _, _, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol, extra)
+    _, _, Sinv, Ainv = lm_solve(N, 0.0, opt.rank_rtol, extra)
     # rank checks: the Schur complement (globals) and each local block (undamped: lambda = 0)
-    _, null = _sym_inverse(extra["S"], opt.rank_rtol)
+    _, null = sym_inverse(extra["S"], opt.rank_rtol)
     unident = _confounded_sets(null, st.glob, problem, "global parameters")
     cov_L = []
     for k, Ai in enumerate(Ainv):
@@ -1132,298 +889,6 @@ def _high_correlations(corr: np.ndarray, keys: list[str], thr: float) -> list[Co
                         "their individual values are uncertain even if their deviations look small"),
             ))
     return out
-
-
-def _one_sided_weights(L: int) -> np.ndarray:
-    """Weights of a real signal's one-sided spectrum of length ``L``: every bin but DC (and Nyquist)
-    stands for two."""
-    wt = np.full(L // 2 + 1, 2.0)
-    wt[0] = 1.0
-    if L % 2 == 0:
-        wt[-1] = 1.0
-    return wt
-
-
-def _colored_std(model: Model, theta: np.ndarray, N: _Normal, st: _Structure, R, nparam, opt,
-                 std_crb: np.ndarray, imu_psd: dict[str, np.ndarray] | None
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    r"""Honest standard deviations: coloured, cross-correlated residuals and the IMU's noise.
-
-    **Coloured residuals** (Morelli & Klein 1997, matrix form). The middle matrix of maneuver ``k``
-    is ``J^T W Sigma W J`` over its samples and channels, ``W = R^-1``. With each channel's Jacobian
-    placed on the maneuver's sample grid (zero where the channel has no sample in the cost),
-    zero-padded to ``L >= 2 n - 1`` and transformed (``F_c``), and ``S(f)`` the channels'
-    cross-spectral matrix per sample, by Parseval::
-
-        middle_k = 1/L sum_f Re( F_f^H W S(f) W F_f ) = 1/L sum_f Re( Y_f Y_f^H ),
-        Y_f = sum_c W_c F_c,f B_c(f),      S_cd(f) = B_c(f) B_d(f)^H
-
-    ``colored_spectrum = "ar"`` (the default) models ``S`` (:mod:`estimator.core.residual_spectrum`):
-    each channel an autoregressive model fitted to its residual periodogram *corrected for what the
-    fit absorbed*, ``I_c(f) / (1 - h_c(f))`` with ``h_c(f) = W_c / n_c F_c,f^H Cov(theta) F_c,f``
-    the leverage of the fit at frequency ``f`` (the expected periodogram of the residuals of a
-    linear fit to white noise is ``sigma^2 (1 - h(f))``); the channels correlated through their
-    innovations, whose coherence is a smoothed cross-periodogram (``B_c = Lambda_c(f) / A_c(f)``,
-    ``Gamma(f) = Lambda Lambda^H``). Without the correction the residuals' missing low-frequency
-    noise would be modelled as absent. ``"periodogram"`` takes the residuals' own
-    cross-periodogram (the original all-lags plug-in, biased low: ``B_c = s_c conj(E_c) /
-    sqrt(n)``, one column, ``s_c = sqrt(n / n_c)``). ``colored_cross_channel = False`` leaves out
-    the cross-channel terms.
-
-    **IMU noise** (:mod:`estimator.core.process_noise`): ``C_proc = sum_j V_j V_j^T`` per maneuver,
-    from the initial-condition columns of the Jacobian, the state sensitivities and the IMU's
-    white-noise level ``imu_psd`` (aircraft -> (6,) SI^2 s; None: left out).
-
-    Both middles are gathered like the normal equations and the Schur projection of the globals'
-    sensitivities is applied per maneuver (:func:`_sandwich_std`). The coloured deviation is
-    floored at the Cramér-Rao bound (which no unbiased estimate beats) and the IMU noise's
-    variance is added. Maneuvers are taken in chunks whose spectra are reduced to per-maneuver
-    matrices and dropped before the next chunk, so memory does not grow with the problem.
-
-    Returns
-    -------
-    (honest deviations, the IMU noise's share alone), (P,) each, SI, NaN where not estimated.
-    """
-    _, _, Sinv, Ainv = _lm_solve(N, 0.0, opt.rank_rtol)
-    p = model.problem
-    nman = len(p.maneuvers)
-    n_of = np.array([m.n for m in p.maneuvers], dtype=np.int64)
-    L_of = np.array([sfft.next_fast_len(max(2 * int(n) - 1, 1), real=True) for n in n_of], dtype=np.int64)
-    members: list[set[int]] = [set() for _ in range(nman)]
-    n_chan = np.zeros(nman, dtype=np.int64)
-    for _, mans, colmap, _ in model.channel_layout():
-        for b, k in enumerate(mans):
-            members[int(k)].update(int(i) for i in colmap[b] if st.free[i])
-            n_chan[int(k)] += 1
-    union = [np.array(sorted(s), dtype=np.intp) for s in members]
-    cross = opt.colored_cross_channel
-    ar = opt.colored_spectrum == "ar"
-    C = _Normal(st)
-    Cp = _Normal(st) if imu_psd is not None else None
-    lock = threading.Lock()
-    chunks, cur, size = [], [], 0.0
-    for k in range(nman):
-        cur.append(k)
-        # the Jacobian spectra held until the maneuver's model is fitted, or the factor Y
-        size += union[k].size * (int(L_of[k]) // 2 + 1) * max(int(n_chan[k]), 1) * 16.0
-        if size >= _COLORED_CHUNK_BYTES:
-            chunks.append(tuple(cur))
-            cur, size = [], 0.0
-    if cur:
-        chunks.append(tuple(cur))
-    for chunk in chunks:
-        held: dict[int, list] = {k: [] for k in chunk}  # "ar": each channel's spectra, for later
-        Y = ({k: np.zeros((union[k].size, int(L_of[k]) // 2 + 1), dtype=complex) for k in chunk}
-             if cross and not ar else {})
-        V: dict[int, np.ndarray] = {}
-        dEq: dict[int, np.ndarray] = {}
-        if Cp is not None:
-            for k, Sk in zip(chunk, model.state_sensitivities(theta, chunk), strict=True):
-                m = p.maneuvers[k]
-                q = np.sqrt(imu_psd[m.aircraft] / m.dt_s)
-                dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
-                V[k] = np.zeros((m.n, union[k].size, 6))
-
-        def spectra(ce, held=held, Y=Y, V=V, dEq=dEq) -> None:
-            # only the slots that are free somewhere: fixed columns drop out of the sandwich
-            keep = np.nonzero(st.free[ce.colmap].any(axis=0))[0]
-            if keep.size:
-                w = 1.0 / R[ce.channel]
-                JT = ce.JT
-                e = ce.e
-                for b, k in enumerate(ce.mans):
-                    k = int(k)
-                    r0, r1 = int(ce.rseg[b]), int(ce.rseg[b + 1])
-                    if r1 == r0:
-                        continue
-                    rows = ce.rows[r0:r1]
-                    pidx = ce.colmap[b, keep]
-                    ok = st.free[pidx]
-                    Jb = JT[keep[ok], r0:r1]
-                    pos = np.searchsorted(union[k], pidx[ok])
-                    if k in V:  # the IMU noise: J^T W J_IC on the grid, its suffix sums times dE Q^1/2
-                        bb = np.zeros((int(n_of[k]), Jb.shape[0], 7))
-                        bb[rows] = np.einsum("sn,cn->nsc", Jb, JT[:7, r0:r1]) * w
-                        Vc = suffix_middle_factor(bb, dEq[k])
-                        with lock:
-                            np.add.at(V[k], (slice(None), pos), Vc)  # slots of one parameter add up
-                    Lk = int(L_of[k])
-                    Jp = np.zeros((Jb.shape[0], Lk))
-                    Jp[:, rows] = Jb
-                    F = sfft.rfft(Jp, axis=-1)
-                    ep = np.zeros(Lk)
-                    ep[rows] = e[r0:r1]
-                    Ef = sfft.rfft(ep)
-                    if ar:
-                        with lock:
-                            held[k].append((ce.channel, pos, F, Ef, rows, e[r0:r1].copy(), w))
-                        continue
-                    F *= np.conj(Ef) * (w * np.sqrt(n_of[k] / (r1 - r0)))
-                    if cross:
-                        with lock:
-                            np.add.at(Y[k], pos, F)  # slots of one parameter add up
-                    else:
-                        Yc = (F * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
-                        with lock:
-                            C.add_blocks((Yc @ Yc.T)[None], np.zeros((1, pos.size)),
-                                         np.ascontiguousarray(pidx[ok][None, :]), np.array([k]), 1.0)
-            ce.JT = None  # used once: do not hold every channel's Jacobian at the same time
-
-        # the chunk once more, now with its Jacobian, each channel's spectra computed (on the
-        # evaluation's worker threads) as soon as the channel is done
-        model.evaluate_all(theta, jacobian=True, keep_jacobian=True, maneuvers=chunk, on_channel=spectra)
-        for k in chunk:
-            u = union[k]
-            if not u.size:
-                continue
-            Lk = int(L_of[k])
-            if ar and held[k]:
-                items = sorted(held.pop(k), key=lambda it: it[0])
-                cov_u = _union_covariance(st, Sinv, Ainv, N, k, u)
-                Yk = _ar_factor(items, cov_u, u.size, int(n_of[k]), Lk, p.maneuvers[k].dt_s, cross)
-                norm = 1.0 / Lk
-            elif k in Y:
-                Yk, norm = Y.pop(k)[:, :, None], 1.0 / (n_of[k] * Lk)
-            else:
-                Yk = None
-            if Yk is not None:
-                Yk = Yk * np.sqrt(_one_sided_weights(Lk) * norm)[None, :, None]
-                Yr = np.ascontiguousarray(Yk).view(np.float64).reshape(u.size, -1)
-                C.add_blocks((Yr @ Yr.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
-                             np.array([k]), 1.0)
-            if k in V:
-                Yv = np.ascontiguousarray(V.pop(k).transpose(1, 0, 2)).reshape(u.size, -1)
-                Cp.add_blocks((Yv @ Yv.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
-                              np.array([k]), 1.0)
-    std_mk = _sandwich_std(N, st, C, Sinv, Ainv, nparam)
-    std_imu = (_sandwich_std(N, st, Cp, Sinv, Ainv, nparam) if Cp is not None
-               else np.where(np.isfinite(std_mk), 0.0, np.nan))
-    floor = np.where(np.isfinite(std_crb), std_crb, 0.0)
-    honest = np.sqrt(np.maximum(std_mk, floor) ** 2 + std_imu ** 2)
-    return honest, std_imu
-
-
-def _union_covariance(st: _Structure, Sinv: np.ndarray, Ainv: list[np.ndarray], N: _Normal, k: int,
-                      u: np.ndarray) -> np.ndarray:
-    """The Cramér-Rao covariance of the parameters ``u`` (indices) of maneuver ``k``: its locals and
-    the globals its channels depend on (``Cov_LL = A^-1 + B S^-1 B^T``, ``Cov_LG = -B S^-1``,
-    ``B = A^-1 M_LG``)."""
-    g = st.gpos[u]
-    isg = g >= 0
-    out = np.zeros((u.size, u.size))
-    gi = g[isg]
-    out[np.ix_(isg, isg)] = Sinv[np.ix_(gi, gi)]
-    if st.local_of_arr[k].size:
-        isl = ~isg
-        lp = st.lpos[u[isl]]
-        B = Ainv[k] @ N.HGL[k].T  # (L, G)
-        out[np.ix_(isl, isl)] = (Ainv[k] + B @ Sinv @ B.T)[np.ix_(lp, lp)]
-        cov_lg = -(B @ Sinv)[np.ix_(lp, gi)]
-        out[np.ix_(isl, isg)] = cov_lg
-        out[np.ix_(isg, isl)] = cov_lg.T
-    return out
-
-
-def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: float, cross: bool
-               ) -> np.ndarray:
-    """``Y_f`` (U, nf, r) of one maneuver from its channels' Jacobian spectra and autoregressive
-    residual models (:func:`_colored_std`, ``colored_spectrum = "ar"``).
-
-    Each channel's residual periodogram is corrected for the fit's leverage ``h_c(f)`` (capped at
-    0.95: the few bins the parameters empty almost completely carry no information either way)
-    before its model is fitted; full-rate channels share a smoothed innovation coherence (with
-    ``cross``), a channel recorded every ``s``-th sample is modelled on its own samples and alone.
-    """
-    nf = L // 2 + 1
-    models, alone = [], []
-    for _, pos, F, Ef, rows, e, w in items:
-        steps = np.diff(rows)
-        stride = int(steps[0]) if steps.size and np.all(steps == steps[0]) else 0
-        nc = rows.size
-        if stride == 0:  # irregular samples: no correlation model, the residual variance
-            models.append(ARModel(np.zeros(0), float(e @ e) / nc, 1))
-            alone.append(True)
-            continue
-        G = cov_u[np.ix_(pos, pos)] @ F
-        h = np.minimum(w / nc * np.real(np.sum(np.conj(F) * G, axis=0)), 0.95)
-        I_corr = (np.abs(Ef) ** 2 / nc) / (1.0 - h)
-        r = sfft.irfft(I_corr, L)[:(AR_MAX_ORDER + 1) * stride:stride]
-        models.append(ar_from_autocovariance(r, nc, stride=stride))
-        alone.append(stride != 1 or not cross)
-    together = [i for i, a in enumerate(alone) if not a]
-    cols = sum(alone) + len(together)
-    factors = np.zeros((len(items), nf, cols), dtype=complex)
-    j = 0
-    for i, a in enumerate(alone):
-        if a:
-            factors[i, :, j] = models[i].inverse_filter(L) * np.sqrt(models[i].innovation_var)
-            j += 1
-    if together:
-        U = np.zeros((n, len(together)))
-        for t, i in enumerate(together):
-            rows, e, m = items[i][4], items[i][5], models[i]
-            U[rows[m.order:], t] = m.innovations(e)  # the samples in the cost are contiguous
-        gam = innovation_cross_spectrum(U, np.array([models[i].innovation_var for i in together]), L, dt_s)
-        lam, vec = np.linalg.eigh(gam)  # per frequency
-        Lam = vec * np.sqrt(np.maximum(lam, 0.0))[:, None, :]  # (nf, Ct, Ct)
-        for t, i in enumerate(together):
-            factors[i, :, j:] = models[i].inverse_filter(L)[:, None] * Lam[:, t, :]
-    Y = np.zeros((nu, nf, cols), dtype=complex)
-    for i, (_, pos, F, _, _, _, w) in enumerate(items):
-        np.add.at(Y, pos, (w * F)[:, :, None] * factors[i][None, :, :])  # slots of one parameter add up
-    return Y
-
-
-#: Maneuvers are taken in chunks whose spectral factors take about this much memory.
-_COLORED_CHUNK_BYTES = 256e6
-
-
-def _imu_noise_psd(problem: Problem, opt: SolverOptions) -> dict[str, np.ndarray] | None:
-    """The IMU's white-noise level per aircraft, (6,) SI^2 s (accelerometers, gyros), or None."""
-    if isinstance(opt.imu_noise, str):
-        if opt.imu_noise == "none":
-            return None
-        per: dict[str, list[np.ndarray]] = {}
-        for m in problem.maneuvers:
-            u = np.hstack([m.accel_imu_mps2, m.omega_rps])
-            per.setdefault(m.aircraft, []).append([white_noise_psd(u[:, j], m.dt_s) for j in range(6)])
-        # one IMU per aircraft: the median over its maneuvers is robust to one whose sharp inputs
-        # leak into the band
-        return {a: np.nan_to_num(np.nanmedian(np.array(v), axis=0)) for a, v in per.items()}
-    accel, gyro = opt.imu_noise
-    psd = np.array([accel] * 3 + [gyro] * 3, dtype=float)
-    return {m.aircraft: psd for m in problem.maneuvers}
-
-
-def _sandwich_std(N: _Normal, st: _Structure, C: _Normal, Sinv: np.ndarray, Ainv: list[np.ndarray],
-                  nparam: int) -> np.ndarray:
-    """Standard deviations of ``M^-1 C M^-1`` for a middle matrix ``C`` gathered like the normal
-    equations (global, coupling and per-maneuver local blocks), through the Schur structure of
-    ``M`` (``S^-1`` and the local blocks' inverses ``A_k^-1``)."""
-    CGG = C.HGG.copy()
-    per_k = []
-    for k, lidx in enumerate(st.local_of_arr):
-        if not lidx.size:
-            per_k.append(None)
-            continue
-        Bk = Ainv[k] @ N.HGL[k].T  # (L, G) = A^-1 M_LG
-        CLG_raw = C.HGL[k].T  # (L, G)
-        CLL = C.HLL[k]
-        BtCLG = Bk.T @ CLG_raw
-        CGG += Bk.T @ CLL @ Bk - BtCLG - BtCLG.T
-        per_k.append((Bk, CLL, CLG_raw - CLL @ Bk))
-    covG = Sinv @ CGG @ Sinv
-    std = np.full(nparam, np.nan)
-    std[st.glob] = np.sqrt(np.maximum(np.diag(covG), 0.0))
-    for k, item in enumerate(per_k):
-        if item is None:
-            continue
-        Bk, CLL, CLG = item
-        Ai = Ainv[k]
-        cross_k = Ai @ CLG @ Sinv @ Bk.T
-        cov = Ai @ CLL @ Ai - cross_k - cross_k.T + Bk @ covG @ Bk.T
-        std[st.local_of_arr[k]] = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    return std
 
 
 def _stats(problem: Problem, ev: Evaluation) -> tuple[ResidualStats, ...]:

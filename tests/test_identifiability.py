@@ -22,8 +22,9 @@ from test_estimator import DEG, Flight, _truth_values
 
 from estimator.model import Model
 from estimator.modelfile import load_model_set
+from estimator.normal_equations import Structure, channel_variances, residual_sums
 from estimator.parameters import ParameterSet
-from estimator.solver import SolverOptions, _evaluate, _residuals, _screen, _Structure, _variances, estimate
+from estimator.solver import SolverOptions, _evaluate, _screen, estimate
 from estimator.verdict import Severity, Verdict
 
 NOISE = {"phi": 0.03 * DEG, "theta": 0.03 * DEG, "psi": 0.03 * DEG, "tas": 0.3, "h": 1.0,
@@ -55,8 +56,8 @@ def test_a_delay_determined_at_the_solution_is_estimated(flight, start):
     prob = _with_bounds(prob, "tau_alpha_zl", (-0.039, 0.039))
     # the case of the issue: judged at the start values, the delay looks undetermined
     ev = _evaluate(Model(prob), prob.parameters.values, True)
-    sse, cnt = _residuals(ev, len(prob.channels))
-    _, holds = _screen(prob, _Structure(prob, prob.parameters.free_mask), ev, _variances(sse, cnt),
+    sse, cnt = residual_sums(ev, len(prob.channels))
+    _, holds = _screen(prob, Structure(prob, prob.parameters.free_mask), ev, channel_variances(sse, cnt),
                        SolverOptions(), loose=True)
     assert any("tau_alpha_zl" in h.confounding.parameters and h.kind == "undetermined" for h in holds), \
         "the test needs a start where the delay looks undetermined"

@@ -1,0 +1,343 @@
+r"""Honest standard deviations: coloured, cross-correlated residuals and the IMU's noise.
+
+Cramér-Rao deviations (``sqrt(diag(M^-1))``) assume white residuals and exact inputs. Flight data
+have neither. The deviations to quote (``EstimationResult.std_colored``) are the sandwich
+(Morelli & Klein 1997, "Accuracy of aircraft parameter estimates from flight test data", in the
+matrix form of NASA SIDPAC's ``m_colores``)::
+
+    Cov = M^-1 [ J^T W Sigma W J + C_proc ] M^-1
+
+with ``Sigma`` the residuals' covariance over the samples *and channels* of a maneuver — its
+spectrum modelled, not plugged in (:mod:`estimator.core.residual_spectrum`: the all-lags plug-in
+of the original method is 1.4 times too optimistic) — and ``C_proc`` the IMU noise integrated as
+process noise (:mod:`estimator.core.process_noise`). Residuals of different maneuvers are
+uncorrelated, so both middles are computed per maneuver (by FFT, in the parameters its channels
+depend on) and projected through the Schur structure of ``M``; the coloured part is floored at
+the Cramér-Rao bound. Entry point: :func:`honest_std`.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+from scipy import fft as sfft
+
+from estimator.core.process_noise import input_increments, suffix_middle_factor, white_noise_psd
+from estimator.core.residual_spectrum import (
+    AR_MAX_ORDER,
+    ARModel,
+    ar_from_autocovariance,
+    innovation_cross_spectrum,
+)
+from estimator.model import Model
+from estimator.normal_equations import NormalEquations, Structure, lm_solve
+from estimator.problem import Problem
+
+
+def _one_sided_weights(L: int) -> np.ndarray:
+    """Weights of a real signal's one-sided spectrum of length ``L``: every bin but DC (and Nyquist)
+    stands for two."""
+    wt = np.full(L // 2 + 1, 2.0)
+    wt[0] = 1.0
+    if L % 2 == 0:
+        wt[-1] = 1.0
+    return wt
+
+
+def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structure, R: np.ndarray,
+               std_crb: np.ndarray, imu_psd: dict[str, np.ndarray] | None, *, rank_rtol: float,
+               cross_channel: bool = True, spectrum: str = "ar") -> tuple[np.ndarray, np.ndarray]:
+    r"""Honest standard deviations: coloured, cross-correlated residuals and the IMU's noise.
+
+    **Coloured residuals** (Morelli & Klein 1997, matrix form). The middle matrix of maneuver ``k``
+    is ``J^T W Sigma W J`` over its samples and channels, ``W = R^-1``. With each channel's Jacobian
+    placed on the maneuver's sample grid (zero where the channel has no sample in the cost),
+    zero-padded to ``L >= 2 n - 1`` and transformed (``F_c``), and ``S(f)`` the channels'
+    cross-spectral matrix per sample, by Parseval::
+
+        middle_k = 1/L sum_f Re( F_f^H W S(f) W F_f ) = 1/L sum_f Re( Y_f Y_f^H ),
+        Y_f = sum_c W_c F_c,f B_c(f),      S_cd(f) = B_c(f) B_d(f)^H
+
+    ``colored_spectrum = "ar"`` (the default) models ``S`` (:mod:`estimator.core.residual_spectrum`):
+    each channel an autoregressive model fitted to its residual periodogram *corrected for what the
+    fit absorbed*, ``I_c(f) / (1 - h_c(f))`` with ``h_c(f) = W_c / n_c F_c,f^H Cov(theta) F_c,f``
+    the leverage of the fit at frequency ``f`` (the expected periodogram of the residuals of a
+    linear fit to white noise is ``sigma^2 (1 - h(f))``); the channels correlated through their
+    innovations, whose coherence is a smoothed cross-periodogram (``B_c = Lambda_c(f) / A_c(f)``,
+    ``Gamma(f) = Lambda Lambda^H``). Without the correction the residuals' missing low-frequency
+    noise would be modelled as absent. ``"periodogram"`` takes the residuals' own
+    cross-periodogram (the original all-lags plug-in, biased low: ``B_c = s_c conj(E_c) /
+    sqrt(n)``, one column, ``s_c = sqrt(n / n_c)``). ``colored_cross_channel = False`` leaves out
+    the cross-channel terms.
+
+    **IMU noise** (:mod:`estimator.core.process_noise`): ``C_proc = sum_j V_j V_j^T`` per maneuver,
+    from the initial-condition columns of the Jacobian, the state sensitivities and the IMU's
+    white-noise level ``imu_psd`` (aircraft -> (6,) SI^2 s; None: left out).
+
+    Both middles are gathered like the normal equations and the Schur projection of the globals'
+    sensitivities is applied per maneuver (:func:`sandwich_std`). The coloured deviation is
+    floored at the Cramér-Rao bound (which no unbiased estimate beats) and the IMU noise's
+    variance is added. Maneuvers are taken in chunks whose spectra are reduced to per-maneuver
+    matrices and dropped before the next chunk, so memory does not grow with the problem.
+
+    Parameters
+    ----------
+    model, theta : the model and the estimate (all parameter values, SI).
+    N, st : the normal equations at the estimate and which parameters are free (global, local).
+    R : (C,) the channels' residual variances, SI^2.
+    std_crb : (P,) the Cramér-Rao deviations (the floor).
+    imu_psd : aircraft -> (6,) the IMU's white-noise densities, or None (no IMU noise term).
+    rank_rtol : relative eigenvalue threshold of the inverses.
+    cross_channel : with the cross-channel terms.
+    spectrum : "ar" (modelled) or "periodogram" (the all-lags plug-in).
+
+    Returns
+    -------
+    (honest deviations, the IMU noise's share alone), (P,) each, SI, NaN where not estimated.
+    """
+    nparam = theta.size
+    _, _, Sinv, Ainv = lm_solve(N, 0.0, rank_rtol)
+    p = model.problem
+    nman = len(p.maneuvers)
+    n_of = np.array([m.n for m in p.maneuvers], dtype=np.int64)
+    L_of = np.array([sfft.next_fast_len(max(2 * int(n) - 1, 1), real=True) for n in n_of], dtype=np.int64)
+    members: list[set[int]] = [set() for _ in range(nman)]
+    n_chan = np.zeros(nman, dtype=np.int64)
+    for _, mans, colmap, _ in model.channel_layout():
+        for b, k in enumerate(mans):
+            members[int(k)].update(int(i) for i in colmap[b] if st.free[i])
+            n_chan[int(k)] += 1
+    union = [np.array(sorted(s), dtype=np.intp) for s in members]
+    cross = cross_channel
+    ar = spectrum == "ar"
+    C = NormalEquations(st)
+    Cp = NormalEquations(st) if imu_psd is not None else None
+    lock = threading.Lock()
+    chunks, cur, size = [], [], 0.0
+    for k in range(nman):
+        cur.append(k)
+        # the Jacobian spectra held until the maneuver's model is fitted, or the factor Y
+        size += union[k].size * (int(L_of[k]) // 2 + 1) * max(int(n_chan[k]), 1) * 16.0
+        if size >= _COLORED_CHUNK_BYTES:
+            chunks.append(tuple(cur))
+            cur, size = [], 0.0
+    if cur:
+        chunks.append(tuple(cur))
+    for chunk in chunks:
+        held: dict[int, list] = {k: [] for k in chunk}  # "ar": each channel's spectra, for later
+        Y = ({k: np.zeros((union[k].size, int(L_of[k]) // 2 + 1), dtype=complex) for k in chunk}
+             if cross and not ar else {})
+        V: dict[int, np.ndarray] = {}
+        dEq: dict[int, np.ndarray] = {}
+        if Cp is not None:
+            for k, Sk in zip(chunk, model.state_sensitivities(theta, chunk), strict=True):
+                m = p.maneuvers[k]
+                q = np.sqrt(imu_psd[m.aircraft] / m.dt_s)
+                dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
+                V[k] = np.zeros((m.n, union[k].size, 6))
+
+        def spectra(ce, held=held, Y=Y, V=V, dEq=dEq) -> None:
+            # only the slots that are free somewhere: fixed columns drop out of the sandwich
+            keep = np.nonzero(st.free[ce.colmap].any(axis=0))[0]
+            if keep.size:
+                w = 1.0 / R[ce.channel]
+                JT = ce.JT
+                e = ce.e
+                for b, k in enumerate(ce.mans):
+                    k = int(k)
+                    r0, r1 = int(ce.rseg[b]), int(ce.rseg[b + 1])
+                    if r1 == r0:
+                        continue
+                    rows = ce.rows[r0:r1]
+                    pidx = ce.colmap[b, keep]
+                    ok = st.free[pidx]
+                    Jb = JT[keep[ok], r0:r1]
+                    pos = np.searchsorted(union[k], pidx[ok])
+                    if k in V:  # the IMU noise: J^T W J_IC on the grid, its suffix sums times dE Q^1/2
+                        bb = np.zeros((int(n_of[k]), Jb.shape[0], 7))
+                        bb[rows] = np.einsum("sn,cn->nsc", Jb, JT[:7, r0:r1]) * w
+                        Vc = suffix_middle_factor(bb, dEq[k])
+                        with lock:
+                            np.add.at(V[k], (slice(None), pos), Vc)  # slots of one parameter add up
+                    Lk = int(L_of[k])
+                    Jp = np.zeros((Jb.shape[0], Lk))
+                    Jp[:, rows] = Jb
+                    F = sfft.rfft(Jp, axis=-1)
+                    ep = np.zeros(Lk)
+                    ep[rows] = e[r0:r1]
+                    Ef = sfft.rfft(ep)
+                    if ar:
+                        with lock:
+                            held[k].append((ce.channel, pos, F, Ef, rows, e[r0:r1].copy(), w))
+                        continue
+                    F *= np.conj(Ef) * (w * np.sqrt(n_of[k] / (r1 - r0)))
+                    if cross:
+                        with lock:
+                            np.add.at(Y[k], pos, F)  # slots of one parameter add up
+                    else:
+                        Yc = (F * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
+                        with lock:
+                            C.add_blocks((Yc @ Yc.T)[None], np.zeros((1, pos.size)),
+                                         np.ascontiguousarray(pidx[ok][None, :]), np.array([k]), 1.0)
+            ce.JT = None  # used once: do not hold every channel's Jacobian at the same time
+
+        # the chunk once more, now with its Jacobian, each channel's spectra computed (on the
+        # evaluation's worker threads) as soon as the channel is done
+        model.evaluate_all(theta, jacobian=True, keep_jacobian=True, maneuvers=chunk, on_channel=spectra)
+        for k in chunk:
+            u = union[k]
+            if not u.size:
+                continue
+            Lk = int(L_of[k])
+            if ar and held[k]:
+                items = sorted(held.pop(k), key=lambda it: it[0])
+                cov_u = _union_covariance(st, Sinv, Ainv, N, k, u)
+                Yk = _ar_factor(items, cov_u, u.size, int(n_of[k]), Lk, p.maneuvers[k].dt_s, cross)
+                norm = 1.0 / Lk
+            elif k in Y:
+                Yk, norm = Y.pop(k)[:, :, None], 1.0 / (n_of[k] * Lk)
+            else:
+                Yk = None
+            if Yk is not None:
+                Yk = Yk * np.sqrt(_one_sided_weights(Lk) * norm)[None, :, None]
+                Yr = np.ascontiguousarray(Yk).view(np.float64).reshape(u.size, -1)
+                C.add_blocks((Yr @ Yr.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
+                             np.array([k]), 1.0)
+            if k in V:
+                Yv = np.ascontiguousarray(V.pop(k).transpose(1, 0, 2)).reshape(u.size, -1)
+                Cp.add_blocks((Yv @ Yv.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
+                              np.array([k]), 1.0)
+    std_mk = sandwich_std(N, st, C, Sinv, Ainv, nparam)
+    std_imu = (sandwich_std(N, st, Cp, Sinv, Ainv, nparam) if Cp is not None
+               else np.where(np.isfinite(std_mk), 0.0, np.nan))
+    floor = np.where(np.isfinite(std_crb), std_crb, 0.0)
+    honest = np.sqrt(np.maximum(std_mk, floor) ** 2 + std_imu ** 2)
+    return honest, std_imu
+
+
+def _union_covariance(st: Structure, Sinv: np.ndarray, Ainv: list[np.ndarray], N: NormalEquations, k: int,
+                      u: np.ndarray) -> np.ndarray:
+    """The Cramér-Rao covariance of the parameters ``u`` (indices) of maneuver ``k``: its locals and
+    the globals its channels depend on (``Cov_LL = A^-1 + B S^-1 B^T``, ``Cov_LG = -B S^-1``,
+    ``B = A^-1 M_LG``)."""
+    g = st.gpos[u]
+    isg = g >= 0
+    out = np.zeros((u.size, u.size))
+    gi = g[isg]
+    out[np.ix_(isg, isg)] = Sinv[np.ix_(gi, gi)]
+    if st.local_of_arr[k].size:
+        isl = ~isg
+        lp = st.lpos[u[isl]]
+        B = Ainv[k] @ N.HGL[k].T  # (L, G)
+        out[np.ix_(isl, isl)] = (Ainv[k] + B @ Sinv @ B.T)[np.ix_(lp, lp)]
+        cov_lg = -(B @ Sinv)[np.ix_(lp, gi)]
+        out[np.ix_(isl, isg)] = cov_lg
+        out[np.ix_(isg, isl)] = cov_lg.T
+    return out
+
+
+def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: float, cross: bool
+               ) -> np.ndarray:
+    """``Y_f`` (U, nf, r) of one maneuver from its channels' Jacobian spectra and autoregressive
+    residual models (:func:`honest_std`, ``colored_spectrum = "ar"``).
+
+    Each channel's residual periodogram is corrected for the fit's leverage ``h_c(f)`` (capped at
+    0.95: the few bins the parameters empty almost completely carry no information either way)
+    before its model is fitted; full-rate channels share a smoothed innovation coherence (with
+    ``cross``), a channel recorded every ``s``-th sample is modelled on its own samples and alone.
+    """
+    nf = L // 2 + 1
+    models, alone = [], []
+    for _, pos, F, Ef, rows, e, w in items:
+        steps = np.diff(rows)
+        stride = int(steps[0]) if steps.size and np.all(steps == steps[0]) else 0
+        nc = rows.size
+        if stride == 0:  # irregular samples: no correlation model, the residual variance
+            models.append(ARModel(np.zeros(0), float(e @ e) / nc, 1))
+            alone.append(True)
+            continue
+        G = cov_u[np.ix_(pos, pos)] @ F
+        h = np.minimum(w / nc * np.real(np.sum(np.conj(F) * G, axis=0)), 0.95)
+        I_corr = (np.abs(Ef) ** 2 / nc) / (1.0 - h)
+        r = sfft.irfft(I_corr, L)[:(AR_MAX_ORDER + 1) * stride:stride]
+        models.append(ar_from_autocovariance(r, nc, stride=stride))
+        alone.append(stride != 1 or not cross)
+    together = [i for i, a in enumerate(alone) if not a]
+    cols = sum(alone) + len(together)
+    factors = np.zeros((len(items), nf, cols), dtype=complex)
+    j = 0
+    for i, a in enumerate(alone):
+        if a:
+            factors[i, :, j] = models[i].inverse_filter(L) * np.sqrt(models[i].innovation_var)
+            j += 1
+    if together:
+        U = np.zeros((n, len(together)))
+        for t, i in enumerate(together):
+            rows, e, m = items[i][4], items[i][5], models[i]
+            U[rows[m.order:], t] = m.innovations(e)  # the samples in the cost are contiguous
+        gam = innovation_cross_spectrum(U, np.array([models[i].innovation_var for i in together]), L, dt_s)
+        lam, vec = np.linalg.eigh(gam)  # per frequency
+        Lam = vec * np.sqrt(np.maximum(lam, 0.0))[:, None, :]  # (nf, Ct, Ct)
+        for t, i in enumerate(together):
+            factors[i, :, j:] = models[i].inverse_filter(L)[:, None] * Lam[:, t, :]
+    Y = np.zeros((nu, nf, cols), dtype=complex)
+    for i, (_, pos, F, _, _, _, w) in enumerate(items):
+        np.add.at(Y, pos, (w * F)[:, :, None] * factors[i][None, :, :])  # slots of one parameter add up
+    return Y
+
+
+#: Maneuvers are taken in chunks whose spectral factors take about this much memory.
+_COLORED_CHUNK_BYTES = 256e6
+
+
+def imu_noise_psd(problem: Problem, imu_noise: str | tuple[float, float]) -> dict[str, np.ndarray] | None:
+    """The IMU's white-noise level per aircraft, (6,) SI^2 s (accelerometers, gyros), or None.
+
+    ``imu_noise``: "estimate" (from each maneuver's IMU data, :func:`white_noise_psd`), "none", or
+    ``(accel_psd, gyro_psd)`` in m^2/s^3 and rad^2/s for every aircraft.
+    """
+    if isinstance(imu_noise, str):
+        if imu_noise == "none":
+            return None
+        per: dict[str, list[np.ndarray]] = {}
+        for m in problem.maneuvers:
+            u = np.hstack([m.accel_imu_mps2, m.omega_rps])
+            per.setdefault(m.aircraft, []).append([white_noise_psd(u[:, j], m.dt_s) for j in range(6)])
+        # one IMU per aircraft: the median over its maneuvers is robust to one whose sharp inputs
+        # leak into the band
+        return {a: np.nan_to_num(np.nanmedian(np.array(v), axis=0)) for a, v in per.items()}
+    accel, gyro = imu_noise
+    psd = np.array([accel] * 3 + [gyro] * 3, dtype=float)
+    return {m.aircraft: psd for m in problem.maneuvers}
+
+
+def sandwich_std(N: NormalEquations, st: Structure, C: NormalEquations, Sinv: np.ndarray,
+                 Ainv: list[np.ndarray], nparam: int) -> np.ndarray:
+    """Standard deviations of ``M^-1 C M^-1`` for a middle matrix ``C`` gathered like the normal
+    equations (global, coupling and per-maneuver local blocks), through the Schur structure of
+    ``M`` (``S^-1`` and the local blocks' inverses ``A_k^-1``)."""
+    CGG = C.HGG.copy()
+    per_k = []
+    for k, lidx in enumerate(st.local_of_arr):
+        if not lidx.size:
+            per_k.append(None)
+            continue
+        Bk = Ainv[k] @ N.HGL[k].T  # (L, G) = A^-1 M_LG
+        CLG_raw = C.HGL[k].T  # (L, G)
+        CLL = C.HLL[k]
+        BtCLG = Bk.T @ CLG_raw
+        CGG += Bk.T @ CLL @ Bk - BtCLG - BtCLG.T
+        per_k.append((Bk, CLL, CLG_raw - CLL @ Bk))
+    covG = Sinv @ CGG @ Sinv
+    std = np.full(nparam, np.nan)
+    std[st.glob] = np.sqrt(np.maximum(np.diag(covG), 0.0))
+    for k, item in enumerate(per_k):
+        if item is None:
+            continue
+        Bk, CLL, CLG = item
+        Ai = Ainv[k]
+        cross_k = Ai @ CLG @ Sinv @ Bk.T
+        cov = Ai @ CLL @ Ai - cross_k - cross_k.T + Bk @ covG @ Bk.T
+        std[st.local_of_arr[k]] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    return std
