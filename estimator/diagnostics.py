@@ -127,17 +127,17 @@ _DEG = 180.0 / math.pi
 
 #: Unit conversions a slope is compared with: (factor, what a slope near it means).
 #: A measurement recorded in unit U but declared as SI is ``factor * true``.
-UNIT_FACTORS: tuple[tuple[float, str], ...] = (
-    (_DEG, "recorded in degrees but declared as radians (x 57.2958)"),
-    (1.0 / _DEG, "recorded in radians but declared as degrees (x 1/57.2958)"),
-    (1.0 / 0.3048, "recorded in feet but declared as metres (x 3.2808)"),
-    (0.3048, "recorded in metres but declared as feet (x 0.3048)"),
-    (3600.0 / 1852.0, "recorded in knots but declared as m/s (x 1.9438)"),
-    (1852.0 / 3600.0, "recorded in m/s but declared as knots (x 0.5144)"),
-    (3.6, "recorded in km/h but declared as m/s (x 3.6)"),
-    (1.0 / 3.6, "recorded in m/s but declared as km/h (x 1/3.6)"),
-    (9.80665, "recorded in m/s^2 but declared as g (x 9.80665)"),
-    (1.0 / 9.80665, "recorded in g but declared as m/s^2 (x 1/9.80665)"),
+UNIT_FACTORS: tuple[tuple[float, str, str], ...] = (
+    (_DEG, "recorded in degrees but declared as radians (x 57.2958)", "rad"),
+    (1.0 / _DEG, "recorded in radians but declared as degrees (x 1/57.2958)", "rad"),
+    (1.0 / 0.3048, "recorded in feet but declared as metres (x 3.2808)", "m"),
+    (0.3048, "recorded in metres but declared as feet (x 0.3048)", "m"),
+    (3600.0 / 1852.0, "recorded in knots but declared as m/s (x 1.9438)", "m/s"),
+    (1852.0 / 3600.0, "recorded in m/s but declared as knots (x 0.5144)", "m/s"),
+    (3.6, "recorded in km/h but declared as m/s (x 3.6)", "m/s"),
+    (1.0 / 3.6, "recorded in m/s but declared as km/h (x 1/3.6)", "m/s"),
+    (9.80665, "recorded in m/s^2 but declared as g (x 9.80665)", "m/s^2"),
+    (1.0 / 9.80665, "recorded in g but declared as m/s^2 (x 1/9.80665)", "m/s^2"),
 )
 
 #: Channel names (before any "_") of air-data channels: relative to the air, like the flow angles.
@@ -624,12 +624,16 @@ def _slope(Y: np.ndarray, Z: np.ndarray, mask: np.ndarray):
     return b, se, sy
 
 
-def _unit_match(value: float, tol: float) -> tuple[float, str] | None:
-    """The unit factor closest to |value| (log distance) if within ``tol``; None otherwise."""
+def _unit_match(value: float, tol: float, unit: str | None = None) -> tuple[float, str, str] | None:
+    """The unit factor closest to |value| (log distance) if within ``tol``; None otherwise. Only the
+    conversions of the channel's own quantity (its SI ``unit``: an altitude is never in knots)."""
     if not np.isfinite(value) or value == 0:
         return None
     a = abs(value)
-    best = min(UNIT_FACTORS, key=lambda f: abs(math.log(a / f[0])))
+    factors = [f for f in UNIT_FACTORS if unit is None or f[2] == unit]
+    if not factors:
+        return None  # a quantity without a common unit confusion (a pressure, a Mach number)
+    best = min(factors, key=lambda f: abs(math.log(a / f[0])))
     return best if abs(a / best[0] - 1.0) <= tol else None
 
 
@@ -1009,7 +1013,7 @@ def _unit_finding(st: _Stats, i: int, opt: DiagnosticOptions) -> Finding | None:
     if slope_ok:
         cands.append((b, se, "its model output"))
     for val, err, against in cands:
-        m = _unit_match(val, opt.unit_tol)
+        m = _unit_match(val, opt.unit_tol, f.unit)
         if m is None or abs(math.log(abs(val))) < math.log(1.5):
             continue
         # a flow channel's model shares tables with other channels, and its kinematic angle comes from
@@ -1029,7 +1033,7 @@ def _unit_finding(st: _Stats, i: int, opt: DiagnosticOptions) -> Finding | None:
     jump = st.floor_jump[i]
     big = math.log(opt.flow_unit_min_factor)
     if misfits and np.isfinite(jump) and abs(math.log(jump)) > big:
-        m = _unit_match(jump, opt.floor_jump_tol)
+        m = _unit_match(jump, opt.floor_jump_tol, f.unit)
         if m is not None and abs(math.log(m[0])) > big:
             return Finding(
                 "unit_error", Severity.FAILURE,
@@ -1043,7 +1047,7 @@ def _unit_finding(st: _Stats, i: int, opt: DiagnosticOptions) -> Finding | None:
     zm = float(np.mean(f.z)) if f.z.size else np.nan
     if misfits and not f.flow and np.isfinite(ym) and ym != 0 and np.isfinite(zm):
         lv = zm / ym
-        m = _unit_match(lv, opt.level_tol)
+        m = _unit_match(lv, opt.level_tol, f.unit)
         if m is not None and abs(math.log(abs(lv))) > math.log(1.5) and abs(ym) > 10 * np.std(f.y):
             return Finding(
                 "unit_error", Severity.FAILURE,

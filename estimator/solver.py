@@ -543,9 +543,8 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         raise ValueError(f"{problem.source}: no identifiable free parameter left; see the confounding "
                          "report: " + "; ".join(", ".join(h.confounding.parameters) for h in holds))
     held = requested & ~st.free
-    if np.any(theta[held] != start[held]):
-        theta[held] = start[held]
-        evals = _evaluate(model, theta, True)
+    stage_notes += _restore_held(model, theta, start, held)
+    evals = _evaluate(model, theta, True)
     iterations, history = 0, []
     for rnd in range(1, max(opt.screen_rounds, 1) + 1):
         try:
@@ -563,12 +562,30 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         if np.array_equal(st_new.free, st.free):
             holds = holds_new
             break
-        newly_held = st.free & ~st_new.free
-        theta[newly_held] = start[newly_held]
+        stage_notes += _restore_held(model, theta, start, st.free & ~st_new.free)
         st, holds = st_new, holds_new
         evals = _evaluate(model, theta, True)
     return _finish(problem, model, theta, start, st, holds, evals, it, iterations, history, stage_notes,
                    opt, t0)
+
+
+def _restore_held(model: Model, theta: np.ndarray, start: np.ndarray, held: np.ndarray) -> list[str]:
+    """Put newly held parameters back at their start values (in place), unless the model cannot be
+    evaluated there (an implicit model whose table the start values make steeper than 1:1 next to
+    estimated neighbours): then they stay where the estimation left them, and a note says so."""
+    moved = held & (theta != start)
+    if not moved.any():
+        return []
+    trial = theta.copy()
+    trial[moved] = start[moved]
+    try:
+        _evaluate(model, trial, False)
+    except ModelEvaluationError as exc:
+        keys = model.problem.parameters.keys
+        return [f"{', '.join(keys[i] for i in np.flatnonzero(moved))} held at the values the estimation "
+                f"had reached, not at their start values: the model cannot be evaluated there ({exc})"]
+    theta[moved] = start[moved]
+    return []
 
 
 def _failed(problem: Problem, theta: np.ndarray, t0: float, why: str, advice: str) -> EstimationResult:
@@ -676,7 +693,9 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         from estimator.diagnostics import diagnose
 
         diagnosis = diagnose(*_fit_traces(problem, evals, st))
-        findings += list(diagnosis.findings)
+        # the data's findings first: a fault in the data explains the parameters' findings, not the
+        # other way round (findings are shown by severity, in this order within one)
+        findings = list(diagnosis.findings) + findings
         diagnosis_table, outliers = diagnosis.table, dict(diagnosis.outliers)
     verdict = judge(it.status, findings)
     message = it.message
