@@ -9,7 +9,7 @@ live — is missing from them; for a bias the all-lags sum is the Bartlett estim
 equal to the record length, whose expectation is a third of the truth whatever the correlation
 time (Kiefer & Vogelsang 2002). On the analytic flight with coloured, cross-correlated noise its
 deviations are 1.39 times too small; with the true noise covariance the same sandwich is right
-(Monte Carlo scatter / deviation 1.007, campaigns/benchmarks/results/colored_mc.txt).
+(Monte Carlo scatter / deviation 1.005, campaigns/benchmarks/results/colored_mc.txt).
 
 So the noise covariance is modelled instead, and the model fitted to the residuals: the missing
 band is narrow against the whole spectrum, which fixes a low-order model's parameters, and the
@@ -26,6 +26,13 @@ times (``Sigma_u``, the flow sensors' common air-data or air-motion error), so t
 matrix is ``S(w) = D(w) Sigma_u D(w)^H``, ``D = diag(1 / A_c(e^{-iw}))``. A channel recorded at
 every ``s``-th sample (DGPS height) is modelled on its own samples, ``S(w) = S_c(s w)`` on the
 common grid, and taken as uncorrelated with the others.
+
+Before the model is fitted, each residual periodogram is divided by ``1 - h(f)``, the fit's
+leverage at that frequency (the solver's :mod:`estimator.uncertainty`): without it the model
+learns the band the parameters emptied as missing noise. Monte Carlo on the analytic flight
+(1200 replications, pooled over 52 parameters): scatter / reported deviation 1.066 +- 0.004 for
+correlation times of 0.5 / 0.2 s (the all-lags plug-in 1.389), 0.99-1.08 from white noise to
+1 s and for 20-40 s maneuvers; per parameter kind 0.91-1.21.
 """
 
 from __future__ import annotations
