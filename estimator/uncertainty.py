@@ -159,7 +159,7 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
                         bb[rows] = np.einsum("sn,cn->nsc", Jb, JT[:7, r0:r1]) * w
                         Vc = suffix_middle_factor(bb, dEq[k])
                         with lock:
-                            np.add.at(V[k], (slice(None), pos), Vc)  # slots of one parameter add up
+                            _scatter_add(V[k], pos, Vc, axis=1)
                     Lk = int(L_of[k])
                     Jp = np.zeros((Jb.shape[0], Lk))
                     Jp[:, rows] = Jb
@@ -174,7 +174,7 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
                     F *= np.conj(Ef) * (w * np.sqrt(n_of[k] / (r1 - r0)))
                     if cross:
                         with lock:
-                            np.add.at(Y[k], pos, F)  # slots of one parameter add up
+                            _scatter_add(Y[k], pos, F)
                     else:
                         Yc = (F * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
                         with lock:
@@ -283,8 +283,18 @@ def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: fl
             factors[i, :, j:] = models[i].inverse_filter(L)[:, None] * Lam[:, t, :]
     Y = np.zeros((nu, nf, cols), dtype=complex)
     for i, (_, pos, F, _, _, _, w) in enumerate(items):
-        np.add.at(Y, pos, (w * F)[:, :, None] * factors[i][None, :, :])  # slots of one parameter add up
+        _scatter_add(Y, pos, (w * F)[:, :, None] * factors[i][None, :, :])
     return Y
+
+
+def _scatter_add(target: np.ndarray, pos: np.ndarray, values: np.ndarray, axis: int = 0) -> None:
+    """``target[pos] += values`` along ``axis``, where slots of one parameter (repeated ``pos``) add
+    up; the common case of distinct positions without ``np.add.at`` (which is slow)."""
+    index = (slice(None),) * axis + (pos,)
+    if np.unique(pos).size == pos.size:
+        target[index] += values
+    else:
+        np.add.at(target, index, values)
 
 
 #: Maneuvers are taken in chunks whose spectral factors take about this much memory.
