@@ -21,7 +21,7 @@ from estimator.report import (
     figure_time_history,
     write_report,
 )
-from estimator.verdict import Severity, Verdict
+from estimator.verdict import Verdict, reasons
 from estimator.workflow import RAD2DEG, WorkflowResult
 
 _LEVEL = {Verdict.SUCCESS: "success", Verdict.SUCCESS_WITH_WARNINGS: "warning", Verdict.FAILURE: "failure"}
@@ -30,8 +30,8 @@ _LEVEL = {Verdict.SUCCESS: "success", Verdict.SUCCESS_WITH_WARNINGS: "warning", 
 def verdict_banner(wf: WorkflowResult) -> Banner:
     """The workflow's verdict and its failures and warnings (most severe first), for the report's top."""
     v = wf.verdict
-    shown = sorted((f for f in wf.findings if f.severity >= Severity.WARNING), key=lambda f: -int(f.severity))
-    return Banner(_LEVEL[v], f"{v.name.replace('_', ' ')}: {v.text}", tuple(f.text() for f in shown))
+    return Banner(_LEVEL[v], f"{v.name.replace('_', ' ')}: {v.text}",
+                  tuple(f.text() for f in reasons(wf.findings)))
 
 
 def _held_parameters(wf: WorkflowResult) -> pd.DataFrame:
@@ -98,7 +98,8 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
     if len(quality):
         csvs.append(("fit_quality.csv", quality))
     sections.append(Section("Summary and verdict", summary, tables=tables, csv=csvs))
-    if not wf.final:
+    final = [st for st in wf.final if st.result.success]  # what Table 2 and the figures rest on
+    if not final:
         out = {"accuracy": wf.accuracy, "true_accuracy": None, "installation_recovery": None,
                "recovery": None}
         out["report"] = write_report(out_dir, title, sections, banner=verdict_banner(wf))
@@ -148,13 +149,19 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
         figs.append(("Figs. 6 and 8: correction-table updates vs breakpoint per Mach (f1 as f1(alpha) - "
                      "alpha), gear down dashed", figure_table_updates(upd)))
         csvs.append(("table_updates.csv", upd))
-    for name, t in wf.correction_tables().items():
-        csvs.append((f"correction_table_{name}.csv", t.reset_index()))
+    for name, (values, states) in wf.correction_tables().items():
+        csvs.append((f"correction_table_{name}.csv", values.reset_index()))
+        csvs.append((f"correction_table_{name}_state.csv", states.reset_index()))
     sections.append(Section("Correction tables", "The updated tables, breakpoints x Mach, in "
-                             "correction_table_<name>.csv (display units: deg for angle tables).",
+                             "correction_table_<name>.csv (display units: deg for angle tables), from "
+                             "the estimations whose verdict is a success only. A value the data did not "
+                             "determine (held at its start value) or that sits on its bound is left empty; "
+                             "correction_table_<name>_state.csv says which, cell by cell, and "
+                             "table_updates.csv why, with the honest deviations (std) and the Cramér-Rao "
+                             "ones (std_crb).",
                              figures=figs, csv=csvs))
     # Figs. 5 and 7: error cross-plots; Fig. 3: a time-history match
-    ref = min(wf.final, key=lambda s: abs(s.mach - 0.5))
+    ref = min(final, key=lambda s: abs(s.mach - 0.5))
     res = ref.residuals
     figs = []
     for name in ("alpha_zl", "alpha_zr"):
@@ -163,7 +170,7 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
             figs.append((f"Fig. 5: {name} measurement - model vs model at Mach {ref.mach:.2f}",
                          figure_crossplot(r.y * RAD2DEG, r.e * RAD2DEG, f"{name}, Mach {ref.mach:.2f}",
                                           "model (deg)", "measurement - model (deg)", limit_deg=0.5)))
-    pooled = [s.residuals["beta_znp"] for s in wf.final if "beta_znp" in s.residuals]
+    pooled = [s.residuals["beta_znp"] for s in final if "beta_znp" in s.residuals]
     if pooled:
         a = np.concatenate([p.alpha_t_rad for p in pooled]) * RAD2DEG
         e = np.concatenate([p.e for p in pooled]) * RAD2DEG

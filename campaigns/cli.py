@@ -214,6 +214,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     from estimator.io import DataWarning, load_problem, problem_from_dataset
     from estimator.plots import save_standard_figures
     from estimator.solver import SolverOptions, estimate
+    from estimator.verdict import verdict_text
 
     src = args.source
     overrides = {**{n: {"free": True} for n in args.free}, **{n: {"free": False} for n in args.fix}}
@@ -265,7 +266,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     if not args.no_plots:
         save_standard_figures(problem, result, out)
     print(f"\nresults in {out}")
-    print(f"VERDICT: {result.verdict.name.replace('_', ' ')} — {result.verdict.text}")
+    print(verdict_text(result.verdict, result.findings, max_lines=0))
     return exit_status(result.verdict)
 
 
@@ -309,6 +310,7 @@ def _workflow(problem, out: Path, args: argparse.Namespace) -> int:
     """The Mach-bin calibration workflow and its report (issue 4)."""
     from campaigns.calibration_report import build_report
     from estimator.solver import SolverOptions
+    from estimator.verdict import verdict_text
     from estimator.workflow import WorkflowOptions, run_workflow
 
     # an earlier report: report.html beside its CSV tables and figures, nothing else
@@ -330,7 +332,7 @@ def _workflow(problem, out: Path, args: argparse.Namespace) -> int:
     tables = build_report(wf, out, f"Flow-angle calibration: {problem.source}")
     if not wf.final:
         print()
-        print(_verdict_text(wf))
+        print(verdict_text(wf.verdict, wf.findings))
         print(f"\nreport: {tables['report']}")
         return exit_status(wf.verdict)
     print()
@@ -353,21 +355,9 @@ def _workflow(problem, out: Path, args: argparse.Namespace) -> int:
                   "their truth")
             print(summ.to_string(float_format=lambda v: f"{v:.2f}"))
     print()
-    print(_verdict_text(wf))
+    print(verdict_text(wf.verdict, wf.findings))
     print(f"\nreport: {tables['report']}")
     return exit_status(wf.verdict)
-
-
-def _verdict_text(wf, max_lines: int = 15) -> str:
-    """The workflow's verdict and its failures and warnings, most severe first."""
-    from estimator.verdict import Severity
-
-    shown = sorted((f for f in wf.findings if f.severity >= Severity.WARNING), key=lambda f: -int(f.severity))
-    lines = [f"VERDICT: {wf.verdict.name.replace('_', ' ')} — {wf.verdict.text}"]
-    lines += [f"  {f.text()}" for f in shown[:max_lines]]
-    if len(shown) > max_lines:
-        lines.append(f"  ... {len(shown) - max_lines} more in findings.csv")
-    return "\n".join(lines)
 
 
 def build_parser() -> argparse.ArgumentParser:

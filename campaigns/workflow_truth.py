@@ -80,7 +80,7 @@ def true_accuracy(wf: WorkflowResult) -> tuple[pd.DataFrame, dict[tuple[float, s
     """Table 2 against the truth, and the error samples per (Mach, gear) stage for plots."""
     rows, samples = [], {}
     limit = wf.nose_probe_alpha_limit_deg
-    for st in (*wf.final, *wf.gear_down):
+    for st in wf.usable:
         errs = calibrated_errors(st.problem, st.result)
         samples[(st.mach, "down" if st.gear_down else "up")] = errs
         for name, df in errs.items():
@@ -143,7 +143,7 @@ def installation_recovery(wf: WorkflowResult) -> pd.DataFrame:
 def recovery(wf: WorkflowResult) -> pd.DataFrame:
     """Every final estimate with a truth (calibration parameters, time delays, IMU biases)."""
     frames = []
-    for st in (*wf.final, *wf.gear_down):
+    for st in wf.usable:
         t = recovery_table(st.result, true_parameters(st.problem, st.result.free_estimated))
         t = t[t["kind"].isin(["imu_bias", "time_delay", "bias", "scale", "table"])].copy()
         t.insert(0, "gear", "down" if st.gear_down else "up")

@@ -139,7 +139,8 @@ def bounded_solve(N: NormalEquations, st: Structure, theta: np.ndarray, lam: flo
     at_hi = st.free & (theta >= st.hi - tiny)
     active = np.zeros(theta.size, dtype=bool)
     M = N
-    for _pass in range(4):
+    # each pass pins at least one more parameter, so this ends; the last solve is of the final set
+    while True:
         dG, dL, Sinv, Ainv = lm_solve(M, lam, rtol)
         step = full_step(st, dG, dL, theta.size)
         out = ~active & ((at_lo & (step < 0)) | (at_hi & (step > 0)))

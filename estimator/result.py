@@ -3,7 +3,8 @@
 ``EstimationResult.to_pandas()`` gives one row per parameter (SI and display units, and what the
 estimator did with it: estimated, on a bound, held and why, or fixed); ``residuals_table()`` one
 row per maneuver and channel; ``findings_table()`` the findings behind the verdict;
-``diagnostics`` the fit-quality table; ``to_json`` / ``to_csv`` write them.
+``diagnostics`` the fit-quality table; ``to_json`` / ``to_csv`` write them. A result is immutable:
+its arrays are read-only copies, its mappings read-only views.
 
 ``status`` is the solver's (:class:`~estimator.verdict.Status`: positive = converged);
 ``verdict`` (:class:`~estimator.verdict.Verdict`) is what to act on: a converged fit can still be
@@ -13,20 +14,22 @@ a failure (a wrong minimum, a stuck vane).
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from types import MappingProxyType
 
 import numpy as np
 import pandas as pd
 
 from estimator.parameters import ParameterSet
 from estimator.problem import Problem
-from estimator.verdict import Finding, Severity, Status, Verdict, findings_frame, judge
+from estimator.verdict import Finding, Severity, Status, Verdict, findings_frame, judge, reasons
 
 #: Short text of each solver status code (for tables that store the code).
 STATUS_TEXT = {s.value: s.name.lower().replace("_", " ") for s in Status}
 #: What the estimator did with a parameter (:attr:`EstimationResult.state`).
-STATES = ("estimated", "on_bound", "held", "fixed", "not estimated")
+STATES = ("estimated", "on_bound", "held", "unidentifiable", "fixed", "not estimated")
 
 
 @dataclass(frozen=True)
@@ -61,7 +64,10 @@ class EstimationResult:
     std_crb : (P,) Cramér-Rao standard deviations, SI (NaN for fixed or unidentifiable).
     std_colored : (P,) honest deviations, SI: corrected for coloured and cross-correlated residuals
         (Morelli-Klein, matrix form), never below the Cramér-Rao bound, plus the IMU noise's share.
-    correlation_keys, correlation : correlation matrix of the free non-per-maneuver parameters.
+    correlation_keys, correlation : Cramér-Rao correlation matrix of the estimated
+        non-per-maneuver parameters.
+    correlation_colored : the same parameters' correlations in the honest covariance (coloured
+        residuals, IMU noise), NaN without it.
     R : channel -> residual variance (SI^2) at the estimate.
     residuals : per maneuver and channel residual statistics.
     iterations, cost_history, status, message, confounding, elapsed_s : how it went.
@@ -71,7 +77,8 @@ class EstimationResult:
         undetermined, unidentifiable; on a bound: which).
     findings : what the fit-quality and identifiability checks found (the verdict's reasons).
     verdict : success, success with warnings, or failure.
-    diagnostics : the fit-quality table, one row per maneuver and channel (None if not run).
+    fit_quality : the fit-quality table of the diagnostics, one row per maneuver and channel (None if
+        not run); read it through :attr:`diagnostics` (a copy).
     outliers : (maneuver, channel) -> times (s) of the residual outliers the diagnostics found.
     std_imu_noise : (P,) the share of ``std_colored`` that the IMU's noise, integrated as process
         noise, contributes (``std_colored^2 = max(Morelli-Klein, Cramér-Rao)^2 + std_imu_noise^2``).
@@ -84,7 +91,7 @@ class EstimationResult:
     std_colored: np.ndarray
     correlation_keys: tuple[str, ...]
     correlation: np.ndarray = field(repr=False)
-    R: dict[str, float] = field(repr=False)
+    R: Mapping[str, float] = field(repr=False)
     residuals: tuple[ResidualStats, ...] = field(repr=False)
     iterations: int = 0
     cost_history: tuple[float, ...] = ()
@@ -96,28 +103,46 @@ class EstimationResult:
     source: str = ""
     channel_display: dict[str, tuple[float, str]] = field(default_factory=dict, repr=False)
     free_estimated: np.ndarray | None = field(default=None, repr=False)
+    correlation_colored: np.ndarray | None = field(default=None, repr=False)
     state: tuple[str, ...] = field(default=(), repr=False)
     state_reason: tuple[str, ...] = field(default=(), repr=False)
     findings: tuple[Finding, ...] = field(default=(), repr=False)
     verdict: Verdict = Verdict.FAILURE
-    diagnostics: pd.DataFrame | None = field(default=None, repr=False)
-    outliers: dict[tuple[str, str], np.ndarray] = field(default_factory=dict, repr=False)
+    fit_quality: pd.DataFrame | None = field(default=None, repr=False)
+    outliers: Mapping[tuple[str, str], np.ndarray] = field(default_factory=dict, repr=False)
     std_imu_noise: np.ndarray | None = field(default=None, repr=False)
-    imu_noise_psd: dict[str, np.ndarray] | None = field(default=None, repr=False)
+    imu_noise_psd: Mapping[str, np.ndarray] | None = field(default=None, repr=False)
 
     @classmethod
     def build(cls, problem: Problem, values: np.ndarray, **kw) -> EstimationResult:
-        for a in ("std_crb", "std_colored", "correlation", "std_imu_noise"):
-            if kw.get(a) is None:
-                continue
-            kw[a] = np.asarray(kw[a])
-            kw[a].setflags(write=False)
+        """The result of an estimation of ``problem`` ending at ``values``; every array is copied
+        and made read-only, every mapping wrapped read-only (the caller's own are untouched)."""
+        def frozen(a):
+            a = np.array(a, copy=True)
+            a.setflags(write=False)
+            return a
+
+        for a in ("std_crb", "std_colored", "correlation", "std_imu_noise", "free_estimated",
+                  "correlation_colored"):
+            if kw.get(a) is not None:
+                kw[a] = frozen(kw[a])
+        kw["R"] = MappingProxyType(dict(kw.get("R", {})))
+        kw["outliers"] = MappingProxyType({k: frozen(v) for k, v in dict(kw.get("outliers", {})).items()})
+        if kw.get("imu_noise_psd") is not None:
+            kw["imu_noise_psd"] = MappingProxyType({k: frozen(v) for k, v in kw["imu_noise_psd"].items()})
+        if kw.get("fit_quality") is not None:
+            kw["fit_quality"] = kw["fit_quality"].copy()
         return cls(
             parameters=problem.parameters.with_values(values), g_mps2=problem.g_mps2,
             source=problem.source,
             channel_display={c.name: (c.display_scale, c.display_unit) for c in problem.channels},
             **kw,
         )
+
+    @property
+    def diagnostics(self) -> pd.DataFrame | None:
+        """The fit-quality table (a copy: the result stays as it was)."""
+        return None if self.fit_quality is None else self.fit_quality.copy()
 
     @property
     def success(self) -> bool:
@@ -157,20 +182,23 @@ class EstimationResult:
     def covariance(self, keys: list[str] | tuple[str, ...], colored: bool = False) -> np.ndarray:
         """Covariance (SI) of some estimated global parameters, from their correlations and deviations.
 
-        ``colored``: with the honest (coloured-residual and IMU-noise) deviations in place of the
-        Cramér-Rao ones, correlations kept (NaN if any of them has none). Parameters outside the
-        correlation matrix (per-maneuver ones) are taken as uncorrelated with the others.
+        ``colored``: the honest covariance (coloured residuals and IMU noise: its own deviations
+        and correlations) instead of the Cramér-Rao one. Parameters outside the correlation matrix
+        (per-maneuver ones) are taken as uncorrelated with the others; a parameter without a
+        deviation (held, unidentifiable) gives NaN, never a zero variance.
         """
         pos = {k: i for i, k in enumerate(self.correlation_keys)}
+        corr = self.correlation
+        if colored:
+            corr = (self.correlation_colored if self.correlation_colored is not None
+                    else np.full_like(self.correlation, np.nan))
         std = np.array([self.std(k, colored=colored) for k in keys])
-        if colored and not np.all(np.isfinite(std)):
-            return np.full((len(keys), len(keys)), np.nan)
         C = np.zeros((len(keys), len(keys)))
         for i, a in enumerate(keys):
             for j, b in enumerate(keys):
-                rho = self.correlation[pos[a], pos[b]] if a in pos and b in pos else float(i == j)
+                rho = corr[pos[a], pos[b]] if a in pos and b in pos else float(i == j)
                 C[i, j] = rho * std[i] * std[j]
-        return np.nan_to_num(C)
+        return C
 
     def to_pandas(self) -> pd.DataFrame:
         """One row per parameter, indexed by key: value and deviations (SI and display units),
@@ -227,8 +255,7 @@ class EstimationResult:
             f"g = {self.g_mps2} m/s^2; {int(self.parameters.free_mask.sum())} free parameters"
             + (": " + ", ".join(f"{n} {s}" for s, n in counts.items()) if len(counts) else ""),
         ]
-        shown = sorted((f for f in self.findings if f.severity >= Severity.WARNING),
-                       key=lambda f: -int(f.severity))
+        shown = reasons(self.findings)
         if shown:
             lines.append(f"failures and warnings ({len(shown)}):")
             lines += [f"  {f.text()}" for f in shown[:max_findings]]
@@ -247,11 +274,20 @@ class EstimationResult:
         return "\n".join(lines)
 
     def to_json(self, path: str | Path) -> None:
-        """Everything, with the verdict and its findings at the top."""
+        """Everything, with the verdict and its findings at the top. Strict JSON: a value that is
+        not a finite number (a deviation of a held parameter) is ``null``."""
         def clean(v):
+            if isinstance(v, Mapping):
+                return {str(k): clean(x) for k, x in v.items()}
+            if isinstance(v, (list, tuple, np.ndarray)):
+                return [clean(x) for x in v]
+            if isinstance(v, np.generic):
+                v = v.item()
             if isinstance(v, float) and not np.isfinite(v):
                 return None
-            return v
+            if v is None or isinstance(v, (str, int, float, bool)):
+                return v
+            return str(v)
         doc = {
             "verdict": self.verdict.name, "verdict_code": self.verdict.code,
             "verdict_text": self.verdict.text,
@@ -259,23 +295,16 @@ class EstimationResult:
             "status": int(self.status), "status_text": STATUS_TEXT.get(int(self.status)),
             "message": self.message, "iterations": self.iterations, "elapsed_s": self.elapsed_s,
             "g_mps2": self.g_mps2, "source": self.source, "cost_history": list(self.cost_history),
-            "R": self.R,
-            "parameters": [
-                {k: clean(v) for k, v in row.items()}
-                for row in self.to_pandas().reset_index().to_dict(orient="records")
-            ],
+            "R": dict(self.R),
+            "imu_noise_psd": None if self.imu_noise_psd is None else dict(self.imu_noise_psd),
+            "parameters": self.to_pandas().reset_index().to_dict(orient="records"),
             "confounding": [c.__dict__ for c in self.confounding],
-            "correlation": {
-                "keys": list(self.correlation_keys),
-                "matrix": np.where(np.isfinite(self.correlation), self.correlation, 0.0).tolist(),
-            },
+            "correlation": {"keys": list(self.correlation_keys), "matrix": self.correlation},
+            "correlation_colored": self.correlation_colored,
             "residuals": [r.__dict__ for r in self.residuals],
-            "fit_quality": ([] if self.diagnostics is None else
-                            [{k: clean(v) for k, v in row.items()}
-                             for row in self.diagnostics.to_dict(orient="records")]),
+            "fit_quality": ([] if self.fit_quality is None else self.fit_quality.to_dict(orient="records")),
         }
-        text = json.dumps(doc, indent=1, default=lambda o: o.item() if hasattr(o, "item") else str(o))
-        Path(path).write_text(text)
+        Path(path).write_text(json.dumps(clean(doc), indent=1, allow_nan=False))
 
     def to_csv(self, directory: str | Path) -> None:
         """parameters.csv, residuals.csv, correlation.csv, findings.csv and fit_quality.csv."""
@@ -285,5 +314,5 @@ class EstimationResult:
         self.residuals_table().to_csv(d / "residuals.csv", index=False)
         self.correlation_frame().to_csv(d / "correlation.csv")
         self.findings_table().to_csv(d / "findings.csv", index=False)
-        if self.diagnostics is not None:
-            self.diagnostics.to_csv(d / "fit_quality.csv", index=False)
+        if self.fit_quality is not None:
+            self.fit_quality.to_csv(d / "fit_quality.csv", index=False)

@@ -57,7 +57,7 @@ from estimator.normal_equations import (
     residual_sums,
     sym_inverse,
 )
-from estimator.problem import Problem
+from estimator.problem import STATE_PARAMS, Problem
 from estimator.result import Confounding, EstimationResult, ResidualStats
 from estimator.start import staged_plan
 from estimator.uncertainty import honest_std, imu_noise_psd
@@ -166,9 +166,10 @@ def _confounded_sets(null: np.ndarray, idx: np.ndarray, problem: Problem, where:
         chosen.add(hold)
         names = [ps.parameters[i].key for i in members]
         out.append((Confounding(
-            parameters=tuple(names[:8]) + (("...",) if len(names) > 8 else ()),
+            parameters=tuple(names),
             kind="unidentifiable",
-            detail=(f"{where}: the data cannot tell {', '.join(names[:8])} apart (a combination of "
+            detail=(f"{where}: the data cannot tell {', '.join(names[:8])}"
+                    f"{' ...' if len(names) > 8 else ''} apart (a combination of "
                     f"them leaves every output unchanged); {ps.parameters[hold].key} is held at its "
                     "start value to anchor the others, whose estimates are relative to it. Fix one "
                     "of them yourself, or fly maneuvers that excite them differently"),
@@ -203,11 +204,7 @@ def _screen(problem: Problem, st: Structure, evals: Evaluation, R: np.ndarray, o
         if not st.free.any():
             break
         N = build_normal(st, evals, R)
-        info = np.zeros(len(keys))
-        info[st.glob] = np.diag(N.HGG)
-        for k, idx in enumerate(st.local_of_arr):
-            info[idx] = np.diag(N.HLL[k])
-        no_data = st.free & ~((info > 0.0) & (N.support >= opt.min_support_samples))
+        no_data = st.free & ~_has_data(N, st, opt.min_support_samples)
         if no_data.any():
             held = tuple(int(i) for i in np.nonzero(no_data)[0])
             holds.append(_Hold(held, "no_data", Confounding(
@@ -240,6 +237,15 @@ def _screen(problem: Problem, st: Structure, evals: Evaluation, R: np.ndarray, o
                 continue
         break
     return st, holds
+
+
+def _has_data(N: NormalEquations, st: Structure, min_support: int) -> np.ndarray:
+    """(P,) the free parameters some information and at least ``min_support`` samples depend on."""
+    info = np.zeros(st.free.size)
+    info[st.glob] = np.diag(N.HGG)
+    for k, idx in enumerate(st.local_of_arr):
+        info[idx] = np.diag(N.HLL[k])
+    return st.free & (info > 0.0) & (N.support >= min_support)
 
 
 def _std_of(st: Structure, cov_G: np.ndarray, cov_L: list[np.ndarray], n: int) -> np.ndarray:
@@ -297,7 +303,7 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpt
         history.append(cost0)
         N = build_normal(st, evals, R)
         # the undamped Gauss-Newton step judges convergence: a damped one shrinks with the damping
-        gn, _, _, Sinv, Ainv, active = bounded_solve(N, st, theta, 0.0, opt.rank_rtol)
+        gn, _, _, Sinv, Ainv, _ = bounded_solve(N, st, theta, 0.0, opt.rank_rtol)
         sig = np.zeros(theta.size)
         sig[st.glob] = np.diag(Sinv)
         for k, idx in enumerate(st.local_of_arr):
@@ -373,6 +379,15 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpt
                 status = Status.CONVERGED_STEP
                 message = (f"converged: the undamped Gauss-Newton step is {moved_max:.1e} deviations "
                            f"at most; no step decreases the cost by more than {achieved:.1e} (round-off)")
+            elif best is None:
+                # not even a tiny step along the gradient lowers the cost: the gradient does not
+                # describe the cost here (a kink, a model or Jacobian fault), so this is no minimum
+                status = Status.STALLED
+                message = (f"stalled: no step decreases the cost at all (damping grew to {lam:.1e}, and "
+                           "along the undamped direction too), yet the Gauss-Newton model predicts "
+                           f"{predicted:.3g} with a step of {moved_max:.2g} deviations "
+                           f"({keys[order[int(np.argmax(moved))]]}): the gradient does not describe "
+                           "the cost here")
             else:
                 status = Status.CONVERGED_DECREASE
                 message = (f"converged: no step decreases the cost by more than {achieved:.1e} "
@@ -436,19 +451,30 @@ def _final_cost(res: EstimationResult) -> float:
 
 
 def _rank(res: EstimationResult) -> tuple[int, float]:
-    order = {1: 0, 2: 1, -1: 2}
-    return order.get(res.verdict.code, 3), _final_cost(res)
+    return res.verdict.rank, _final_cost(res)
+
+
+def _estimate_guarded(problem: Problem, opt: SolverOptions) -> EstimationResult:
+    """:func:`_estimate`, with a numerical breakdown (the model leaving its domain, a singular
+    matrix) turned into a failed result: a verdict, not an exception, for data that cause it."""
+    t0 = time.perf_counter()
+    try:
+        return _estimate(problem, opt)
+    except (ModelEvaluationError, np.linalg.LinAlgError) as exc:
+        return _failed(problem, problem.parameters.values, t0,
+                       f"the estimation broke down numerically: {type(exc).__name__}: {exc}",
+                       "read the channel named; check its data and units, or start closer to the data")
 
 
 def _estimate_robust(problem: Problem, opt: SolverOptions) -> EstimationResult:
     """:func:`_estimate`, and with ``opt.robust`` once more without the outliers it found."""
-    res = _estimate(problem, opt)
+    res = _estimate_guarded(problem, opt)
     if not opt.robust or not res.outliers:
         return res
     excluded = dict(res.outliers)
     sub = _without_samples(problem, excluded)
     sub = replace(sub, parameters=sub.parameters.with_values(res.values))
-    again = _estimate(sub, replace(opt, start="given"))
+    again = _estimate_guarded(sub, replace(opt, start="given"))
     notes = tuple(Finding(
         "excluded", Severity.INFO,
         f"robust option: {t.size} outlier sample(s) of {ch} in maneuver {man} excluded from the fit "
@@ -492,11 +518,7 @@ def _staged_start(problem: Problem, theta: np.ndarray, free: np.ndarray, opt: So
         st = Structure(sub, stage.free)
         # a stage frees only what its channels depend on; the rest waits for a later stage
         N = build_normal(st, ev, np.ones(len(sub.channels)))
-        info = np.zeros(theta.size)
-        info[st.glob] = np.diag(N.HGG)
-        for k, idx in enumerate(st.local_of_arr):
-            info[idx] = np.diag(N.HLL[k])
-        st = Structure(sub, stage.free & (info > 0) & (N.support >= opt.min_support_samples))
+        st = Structure(sub, stage.free & _has_data(N, st, opt.min_support_samples))
         if not st.free.any():
             continue
         it = _gauss_newton(model, theta, st, opt, ev, label=f"start ({stage.name}) ")
@@ -531,8 +553,15 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         raise ValueError(f"{problem.source}: no channel has data in any maneuver")
     stage_notes: list[str] = []
     if opt.start == "staged":
-        theta, stage_notes = _staged_start(problem, theta, requested, opt)
-        evals = _evaluate(model, theta, True)
+        staged, stage_notes = _staged_start(problem, theta, requested, opt)
+        try:
+            # the stages fit subsets of the channels: an implicit channel left out may be outside
+            # its domain where they ended; then the full estimation starts from the given values
+            evals = _evaluate(model, staged, True)
+            theta = staged
+        except ModelEvaluationError as exc:
+            stage_notes.append(f"the staged start is left: the full model cannot be evaluated where it "
+                               f"ended ({exc}); the estimation starts from the given values")
         sse, cnt = residual_sums(evals, nch)
     # the screen before the iterations also holds what looks undetermined there, which keeps a
     # parameter the data hardly see from wandering to a bound on the way; the screen at the
@@ -540,8 +569,10 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
     st, holds = _screen(problem, Structure(problem, requested), evals, channel_variances(sse, cnt), opt,
                         loose=True)
     if not st.free.any():
-        raise ValueError(f"{problem.source}: no identifiable free parameter left; see the confounding "
-                         "report: " + "; ".join(", ".join(h.confounding.parameters) for h in holds))
+        return _failed(problem, theta, t0, "no free parameter is determined by the data: "
+                       + "; ".join(f"{h.kind}: {', '.join(h.confounding.parameters[:12])}" for h in holds),
+                       "fly maneuvers that excite the parameters asked for, or fix them in the problem file",
+                       Status.UNDETERMINED)
     held = requested & ~st.free
     stage_notes += _restore_held(model, theta, start, held)
     evals = _evaluate(model, theta, True)
@@ -588,19 +619,20 @@ def _restore_held(model: Model, theta: np.ndarray, start: np.ndarray, held: np.n
     return []
 
 
-def _failed(problem: Problem, theta: np.ndarray, t0: float, why: str, advice: str) -> EstimationResult:
-    """A result for an estimation that could not run at all (the model fails at the start)."""
+def _failed(problem: Problem, theta: np.ndarray, t0: float, why: str, advice: str,
+            status: Status = Status.MODEL_ERROR) -> EstimationResult:
+    """A result for an estimation that could not run (the model fails, nothing is determined)."""
     n = len(problem.parameters)
     nan = np.full(n, np.nan)
     requested = problem.parameters.free_mask
     return EstimationResult.build(
         problem=problem, values=theta, std_crb=nan, std_colored=nan, correlation_keys=(),
         correlation=np.zeros((0, 0)), R={}, residuals=(), iterations=0, cost_history=(),
-        status=Status.MODEL_ERROR, message=why, confounding=(), elapsed_s=time.perf_counter() - t0,
+        status=status, message=why, confounding=(), elapsed_s=time.perf_counter() - t0,
         free_estimated=np.zeros(n, dtype=bool),
         state=tuple("fixed" if not f else "not estimated" for f in requested),
         state_reason=tuple("" if not f else "the estimation failed" for f in requested),
-        findings=(Finding("model_error", Severity.FAILURE, why, advice),),
+        findings=(Finding(status.name.lower(), Severity.FAILURE, why, advice),),
     )
 
 
@@ -616,20 +648,39 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     cov_G, cov_L, unident, correlated = _covariance(N, st, problem, opt)
     std = _std_of(st, cov_G, cov_L, len(keys))
     confounding = [h.confounding for h in holds]
-    for conf, _ in unident:  # only after the last rounds' limit: reported, deviations NaN
+    # a set still unidentifiable here (the screen's rounds ran out): no deviation means anything
+    unresolved = np.zeros(len(keys), dtype=bool)
+    for conf, _ in unident:
         confounding.append(conf)
-        std[[ps.index(k) for k in conf.parameters if k in ps]] = np.nan
+        unresolved[[ps.index(k) for k in conf.parameters]] = True
+    std[unresolved] = np.nan
     dg = np.sqrt(np.maximum(np.diag(cov_G), 1e-300))
     corr_G = cov_G / np.outer(dg, dg)
     correlated = correlated + _high_correlations(corr_G, [keys[i] for i in st.glob], opt.correlation_warn)
     confounding += correlated
     std_col = np.full(len(keys), np.nan)
     std_imu = np.full(len(keys), np.nan)
+    corr_honest = np.full_like(corr_G, np.nan)
     imu_psd = imu_noise_psd(problem, opt.imu_noise) if opt.colored else None
+    unread = sorted(a for a, v in (imu_psd or {}).items() if not np.all(np.isfinite(v)))
+    if unread:
+        findings_pre = [Finding(
+            "imu_noise_unknown", Severity.WARNING,
+            f"the IMU noise level could not be read off the data of {', '.join(unread)} (every maneuver "
+            "shorter than 64 samples): the honest deviations leave the IMU noise out, and the IMU "
+            "biases' and initial conditions' deviations may be several times too small",
+            "give the IMU's noise densities (SolverOptions.imu_noise: datasheet random walks, squared, SI)")]
+    else:
+        findings_pre = []
     if opt.colored:
-        std_col, std_imu = honest_std(model, theta, N, st, R, std, imu_psd, rank_rtol=opt.rank_rtol,
-                                      cross_channel=opt.colored_cross_channel,
-                                      spectrum=opt.colored_spectrum)
+        std_col, std_imu, cov_hon = honest_std(model, theta, N, st, R, std, imu_psd,
+                                               rank_rtol=opt.rank_rtol,
+                                               cross_channel=opt.colored_cross_channel,
+                                               spectrum=opt.colored_spectrum)
+        std_col[unresolved] = np.nan
+        std_imu[unresolved] = np.nan
+        dh = np.sqrt(np.maximum(np.diag(cov_hon), 1e-300))
+        corr_honest = cov_hon / np.outer(dh, dh)
     # what each parameter is: estimated, on a bound, held (why) or fixed
     state, reason = [], []
     why = {i: h for h in holds for i in h.params}
@@ -645,7 +696,13 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
                            "undetermined": "undetermined: its Cramér-Rao deviation exceeds half its "
                                            "allowed range",
                            "unidentifiable": "unidentifiable: " + (h.confounding.detail if h else "")
-                           }.get(h.kind if h else "", "held"))
+                           }.get(h.kind if h else "", "held")
+                          + ("" if theta[i] == start[i] else "; held where the estimation left it, not at "
+                             "its start value (the model cannot be evaluated there)"))
+        elif unresolved[i]:
+            state.append("unidentifiable")
+            reason.append("unidentifiable at the solution: " + next(c.detail for c, _ in unident
+                                                                   if p.key in c.parameters))
         elif theta[i] <= st.lo[i] + tiny[i] or theta[i] >= st.hi[i] - tiny[i]:
             state.append("on_bound")
             side = "lower" if theta[i] <= st.lo[i] + tiny[i] else "upper"
@@ -658,13 +715,15 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     informs = {keys[g]: {problem.maneuvers[k].id for k in range(len(problem.maneuvers))
                          if N.HGL[k].shape[1] and np.any(N.HGL[k][j] != 0.0)}
                for j, g in enumerate(st.glob)}
-    findings = _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs)
+    findings = findings_pre + _parameter_findings(problem, holds, unident, correlated, state, reason, opt,
+                                                  informs)
     if imu_psd is not None and np.isfinite(std_imu).any():
         inflation = np.where(st.free, np.sqrt(1.0 + (std_imu / np.where(std > 0, std, np.nan)) ** 2), np.nan)
         worst = int(np.nanargmax(inflation)) if np.isfinite(inflation).any() else -1
-        levels = "; ".join(f"{a}: accelerometers {np.sqrt(v[:3]).max():.2g} m/s/sqrt(s), gyros "
-                           f"{np.degrees(np.sqrt(v[3:])).max() * 60.0:.2g} deg/sqrt(h)"
-                           for a, v in imu_psd.items())
+        levels = "; ".join(
+            f"{a}: accelerometers {np.nan_to_num(np.sqrt(v[:3])).max():.2g} m/s/sqrt(s), gyros "
+            f"{np.degrees(np.nan_to_num(np.sqrt(v[3:]))).max() * 60.0:.2g} deg/sqrt(h)"
+            for a, v in imu_psd.items())
         source = "from the data" if opt.imu_noise == "estimate" else "as given"
         most = (f", most to {keys[worst]} ({inflation[worst]:.2g} x its Cramér-Rao deviation)"
                 if worst >= 0 else "")
@@ -690,9 +749,9 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
             "a fault in the data or a wrong minimum stops the iteration too"))
     diagnosis_table, outliers = None, {}
     if opt.diagnose:
-        from estimator.diagnostics import diagnose
+        from estimator.diagnostics import DiagnosticOptions, diagnose
 
-        diagnosis = diagnose(*_fit_traces(problem, evals, st))
+        diagnosis = diagnose(*_fit_traces(problem, evals, st), DiagnosticOptions(g_mps2=problem.g_mps2))
         # the data's findings first: a fault in the data explains the parameters' findings, not the
         # other way round (findings are shown by severity, in this order within one)
         findings = list(diagnosis.findings) + findings
@@ -703,12 +762,13 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         std_imu_noise=std_imu, imu_noise_psd=imu_psd,
         problem=problem, values=theta, std_crb=std, std_colored=std_col,
         correlation_keys=tuple(keys[i] for i in st.glob), correlation=corr_G,
+        correlation_colored=corr_honest,
         R=dict(zip((c.name for c in problem.channels), R, strict=True)),
         residuals=_stats(problem, evals), iterations=iterations, cost_history=tuple(history),
         status=it.status, message=message, confounding=tuple(confounding),
         elapsed_s=time.perf_counter() - t0, free_estimated=st.free.copy(), state=tuple(state),
         state_reason=tuple(reason), findings=tuple(findings), verdict=verdict,
-        diagnostics=diagnosis_table, outliers=outliers,
+        fit_quality=diagnosis_table, outliers=outliers,
     )
 
 
@@ -723,7 +783,7 @@ def _parameter_findings(problem, holds, unident, correlated, state, reason, opt,
     for h in holds:
         if h.kind != "unidentifiable":
             continue
-        members = {k for k in h.confounding.parameters if k != "..."}
+        members = set(h.confounding.parameters)
         held = [ps.parameters[i].key for i in h.params]
         for g in groups:
             if g[0] & members:
@@ -824,7 +884,7 @@ def _fit_traces(problem: Problem, ev: Evaluation, st: Structure):
             fin = np.isfinite(meas)
             # the channel model's own free parameters (not the state equations')
             params = tuple(dict.fromkeys(keys[i] for i in ce.colmap[b]
-                                         if st.free[i] and ps.parameters[i].name not in _STATE_FAMILIES))
+                                         if st.free[i] and ps.parameters[i].name not in STATE_PARAMS))
             fits.append(ChannelFit(
                 maneuver=m.id, channel=ch.name, flow=ch.sensor is not None, t_s=m.t_s[rows],
                 z=ce.z[r0:r1], y=ce.y[r0:r1], measured_t_s=m.t_s[fin], measured=meas[fin], unit=ch.unit,
@@ -845,9 +905,6 @@ def _fit_traces(problem: Problem, ev: Evaluation, st: Structure):
                                      omega_rps=m.omega_rps, states=X, euler_measured_rad=eul))
     return fits, inputs
 
-
-_STATE_FAMILIES = frozenset({"u0", "v0", "w0", "phi0", "theta0", "psi0", "h0",
-                             "dax", "day", "daz", "dp", "dq", "dr"})
 
 
 def _covariance(N: NormalEquations, st: Structure, problem: Problem, opt: SolverOptions):

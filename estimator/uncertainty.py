@@ -47,7 +47,8 @@ def _one_sided_weights(L: int) -> np.ndarray:
 
 def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structure, R: np.ndarray,
                std_crb: np.ndarray, imu_psd: dict[str, np.ndarray] | None, *, rank_rtol: float,
-               cross_channel: bool = True, spectrum: str = "ar") -> tuple[np.ndarray, np.ndarray]:
+               cross_channel: bool = True, spectrum: str = "ar"
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r"""Honest standard deviations: coloured, cross-correlated residuals and the IMU's noise.
 
     **Coloured residuals** (Morelli & Klein 1997, matrix form). The middle matrix of maneuver ``k``
@@ -94,7 +95,8 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
 
     Returns
     -------
-    (honest deviations, the IMU noise's share alone), (P,) each, SI, NaN where not estimated.
+    (honest deviations, the IMU noise's share alone): (P,) each, SI, NaN where not estimated; and
+    the honest covariance of the global parameters (G, G), in ``st.glob`` order.
     """
     nparam = theta.size
     _, _, Sinv, Ainv = lm_solve(N, 0.0, rank_rtol)
@@ -133,7 +135,7 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
         if Cp is not None:
             for k, Sk in zip(chunk, model.state_sensitivities(theta, chunk), strict=True):
                 m = p.maneuvers[k]
-                q = np.sqrt(imu_psd[m.aircraft] / m.dt_s)
+                q = np.sqrt(np.nan_to_num(imu_psd[m.aircraft]) / m.dt_s)  # unknown: left out
                 dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
                 V[k] = np.zeros((m.n, union[k].size, 6))
 
@@ -208,12 +210,19 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
                 Yv = np.ascontiguousarray(V.pop(k).transpose(1, 0, 2)).reshape(u.size, -1)
                 Cp.add_blocks((Yv @ Yv.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
                               np.array([k]), 1.0)
-    std_mk = sandwich_std(N, st, C, Sinv, Ainv, nparam)
-    std_imu = (sandwich_std(N, st, Cp, Sinv, Ainv, nparam) if Cp is not None
-               else np.where(np.isfinite(std_mk), 0.0, np.nan))
+    std_mk, cov_mk = sandwich_std(N, st, C, Sinv, Ainv, nparam)
+    if Cp is not None:
+        std_imu, cov_imu = sandwich_std(N, st, Cp, Sinv, Ainv, nparam)
+    else:
+        std_imu, cov_imu = np.where(np.isfinite(std_mk), 0.0, np.nan), np.zeros_like(cov_mk)
     floor = np.where(np.isfinite(std_crb), std_crb, 0.0)
     honest = np.sqrt(np.maximum(std_mk, floor) ** 2 + std_imu ** 2)
-    return honest, std_imu
+    # the globals' honest covariance: the coloured one with each deviation raised to its floor
+    # (correlations kept), plus the IMU noise's
+    g = st.glob
+    raise_to = np.maximum(1.0, floor[g] / np.where(std_mk[g] > 0, std_mk[g], np.inf))
+    cov_g = raise_to[:, None] * cov_mk * raise_to[None, :] + cov_imu
+    return honest, std_imu, cov_g
 
 
 def _union_covariance(st: Structure, Sinv: np.ndarray, Ainv: list[np.ndarray], N: NormalEquations, k: int,
@@ -245,13 +254,19 @@ def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: fl
     Each channel's residual periodogram is corrected for the fit's leverage ``h_c(f)`` (capped at
     0.95: the few bins the parameters empty almost completely carry no information either way)
     before its model is fitted; full-rate channels share a smoothed innovation coherence (with
-    ``cross``), a channel recorded every ``s``-th sample is modelled on its own samples and alone.
+    ``cross``), a channel recorded every ``s``-th sample is modelled on its own samples and alone;
+    samples missing from a channel's cost (excluded outliers) are zeros of its series.
     """
     nf = L // 2 + 1
     models, alone = [], []
     for _, pos, F, Ef, rows, e, w in items:
+        # the channel's spacing on the grid (4 for 10 Hz in 40 Hz); gaps of whole spacings (samples
+        # the robust option excluded) leave zeros in the series: the correlation estimate loses
+        # their few pairs, nothing more
         steps = np.diff(rows)
-        stride = int(steps[0]) if steps.size and np.all(steps == steps[0]) else 0
+        stride = int(steps.min()) if steps.size else 1
+        if steps.size and np.any(steps % stride):
+            stride = 0
         nc = rows.size
         if stride == 0:  # irregular samples: no correlation model, the residual variance
             models.append(ARModel(np.zeros(0), float(e @ e) / nc, 1))
@@ -275,7 +290,11 @@ def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: fl
         U = np.zeros((n, len(together)))
         for t, i in enumerate(together):
             rows, e, m = items[i][4], items[i][5], models[i]
-            U[rows[m.order:], t] = m.innovations(e)  # the samples in the cost are contiguous
+            x = np.zeros(n)
+            x[rows] = e
+            u = m.innovations(x)  # on the grid: a gap's zeros stand in for its missing samples
+            ok = rows[rows >= m.order]
+            U[ok, t] = u[ok - m.order]
         gam = innovation_cross_spectrum(U, np.array([models[i].innovation_var for i in together]), L, dt_s)
         lam, vec = np.linalg.eigh(gam)  # per frequency
         Lam = vec * np.sqrt(np.maximum(lam, 0.0))[:, None, :]  # (nf, Ct, Ct)
@@ -315,18 +334,19 @@ def imu_noise_psd(problem: Problem, imu_noise: str | tuple[float, float]) -> dic
             u = np.hstack([m.accel_imu_mps2, m.omega_rps])
             per.setdefault(m.aircraft, []).append([white_noise_psd(u[:, j], m.dt_s) for j in range(6)])
         # one IMU per aircraft: the median over its maneuvers is robust to one whose sharp inputs
-        # leak into the band
-        return {a: np.nan_to_num(np.nanmedian(np.array(v), axis=0)) for a, v in per.items()}
+        # leak into the band; NaN where no maneuver was long enough to read it (the caller says so)
+        with np.errstate(all="ignore"):
+            return {a: np.nanmedian(np.array(v), axis=0) for a, v in per.items()}
     accel, gyro = imu_noise
     psd = np.array([accel] * 3 + [gyro] * 3, dtype=float)
     return {m.aircraft: psd for m in problem.maneuvers}
 
 
 def sandwich_std(N: NormalEquations, st: Structure, C: NormalEquations, Sinv: np.ndarray,
-                 Ainv: list[np.ndarray], nparam: int) -> np.ndarray:
+                 Ainv: list[np.ndarray], nparam: int) -> tuple[np.ndarray, np.ndarray]:
     """Standard deviations of ``M^-1 C M^-1`` for a middle matrix ``C`` gathered like the normal
     equations (global, coupling and per-maneuver local blocks), through the Schur structure of
-    ``M`` (``S^-1`` and the local blocks' inverses ``A_k^-1``)."""
+    ``M`` (``S^-1`` and the local blocks' inverses ``A_k^-1``); and its global block (G, G)."""
     CGG = C.HGG.copy()
     per_k = []
     for k, lidx in enumerate(st.local_of_arr):
@@ -350,4 +370,4 @@ def sandwich_std(N: NormalEquations, st: Structure, C: NormalEquations, Sinv: np
         cross_k = Ai @ CLG @ Sinv @ Bk.T
         cov = Ai @ CLL @ Ai - cross_k - cross_k.T + Bk @ covG @ Bk.T
         std[st.local_of_arr[k]] = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    return std
+    return std, covG

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import pandas as pd
 
@@ -37,6 +37,7 @@ class Status(enum.IntEnum):
     ITERATION_LIMIT = 0, "not converged: iteration limit reached"
     STALLED = -2, "not converged: no step decreases the cost, yet the Gauss-Newton step is not negligible"
     MODEL_ERROR = -3, "failed: the model cannot be evaluated at these parameter values"
+    UNDETERMINED = -4, "failed: no free parameter is determined by the data"
 
     def __new__(cls, value: int, text: str):
         obj = int.__new__(cls, value)
@@ -71,6 +72,11 @@ class Verdict(enum.Enum):
     @property
     def success(self) -> bool:
         return self.code > 0
+
+    @property
+    def rank(self) -> int:
+        """0 for the best verdict (success), 2 for the worst (failure): for choosing between runs."""
+        return {1: 0, 2: 1, -1: 2}[self.code]
 
 
 @dataclass(frozen=True)
@@ -129,19 +135,17 @@ def findings_frame(findings: Sequence[Finding]) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=cols)
 
 
-@dataclass(frozen=True)
-class VerdictReport:
-    """A verdict with its findings, for whatever produced one (an estimation, a workflow)."""
+def reasons(findings: Iterable[Finding]) -> list[Finding]:
+    """The warnings and failures, most severe first (the order within a severity kept: the data's
+    findings before the parameters')."""
+    return sorted((f for f in findings if f.severity >= Severity.WARNING), key=lambda f: -int(f.severity))
 
-    verdict: Verdict
-    findings: tuple[Finding, ...] = field(default=())
 
-    def summary(self, max_lines: int = 12) -> str:
-        """The verdict and its warnings and failures, most severe first, one line each."""
-        shown = [f for f in sorted(self.findings, key=lambda f: -int(f.severity))
-                 if f.severity >= Severity.WARNING]
-        lines = [f"verdict: {self.verdict.text}"]
-        lines += [f"  {f.text()}" for f in shown[:max_lines]]
-        if len(shown) > max_lines:
-            lines.append(f"  ... and {len(shown) - max_lines} more (all in findings)")
-        return "\n".join(lines)
+def verdict_text(verdict: Verdict, findings: Iterable[Finding], max_lines: int = 15) -> str:
+    """``VERDICT: NAME — text`` and one line per warning or failure (the rest counted)."""
+    shown = reasons(findings)
+    lines = [f"VERDICT: {verdict.name.replace('_', ' ')} — {verdict.text}"]
+    lines += [f"  {f.text()}" for f in shown[:max_lines]]
+    if len(shown) > max_lines:
+        lines.append(f"  ... {len(shown) - max_lines} more in findings.csv")
+    return "\n".join(lines)

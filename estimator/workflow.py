@@ -198,11 +198,19 @@ class WorkflowResult:
         """Every finding of the workflow, most severe first, with its stage."""
         return findings_frame(self.findings)
 
+    @property
+    def usable(self) -> tuple[Stage, ...]:
+        """The final and gear-down estimations whose verdict is a success: only they feed Table 2
+        and the correction tables (a failed one is named among the findings)."""
+        return tuple(st for st in (*self.final, *self.gear_down) if st.result.success)
+
     def table_updates(self) -> pd.DataFrame:
-        """Every table of the final and gear-down estimations: table, breakpoint_deg, mach, gear,
-        value, std (display units), unit; ``f1``'s value is its update ``f1(alpha) - alpha``."""
+        """Every table value of the usable final and gear-down estimations: table, breakpoint_deg,
+        mach, gear, value, std (the honest deviation; +-1 sigma error bars), std_crb, unit, state
+        and reason (estimated, on_bound, held ...: a held value is its start value, not an
+        estimate), verdict (of its estimation); ``f1``'s value is its update ``f1(alpha) - alpha``."""
         rows = []
-        for st in (*self.final, *self.gear_down):
+        for st in self.usable:
             df = st.result.to_pandas()
             for name, spec in st.problem.parameters.specs.items():
                 if spec.kind != "table":
@@ -217,14 +225,19 @@ class WorkflowResult:
                     identity = bp[e] if name == self.identity_table else 0.0
                     rows.append({"table": name, "breakpoint_deg": float(bp[e]), "mach": st.mach,
                                  "gear": "down" if st.gear_down else "up", "value": value - identity,
-                                 "std": float(r["std_crb_display"]), "free": bool(r["free"]),
-                                 "unit": r["display_unit"]})
+                                 "std": float(r["std_colored_display"]),
+                                 "std_crb": float(r["std_crb_display"]),
+                                 "unit": r["display_unit"], "state": r["state"], "reason": r["reason"],
+                                 "verdict": st.result.verdict.name})
         return pd.DataFrame(rows)
 
-    def correction_tables(self) -> dict[str, pd.DataFrame]:
-        """Per table, its values (display units, f1 as f1 itself) with breakpoints as rows and
-        one column per bin and gear position: ready for the flight-control team."""
-        out: dict[str, pd.DataFrame] = {}
+    def correction_tables(self) -> dict[str, tuple[pd.DataFrame, pd.DataFrame]]:
+        """Per table, ``(values, states)``: breakpoints as rows, one column per bin and gear
+        position, display units (f1 as f1 itself), ready for the flight-control team. A value the
+        data did not determine (held at its start value) or that sits on its bound is left empty
+        (NaN) in ``values``; ``states`` says, cell by cell, estimated / held / on_bound and why is
+        in ``table_updates``."""
+        out: dict[str, tuple[pd.DataFrame, pd.DataFrame]] = {}
         upd = self.table_updates()
         if upd.empty:
             return out
@@ -232,9 +245,13 @@ class WorkflowResult:
             g = g.copy()
             if name == self.identity_table:
                 g["value"] = g["value"] + g["breakpoint_deg"]
+            g.loc[g["state"] != "estimated", "value"] = np.nan
             g["column"] = [f"M{m:.2f} gear {gear}" for m, gear in zip(g["mach"], g["gear"], strict=True)]
-            t = g.pivot_table(index="breakpoint_deg", columns="column", values="value", sort=False)
-            out[str(name)] = t[sorted(t.columns, key=lambda c: (c.endswith("down"), c))]
+            vals = g.pivot_table(index="breakpoint_deg", columns="column", values="value", sort=False,
+                                 dropna=False)
+            states = g.pivot(index="breakpoint_deg", columns="column", values="state")
+            order = sorted(states.columns, key=lambda c: (c.endswith("down"), c))
+            out[str(name)] = (vals.reindex(index=states.index, columns=order), states[order])
         return out
 
 
@@ -337,6 +354,16 @@ def _stage_label(st: Stage) -> str:
     return f"Mach {st.mach:.2f} gear {'down' if st.gear_down else 'up'}, {st.name}"
 
 
+def _stage_failed(st: Stage, left_out_of: str) -> Finding:
+    """The workflow's failure for a stage whose estimation failed: which, why, and what it misses."""
+    why = "; ".join(f.message for f in st.result.failures[:3]) or st.result.message
+    return Finding(
+        "bin_failed", Severity.FAILURE,
+        f"the Mach {st.mach:.2f} gear-{'down' if st.gear_down else 'up'} bin's estimation failed "
+        f"({st.name}: {why}); it is left out of {left_out_of}",
+        "read its findings, mend the data or the problem and run the workflow again")
+
+
 def _stage_findings(stages: Sequence[Stage]) -> list[Finding]:
     """Every stage's warnings and failures, each message prefixed with its stage."""
     out = []
@@ -389,12 +416,7 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     findings: list[Finding] = []
     failed = [st for st in first if not st.result.success]
     for st in failed:
-        why = "; ".join(f.message for f in st.result.failures[:3]) or st.result.message
-        findings.append(Finding(
-            "bin_failed", Severity.FAILURE,
-            f"the Mach {st.mach:.2f} gear-up bin's estimation failed ({why}); it is left out of the "
-            "vane-bias apportionment and of the later steps", "read its findings, mend the data or the "
-            "problem and run the workflow again"))
+        findings.append(_stage_failed(st, "the vane-bias apportionment and the later steps"))
     first_ok = tuple(st for st in first if st.result.success)
     # ---- step 3
     vb_rows, inst = [], pd.DataFrame()
@@ -423,7 +445,10 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     if has_vanes and per_bin:
         ref = min(per_bin, key=lambda m: (abs(m - opt.reference_mach), m))
         if abs(ref - opt.reference_mach) > 1e-9:
-            notes.append(f"no Mach {opt.reference_mach} bin: installation biases taken at Mach {ref:.2f}")
+            why = ("its estimation failed" if any(abs(st.mach - opt.reference_mach) < 1e-9 for st in failed)
+                   else "there is none")
+            notes.append(f"no Mach {opt.reference_mach} bin to take the installation biases from ({why}): "
+                         f"taken at Mach {ref:.2f}")
         rows = []
         all_ac = sorted({m.aircraft for m in problem.maneuvers})
         for a in all_ac:
@@ -472,16 +497,23 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     gear = []
     if len(down):
         _say(opt, "step 5: gear-down maneuvers, installation biases fixed")
+    final_ok = [st for st in final if st.result.success]
+    for st in final:
+        if not st.result.success:
+            findings.append(_stage_failed(st, "Table 2 and the correction tables"))
     for b, g in down.groupby("bin"):
-        if not final:
+        if not final_ok:
             notes.append(f"Mach {b:.2f} gear down: no gear-up bin succeeded to start it from; left out")
             continue
-        near = min(final, key=lambda s: (abs(s.mach - b), s.mach))
+        near = min(final_ok, key=lambda s: (abs(s.mach - b), s.mach))
         start = dict(zip(near.result.parameters.keys, near.result.values, strict=True))
         gear.append(_run(problem, g["id"].tolist(), "gear down", float(b), True, opt,
                          values={**start, **fixed_bias}, free=free4))
-    # ---- step 6
-    acc, growth, limit = _accuracy(final, tuple(gear), opt)
+    for st in gear:
+        if not st.result.success:
+            findings.append(_stage_failed(st, "Table 2 and the gear-down correction tables"))
+    # ---- step 6: from the estimations that succeeded only
+    acc, growth, limit = _accuracy(tuple(final_ok), tuple(st for st in gear if st.result.success), opt)
     vb = pd.DataFrame(vb_rows)
     findings += _stage_findings((*first, *final, *gear))
     return WorkflowResult(maneuvers=bins, first=first, final=final, gear_down=tuple(gear), vane_bias=vb,

@@ -404,7 +404,11 @@ def point_metrics(results: Sequence[ReplicationResult], factor: Factor,
     m: dict[str, Any] = {"n_ok": len(ok), "n_failed": len(failed)}
     why: dict[str, int] = {}
     for r in failed:
-        text = r.message.split(":")[0] if r.message else str(r.status)
+        # what failed it: the estimator's first failure finding (turbulence, not converged, ...), or
+        # the start of the message of a replication that raised
+        codes = [code for sev, code, _ in r.findings if sev == "failure"]
+        raised = r.message.split(":")[0] if r.message else str(r.status)
+        text = codes[0].replace("_", " ") if codes else raised
         why[text] = why.get(text, 0) + 1
     m["failures"] = ", ".join(f"{n} {w}" for w, n in why.items())
     acc = pd.DataFrame([group_accuracy(r) for r in ok], columns=list(SENSOR_GROUPS))

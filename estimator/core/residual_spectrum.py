@@ -164,8 +164,10 @@ def innovation_cross_spectrum(U: np.ndarray, variances: np.ndarray, L: int, dt_s
     P = Fu[:, :, None] * np.conj(Fu[:, None, :])  # (nf, C, C), rank one per frequency
     nf = P.shape[0]
     h = max(1, int(round(0.5 * bandwidth_hz * L * dt_s)))
-    # reflect: the periodogram of a real series is conjugate-symmetric about 0 and Nyquist
-    ext = np.concatenate([np.conj(P[h:0:-1]), P, np.conj(P[-2:-h - 2:-1])], axis=0)
+    # reflect: the periodogram of a real series is conjugate-symmetric about 0 and about L/2 (the
+    # last bin is Nyquist itself for an even L; for an odd L the mirror starts at the last bin)
+    top = np.conj(P[-2:-h - 2:-1]) if L % 2 == 0 else np.conj(P[-1:-h - 1:-1])
+    ext = np.concatenate([np.conj(P[h:0:-1]), P, top], axis=0)
     cs = np.cumsum(ext, axis=0)
     cs = np.concatenate([np.zeros((1, C, C), dtype=complex), cs], axis=0)
     K = (cs[2 * h + 1:2 * h + 1 + nf] - cs[:nf]) / (2 * h + 1)
