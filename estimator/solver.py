@@ -422,6 +422,14 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
     EstimationResult with estimates, Cramér-Rao and coloured-residual deviations, correlations,
     residual statistics, the solver status, the fit-quality findings and the verdict.
 
+    Raises
+    ------
+    ValueError
+        For a problem that cannot be estimated as asked: no free parameter, or no channel with data
+        (the message says which and how to fix it). Everything that goes wrong in the estimation
+        itself — the model leaving its domain, nothing determined, no convergence, a fault in the
+        data — is a result with a failure verdict, not an exception.
+
     Notes
     -----
     Runs with one BLAS thread (restored on return): every matrix here is small, and waking

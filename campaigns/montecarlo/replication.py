@@ -36,6 +36,7 @@ from estimator.io import problem_from_dataset
 from estimator.problem import Problem
 from estimator.result import STATUS_TEXT, EstimationResult
 from estimator.solver import SolverOptions, estimate
+from estimator.verdict import Verdict
 from estimator.workflow import RAD2DEG, apportion, stage_residuals, three_sigma, vane_biases
 from synth.campaign import software_versions
 from synth.dataset import FORMAT, FORMAT_VERSION, write_maneuver, write_manifest
@@ -51,7 +52,7 @@ from .scenario import ManeuverDraw, Scenario, draws_table
 COLUMNS = ("replication", "record", "name", "family", "kind", "unit", "estimate", "truth", "error",
            "std_crb", "std_colored", "z_crb", "z_colored", "mean", "std", "three_sigma", "n")
 #: the estimator's verdict codes (:class:`estimator.verdict.Verdict`) -> their names, for tables
-VERDICT_NAMES = {1: "success", 2: "success with warnings", -1: "failure"}
+VERDICT_NAMES = {v.code: v.name.lower().replace("_", " ") for v in Verdict}
 #: maneuver keys: one per (job, segment), as synth.campaign numbers them (so the noise of a
 #: maneuver does not depend on which other maneuvers are flown)
 _SEGMENTS_PER_JOB = 64
