@@ -727,6 +727,13 @@ def conclusions(df: pd.DataFrame, table: pd.DataFrame) -> str:
                      + ").")
     else:
         parts.append("No fit ended with a failure verdict.")
+    warned = ok[ok["judged_verdict"] == "SUCCESS_WITH_WARNINGS"]
+    if len(warned):
+        why = sorted({f for x in warned["judged_findings"] if isinstance(x, str) for f in x.split("; ") if f})
+        parts.append(f"{len(warned)} successes carry warnings" + (f" ({', '.join(why)})" if why else "")
+                     + "; the reference fits' findings: " + (", ".join(sorted(
+                         {f for x in ok["reference_findings"] if isinstance(x, str) for f in x.split("; ")
+                          if f})) or "none") + ".")
     if len(true):
         d = true["dtheta_max_sigma"].to_numpy(dtype=float)
         close = int(np.sum(d <= PARAM_TOL_SIGMA))
