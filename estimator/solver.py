@@ -714,7 +714,8 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         elif theta[i] <= st.lo[i] + tiny[i] or theta[i] >= st.hi[i] - tiny[i]:
             state.append("on_bound")
             side = "lower" if theta[i] <= st.lo[i] + tiny[i] else "upper"
-            reason.append(f"on its {side} bound {theta[i]:.6g} {p.unit}: the data push it beyond; the "
+            unit = "" if p.unit in ("", "1") else f" {p.unit}"  # "0.5", not "0.5 1"
+            reason.append(f"on its {side} bound {theta[i]:.6g}{unit}: the data push it beyond; the "
                           "estimate is the bound")
         else:
             state.append("estimated")
