@@ -763,7 +763,17 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         diagnosis = diagnose(*_fit_traces(problem, evals, st), DiagnosticOptions(g_mps2=problem.g_mps2))
         # the data's findings first: a fault in the data explains the parameters' findings, not the
         # other way round (findings are shown by severity, in this order within one)
-        findings = list(diagnosis.findings) + findings
+        # parameters on a bound that can cause a residual finding rather than follow from it: a
+        # channel's time delays, and the state equations' (IMU biases, initial conditions) of the
+        # finding's maneuver. Not tables or scales: gusts push those onto their bounds themselves.
+        on_bound: dict[str, list[str]] = {}
+        for i, s in enumerate(state):
+            p = ps.parameters[i]
+            if s == "on_bound" and p.name in STATE_PARAMS:
+                on_bound.setdefault(p.instance, []).append(p.key)
+            elif s == "on_bound" and p.kind == "time_delay":
+                on_bound.setdefault("*", []).append(p.key)
+        findings = [_beside_bounds(f, on_bound) for f in diagnosis.findings] + findings
         diagnosis_table, outliers = diagnosis.table, dict(diagnosis.outliers)
     verdict = judge(it.status, findings)
     message = it.message
@@ -779,6 +789,33 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         state_reason=tuple(reason), findings=tuple(findings), verdict=verdict,
         fit_quality=diagnosis_table, outliers=outliers,
     )
+
+
+#: Residual patterns a parameter stopped at its bound produces as well as the data's own faults.
+_BOUND_MIMICS = frozenset({"turbulence", "misfit", "scale_error", "noise_floor", "coloured"})
+
+
+def _beside_bounds(f: Finding, on_bound: dict[str, list[str]]) -> Finding:
+    """A residual finding whose channels' parameters sit on a bound names them as a possible cause.
+
+    A parameter the data push beyond its bound leaves exactly the residual it could not absorb: flow
+    delays of 400 ms against bounds of +-300 ms leave coloured flow residuals common to every sensor,
+    which read as turbulence; IMU biases beyond theirs leave kinematic misfits (planning study (c)).
+    The finding keeps its severity; it now says the bound may be the cause, and to widen it before
+    blaming the air or the sensor. ``on_bound``: maneuver id -> its state-equation parameters on a
+    bound, ``"*"`` -> the time delays on a bound.
+    """
+    hit = [k for k in f.parameters if k in on_bound.get("*", ())] + list(on_bound.get(f.maneuver or "", ()))
+    if f.code not in _BOUND_MIMICS or not hit:
+        return f
+    names = ", ".join(hit)
+    return replace(
+        f, message=f"{f.message}; or the bound{'s' if len(hit) > 1 else ''} of {names}, where "
+        + ("the estimates stopped: the data push them beyond" if len(hit) > 1 else
+           "the estimate stopped: the data push it beyond"),
+        advice=f"if the range of {names} in the problem file is too narrow for this installation, widen "
+        f"the bounds of {names} and estimate again (a delay or IMU bias beyond its bound leaves this "
+        f"pattern too); if it stays: {f.advice}")
 
 
 def _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs) -> list[Finding]:

@@ -169,3 +169,27 @@ def test_single_wind_up_turn_sideslip_biases_are_honest_and_the_weak_points_flag
     # the nose probe's sideslip at the turn's high angle of attack: model-structure error, with time
     nose = [f for f in res.warnings if f.code == "noise_floor" and f.channel == "beta_znp"]
     assert nose and nose[0].maneuver == "m0000" and len(nose[0].t_s) == 2, codes
+
+
+def test_a_residual_finding_beside_a_delay_on_its_bound_names_the_bound():
+    """A delay the data push beyond its bound leaves the residual it could not absorb; the finding
+    on that residual names the bound as a possible cause and says to widen it if the range was too
+    narrow (planning study (c): 400-ms flow delays against bounds of +-300 ms read as turbulence)."""
+    _, specs = load_model_set("tejas")
+    flight = Flight(_truth_values(np.random.default_rng(5)), specs, tau_override={"tau_sp": 0.3})
+    prob = flight.problem(noise=NOISE, rng=np.random.default_rng(6))
+    prob = _with_bounds(prob, "tau_sp", (-0.1, 0.1))  # the side probe's true delay is 300 ms
+    res = estimate(prob)
+    row = res.to_pandas().loc["tau_sp"]
+    assert row["state"] == "on_bound", (row["state"], row["reason"])
+    assert res.verdict != Verdict.SUCCESS, res.summary()
+    # the side probe's channels leave a residual finding; each names the bound and the fix
+    side = [f for f in res.findings if f.severity >= Severity.WARNING and f.code != "on_bound"
+            and f.channel in ("alpha_zsp", "beta_zsp")]
+    assert side, res.summary(max_findings=40)
+    for f in side:
+        assert "bound of tau_sp" in f.message and "widen the bounds of tau_sp" in f.advice, f.text()
+    # no finding on a channel that tau_sp does not enter is blamed on it
+    others = [f for f in res.findings if "tau_sp" in f.message and f.code != "on_bound"
+              and f.channel not in ("alpha_zsp", "beta_zsp")]
+    assert not others, [f.text() for f in others]
