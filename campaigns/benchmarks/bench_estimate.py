@@ -9,17 +9,19 @@ problems from analytic flights (:mod:`synthetic_fpr`, next to this file: no JSBS
 memory in about a second; 32 Hz so that 70 maneuvers of 30-40 s make ~80,000 samples; every
 channel of the ``tejas`` model set; five aircraft, three with the nose probe and two with the
 boom; 13 free initial conditions and IMU biases plus the pressure-altitude scale per maneuver)
-and runs :func:`estimator.solver.estimate` with the default options, Morelli-Klein deviations
-included. Reported:
+and runs :func:`estimator.solver.estimate` with the default options: staged start, honest
+deviations (cross-channel residual spectrum, IMU noise as process noise) and fit-quality
+diagnostics included. Reported:
 
 - the machine (CPU, cores, memory, library versions);
 - the numba compile time of the estimator's kernels, cold (empty cache) and loading them from
   the on-disk cache (``cache=True``): paid once per machine, and once per process respectively,
   and excluded from the timings below (each size runs in its own process after a warm-up);
 - per problem size: maneuvers, samples, channel samples (residuals), free parameters, iterations,
-  wall time to converge (everything ``estimate`` does: screening, iterations, Cramér-Rao and
-  coloured-residual deviations, result), time per iteration, time per maneuver, the time spent
-  in the coloured-residual (Morelli-Klein) deviations, the first run's wall time, the CPU time
+  wall time to converge (everything ``estimate`` does: staged start, screening, iterations,
+  Cramér-Rao and honest deviations, diagnostics, result), time per iteration, time per maneuver,
+  the time spent in the honest deviations (:func:`estimator.uncertainty.honest_std`), the first
+  run's wall time, the CPU time
   (the estimator uses two threads on a two-core machine), and the process's peak resident
   memory (problem data included).
 
@@ -171,7 +173,7 @@ def main() -> None:
     lines += _machine()
     lines.append("data: synthetic analytic flights (campaigns/benchmarks/synthetic_fpr.py), 32 Hz, "
                  "30-40 s per maneuver, all tejas channels, white noise; default SolverOptions "
-                 "(Morelli-Klein deviations on)")
+                 "(staged start, honest deviations, diagnostics)")
     with tempfile.TemporaryDirectory() as cache:
         cold = _child(["--compile-probe"], {"NUMBA_CACHE_DIR": cache})
         warm = _child(["--compile-probe"], {"NUMBA_CACHE_DIR": cache})
@@ -205,8 +207,10 @@ def main() -> None:
         f"{r['maneuvers']}: {r['message'].split(';')[0]} ({r['estimated']} of {r['free']} free "
         "parameters estimated, the rest held as undetermined)" for r in rows)]
     lines += ["", "wall s: best of the runs, everything estimate() does (screening, iterations, "
-              "Cramér-Rao and coloured-residual deviations, result); s/iter, ms/maneuver: from it; "
-              "coloured s: the Morelli-Klein part of it; first s: the first run in the process, "
+              "Cramér-Rao and honest deviations, diagnostics, result; the staged start's iterations "
+              "not counted in iter); s/iter, ms/maneuver: from it; coloured s: the honest deviations' "
+              "part of it (cross-channel residual spectrum, IMU noise as process noise); first s: "
+              "the first run in the process, "
               "which also pays for the operating system handing out its memory page by page "
               "(slow on this virtual machine); CPU s: user + system time of the best run, both "
               "threads (less sensitive to other jobs than wall time); peak RSS: the benchmark "

@@ -653,7 +653,13 @@ def findings(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names: 
             continue
         c = compare(config, metrics, v, names)
         if c is None:
-            lines.append(f"{v.condition} at Mach {v.mach:g}: too few usable replications to compare")
+            pair = _pair(config, metrics, v)
+            runs = [] if pair is None else zip(("unsplit", "split"), pair, strict=True)
+            counts = " (" + "; ".join(
+                f"{who} {m.used}/{m.requested} usable, {m.failed} with a failure verdict or not converged, "
+                f"{m.wrong_minimum} at a wrong minimum" for who, m in runs) + ")" if pair else ""
+            lines.append(f"{v.condition.replace('_', ' ')} at Mach {v.mach:g}: too few usable replications "
+                         f"to compare{counts}")
             continue
         comparisons.append(c)
         lines.append(_clause(c, tol))
@@ -699,7 +705,14 @@ def conclusion(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names
                      f"{cold[0].wrong_minimum + cold[0].failed} of {cold[0].requested} replications "
                      f"against {cold[1].wrong_minimum + cold[1].failed} of {cold[1].requested} split")
     turbulent = [c for c in comparisons if c.condition == "turbulence" and c.misses]
-    if turbulent:
+    rejected = [p for v in config.variants if v.pieces == 1 and v.condition == "turbulence"
+                for p in [_pair(config, metrics, v)] if p is not None and not p[0].used and not p[1].used]
+    if rejected:
+        long, split = rejected[0]
+        parts.append(f"; in light turbulence the estimator rejected every fit ({long.failed} of "
+                     f"{long.requested} unsplit, {split.failed} of {split.requested} split with a failure "
+                     "verdict), as it should: no accuracy is claimed there")
+    elif turbulent:
         parts.append("; in light turbulence neither meets the desired sideslip accuracy ("
                      + ", ".join(turbulent[0].misses) + " split)")
     if robust or worse or less_info or less_accurate:

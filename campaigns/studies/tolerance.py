@@ -580,10 +580,13 @@ def _largest_change(rows: pd.DataFrame, base: Mapping[str, Any]) -> str:
 
 def _first_failure(rows: pd.DataFrame) -> tuple[list[pd.Series], pd.Series | None, list[str]]:
     """The rows that pass every requirement before the first that does not, that row and what it
-    misses (``["convergence"]`` when no estimation converged)."""
+    misses (``["convergence"]`` when no estimation succeeded, ``"verdict"`` among the sensor groups
+    when some ended with a failure verdict)."""
     passed = []
     for _, r in rows.iterrows():
-        bad = failing_groups(r) if r.get("n_ok", 0) else ["convergence"]
+        # a level holds only where the estimations succeed: failure verdicts count against it
+        bad = (failing_groups(r) + (["verdict"] if r.get("n_failed", 0) else [])
+               if r.get("n_ok", 0) else ["convergence"])
         if bad:
             return passed, r, bad
         passed.append(r)
@@ -643,13 +646,22 @@ def conclusion(factor: Factor, rows: pd.DataFrame, base: Mapping[str, Any] | Non
         else:
             text = f"{name}: already at "
         n = int(r.get("n_ok", 0) + r.get("n_failed", 0))
+        lost = [g for g in bad if g not in ("verdict", "convergence")]
         if bad == ["convergence"]:
-            text += f"{r['level']} no estimation converged ({r.get('failures', '')})"
+            text += f"{r['level']} every estimation ended with a failure verdict ({r.get('failures', '')})"
         else:
-            text += f"{r['level']}{_swept_size(factor, r)} it is lost for " + ", ".join(
-                f"{g} ({r[f'acc_{g}']:.2f} > {DESIRED_3SIGMA_DEG[g]:g} deg)" for g in bad)
-            if np.isfinite(r.get("n_pass", math.nan)):
-                text += f" ({int(r['n_pass'])} of {n} replications meet every requirement)"
+            text += f"{r['level']}{_swept_size(factor, r)} "
+            if "verdict" in bad:
+                text += (f"{int(r['n_failed'])} of {n} estimations ended with a failure verdict "
+                         f"({r.get('failures', '')})" + (", and " if lost else
+                                                         f"; the {int(r['n_ok'])} that succeeded "
+                                                         + ("meets" if r["n_ok"] == 1 else "meet")
+                                                         + " every requirement"))
+            if lost:
+                text += "it is lost for " + ", ".join(
+                    f"{g} ({r[f'acc_{g}']:.2f} > {DESIRED_3SIGMA_DEG[g]:g} deg)" for g in lost)
+                if np.isfinite(r.get("n_pass", math.nan)):
+                    text += f" ({int(r['n_pass'])} of {n} replications meet every requirement)"
         note = _bound_note(factor, r, bounds)
         base_res, res = base.get("resid_vane_deg", math.nan), r.get("resid_vane_deg", math.nan)
         grown = np.isfinite(res) and np.isfinite(base_res) and res > 1.5 * base_res
@@ -658,11 +670,11 @@ def conclusion(factor: Factor, rows: pd.DataFrame, base: Mapping[str, Any] | Non
         elif factor.swept and grown:
             text += (f"; the estimates stay inside their bounds but the fit stops in a wrong minimum (median "
                      f"vane residual 3-sigma {base_res:.2f} -> {res:.2f} deg, {int(r.get('n_ok', 0))} of {n} "
-                     "reported as converged)")
+                     "reported as a success)")
         elif not factor.swept and grown:
             text += (f"; the vane residual 3-sigma grows from {base_res:.2f} to {res:.2f} deg: the model "
                      "(no process noise) no longer fits the data")
-        elif np.isfinite(res):
+        elif np.isfinite(res) and lost:  # (a loss by failure verdicts alone was seen in the residuals)
             text += (f"; the vane residual 3-sigma stays near {res:.2f} deg (base {base_res:.2f}): an error "
                      "the fit does not see in its residuals")
         ratio, base_ratio = r.get("ratio_crb", math.nan), base.get("ratio_crb", math.nan)
@@ -677,7 +689,8 @@ def conclusion(factor: Factor, rows: pd.DataFrame, base: Mapping[str, Any] | Non
             text += (f"; at {q['level']} {note}: the values still pass because the accuracy is measured at "
                      "each channel's true lag, but that much of the timing is lost, to the bound and not to "
                      "the method")
-    partial = [q for _, q in rows.iterrows() if q.get("n_failed", 0) and q.get("n_ok", 0)]
+    partial = [q for _, q in rows.iterrows() if q.get("n_failed", 0) and q.get("n_ok", 0)
+               and (r is None or q["level"] != r["level"])]  # the first failing level is told above
     if partial:
         text += "; failed estimations: " + ", ".join(
             f"{int(q['n_failed'])} of {int(q['n_ok'] + q['n_failed'])} at {q['level']} ({q['failures']})"
@@ -687,14 +700,19 @@ def conclusion(factor: Factor, rows: pd.DataFrame, base: Mapping[str, Any] | Non
         how = vf.title.split(", ", 1)[-1]
         for _, q in vrows.iterrows():
             mine = rows[rows["level"] == q["level"]]
-            lost_here = len(mine) and (failing_groups(mine.iloc[0]) or not mine.iloc[0].get("n_ok", 0))
-            still = failing_groups(q) if q.get("n_ok", 0) else ["convergence"]
-            if lost_here and not still:
+            lost_here = len(mine) and (failing_groups(mine.iloc[0]) or not mine.iloc[0].get("n_ok", 0)
+                                       or mine.iloc[0].get("n_failed", 0))
+            groups = failing_groups(q) if q.get("n_ok", 0) else []
+            n_q, n_bad = int(q.get("n_ok", 0) + q.get("n_failed", 0)), int(q.get("n_failed", 0))
+            if lost_here and not groups and not n_bad:
                 text += (f"; {how}, every requirement holds at {q['level']}{_tightest(q)}: the loss is the "
                          "start value's (0), not the biases' size")
             elif lost_here:
                 note = _bound_note(vf, q, bounds)
-                text += (f"; {how}, at {q['level']} it is still lost for " + ", ".join(still)
+                text += (f"; {how}, at {q['level']} it is still lost" + (" for " + ", ".join(groups) if groups
+                                                                        else "")
+                         + (f" ({n_bad} of {n_q} estimations ended with a failure verdict: "
+                            f"{q.get('failures', '')})" if n_bad else "")
                          + (f" ({note})" if note else ""))
     return text + "."
 
