@@ -30,27 +30,46 @@ A campaign file::
     [flights.maneuver]               # optional extra ManeuverSpec fields for this block
     duration_s = 35.0
 
-Every maneuver gets a stable index in file order, from which its seeds derive, so the same file
-gives bit-identical data whatever the number of worker processes.
+Every maneuver gets a stable index in file order, from which its seeds derive (turbulence:
+master seed + index; every error source: ``default_rng([source seed, index * 64 + segment,
+channel])``), so the same file gives bit-identical data whatever the number of worker processes,
+and a job's data do not depend on which other jobs ran: an interrupted dataset completed with
+``fly_campaign(..., resume=True)`` is byte-identical to an uninterrupted one.
 """
 
 from __future__ import annotations
 
 import copy
 import importlib.metadata
+import json
+import multiprocessing
+import os
 import platform
+import signal
 import sys
 import tomllib
 import traceback
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from aircraft_models import Fleet, load_fleet
-from synth.dataset import FORMAT, FORMAT_VERSION, prepare_directory, write_maneuver, write_manifest
+from synth.dataset import (
+    FORMAT,
+    FORMAT_VERSION,
+    _jsonable,
+    dataset_status,
+    prepare_directory,
+    read_maneuver_metadata,
+    read_manifest_if_dataset,
+    remove_temp_files,
+    resume_command,
+    write_maneuver,
+    write_manifest,
+)
 from synth.environment import Environment
 from synth.errors import ErrorConfig
 from synth.flight import FlightError, fly_maneuver
@@ -237,7 +256,16 @@ _WORKER: dict = {}
 
 
 def _init_worker(fleet_source: str, out_dir: str, common_rate_hz: float, seed: int,
-                 local_flow_truth: str, adc_baseline: str) -> None:
+                 local_flow_truth: str, adc_baseline: str, parent_pid: int | None = None) -> None:
+    """Load the worker state; in a pool worker (``parent_pid`` given) also tie the worker's life
+    to its parent's and leave Ctrl-C to the parent."""
+    if parent_pid is not None:
+        from synth.workers import bind_to_parent
+
+        bind_to_parent(parent_pid)
+        # the terminal sends SIGINT to the whole process group: the parent alone handles it (and
+        # stops the workers), so no worker dies with a traceback of its own
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     _WORKER.update(
         fleet=load_fleet(fleet_source), out_dir=Path(out_dir), rate=common_rate_hz, seed=seed,
         truth_model=load_local_flow_truth(local_flow_truth), adc=load_adc_baseline(adc_baseline),
@@ -309,79 +337,47 @@ def _run_job(job: Job) -> JobResult:
 
 @dataclass(frozen=True)
 class FlyResult:
-    """What `fly_campaign` did: the dataset directory, its manifest, failures and timing."""
+    """What `fly_campaign` did: the dataset directory, its manifest, failures and timing.
+
+    ``flown`` is the number of jobs flown by this call (less than the campaign's on a resume).
+    """
 
     out_dir: Path
     manifest: dict
     failures: tuple[tuple[Job, str], ...]
     wall_s: float
+    flown: int = 0
 
     @property
     def ok(self) -> bool:
         return not self.failures
 
 
-def fly_campaign(
-    campaign: Campaign,
-    out_dir: str | Path,
-    *,
-    workers: int | None = None,
-    overwrite: bool = False,
-    progress: Callable[[int, int], None] | bool = False,
-) -> FlyResult:
-    """Fly every maneuver of a campaign and write the dataset.
+class FlyInterrupted(KeyboardInterrupt):
+    """`fly_campaign` stopped by Ctrl-C (or a signal turned into KeyboardInterrupt): the dataset
+    is left incomplete and can be completed with ``resume=True`` (``fpr fly --resume``)."""
 
-    Parameters
-    ----------
-    campaign : from :func:`load_campaign`.
-    out_dir : the dataset directory to create.
-    workers : worker processes (default: the number of CPUs; 1 runs in this process).
-    overwrite : replace an existing dataset at ``out_dir``.
-    progress : show a tqdm progress bar (True) or call ``progress(done, total)``.
+    def __init__(self, out_dir: Path, n_done: int, n_jobs: int):
+        self.out_dir, self.n_done, self.n_jobs = Path(out_dir), n_done, n_jobs
+        super().__init__(
+            f"interrupted: {n_done} of {n_jobs} maneuvers written to {out_dir}; resume with: "
+            f"{resume_command(out_dir)}")
 
-    Failed maneuvers (departure, controller could not hold its target) are listed in the
-    manifest's ``failures`` and in the result; the others are still written.
-    """
-    import os
-    import time
+    def __str__(self) -> str:
+        return str(self.args[0])
 
-    t0 = time.perf_counter()
-    out_dir = prepare_directory(Path(out_dir), overwrite=overwrite)
-    workers = workers or os.cpu_count() or 1
-    init_args = (campaign.fleet.source, str(out_dir), campaign.common_rate_hz, campaign.seed,
-                 campaign.local_flow_truth, campaign.adc_baseline)
-    results: list[JobResult] = []
-    bar = None
-    if progress is True:
-        from tqdm import tqdm
 
-        bar = tqdm(total=len(campaign.jobs), unit="maneuver", desc=f"fly {campaign.name}",
-                   file=sys.stderr, mininterval=0.5 if sys.stderr.isatty() else 10.0)
+def _job_files(job: Job) -> list[str]:
+    """The files a job writes: one per segment of its maneuver (see :func:`_run_job`)."""
+    n = ManeuverSpec.from_dict(job.maneuver).n_segments
+    return [f"maneuvers/m{job.index:04d}.parquet"] if n == 1 else \
+        [f"maneuvers/m{job.index:04d}s{k}.parquet" for k in range(n)]
 
-    def _tick(res: JobResult) -> None:
-        results.append(res)
-        if bar is not None:
-            bar.update(1)
-            if res.error:
-                bar.write(f"maneuver {res.index} failed: {res.error.splitlines()[0]}")
-        elif callable(progress):
-            progress(len(results), len(campaign.jobs))
 
-    if workers == 1 or len(campaign.jobs) == 1:
-        _init_worker(*init_args)
-        for job in campaign.jobs:
-            _tick(_run_job(job))
-    else:
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
-                                 initargs=init_args) as pool:
-            for res in pool.map(_run_job, campaign.jobs, chunksize=1):
-                _tick(res)
-    if bar is not None:
-        bar.close()
-    results.sort(key=lambda r: r.index)
-    jobs = {j.index: j for j in campaign.jobs}
-    failures = tuple((jobs[r.index], r.error) for r in results if r.error)
-    manifest = {
+def _manifest_header(campaign: Campaign) -> dict:
+    """Everything of the manifest but the flown maneuvers: the same before and after the flight,
+    and for an interrupted run and its resumption (no time, no timing)."""
+    return _jsonable({
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "campaign": {
@@ -417,18 +413,206 @@ def fly_campaign(
             },
         },
         "common_rate_hz": campaign.common_rate_hz,
-        "maneuvers": [e for r in results for e in r.entries],
+        "jobs": [{"job_index": j.index, "configuration": j.configuration_id, "maneuver": j.maneuver,
+                  "files": _job_files(j)} for j in campaign.jobs],
+    })
+
+
+def _normalized(obj):
+    """``obj`` as it reads back from JSON (so a manifest and a fresh header compare equal)."""
+    return json.loads(json.dumps(_jsonable(obj), sort_keys=True))
+
+
+def _check_same_campaign(out_dir: Path, stored: Mapping, header: dict) -> None:
+    """Refuse to resume ``out_dir`` with a campaign, fleet or software other than its own."""
+    fresh = _normalized(header)
+    legacy = stored.get("complete", True) is not False and "jobs" not in stored
+    diffs = []
+    for key, value in fresh.items():
+        if key not in stored and legacy:  # a dataset written before the key existed
+            continue
+        old = stored.get(key)
+        if old == value:
+            continue
+        if isinstance(old, dict) and isinstance(value, dict):
+            sub = sorted(k for k in set(old) | set(value) if old.get(k) != value.get(k))
+            if key == "software":
+                sub = [f"{k} {old.get(k)} (dataset) vs {value.get(k)} (now)" for k in sub]
+            diffs.append(f"{key}: {', '.join(sub)}")
+        else:
+            diffs.append(key)
+    if diffs:
+        raise CampaignError(
+            f"{out_dir}: cannot resume: the dataset was started with another campaign or software; "
+            f"differences in {'; '.join(diffs)}. Resume with the dataset's own campaign "
+            f"(`{resume_command(out_dir)}` reads it from the manifest), or fly this campaign into a "
+            "new --out (or replace the dataset with --overwrite)")
+
+
+def campaign_of_dataset(out_dir: str | Path) -> Campaign:
+    """The campaign a dataset (complete or interrupted) was flown from, as its manifest records it.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``out_dir`` holds no dataset manifest.
+    """
+    out_dir = Path(out_dir)
+    stored = read_manifest_if_dataset(out_dir)
+    if stored is None or "definition" not in stored.get("campaign", {}):
+        raise FileNotFoundError(
+            f"{out_dir}: no dataset to resume (no {out_dir / 'manifest.json'} written by `fpr fly` "
+            "with its campaign); give the campaign to fly it anew")
+    camp = stored["campaign"]
+    return parse_campaign(camp["definition"], source=str(camp.get("source", out_dir)))
+
+
+def _pool_context():
+    # fork on Linux: the workers are then children of this process, which bind_to_parent checks
+    # (a forkserver, the default from Python 3.14, would be their parent instead)
+    return multiprocessing.get_context("fork") if sys.platform.startswith("linux") else None
+
+
+def _stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Stop a pool now: cancel what has not started and end the running workers (their
+    half-written files are temporary ones, removed on resume or overwrite)."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
+        if proc.is_alive():
+            proc.terminate()
+    for proc in procs:
+        proc.join(timeout=5.0)
+        if proc.is_alive():
+            proc.kill()
+            proc.join(timeout=5.0)
+
+
+def fly_campaign(
+    campaign: Campaign,
+    out_dir: str | Path,
+    *,
+    workers: int | None = None,
+    overwrite: bool = False,
+    resume: bool = False,
+    progress: Callable[[int, int], None] | bool = False,
+) -> FlyResult:
+    """Fly every maneuver of a campaign and write the dataset.
+
+    Parameters
+    ----------
+    campaign : from :func:`load_campaign` (to resume: :func:`campaign_of_dataset`).
+    out_dir : the dataset directory to create.
+    workers : worker processes (default: the number of CPUs; 1 runs in this process).
+    overwrite : replace a dataset at ``out_dir`` (only the files it wrote are removed; a directory
+        holding anything else is refused).
+    resume : complete the interrupted dataset at ``out_dir``: fly only the jobs whose files are
+        missing (refused if its manifest records another campaign); the result is byte-identical to
+        an uninterrupted run. On a new or empty directory, fly the whole campaign.
+    progress : show a tqdm progress bar (True) or call ``progress(done, total)``.
+
+    Failed maneuvers (departure, controller could not hold its target) are listed in the
+    manifest's ``failures`` and in the result; the others are still written.
+
+    Raises
+    ------
+    FlyInterrupted
+        On KeyboardInterrupt (Ctrl-C): the workers are stopped, the dataset stays incomplete and
+        says so; the exception's message says how to resume.
+    FileExistsError
+        If ``out_dir`` cannot be used (see :func:`synth.dataset.prepare_directory`).
+    CampaignError
+        If ``resume`` and the dataset was started with another campaign.
+    """
+    import time
+
+    if overwrite and resume:
+        raise ValueError("overwrite and resume exclude each other: replace the dataset or complete it")
+    t0 = time.perf_counter()
+    out_dir = Path(out_dir)
+    header = _manifest_header(campaign)
+    stored = read_manifest_if_dataset(out_dir) if resume and out_dir.is_dir() else None
+    jobs = {j.index: j for j in campaign.jobs}
+    done: dict[int, list[dict]] = {}
+    if stored is not None:
+        _check_same_campaign(out_dir, stored, header)
+        # keep the manifest's own source label: the same file may be named another way today
+        header["campaign"]["source"] = stored["campaign"]["source"]
+        if stored.get("complete", True) is not False:
+            failures = tuple((jobs[f["job_index"]], f["error"]) for f in stored.get("failures", [])
+                             if f.get("job_index") in jobs)
+            return FlyResult(out_dir, stored, failures, time.perf_counter() - t0, flown=0)
+        remove_temp_files(out_dir)
+        (out_dir / "maneuvers").mkdir(exist_ok=True)
+        for index in dataset_status(out_dir, stored).done:
+            # each file carries its manifest entry: the finished jobs need not be flown again
+            done[index] = [read_maneuver_metadata(out_dir / f) for f in _job_files(jobs[index])]
+    else:
+        out_dir = prepare_directory(out_dir, overwrite=overwrite)
+        # first, before any maneuver: at every moment the directory says it is an incomplete dataset
+        write_manifest(out_dir, {**header, "complete": False, "maneuvers": [], "failures": []})
+    todo = [j for j in campaign.jobs if j.index not in done]
+    workers = max(1, min(workers or os.cpu_count() or 1, len(todo) or 1))
+    init_args = (campaign.fleet.source, str(out_dir), campaign.common_rate_hz, campaign.seed,
+                 campaign.local_flow_truth, campaign.adc_baseline)
+    results: list[JobResult] = []
+    bar = None
+    if progress is True:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(campaign.jobs), initial=len(done), unit="maneuver",
+                   desc=f"fly {campaign.name}", file=sys.stderr,
+                   mininterval=0.5 if sys.stderr.isatty() else 10.0)
+
+    def _tick(res: JobResult) -> None:
+        results.append(res)
+        if bar is not None:
+            bar.update(1)
+            if res.error:
+                bar.write(f"maneuver {res.index} failed: {res.error.splitlines()[0]}")
+        elif callable(progress):
+            progress(len(done) + len(results), len(campaign.jobs))
+
+    try:
+        if workers == 1:
+            _init_worker(*init_args)
+            for job in todo:
+                _tick(_run_job(job))
+        elif todo:
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=_pool_context(),
+                                       initializer=_init_worker, initargs=(*init_args, os.getpid()))
+            try:
+                for fut in as_completed([pool.submit(_run_job, job) for job in todo]):
+                    _tick(fut.result())
+            except BaseException:
+                _stop_pool(pool)
+                raise
+            pool.shutdown(wait=True)
+    except KeyboardInterrupt:
+        if bar is not None:
+            bar.close()
+        remove_temp_files(out_dir)
+        raise FlyInterrupted(out_dir, dataset_status(out_dir).n_done, len(campaign.jobs)) from None
+    if bar is not None:
+        bar.close()
+    flown = {r.index: r for r in results}
+    entries = [e for j in campaign.jobs
+               for e in (done[j.index] if j.index in done else flown[j.index].entries)]
+    failures = tuple((jobs[r.index], r.error) for r in sorted(results, key=lambda r: r.index) if r.error)
+    manifest = {
+        **header,
+        "complete": True,
+        "maneuvers": entries,
         "failures": [
             {"job_index": j.index, "configuration": j.configuration_id, "maneuver": j.maneuver,
              "error": err}
             for j, err in failures
         ],
-        "timing": {"fly_s_per_job": [r.elapsed_s for r in results]},
     }
-    # wall-clock timing would make two identical campaigns' manifests differ; keep it out of it
-    manifest.pop("timing")
+    # no wall-clock time or timing in the manifest: two identical campaigns, or an interrupted
+    # one and its resumption, give the same bytes
     write_manifest(out_dir, manifest)
-    return FlyResult(out_dir, manifest, failures, time.perf_counter() - t0)
+    return FlyResult(out_dir, _normalized(manifest), failures, time.perf_counter() - t0, flown=len(todo))
 
 
 def summarize(manifest: Mapping) -> str:
@@ -468,7 +652,12 @@ def flags_campaign(
     common_rate_hz: float = 40.0,
     fleet: str = "fleet_default",
 ) -> dict:
-    """A one-block campaign mapping built from command-line flags."""
+    """A one-block campaign mapping built from command-line flags (``["all"]``, as a command line
+    gives it, means "all" for the configurations and the maneuvers)."""
+    if configurations == "all" or list(configurations) == ["all"]:
+        configurations = "all"
+    if maneuvers == "all" or list(maneuvers) == ["all"]:
+        maneuvers = "all"
     return {
         "name": "flags",
         "description": "campaign given by command-line flags",

@@ -20,15 +20,25 @@ kept at their recorder's own, slower samples: empty between them, e.g. the 10 Hz
 40 Hz base). The same entry is stored in each
 Parquet file's key-value metadata under ``fpr.maneuver`` so a single file stays self-describing.
 
-Files are written to a temporary name and renamed into place, so an interrupted run never leaves
-a truncated file behind; an existing dataset is never overwritten unless asked.
+The manifest is written first, before any maneuver, with ``complete = false``, the campaign
+definition and the planned ``jobs`` (each with the ``files`` it will write); it is rewritten with
+``complete = true`` and the ``maneuvers`` entries when the last maneuver is in. Files are written to a
+temporary name and renamed into place, so a present maneuver file is a whole one: at every moment the
+dataset says whether it is complete and which jobs are done (:func:`dataset_status`), and an
+interrupted one can be completed (``fpr fly --resume``). A manifest without ``complete`` (written
+before that key existed) is a complete dataset.
+
+A directory is only ever cleared of what the tool wrote there (:func:`prepare_directory`):
+``manifest.json``, the maneuver files its manifest names (``maneuvers/mNNNN[sK].parquet``) and the
+tool's own temporary files; a directory holding anything else is refused, the message listing it.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import shutil
+import re
+import shlex
 import tempfile
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
@@ -43,6 +53,17 @@ FORMAT = "fpr-dataset"
 FORMAT_VERSION = 1
 MANIFEST = "manifest.json"
 METADATA_KEY = b"fpr.maneuver"
+#: The maneuver files the tool writes, relative to the dataset directory (job index, SHSS segment).
+MANEUVER_FILE_RE = re.compile(r"maneuvers/m\d{4,}(?:s\d+)?\.parquet")
+#: The tool's temporary files (:func:`_atomic_write_bytes`: ``.NAME.RANDOM.tmp`` beside ``NAME``).
+_TEMP_RE = re.compile(r"\.(?:m\d{4,}(?:s\d+)?\.parquet|manifest\.json)\.[A-Za-z0-9_]+\.tmp")
+#: Names shown in a refusal before "and N more".
+_MAX_SHOWN = 12
+
+
+class IncompleteDatasetError(ValueError):
+    """A dataset whose `fpr fly` was interrupted: the message says how much is there and how to
+    complete it."""
 
 
 def _jsonable(obj):
@@ -54,7 +75,9 @@ def _jsonable(obj):
     if isinstance(obj, np.ndarray):
         return _jsonable(obj.tolist())
     if isinstance(obj, np.generic):
-        return obj.item()
+        # through _jsonable again: a numpy NaN becomes None like a Python one, so an entry read back
+        # from a Parquet file's metadata gives the same manifest bytes as the entry itself
+        return _jsonable(obj.item())
     if isinstance(obj, float) and not np.isfinite(obj):
         return None
     return obj
@@ -102,32 +125,181 @@ def write_manifest(directory: Path, manifest: Mapping) -> Path:
     return path
 
 
+def resume_command(directory: str | Path) -> str:
+    """The shell command that completes the interrupted dataset at ``directory``."""
+    return f"fpr fly --resume --out {shlex.quote(str(directory))}"
+
+
+def read_manifest_if_dataset(directory: str | Path) -> dict | None:
+    """The parsed manifest of an fpr dataset at ``directory`` (complete or not), else None."""
+    try:
+        manifest = json.loads((Path(directory) / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return None
+    return manifest if isinstance(manifest, dict) and manifest.get("format") == FORMAT else None
+
+
+def planned_files(manifest: Mapping) -> list[str]:
+    """Every maneuver file a dataset's manifest says the tool writes (planned jobs and entries),
+    relative to the dataset directory; names outside the tool's own pattern are never included."""
+    names: list[str] = []
+    for job in manifest.get("jobs") or []:
+        if isinstance(job, Mapping) and isinstance(job.get("files"), list):
+            names.extend(job["files"])
+    for entry in manifest.get("maneuvers") or []:
+        if isinstance(entry, Mapping):
+            names.append(entry.get("file"))
+    return list(dict.fromkeys(n for n in names if isinstance(n, str) and MANEUVER_FILE_RE.fullmatch(n)))
+
+
+@dataclass(frozen=True)
+class DatasetStatus:
+    """How far a dataset is: planned jobs (maneuvers to fly) and those whose every file is there.
+
+    Attributes
+    ----------
+    complete : the manifest says the run ended (``complete`` true or absent).
+    n_jobs : planned jobs (for a manifest without ``jobs``: its maneuver entries).
+    done : indices of the jobs whose every file is present (a present file is whole: atomic writes).
+    """
+
+    complete: bool
+    n_jobs: int
+    done: tuple[int, ...]
+
+    @property
+    def n_done(self) -> int:
+        return len(self.done)
+
+
+def dataset_status(directory: str | Path, manifest: Mapping | None = None) -> DatasetStatus:
+    """Whether the dataset at ``directory`` is complete, and which planned jobs are done."""
+    directory = Path(directory)
+    manifest = read_manifest_if_dataset(directory) if manifest is None else manifest
+    if manifest is None:
+        raise FileNotFoundError(
+            f"{directory / MANIFEST}: no manifest of format {FORMAT!r}; is {directory} a dataset "
+            "written by `fpr fly`?")
+    complete = manifest.get("complete", True) is not False
+    jobs = manifest.get("jobs")
+    if jobs is None:  # a manifest written before planned jobs were recorded: always a complete run
+        return DatasetStatus(complete, len(manifest.get("maneuvers", [])),
+                             tuple(range(len(manifest.get("maneuvers", [])))))
+    done = tuple(
+        int(job["job_index"]) for job in jobs
+        if all(MANEUVER_FILE_RE.fullmatch(f) and (directory / f).is_file() for f in job["files"])
+    )
+    return DatasetStatus(complete, len(jobs), done)
+
+
+def incomplete_message(directory: str | Path, status: DatasetStatus) -> str:
+    """What an incomplete dataset is and how to complete it (for errors and `fpr show`)."""
+    return (f"{directory}: incomplete dataset: {status.n_done} of {status.n_jobs} maneuvers written "
+            f"(`fpr fly` was interrupted); complete it with: {resume_command(directory)}")
+
+
+def _listing(names: list[str]) -> str:
+    shown = ", ".join(names[:_MAX_SHOWN])
+    return shown + (f", ... and {len(names) - _MAX_SHOWN} more" if len(names) > _MAX_SHOWN else "")
+
+
+def dataset_contents(directory: str | Path) -> tuple[list[Path], list[str]]:
+    """Split a directory's contents into what `fpr fly` wrote there and everything else.
+
+    Returns
+    -------
+    own : paths the tool wrote: ``manifest.json`` (of format ``fpr-dataset``), the maneuver files
+        its manifest names, the tool's temporary files (not ``maneuvers/`` itself).
+    foreign : everything else, relative names (a directory ends in ``/``). Without a dataset
+        manifest everything is foreign but an empty ``maneuvers/``.
+    """
+    directory = Path(directory)
+    manifest = read_manifest_if_dataset(directory)
+    ours = set(planned_files(manifest)) if manifest is not None else set()
+    own: list[Path] = []
+    foreign: list[str] = []
+
+    def plain_file(p: Path) -> bool:  # never follow a link or take a directory as the tool's file
+        return p.is_file() and not p.is_symlink()
+
+    for p in sorted(directory.iterdir()):
+        if p.name == "maneuvers" and p.is_dir() and not p.is_symlink():
+            for q in sorted(p.iterdir()):
+                rel = f"maneuvers/{q.name}"
+                if plain_file(q) and (rel in ours or (manifest is not None and _TEMP_RE.fullmatch(q.name))):
+                    own.append(q)
+                else:
+                    foreign.append(rel + ("/" if q.is_dir() else ""))
+        elif manifest is not None and plain_file(p) and (p.name == MANIFEST or _TEMP_RE.fullmatch(p.name)):
+            own.append(p)
+        else:
+            foreign.append(p.name + ("/" if p.is_dir() else ""))
+    return own, foreign
+
+
+def remove_temp_files(directory: str | Path) -> None:
+    """Remove the tool's temporary files left by a killed run (a dataset directory only)."""
+    directory = Path(directory)
+    if read_manifest_if_dataset(directory) is None:
+        return
+    for folder in (directory, directory / "maneuvers"):
+        if folder.is_dir() and not folder.is_symlink():
+            for p in folder.iterdir():
+                if _TEMP_RE.fullmatch(p.name) and p.is_file() and not p.is_symlink():
+                    p.unlink()
+
+
 def prepare_directory(directory: Path, overwrite: bool = False) -> Path:
-    """Create a campaign directory, refusing to clobber an existing dataset.
+    """Create a dataset directory (and its ``maneuvers/``), never touching a file the tool did not
+    write.
+
+    With ``overwrite``, an earlier dataset there is removed: exactly the files its manifest says
+    the tool wrote (:func:`dataset_contents`), nothing else; the directory itself stays.
 
     Raises
     ------
     FileExistsError
-        If ``directory`` already holds files and ``overwrite`` is false.
+        If ``directory`` is a file; if it holds a dataset and ``overwrite`` is false; if it holds
+        anything the tool did not write (the message lists it), whatever ``overwrite``.
     """
     directory = Path(directory)
-    if directory.exists() and any(directory.iterdir()):
-        if not overwrite:
+    if directory.exists() and not directory.is_dir():
+        raise FileExistsError(
+            f"{directory}: is a file, not a directory; --out names the dataset directory to create "
+            "(a new or empty one)")
+    if directory.is_dir() and any(directory.iterdir()):
+        own, foreign = dataset_contents(directory)
+        manifest = read_manifest_if_dataset(directory)
+        if manifest is None:
+            if foreign:
+                raise FileExistsError(
+                    f"{directory}: not an fpr dataset (no {MANIFEST} of format {FORMAT!r}) and not "
+                    f"empty: it holds {_listing(foreign)}; refusing to write into it or delete "
+                    "anything, even with --overwrite. Choose an empty or new directory.")
+        elif foreign:
             raise FileExistsError(
-                f"{directory}: directory exists and is not empty; choose another --out or pass "
-                "--overwrite to replace it (its current contents will be deleted)"
-            )
-        try:
-            is_dataset = json.loads((directory / MANIFEST).read_text()).get("format") == FORMAT
-        except (OSError, ValueError):
-            is_dataset = False
-        if not is_dataset:
+                f"{directory}: holds {len(foreign)} item(s) `fpr fly` did not write: "
+                f"{_listing(foreign)}; refusing to touch them (--overwrite removes only a dataset's "
+                "own files). Move them away or choose another --out.")
+        elif not overwrite:
+            status = dataset_status(directory, manifest)
+            what = "a complete dataset" if status.complete else \
+                f"an incomplete dataset ({status.n_done} of {status.n_jobs} maneuvers written)"
             raise FileExistsError(
-                f"{directory}: not an fpr dataset (no {MANIFEST} of format {FORMAT!r}); refusing to "
-                "delete it even with --overwrite. Choose an empty or new directory."
-            )
-        shutil.rmtree(directory)
-    (directory / "maneuvers").mkdir(parents=True, exist_ok=True)
+                f"{directory}: holds {what}; pass --overwrite to replace it (only the dataset's own "
+                "files are removed)" + ("" if status.complete else
+                                         f", complete it with: {resume_command(directory)}")
+                + ", or choose another --out")
+        # the manifest last: until the end the directory stays recognisably a dataset
+        for p in sorted(own, key=lambda p: p.name == MANIFEST):
+            p.unlink()
+    try:
+        (directory / "maneuvers").mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError) as exc:
+        raise FileExistsError(
+            f"{directory}: cannot create the dataset directory ({exc.strerror}: {exc.filename}); "
+            "a part of the path is a file or maneuvers/ is not a directory. Choose another --out"
+        ) from None
     return directory
 
 
@@ -192,19 +364,25 @@ def load_dataset(path: str | Path) -> Dataset:
             f"{mpath}: no manifest; is {path} a dataset written by `fpr fly`? "
             "A dataset directory holds manifest.json and maneuvers/*.parquet"
         )
-    manifest = json.loads(mpath.read_text())
-    if manifest.get("format") != FORMAT:
-        raise ValueError(f"{mpath}: format is {manifest.get('format')!r}, expected {FORMAT!r}")
+    try:
+        manifest = json.loads(mpath.read_text())
+    except ValueError as exc:
+        raise ValueError(f"{mpath}: not valid JSON ({exc}); the dataset is damaged") from None
+    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
+        got = manifest.get("format") if isinstance(manifest, dict) else type(manifest).__name__
+        raise ValueError(f"{mpath}: format is {got!r}, expected {FORMAT!r}")
     if manifest.get("format_version", 0) > FORMAT_VERSION:
         raise ValueError(
             f"{mpath}: format_version {manifest['format_version']} is newer than this software "
             f"reads ({FORMAT_VERSION}); upgrade fpr-testbed"
         )
+    if manifest.get("complete", True) is False:
+        raise IncompleteDatasetError(incomplete_message(path, dataset_status(path, manifest)))
     missing = [m["file"] for m in manifest.get("maneuvers", []) if not (path / m["file"]).exists()]
     if missing:
         raise FileNotFoundError(
             f"{path}: the manifest lists {len(missing)} maneuver file(s) that are missing, e.g. "
-            f"{missing[0]}; the dataset is incomplete (re-run `fpr fly` into a new directory)"
+            f"{missing[0]}; the dataset is damaged (fly it again: `fpr fly ... --overwrite`)"
         )
     return Dataset(path=path, manifest=manifest)
 
