@@ -6,6 +6,7 @@ and, for synthetic datasets, the truth (:mod:`campaigns.workflow_truth`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -58,8 +59,12 @@ def _has_truth(wf: WorkflowResult) -> bool:
     return all("dataset" in m.meta for st in wf.final for m in st.problem.maneuvers)
 
 
-def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | None = None) -> dict:
+def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | None = None,
+                 record: Callable[[Path], object] | None = None) -> dict:
     """Write ``out_dir/report.html`` and its CSV files; return the tables it printed from.
+
+    ``record`` is called with each file's path before it is written (e.g.
+    :meth:`estimator.io.outdir.OutputFolder.record`, so the output folder lists what it holds).
 
     Returns
     -------
@@ -102,7 +107,7 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
     if not final:
         out = {"accuracy": wf.accuracy, "true_accuracy": None, "installation_recovery": None,
                "recovery": None}
-        out["report"] = write_report(out_dir, title, sections, banner=verdict_banner(wf))
+        out["report"] = write_report(out_dir, title, sections, banner=verdict_banner(wf), record=record)
         return out
     sections.append(Section(
         "Table 2: 3-sigma of measurement minus model",
@@ -212,5 +217,5 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
                                 "per kind; every estimate in recovery.csv.",
                                 tables=[("Within 3 sigma", summ.reset_index()), ("All", rec.reset_index())],
                                 csv=[("recovery.csv", rec.reset_index())]))
-    out["report"] = write_report(out_dir, title, sections, banner=verdict_banner(wf))
+    out["report"] = write_report(out_dir, title, sections, banner=verdict_banner(wf), record=record)
     return out

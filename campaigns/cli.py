@@ -105,6 +105,10 @@ def _demo(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     campaign = load_campaign("demo")
     out = args.out
+    report_dir = out.parent / f"{out.name}-report"
+    # the report folder is checked before the campaign is flown: one holding anything fpr did not
+    # write there is refused at once (its earlier demo report is replaced; nothing else is touched)
+    _prepare_out(report_dir, True, "fpr demo", [out], check_only=True)
     print(f"fpr demo: flying the demo campaign ({len(campaign.jobs)} maneuvers, seven fleet "
           f"configurations) into {out}")
     result = fly_campaign(campaign, out, workers=args.workers, overwrite=True, progress=True)
@@ -120,9 +124,9 @@ def _demo(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         problem = problem_from_dataset(out)
-    report_dir = out.parent / f"{out.name}-report"
     ns = argparse.Namespace(overwrite=True, max_mach_variation=0.05, reference_mach=0.5, max_iterations=40,
-                            no_colored=False, verbose=False, robust=False, start="staged")
+                            no_colored=False, verbose=False, robust=False, start="staged",
+                            command="demo", source=out)
     code = _workflow(problem, report_dir, ns)
     print(f"fpr demo: {time.perf_counter() - t0:.0f} s in all")
     return code
@@ -238,11 +242,8 @@ def _calibrate(args: argparse.Namespace) -> int:
     out = args.out or Path("fpr-out") / f"calibrate-{src.stem or src.name}"
     if not args.single:
         return _workflow(problem, out, args)
-    single_files = {"result.json", "parameters.csv", "residuals.csv", "correlation.csv", "recovery.csv",
-                    "findings.csv", "fit_quality.csv",
-                    "time_history_match.png", "residual_crossplots.png"}
-    if not _prepare_out(out, args.overwrite, lambda p: p.name in single_files):
-        return 2
+    tool, protect = "fpr calibrate --single", _inputs(problem, src)
+    _prepare_out(out, args.overwrite, tool, protect, check_only=True)
     n_samples = sum(m.n for m in problem.maneuvers)
     print(f"{len(problem.maneuvers)} maneuvers, {n_samples} samples, {len(problem.channels)} "
           f"channels, {int(problem.parameters.free_mask.sum())} free parameters")
@@ -250,21 +251,22 @@ def _calibrate(args: argparse.Namespace) -> int:
                                              verbose=args.verbose, robust=args.robust,
                                              start=_starts(args.start)))
     print(result.summary())
-    result.to_json(out / "result.json")
-    result.to_csv(out)
-    if any("dataset" in m.meta for m in problem.maneuvers):
-        from campaigns.truth import recovery_table, true_parameters
+    with _prepare_out(out, args.overwrite, tool, protect) as folder:
+        result.to_json(folder.record(out / "result.json"))
+        result.to_csv(out, record=folder.record)
+        if any("dataset" in m.meta for m in problem.maneuvers):
+            from campaigns.truth import recovery_table, true_parameters
 
-        truth = true_parameters(problem, result.free_estimated)
-        rec = recovery_table(result, truth)
-        rec.to_csv(out / "recovery.csv")
-        shown = rec[rec["kind"].isin(["time_delay", "bias", "scale", "table"])]
-        print("\nrecovery against the injected truth (calibration parameters; all in recovery.csv):")
-        print(shown.to_string(float_format=lambda v: f"{v: .4g}"))
-        print("model-structure error (rms of the best possible fit to the clean channels): " + ", ".join(
-            f"{c} {v * 57.29578:.4f} deg" for c, v in truth.structure_rms.items()))
-    if not args.no_plots:
-        save_standard_figures(problem, result, out)
+            truth = true_parameters(problem, result.free_estimated)
+            rec = recovery_table(result, truth)
+            rec.to_csv(folder.record(out / "recovery.csv"))
+            shown = rec[rec["kind"].isin(["time_delay", "bias", "scale", "table"])]
+            print("\nrecovery against the injected truth (calibration parameters; all in recovery.csv):")
+            print(shown.to_string(float_format=lambda v: f"{v: .4g}"))
+            print("model-structure error (rms of the best possible fit to the clean channels): " + ", ".join(
+                f"{c} {v * 57.29578:.4f} deg" for c, v in truth.structure_rms.items()))
+        if not args.no_plots:
+            save_standard_figures(problem, result, out, record=folder.record)
     print(f"\nresults in {out}")
     print(verdict_text(result.verdict, result.findings, max_lines=0))
     return exit_status(result.verdict)
@@ -274,21 +276,28 @@ def _starts(choice: str) -> str | tuple[str, ...]:
     return ("staged", "given") if choice == "both" else choice
 
 
-def _prepare_out(out: Path, overwrite: bool, ours) -> bool:
-    """Make ``out`` ready for new results: an earlier run's files (``ours(path)``) are removed
-    when ``overwrite``, so none survives stale beside the new ones; anything else stays and the
-    command stops (False, after saying why) rather than lose a user's file."""
-    present = list(out.iterdir()) if out.exists() else []
-    if present:
-        foreign = [p for p in present if not ours(p)]
-        if not overwrite or foreign:
-            print(f"fpr calibrate: {out} is not empty; choose another --out" + (
-                "" if foreign else " or pass --overwrite to replace the earlier results"), file=sys.stderr)
-            return False
-        for p in present:
-            p.unlink()
-    out.mkdir(parents=True, exist_ok=True)
-    return True
+def _prepare_out(out: Path, overwrite: bool, tool: str, protect: list[Path], check_only: bool = False):
+    """``out`` made ready for a run's results (:func:`estimator.io.outdir.prepare_output`).
+
+    Only the files fpr itself wrote there (its listing, ``.fpr-written.json``) are ever removed, and
+    only with ``overwrite``; a folder holding anything else, or one of the run's inputs (``protect``),
+    is refused with an ``OutputFolderError`` naming what is there (a ValueError: :func:`main` prints
+    it, exit status 2). ``check_only`` raises the same refusals and changes nothing: called before
+    the work, so that a refusal comes at once and an earlier run's results stay until new ones are
+    ready to be written.
+    """
+    from estimator.io.outdir import check_output, prepare_output
+
+    if check_only:
+        return check_output(out, overwrite=overwrite, protect=protect)
+    return prepare_output(out, overwrite=overwrite, tool=tool, protect=protect)
+
+
+def _inputs(problem, *paths: Path) -> list[Path]:
+    """The run's input files and folders (never removed from an output folder)."""
+    from estimator.io.outdir import input_paths
+
+    return [*paths, *input_paths(problem)]
 
 
 def _fmt_table2(acc, title: str) -> str:
@@ -313,11 +322,11 @@ def _workflow(problem, out: Path, args: argparse.Namespace) -> int:
     from estimator.verdict import verdict_text
     from estimator.workflow import WorkflowOptions, run_workflow
 
-    # an earlier report: report.html beside its CSV tables and figures, nothing else
-    earlier = (out / "report.html").is_file()
-    if not _prepare_out(out, args.overwrite,
-                        lambda p: earlier and p.is_file() and p.suffix in (".csv", ".html", ".png")):
-        return 2
+    # refused at once if --out holds anything but an earlier run's files (or those without
+    # --overwrite); the earlier files are removed only when the new report is ready to be written
+    tool = f"fpr {getattr(args, 'command', None) or 'calibrate'}"
+    protect = _inputs(problem, *([args.source] if getattr(args, "source", None) else []))
+    _prepare_out(out, args.overwrite, tool, protect, check_only=True)
     n_samples = sum(m.n for m in problem.maneuvers)
     print(f"{len(problem.maneuvers)} maneuvers, {n_samples} samples, {len(problem.channels)} channels: "
           "Mach-bin calibration workflow (paper §4)")
@@ -329,7 +338,8 @@ def _workflow(problem, out: Path, args: argparse.Namespace) -> int:
     wf = run_workflow(problem, opt)
     print("\n".join(wf.notes))
     print(f"workflow done in {wf.elapsed_s:.0f} s; writing the report")
-    tables = build_report(wf, out, f"Flow-angle calibration: {problem.source}")
+    with _prepare_out(out, args.overwrite, tool, protect) as folder:
+        tables = build_report(wf, out, f"Flow-angle calibration: {problem.source}", record=folder.record)
     if not wf.final:
         print()
         print(verdict_text(wf.verdict, wf.findings))

@@ -6,7 +6,8 @@ it goes: a PNG file, an HTML report, a notebook.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import matplotlib
 
@@ -120,16 +121,21 @@ def plot_residual_crossplot(histories: pd.DataFrame, channels: Sequence[str], ti
     return fig
 
 
-def save_standard_figures(problem: Problem, result: EstimationResult, directory) -> list[str]:
-    """Write the time-history match and cross-plots of a result as PNG files; returns the paths."""
-    from pathlib import Path
+def save_standard_figures(problem: Problem, result: EstimationResult, directory,
+                          record: Callable[[Path], object] | None = None) -> list[str]:
+    """Write the time-history match and cross-plots of a result as PNG files; returns the paths.
 
+    ``record`` is called with each file's path before it is written (e.g.
+    :meth:`estimator.io.outdir.OutputFolder.record`, so the output folder lists what it holds).
+    """
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     hist = time_histories(problem, result.values)
     paths = []
     fig = plot_time_history_match(hist, title=f"time-history match — {problem.source}")
     p = d / "time_history_match.png"
+    if record is not None:
+        record(p)
     fig.savefig(p, dpi=110)
     plt.close(fig)
     paths.append(str(p))
@@ -137,6 +143,8 @@ def save_standard_figures(problem: Problem, result: EstimationResult, directory)
     if flow:
         fig = plot_residual_crossplot(hist, flow, title="measurement minus model")
         p = d / "residual_crossplots.png"
+        if record is not None:
+            record(p)
         fig.savefig(p, dpi=110)
         plt.close(fig)
         paths.append(str(p))

@@ -649,6 +649,7 @@ def write_report(
     float_format: Callable[[float], str] = "{:.4g}".format,
     banner: Banner | None = None,
     max_banner_lines: int = 25,
+    record: Callable[[Path], object] | None = None,
 ) -> Path:
     """Write the report: ``out_dir/report.html`` and the sections' CSV files.
 
@@ -668,6 +669,8 @@ def write_report(
     float_format : formats floats in DataFrame tables.
     banner : the verdict, shown above everything else.
     max_banner_lines : reasons shown in the banner (the rest are counted).
+    record : called with each file's path before it is written (e.g.
+        :meth:`estimator.io.outdir.OutputFolder.record`, so the output folder lists what it holds).
 
     Returns
     -------
@@ -686,6 +689,8 @@ def write_report(
             # two sections claiming one file name would silently lose one of the frames
             raise ValueError(f"CSV file name {name!r} is used for two different frames")
         written[name] = frame
+        if record is not None:
+            record(out / name)
         _write_csv(frame, out / name)
 
     body: list[str] = []
@@ -745,5 +750,7 @@ def write_report(
         + "</body>\n</html>\n"
     )
     path = out / "report.html"
+    if record is not None:
+        record(path)
     path.write_text(page, encoding="utf-8")
     return path

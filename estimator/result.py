@@ -14,7 +14,7 @@ a failure (a wrong minimum, a stuck vane).
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
@@ -306,13 +306,23 @@ class EstimationResult:
         }
         Path(path).write_text(json.dumps(clean(doc), indent=1, allow_nan=False))
 
-    def to_csv(self, directory: str | Path) -> None:
-        """parameters.csv, residuals.csv, correlation.csv, findings.csv and fit_quality.csv."""
+    def to_csv(self, directory: str | Path, record: Callable[[Path], object] | None = None) -> None:
+        """parameters.csv, residuals.csv, correlation.csv, findings.csv and fit_quality.csv.
+
+        ``record`` is called with each file's path before it is written (e.g.
+        :meth:`estimator.io.outdir.OutputFolder.record`, so the output folder lists what it holds).
+        """
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
-        self.to_pandas().to_csv(d / "parameters.csv")
-        self.residuals_table().to_csv(d / "residuals.csv", index=False)
-        self.correlation_frame().to_csv(d / "correlation.csv")
-        self.findings_table().to_csv(d / "findings.csv", index=False)
+
+        def at(name: str) -> Path:
+            if record is not None:
+                record(d / name)
+            return d / name
+
+        self.to_pandas().to_csv(at("parameters.csv"))
+        self.residuals_table().to_csv(at("residuals.csv"), index=False)
+        self.correlation_frame().to_csv(at("correlation.csv"))
+        self.findings_table().to_csv(at("findings.csv"), index=False)
         if self.fit_quality is not None:
-            self.fit_quality.to_csv(d / "fit_quality.csv", index=False)
+            self.fit_quality.to_csv(at("fit_quality.csv"), index=False)
