@@ -29,8 +29,10 @@ OUT/replications/rNNNNN.parquet holds one replication (every estimate beside its
 Cramer-Rao and coloured deviations, z-scores; per channel the 3-sigma of the residuals and of
 the calibrated channel against the true flow angle); a failed replication leaves
 rNNNNN.failed.json with its error instead. Interrupted? Run the same command again: finished
-replications are skipped. At the end: summary.txt, summary_parameters.csv, summary_channels.csv,
-summary.png in OUT.
+replications are skipped, and the files end the same, byte for byte, as an uninterrupted run's
+(wall times go to OUT/timings.csv). Nothing in OUT is ever unpickled or executed (an old
+flights/*.pkl cache is ignored and the flight flown again). At the end: summary.txt,
+summary_parameters.csv, summary_channels.csv, summary.png in OUT.
 
 examples:
   fpr montecarlo mc_20maneuvers --out runs/mc20

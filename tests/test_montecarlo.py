@@ -12,7 +12,6 @@ from __future__ import annotations
 import copy
 import json
 import math
-import pickle
 import shutil
 import tomllib
 
@@ -31,6 +30,7 @@ from campaigns.montecarlo import (
     summarize_results,
 )
 from campaigns.montecarlo import replication as replication_module
+from campaigns.montecarlo.flight_cache import flight_file, read_flight
 from campaigns.montecarlo.runner import finished_replications, read_replication, replication_file
 from campaigns.montecarlo.summary import kind_table, load_results
 from estimator import workflow
@@ -416,7 +416,7 @@ def test_channel_accuracy_is_three_rms_about_zero(base_run):
 def test_calibrated_channels_are_the_workflow_reports_and_a_flat_segment_is_a_note(base_run, monkeypatch):
     out, _ = base_run
     scenario = _scenario()
-    truths = {j: pickle.loads((out / "flights" / f"j{j:04d}.pkl").read_bytes()) for j in (0, 1)}
+    truths = {j: read_flight(flight_file(out / "flights", j)) for j in (0, 1)}
     seen = {}
 
     def recorded(problem, result):

@@ -73,7 +73,9 @@ class ReplicationResult:
     message : the estimator's message, or the error and its traceback.
     noise_seed : the master seed of the replication's noise sources.
     scenario_hash : the scenario it belongs to.
-    elapsed_s : wall time of the replication (not part of the tables: they stay bit-identical).
+    elapsed_s : wall time of the replication, s. Not in the replication's file (nor in
+        :meth:`meta`), which stays bit-identical between runs: the runner keeps it in the run's
+        ``timings.csv`` and :func:`~campaigns.montecarlo.summary.load_results` puts it back.
     parameters : one row per free parameter with a truth (see :data:`COLUMNS`).
     channels : per channel and kind ("residual", "calibrated"): mean, std, three_sigma, n.
     draws : the drawn values (path, instance, component, value SI).
@@ -107,11 +109,12 @@ class ReplicationResult:
                                                                           str(self.verdict_code))
 
     def meta(self) -> dict:
-        """The scalars, JSON-ready (stored in the Parquet file's metadata / the failure record)."""
+        """The scalars, JSON-ready (stored in the Parquet file's metadata / the failure record);
+        only what the replication's inputs decide (no wall time)."""
         return {"replication": self.index, "ok": self.ok, "status": self.status,
                 "status_text": STATUS_TEXT.get(self.status, str(self.status)), "message": self.message,
                 "noise_seed": self.noise_seed, "scenario_hash": self.scenario_hash,
-                "elapsed_s": self.elapsed_s, "warnings": list(self.warnings),
+                "warnings": list(self.warnings),
                 "verdict_code": self.verdict_code, "verdict": self.verdict,
                 "n_warnings": self.n_warnings, "n_failures": self.n_failures,
                 "findings": [list(f) for f in self.findings]}
@@ -120,7 +123,7 @@ class ReplicationResult:
     def from_meta(cls, meta: Mapping, **tables: pd.DataFrame) -> ReplicationResult:
         """A result from its :meth:`meta` (a failure record) and, for a finished one, its tables
         (``parameters``, ``channels``, ``draws``); keys a file of an older version lacks take
-        their defaults."""
+        their defaults (and its ``elapsed_s``, when it has one, is read)."""
         code = meta.get("verdict_code")
         return cls(index=int(meta["replication"]), ok=bool(meta["ok"]), status=int(meta["status"]),
                    message=str(meta["message"]), noise_seed=int(meta["noise_seed"]),

@@ -4,19 +4,31 @@ Layout of the output directory::
 
     OUT/montecarlo.json            format, scenario (as read) and its hash, N, software versions
     OUT/scenario.toml              a copy of the scenario file (when it came from one)
-    OUT/flights/j0007.pkl          truth of each maneuver flown once (reused by every replication)
+    OUT/flights/j0007.npz          truth of each maneuver flown once (reused by every replication;
+                                   NumPy arrays + JSON, :mod:`campaigns.montecarlo.flight_cache`)
     OUT/replications/r00042.parquet         one finished replication (ReplicationResult.to_pandas,
                                             its scalars in the file metadata under fpr.montecarlo)
     OUT/replications/r00043.failed.json     one failed replication: status, error text, seeds
+    OUT/timings.csv                one line per replication run: its wall time in the worker, when
+                                   and where it finished (appended; the only file that differs
+                                   between two runs of the same replications)
 
 Every file is written to a temporary name and renamed into place, by the one process that runs
 the campaign (workers return results; they never write), so an interrupted run leaves whole files
 only. Running the same command again skips the replications that have a file (a failed one too,
-unless ``retry_failed``) and ends with exactly one file per replication. An output directory made
-from another scenario (its hash differs) is refused. The hash covers the scenario's own tables, not
-the files it names (fleet, local-flow truth, model set) nor the code: after changing those, start a
-new directory rather than resume, or the run mixes results of both. A lock (``OUT/.lock``) keeps
-two runs out of one directory.
+unless ``retry_failed``) and ends with exactly one file per replication. A replication's file holds
+only what its inputs decide (no wall time, host or date: those go to ``timings.csv``), so an
+interrupted and resumed run ends with the same bytes as an uninterrupted one. An output directory
+made from another scenario (its hash differs) is refused. The hash covers the scenario's own
+tables, not the files it names (fleet, local-flow truth, model set) nor the code: after changing
+those, start a new directory rather than resume, or the run mixes results of both. A lock
+(``OUT/.lock``) keeps two runs out of one directory.
+
+Nothing in the directory is ever unpickled, eval'd or exec'd: a run folder may come from anyone.
+A flight cache of an older version (``flights/j0007.pkl``) is ignored, said so, and flown again.
+The run removes only what it wrote itself: its own temporary files left by a killed run, and the
+failure record of a replication that now succeeded; anything else in the folder is left alone
+(there is no overwrite mode: a new run goes to a new or empty directory).
 
 Executors: local processes (:class:`concurrent.futures.ProcessPoolExecutor`, the default),
 in-process (``workers=1``, for debugging and tests), or a Dask distributed cluster
@@ -26,16 +38,20 @@ depend on the executor: everything it draws derives from ``(seed, k)``.
 
 from __future__ import annotations
 
+import csv
 import fcntl
+import io
 import json
 import os
-import pickle
+import re
+import socket
 import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from datetime import UTC, datetime
 from pathlib import Path
 
 import pyarrow as pa
@@ -44,7 +60,9 @@ import pyarrow.parquet as pq
 from synth.campaign import software_versions
 from synth.flight import FlightError
 from synth.truth import TruthTrajectory
+from synth.workers import bind_to_parent
 
+from .flight_cache import flight_bytes, flight_file, read_flight
 from .replication import Models, ReplicationResult, failure_record, fly, run_replication_safely
 from .scenario import Scenario, ScenarioError, parse_scenario, scenario_hash, with_replications
 
@@ -52,8 +70,14 @@ FORMAT = "fpr-montecarlo"
 FORMAT_VERSION = 1
 STATE_FILE = "montecarlo.json"
 METADATA_KEY = b"fpr.montecarlo"
+TIMINGS_FILE = "timings.csv"
+TIMINGS_COLUMNS = ("replication", "ok", "elapsed_s", "finished_utc", "host", "executor")
 _REP = "replications"
 _FLIGHTS = "flights"
+#: the files this module writes (the temporary names of a killed run are ``.NAME.XXXXXXXX.tmp``)
+_OWN_NAMES = {_REP: re.compile(r"r(\d{5})\.(parquet|failed\.json)"),
+              _FLIGHTS: re.compile(r"j(\d{4})\.npz"),
+              "": re.compile(r"(montecarlo\.json|scenario\.toml)")}
 
 
 # ---------------------------------------------------------------------------- files
@@ -86,17 +110,21 @@ def finished_replications(out_dir: Path) -> dict[int, str]:
     if not rep.is_dir():
         return out
     for p in rep.iterdir():
-        if p.name.startswith("."):
+        m = _OWN_NAMES[_REP].fullmatch(p.name)
+        if m is None:  # not a file of ours (a user's note, a temporary file): left alone
             continue
-        if p.name.endswith(".failed.json"):
-            out.setdefault(int(p.name[1:6]), "failed")
-        elif p.suffix == ".parquet":
-            out[int(p.name[1:6])] = "ok"
+        if m.group(2) == "parquet":
+            out[int(m.group(1))] = "ok"
+        else:
+            out.setdefault(int(m.group(1)), "failed")
     return out
 
 
 def write_replication(out_dir: Path, result: ReplicationResult) -> Path:
-    """Write one replication's file atomically (and drop an earlier failure record of it)."""
+    """Write one replication's file atomically (and drop an earlier failure record of it).
+
+    The file holds only what the replication's inputs decide: the same replication gives the same
+    bytes in any run (its wall time goes to :func:`append_timing`)."""
     if not result.ok:
         path = replication_file(out_dir, result.index, failed=True)
         _atomic_write(path, failure_record(result).encode())
@@ -105,7 +133,8 @@ def write_replication(out_dir: Path, result: ReplicationResult) -> Path:
     meta = dict(table.schema.metadata or {})
     meta[METADATA_KEY] = json.dumps(result.meta(), sort_keys=True).encode()
     sink = pa.BufferOutputStream()
-    pq.write_table(table.replace_schema_metadata(meta), sink, compression="zstd")
+    # no statistics: the same table gives the same bytes (as synth.dataset.write_maneuver)
+    pq.write_table(table.replace_schema_metadata(meta), sink, compression="zstd", write_statistics=False)
     path = replication_file(out_dir, result.index)
     _atomic_write(path, sink.getvalue().to_pybytes())
     replication_file(out_dir, result.index, failed=True).unlink(missing_ok=True)
@@ -116,18 +145,54 @@ def read_replication(path: Path) -> ReplicationResult:
     """Read a replication file (finished ``.parquet`` or ``.failed.json``)."""
     path = Path(path)
     if path.name.endswith(".failed.json"):
-        meta = json.loads(path.read_text())
-        return ReplicationResult(index=int(meta["replication"]), ok=False, status=int(meta["status"]),
-                                 message=str(meta["message"]), noise_seed=int(meta["noise_seed"]),
-                                 scenario_hash=str(meta["scenario_hash"]),
-                                 elapsed_s=float(meta.get("elapsed_s", 0.0)),
-                                 warnings=tuple(meta.get("warnings", ())))
+        return ReplicationResult.from_meta(json.loads(path.read_text()))
     table = pq.read_table(path)
     raw = (table.schema.metadata or {}).get(METADATA_KEY)
     if raw is None:
         raise ValueError(f"{path}: no {METADATA_KEY.decode()} metadata; not a replication file written "
                          "by `fpr montecarlo` (remove it from the replications/ directory)")
     return ReplicationResult.from_pandas(table.to_pandas(), json.loads(raw))
+
+
+def append_timing(out_dir: Path, result: ReplicationResult, executor: str = "") -> None:
+    """Append replication ``result``'s wall time (and when and where it finished) to
+    ``OUT/timings.csv``: timings are kept apart from the replication files, which stay
+    bit-identical between runs. One ``write`` per line, so a killed run leaves whole lines (a torn
+    last line is skipped by :func:`read_timings`)."""
+    path = Path(out_dir) / TIMINGS_FILE
+    row = io.StringIO()
+    writer = csv.writer(row, lineterminator="\n")
+    if not path.exists():
+        writer.writerow(TIMINGS_COLUMNS)
+    writer.writerow([result.index, int(result.ok), repr(float(result.elapsed_s)),
+                     datetime.now(UTC).isoformat(timespec="seconds"), socket.gethostname(), executor])
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        os.write(fd, row.getvalue().encode())
+    finally:
+        os.close(fd)
+
+
+def read_timings(out_dir: Path) -> dict[int, float]:
+    """Replication index -> its wall time in the worker, s, from ``OUT/timings.csv`` (the last
+    line of a replication run more than once); empty without the file."""
+    path = Path(out_dir) / TIMINGS_FILE
+    out: dict[int, float] = {}
+    if not path.is_file():
+        return out
+    with open(path, newline="") as fh:
+        for row in csv.DictReader(fh):
+            try:
+                out[int(row["replication"])] = float(row["elapsed_s"])
+            except (KeyError, TypeError, ValueError):  # a line torn by a kill: that timing is lost
+                continue
+    return out
+
+
+def with_timings(out_dir: Path, results: Iterable[ReplicationResult]) -> list[ReplicationResult]:
+    """``results`` with ``elapsed_s`` taken from the run's ``timings.csv`` where it has a line."""
+    times = read_timings(out_dir)
+    return [replace(r, elapsed_s=times[r.index]) if r.index in times else r for r in results]
 
 
 def read_state(out_dir: Path) -> dict:
@@ -146,6 +211,22 @@ def scenario_of(out_dir: Path) -> Scenario:
     """The scenario an output directory was made from (as stored in its ``montecarlo.json``)."""
     state = read_state(out_dir)
     return parse_scenario(state["scenario"], source=state.get("source", str(out_dir)))
+
+
+def own_temporary_files(out_dir: Path) -> list[Path]:
+    """The temporary files a killed run of this module left in ``out_dir`` (never whole files):
+    ``.NAME.XXXXXXXX.tmp`` beside a file NAME of ours. Nothing else matches, so a user's own
+    ``.something.tmp`` is never touched."""
+    out = []
+    for sub, own in _OWN_NAMES.items():
+        d = Path(out_dir) / sub
+        if not d.is_dir():
+            continue
+        for p in d.glob(".*.tmp"):
+            m = re.fullmatch(r"\.(.+)\.[a-z0-9_]{8}\.tmp", p.name)  # mkstemp's 8 random characters
+            if m is not None and own.fullmatch(m.group(1)) and p.is_file():
+                out.append(p)
+    return sorted(out)
 
 
 def prepare_output(scenario: Scenario, out_dir: Path) -> Path:
@@ -172,9 +253,8 @@ def prepare_output(scenario: Scenario, out_dir: Path) -> Path:
                 f"start over, or resume it with the scenario it was made from ({out_dir / 'scenario.toml'})")
     (out_dir / _REP).mkdir(parents=True, exist_ok=True)
     (out_dir / _FLIGHTS).mkdir(parents=True, exist_ok=True)
-    for sub in (_REP, _FLIGHTS):  # leftovers of a run killed while writing: never whole files
-        for p in (out_dir / sub).glob(".*.tmp"):
-            p.unlink(missing_ok=True)
+    for p in own_temporary_files(out_dir):  # leftovers of a run killed while writing
+        p.unlink(missing_ok=True)
     src = Path(scenario.source)
     if src.is_file() and not (out_dir / "scenario.toml").exists():
         _atomic_write(out_dir / "scenario.toml", src.read_bytes())
@@ -225,11 +305,16 @@ def _load_truths(source: str | FlightCache | Mapping, jobs: Iterable[int]) -> Ma
         return source.truths
     if isinstance(source, Mapping):
         return source
+    # read once per process, then kept: the same flights serve every replication (keyed by the
+    # file, so that two run folders read in one process never lend each other their flights)
     cache = _PROCESS.setdefault("truths", {})
-    for j in jobs:  # read once per process, then kept: the same flights serve every replication
-        if j not in cache:
-            cache[j] = pickle.loads((Path(source) / f"j{j:04d}.pkl").read_bytes())
-    return cache
+    out = {}
+    for j in jobs:
+        path = flight_file(source, j)
+        if path not in cache:
+            cache[path] = read_flight(path)
+        out[j] = cache[path]
+    return out
 
 
 def fly_task(payload: ScenarioPayload, job_index: int) -> tuple[int, tuple | None, str | None]:
@@ -267,6 +352,7 @@ class RunReport:
     flights_flown : maneuvers flown for the shared truth cache by this call.
     wall_s : wall time of the call, s.
     executor : "in-process", "processes(N)" or "dask(ADDRESS)".
+    notes : what the user should know about the folder (an ignored old pickle cache).
     """
 
     out_dir: Path
@@ -277,6 +363,7 @@ class RunReport:
     flights_flown: int
     wall_s: float
     executor: str
+    notes: tuple[str, ...] = ()
 
     @property
     def complete(self) -> bool:
@@ -288,7 +375,7 @@ class RunReport:
         per = f", {self.wall_s / len(self.ran):.1f} s per replication" if self.ran else ""
         lines = [f"{self.out_dir}: {len(self.ran)} replications run now, {self.skipped} already done, "
                  f"{self.requested} requested; {self.flights_flown} shared flights flown; "
-                 f"{self.executor}; wall {self.wall_s:.1f} s{per}"]
+                 f"{self.executor}; wall {self.wall_s:.1f} s{per}", *self.notes]
         if self.failed:
             lines.append(f"failed replications ({len(self.failed)}): {list(self.failed)[:20]} "
                          f"(records in {self.out_dir / _REP}/rNNNNN.failed.json)")
@@ -366,6 +453,11 @@ def run_montecarlo(
         if bad:
             raise ScenarioError(f"replications {bad} are outside 0..{n - 1}")
         todo = [k for k in wanted if k not in have or (retry_failed and have[k] == "failed")]
+        notes = _ignored_pickles(scenario, out_dir, todo)
+        n_workers = workers or os.cpu_count() or 1
+        # for timings.csv (the report's label names the Dask scheduler's address too)
+        label = "dask" if scheduler is not None else "in-process" if n_workers == 1 else \
+            f"processes({n_workers})"
         payload = ScenarioPayload(raw=scenario.raw, source=scenario.source)
         bar = _progress_bar(len(todo), 0, f"monte carlo {scenario.name} ({len(wanted) - len(todo)} done "
                             "before)", progress)
@@ -373,6 +465,7 @@ def run_montecarlo(
 
         def record(res: ReplicationResult) -> None:
             write_replication(out_dir, res)
+            append_timing(out_dir, res, label)
             done[0] += 1
             if bar is not None:
                 bar.update(1)
@@ -384,25 +477,36 @@ def run_montecarlo(
         try:
             if scheduler is not None:
                 flown, executor = _run_dask(scenario, payload, out_dir, todo, scheduler, record)
-            elif (workers or os.cpu_count() or 1) == 1:
+            elif n_workers == 1:
                 flown, executor = _run_in_process(scenario, out_dir, todo, record)
             else:
-                flown, executor = _run_processes(scenario, payload, out_dir, todo,
-                                                 workers or os.cpu_count() or 1, record)
+                flown, executor = _run_processes(scenario, payload, out_dir, todo, n_workers, record)
         finally:
             if bar is not None:
                 bar.close()
         final = finished_replications(out_dir)
     return RunReport(out_dir=out_dir, requested=n, ran=tuple(todo), skipped=len(wanted) - len(todo),
                      failed=tuple(k for k in range(n) if final.get(k) == "failed"),
-                     flights_flown=flown, wall_s=time.perf_counter() - t0, executor=executor)
+                     flights_flown=flown, wall_s=time.perf_counter() - t0, executor=executor,
+                     notes=notes)
 
 
 def _missing_flights(scenario: Scenario, out_dir: Path, todo: Sequence[int]) -> list[int]:
     if not todo:
         return []
-    return [j.index for j in scenario.fixed_jobs
-            if not (out_dir / _FLIGHTS / f"j{j.index:04d}.pkl").exists()]
+    return [j.index for j in scenario.fixed_jobs if not flight_file(out_dir / _FLIGHTS, j.index).exists()]
+
+
+def _ignored_pickles(scenario: Scenario, out_dir: Path, todo: Sequence[int]) -> tuple[str, ...]:
+    """One note per pickle in ``flights/`` (an older version's cache, or planted): never loaded,
+    left where it is; the flight is flown again when a replication needs it."""
+    missing = set(_missing_flights(scenario, out_dir, todo))
+    notes = []
+    for p in sorted((out_dir / _FLIGHTS).glob("*.pkl")):
+        m = re.fullmatch(r"j(\d{4})\.pkl", p.name)
+        again = "; the flight is flown again" if m and int(m.group(1)) in missing else ""
+        notes.append(f"ignoring {_FLIGHTS}/{p.name}: pickle files are never loaded{again}")
+    return tuple(notes)
 
 
 def _store_flights(scenario: Scenario, out_dir: Path,
@@ -416,8 +520,7 @@ def _store_flights(scenario: Scenario, out_dir: Path,
             errors.append(f"  maneuver {job_index} ({job.configuration_id}, {job.maneuver['kind']}, "
                           f"Mach {job.maneuver['mach']}): {error}")
             continue
-        _atomic_write(out_dir / _FLIGHTS / f"j{job_index:04d}.pkl",
-                      pickle.dumps(tuple(segments), protocol=pickle.HIGHEST_PROTOCOL))
+        _atomic_write(flight_file(out_dir / _FLIGHTS, job_index), flight_bytes(segments))
         n += 1
     if errors:
         raise ScenarioError(f"{scenario.source}: {len(errors)} maneuver(s) cannot be flown, so no "
@@ -438,7 +541,8 @@ def _run_in_process(scenario, out_dir, todo, record) -> tuple[int, str]:
 
 def _run_processes(scenario, payload, out_dir, todo, workers, record) -> tuple[int, str]:
     cache = str(out_dir / _FLIGHTS)
-    pool = ProcessPoolExecutor(max_workers=workers)
+    # the workers end with this process, however it ends (a kill leaves no orphan computing on)
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=bind_to_parent, initargs=(os.getpid(),))
     try:
         missing = _missing_flights(scenario, out_dir, todo)
         flown = _store_flights(scenario, out_dir,
@@ -469,8 +573,7 @@ def _run_dask(scenario, payload, out_dir, todo, scheduler, record) -> tuple[int,
         if not todo:
             return flown, f"dask({client.scheduler.address})"
         fixed = [j.index for j in scenario.fixed_jobs]
-        truths = FlightCache({j: pickle.loads((out_dir / _FLIGHTS / f"j{j:04d}.pkl").read_bytes())
-                              for j in fixed})
+        truths = FlightCache({j: read_flight(flight_file(out_dir / _FLIGHTS, j)) for j in fixed})
         # the workers need not see this directory: the truths travel to each of them once
         shared = client.scatter(truths, broadcast=True)
         futures = [client.submit(replication_task, payload, k, shared, pure=False) for k in todo]

@@ -18,7 +18,8 @@ initial_condition): the fraction of estimates within 3 reported deviations (Cram
 coloured) of their truth, the z-score standard deviations and median |z|. Per channel, the
 distribution over replications of the 3-sigma accuracy — :func:`estimator.workflow.three_sigma`,
 3 x the rms about zero, computed by the replication — of the residuals (the paper's Table 2) and
-of the calibrated channel against the true flow angle.
+of the calibrated channel against the true flow angle. The time a replication took comes from
+the run's ``timings.csv`` (kept apart from the replication files, which stay bit-identical).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import numpy as np
 import pandas as pd
 
 from .replication import VERDICT_NAMES, ReplicationResult
-from .runner import finished_replications, read_replication, read_state, replication_file
+from .runner import finished_replications, read_replication, read_state, replication_file, with_timings
 
 #: the parameter kinds of the calibration proper (shown one by one in the text summary)
 CALIBRATION_KINDS = ("time_delay", "bias", "scale", "table")
@@ -69,6 +70,7 @@ class MonteCarloSummary:
         whether they are in the statistics.
     findings : per (severity, code) of the estimator's warnings and failures: the replications
         that had it and how often.
+    elapsed_s : wall time of each replication that has one (from the run's ``timings.csv``), s.
     """
 
     name: str
@@ -82,6 +84,7 @@ class MonteCarloSummary:
     kinds: pd.DataFrame = field(default_factory=pd.DataFrame)
     verdicts: pd.DataFrame = field(default_factory=pd.DataFrame)
     findings: pd.DataFrame = field(default_factory=pd.DataFrame)
+    elapsed_s: tuple[float, ...] = ()
 
     @property
     def n_failure_verdict(self) -> int:
@@ -105,6 +108,11 @@ class MonteCarloSummary:
                          "because their verdict was failure"
                          + (f", {self.n_failed - self.n_failure_verdict} because they failed otherwise "
                             "(raised, or no verdict)" if self.n_failed > self.n_failure_verdict else ""))
+        if self.elapsed_s:
+            t = np.asarray(self.elapsed_s)
+            lines.append(f"time per replication in its worker (timings.csv, {t.size} replications): median "
+                         f"{np.median(t):.2f} s (10-90 %: {np.percentile(t, 10):.2f}-"
+                         f"{np.percentile(t, 90):.2f} s)")
         if len(self.kinds):
             lines += ["", f"per parameter kind, estimates within {COVERAGE_SIGMAS:g} reported deviations of "
                       "their truth (Cramer-Rao, coloured-residual), z-score std and median |z|:",
@@ -362,14 +370,15 @@ def summarize_results(results: list[ReplicationResult], name: str = "") -> Monte
         name=name, n_ok=len(ok), n_failed=len(failed), parameters=_parameter_table(params, len(ok)),
         families=_family_table(params), channels=_channel_table(chans), failures=failures,
         z=params[["replication", "name", "family", "kind", "error", "z_crb", "z_colored"]].copy(),
-        kinds=kind_table(params), verdicts=verdict_table(results), findings=findings_table(results))
+        kinds=kind_table(params), verdicts=verdict_table(results), findings=findings_table(results),
+        elapsed_s=tuple(float(r.elapsed_s) for r in results if r.elapsed_s > 0))
 
 
 def load_results(out_dir: str | Path, replications: int | None = None) -> list[ReplicationResult]:
     """Every replication file of a run (of 0..N-1 when ``replications`` is given), in index order.
 
     A failure record is read whole (:meth:`ReplicationResult.from_meta`: its verdict and findings
-    too)."""
+    too). Each result's ``elapsed_s`` comes from the run's ``timings.csv`` (0 without a line)."""
     out_dir = Path(out_dir)
     have = finished_replications(out_dir)
     keys = sorted(k for k in have if replications is None or k < replications)
@@ -380,7 +389,7 @@ def load_results(out_dir: str | Path, replications: int | None = None) -> list[R
             out.append(ReplicationResult.from_meta(meta))
         else:
             out.append(read_replication(replication_file(out_dir, k)))
-    return out
+    return with_timings(out_dir, out)
 
 
 def summarize(out_dir: str | Path, replications: int | None = None) -> MonteCarloSummary:

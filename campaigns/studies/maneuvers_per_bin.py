@@ -36,7 +36,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import pickle
 import shlex
 import sys
 import textwrap
@@ -47,6 +46,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from campaigns.montecarlo.flight_cache import SUFFIX as FLIGHT_SUFFIX
+from campaigns.montecarlo.flight_cache import read_flight
 from campaigns.montecarlo.summary import load_results, summarize_results
 from campaigns.studies.shss_segments import (
     ALTITUDE_M,
@@ -160,10 +161,11 @@ def scenario_raw(s: ManeuverSet, config: StudyConfig, replications: int) -> dict
 
 def coverage_deg(run_dir: Path) -> tuple[float, float, float]:
     """True alpha min and max and the largest |beta| over the set's flown maneuvers, deg (from the
-    run's cache of shared flights, ``flights/jNNNN.pkl``)."""
+    run's cache of shared flights, ``flights/jNNNN.npz``; never a pickle: a run folder may come
+    from anyone)."""
     lo, hi, beta = math.inf, -math.inf, 0.0
-    for path in sorted((run_dir / "flights").glob("j*.pkl")):
-        for truth in pickle.loads(path.read_bytes()):
+    for path in sorted((run_dir / "flights").glob(f"j*{FLIGHT_SUFFIX}")):
+        for truth in read_flight(path):
             a = np.degrees(truth.alpha_rad)
             lo, hi = min(lo, float(a.min())), max(hi, float(a.max()))
             beta = max(beta, float(np.degrees(np.abs(truth.beta_rad)).max()))

@@ -113,6 +113,7 @@ from estimator.problem import Problem
 from estimator.result import STATUS_TEXT, EstimationResult
 from estimator.solver import SolverOptions, estimate
 from synth.errors import ErrorConfig
+from synth.workers import bind_to_parent
 
 STUDY = "robustness"
 #: the master seed of every scale's scenario (replication r draws from (SEED, r))
@@ -476,7 +477,8 @@ def run_study(config: StudyConfig, out_dir: Path, replications: int, workers: in
             for s, k in todo:
                 write(pair_task(raws[s], s, k))
         elif todo:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
+            with ProcessPoolExecutor(max_workers=workers, initializer=bind_to_parent,
+                                     initargs=(os.getpid(),)) as pool:
                 futures = [pool.submit(pair_task, raws[s], s, k) for s, k in todo]
                 for fut in as_completed(futures):
                     write(fut.result())

@@ -66,6 +66,7 @@ from campaigns.truth import true_parameters
 from estimator.io import problem_from_dataset
 from estimator.modelfile import load_model_set
 from synth.errors import PROBE_SENSORS, VANE_SENSORS, ErrorConfig
+from synth.workers import bind_to_parent
 
 #: desired 3-sigma accuracy per requirement group, deg (paper Table 2)
 DESIRED_3SIGMA_DEG: Mapping[str, float] = {
@@ -350,7 +351,8 @@ def run_points(points: Sequence[Point], replications: int, workers: int,
         for d in order:
             done(*_run_point(unique[d], str(d), replications))
         return errors, ran[0]
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    with ProcessPoolExecutor(max_workers=workers, initializer=bind_to_parent,
+                             initargs=(os.getpid(),)) as pool:
         futures = [pool.submit(_run_point, unique[d], str(d), replications) for d in order]
         for fut in as_completed(futures):
             done(*fut.result())

@@ -1,0 +1,261 @@
+"""Monte Carlo run folders are safe to open and their files are reproducible (issue 11).
+
+- A run folder may come from anyone: nothing in it is unpickled. A planted ``flights/*.pkl`` is
+  ignored (said so) and the flight flown again; files the tool did not write are left alone.
+- The shared-flight cache (``flights/jNNNN.npz``) gives back exactly what was flown.
+- An interrupted run, resumed, ends with the same bytes as an uninterrupted one (timings apart).
+- The worker processes end with the run's process, even when it is killed.
+
+The tiny scenario of tests/test_montecarlo.py (a replication takes about a second).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import pathlib
+import pickle
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_montecarlo import SCENARIO_TOML, _scenario
+
+from campaigns import montecarlo_cli
+from campaigns.montecarlo import run_montecarlo, runner, summarize
+from campaigns.montecarlo.flight_cache import flight_bytes, flight_file, read_flight
+from campaigns.montecarlo.summary import load_results
+from synth.truth import TruthTrajectory
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+class _Planted:
+    """Unpickling this creates ``marker``: what someone else's code could do instead."""
+
+    def __init__(self, marker: Path):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (pathlib.Path.touch, (pathlib.Path(self.marker),))
+
+
+def _files(directory: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(directory)): p.read_bytes()
+            for p in sorted(directory.rglob("*")) if p.is_file()}
+
+
+def test_a_planted_pickle_in_a_copied_run_folder_is_never_loaded(tmp_path, monkeypatch, capsys):
+    # no flight held in memory from another test of this process: the folder alone decides
+    monkeypatch.setattr(runner, "_PROCESS", {})
+    toml = tmp_path / "mc_test.toml"
+    toml.write_text(SCENARIO_TOML)
+    out = tmp_path / "copied_run"
+    runner.prepare_output(_scenario(), out)  # a run folder as `fpr montecarlo` makes it...
+    marker = tmp_path / "code_ran"
+    planted = pickle.dumps(_Planted(marker))
+    for j in (0, 1):  # ...with a flight cache that runs code when unpickled
+        (out / "flights" / f"j{j:04d}.pkl").write_bytes(planted)
+
+    status = montecarlo_cli.main(["montecarlo", str(toml), "--out", str(out), "--workers", "1",
+                                  "--replications", "1", "--no-summary"])
+    text = capsys.readouterr().out
+    assert not marker.exists(), "a pickle from the run folder was loaded"
+    assert status == 0, text
+    assert "2 shared flights flown" in text and "1 replications run now" in text
+    for j in (0, 1):
+        line = f"ignoring flights/j{j:04d}.pkl: pickle files are never loaded; the flight is flown again"
+        assert text.count(line) == 1, text
+        assert (out / "flights" / f"j{j:04d}.pkl").read_bytes() == planted  # left where it was
+        assert len(read_flight(flight_file(out / "flights", j))) == 1  # flown again, cached safely
+    assert runner.finished_replications(out) == {0: "ok"}
+    # with the flights cached, the pickles are only mentioned
+    report = run_montecarlo(_scenario(), out, replications=1, workers=1)
+    assert report.ran == () and report.notes == (
+        "ignoring flights/j0000.pkl: pickle files are never loaded",
+        "ignoring flights/j0001.pkl: pickle files are never loaded")
+    assert not marker.exists()
+
+
+def test_a_run_removes_only_its_own_leftovers(tmp_path):
+    out = tmp_path / "run"
+    runner.prepare_output(_scenario(), out)
+    # the user's own files, some with names a careless cleanup would take for its own
+    foreign = {"flights/notes.txt": b"mine", "replications/.draft.tmp": b"mine too",
+               "flights/.j0000.npz.tmp": b"not of the tool's pattern",
+               "replications/my_table.parquet": b"not a replication", "my_notes.txt": b"keep",
+               ".scratch.tmp": b"keep"}
+    for name, data in foreign.items():
+        (out / name).write_bytes(data)
+    # the tool's own temporary files, left by a run killed while writing
+    ours = [out / "replications" / ".r00000.parquet.k3j9x_2a.tmp",
+            out / "flights" / ".j0001.npz.abc123de.tmp", out / ".montecarlo.json.zz9_qa0b.tmp"]
+    for p in ours:
+        p.write_bytes(b"half a file")
+    report = run_montecarlo(_scenario(), out, replications=1, workers=1)
+    assert report.ran == (0,) and not report.failed
+    assert runner.finished_replications(out) == {0: "ok"}
+    for name, data in foreign.items():
+        assert (out / name).read_bytes() == data, name
+    assert not any(p.exists() for p in ours)
+
+
+def test_a_pickle_named_like_a_cache_file_is_refused_without_running_it(tmp_path):
+    marker = tmp_path / "code_ran"
+    path = flight_file(tmp_path, 7)
+    path.write_bytes(pickle.dumps(_Planted(marker)))
+    with pytest.raises(ValueError, match=r"j0007\.npz: not a readable flight-cache file.*delete"):
+        read_flight(path)
+    assert not marker.exists()
+
+
+def _assert_same_segments(a: tuple[TruthTrajectory, ...], b: tuple[TruthTrajectory, ...]) -> None:
+    assert len(a) == len(b)
+    for sa, sb in zip(a, b, strict=True):
+        for f in dataclasses.fields(TruthTrajectory):
+            va, vb = getattr(sa, f.name), getattr(sb, f.name)
+            if isinstance(va, np.ndarray):
+                assert va.dtype == vb.dtype and va.shape == vb.shape, f.name
+                assert va.tobytes() == vb.tobytes(), f.name  # bit for bit, NaN and -0.0 included
+            elif f.name == "controls":
+                assert list(va) == list(vb)
+                for k in va:
+                    assert va[k].dtype == vb[k].dtype and va[k].tobytes() == vb[k].tobytes(), k
+            else:
+                assert va == vb and repr(va) == repr(vb), f.name  # repr: a tuple stays a tuple
+
+
+def test_the_flight_cache_round_trip_is_lossless_and_deterministic(tmp_path):
+    # a real flight, cached by the runner
+    scenario = _scenario()
+    payload = runner.ScenarioPayload(raw=scenario.raw, source=scenario.source)
+    _, flown, error = runner.fly_task(payload, 1)
+    assert error is None
+    (tmp_path / "flights").mkdir()
+    assert runner._store_flights(scenario, tmp_path, [(1, flown, None)]) == 1
+    _assert_same_segments(tuple(flown), read_flight(flight_file(tmp_path / "flights", 1)))
+    # and two hand-made segments with what a float64 and a meta can hold
+    rng = np.random.default_rng(11)
+    n = 7
+    special = np.array([np.nan, -0.0, np.inf, -np.inf, 5e-324, 1.0 / 3.0, np.finfo(float).max])
+    names = [f.name for f in dataclasses.fields(TruthTrajectory)
+             if f.name not in ("controls", "planet", "meta")]
+    arrays = {name: rng.standard_normal((n, 3) if i % 2 else n) for i, name in enumerate(names)}
+    arrays["t_s"] = np.arange(n) * 0.1
+    arrays["alpha_rad"] = special
+    meta = {"segment": 1, "segment_start_s": 0.1 + 0.2, "trim": {"residuals": {"udot": 1e-17}},
+            "wind": (1.5, -2.0, 0.0), "nested": [(1, "a"), {"k": None}], "flag": True, "nan": math.nan,
+            "big": 2**70, "np": np.float64(0.1), "text": "Mach 0.6 ° ü"}
+    made = tuple(TruthTrajectory(**arrays, controls={"z_last": -special, "a_first": special[::-1].copy()},
+                                 planet=planet, meta=dict(meta, segment=i))
+                 for i, planet in enumerate(("flat", "wgs84")))
+    for segments in (flown, made):
+        data = flight_bytes(segments)
+        path = flight_file(tmp_path, 3)
+        path.write_bytes(data)
+        back = read_flight(path)
+        assert flight_bytes(back) == data  # the same flight, the same bytes
+        if segments is made:  # NaN != NaN, and a NumPy scalar comes back as the float it equals
+            assert math.isnan(back[0].meta["nan"]) and type(back[0].meta["np"]) is float
+            assert back[0].meta["np"] == 0.1 and back[0].meta["wind"] == (1.5, -2.0, 0.0)
+            segments, back = ([dataclasses.replace(s, meta={k: v for k, v in s.meta.items()
+                                                            if k not in ("nan", "np")}) for s in x]
+                              for x in (segments, back))
+        _assert_same_segments(segments, back)
+
+
+def test_an_interrupted_run_resumed_ends_byte_identical_to_an_uninterrupted_one(tmp_path, monkeypatch):
+    scenario = _scenario()
+    whole = tmp_path / "whole"
+    run_montecarlo(scenario, whole, replications=2, workers=1)
+    cut = tmp_path / "cut"
+    real = runner.replication_task
+
+    def interrupted_at_1(payload, index, truths):
+        if index == 1:
+            raise KeyboardInterrupt  # the operator's Ctrl-C in the middle of the run
+        return real(payload, index, truths)
+
+    monkeypatch.setattr(runner, "replication_task", interrupted_at_1)
+    with pytest.raises(KeyboardInterrupt):
+        run_montecarlo(scenario, cut, replications=2, workers=1)
+    assert sorted(runner.finished_replications(cut)) == [0]
+    monkeypatch.setattr(runner, "replication_task", real)
+    report = run_montecarlo(scenario, cut, replications=2, workers=2)  # resumed, in worker processes
+    assert report.ran == (1,) and report.flights_flown == 0 and not report.failed
+    a, b = _files(whole), _files(cut)
+    assert set(a) == set(b)
+    assert sorted(k for k in a if k.startswith("replications/")) == [
+        f"replications/r{k:05d}.parquet" for k in range(2)]
+    differ = sorted(k for k in a if a[k] != b[k])
+    assert differ == ["timings.csv"]  # replications, flights, montecarlo.json: the same bytes
+    # the timings are kept apart, and still read by the summary
+    for out in (whole, cut):
+        times = [r.elapsed_s for r in load_results(out)]
+        assert len(times) == 2 and all(t > 0 for t in times)
+        line = "time per replication in its worker (timings.csv, 2 replications): median"
+        assert line in summarize(out).text()
+
+
+_RUN_IN_CHILD = """
+import sys
+sys.path.insert(0, {tests!r})
+from test_montecarlo import _scenario
+from campaigns.montecarlo import run_montecarlo
+run_montecarlo(_scenario(), {out!r}, replications=40, workers=2)
+"""
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"  # a zombie computes nothing; its new parent reaps it when it can
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_worker_processes_end_when_the_run_is_killed(tmp_path):
+    out = tmp_path / "killed"
+    child = subprocess.Popen([sys.executable, "-c", _RUN_IN_CHILD.format(tests=str(ROOT / "tests"),
+                                                                       out=str(out))], cwd=ROOT)
+    try:
+        deadline = time.monotonic() + 120
+        workers: list[int] = []
+        # the workers are busy with replications once the first one is written
+        while not (out / "replications").is_dir() or not any((out / "replications").glob("r*.parquet")):
+            assert child.poll() is None, "the run ended before it could be killed"
+            assert time.monotonic() < deadline, "no replication within 120 s"
+            time.sleep(0.2)
+        workers = _children(child.pid)
+        assert len(workers) >= 2, workers
+        os.kill(child.pid, signal.SIGKILL)
+        child.wait()
+        end = time.monotonic() + 5.0
+        while any(_alive(w) for w in workers) and time.monotonic() < end:
+            time.sleep(0.1)
+        alive = [w for w in workers if _alive(w)]
+        assert not alive, f"worker processes {alive} outlived their killed parent by 5 s"
+    finally:
+        if child.poll() is None:
+            child.kill()
+        for w in _children(child.pid) + workers:
+            if _alive(w):
+                os.kill(w, signal.SIGKILL)
