@@ -31,15 +31,22 @@ describe a one-block campaign.
 
 The output directory holds manifest.json and maneuvers/mNNNN.parquet, one file per maneuver
 (SHSS segments get mNNNNsK): measured channels and truth channels (prefix true_), SI units.
-Load it with `synth.dataset.load_dataset(DIR)`.
+Load it with `synth.dataset.load_dataset(DIR)`; `fpr show DIR` summarises it.
+
+The manifest is written first and says "complete": false until the last maneuver is in. An
+interrupted run (Ctrl-C: exit status 130) is completed by `fpr fly --resume --out DIR`, which
+reads the campaign from the manifest and flies only the missing maneuvers: the dataset is then
+byte-identical to an uninterrupted run. --overwrite removes only the files fpr fly wrote there (the
+manifest and the maneuver files it names); a directory holding anything else is refused.
 
 Maneuvers that fail (the aircraft departs, a controller cannot hold its target) are reported and
-listed in the manifest; the exit status is then 1.
+listed in the manifest; the exit status is then 1. Exit status 2: bad input or usage.
 
 examples:
   fpr fly default --out data/default
   fpr fly --config PV1-NP PT1-BOOM --mach 0.4 0.6 --maneuver pitch_doublet shss --out data/small
   fpr fly --mach 0.3 --maneuver pitch_doublet --gear-down --altitude-m 1000 --out data/gear
+  fpr fly --resume --out data/default       complete an interrupted run
 """
 
 
@@ -54,20 +61,30 @@ def _add_fly(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("campaign", nargs="?", help="campaign TOML file or shipped name "
                    "(default, demo); omit to describe the campaign with flags")
-    p.add_argument("--out", required=True, type=Path, help="dataset directory to create")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing dataset at --out")
+    p.add_argument("--out", required=True, type=Path,
+                   help="dataset directory to create (new or empty)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--overwrite", action="store_true",
+                      help="replace a dataset fpr fly wrote at --out (only its own files are "
+                      "removed; a directory holding anything else is refused)")
+    mode.add_argument("--resume", action="store_true",
+                      help="complete the interrupted dataset at --out: fly only its missing "
+                      "maneuvers (the campaign is read from its manifest; a campaign given too "
+                      "must be the same)")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: all CPUs)")
     g = p.add_argument_group("campaign by flags (ignored when a campaign file is given)")
     g.add_argument("--config", nargs="+", default="all", metavar="ID",
-                   help="fleet configuration ids (default: all seven)")
+                   help="fleet configuration ids, or all (default: all seven: PV1-NP PV2-NP "
+                   "PV3-NP PT1-NP PT1-BOOM PT2-NP PT2-BOOM)")
     g.add_argument("--mach", nargs="+", type=float, default=[0.5], help="Mach numbers (0.3-0.9)")
     g.add_argument("--maneuver", nargs="+", default="all", metavar="KIND",
-                   help="maneuver kinds (default: all); see synth.maneuvers.MANEUVER_KINDS")
+                   help="maneuver kinds, or all (the default): pitch_doublet 3211 pullup_pushover "
+                   "roller_coaster windup_turn shss pullup_rudder_doublets level_accel level_decel")
     g.add_argument("--altitude-m", type=float, default=6000.0, help="trim altitude, m")
     g.add_argument("--gear-down", action="store_true", help="fly with the landing gear down")
     g.add_argument("--seed", type=int, default=0, help="master seed for errors and turbulence")
     g.add_argument("--errors", default="typical", choices=["typical", "none"],
-                   help="error preset: SPEC §6 typical magnitudes, or none (truth only)")
+                   help="error preset: typical magnitudes (synth/errors.py), or none (truth only)")
     g.add_argument("--planet", default="flat", choices=["flat", "wgs84"],
                    help="flat non-rotating earth, or JSBSim's rotating WGS84 ellipsoid")
     g.add_argument("--turbulence", default="none", choices=["none", "light", "moderate", "severe"])
@@ -76,11 +93,35 @@ def _add_fly(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--rate-hz", type=float, default=40.0, help="common time base, Hz")
 
 
-def _fly(args: argparse.Namespace) -> int:
-    from synth.campaign import flags_campaign, fly_campaign, load_campaign, parse_campaign, summarize
+#: Flags that describe a campaign, and their defaults (a resume without a campaign file uses
+#: the dataset's own campaign unless one of these was given).
+_FLY_CAMPAIGN_FLAGS = {"config": "all", "mach": [0.5], "maneuver": "all", "altitude_m": 6000.0,
+                       "gear_down": False, "seed": 0, "errors": "typical", "planet": "flat",
+                       "turbulence": "none", "wind_ned_mps": [0.0, 0.0, 0.0], "rate_hz": 40.0}
 
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, turned into an interrupt so `fpr fly` stops its workers and says how to resume."""
+
+
+def _fly(args: argparse.Namespace) -> int:
+    import signal
+
+    from synth.campaign import (
+        FlyInterrupted,
+        campaign_of_dataset,
+        flags_campaign,
+        fly_campaign,
+        load_campaign,
+        parse_campaign,
+        summarize,
+    )
+
+    flags_given = any(getattr(args, k) != v for k, v in _FLY_CAMPAIGN_FLAGS.items())
     if args.campaign:
         campaign = load_campaign(args.campaign)
+    elif args.resume and not flags_given:
+        campaign = campaign_of_dataset(args.out)
     else:
         campaign = parse_campaign(
             flags_campaign(
@@ -91,16 +132,40 @@ def _fly(args: argparse.Namespace) -> int:
             ),
             source="command-line flags",
         )
-    print(f"campaign {campaign.name!r}: {len(campaign.jobs)} maneuvers -> {args.out}")
-    result = fly_campaign(campaign, args.out, workers=args.workers, overwrite=args.overwrite,
-                          progress=True)
+    print(f"campaign {campaign.name!r}: {len(campaign.jobs)} maneuvers -> {args.out}"
+          + (" (resuming)" if args.resume else ""))
+
+    def _on_sigterm(signum, frame):
+        raise _Terminated()
+
+    try:  # only the main thread may set a handler; elsewhere SIGTERM keeps its default
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:
+        previous = None
+    try:
+        result = fly_campaign(campaign, args.out, workers=args.workers, overwrite=args.overwrite,
+                              resume=args.resume, progress=True)
+    except KeyboardInterrupt as exc:
+        cause = exc.__context__ if isinstance(exc, FlyInterrupted) else exc
+        print(f"fpr fly: {exc if isinstance(exc, FlyInterrupted) else 'interrupted'}", file=sys.stderr)
+        return 143 if isinstance(cause, _Terminated) else 130
+    except (IsADirectoryError, NotADirectoryError, PermissionError) as exc:
+        print(f"fpr fly: error: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     print(summarize(result.manifest))
-    print(f"wrote {args.out} in {result.wall_s:.1f} s")
+    if args.resume and result.flown == 0:
+        print(f"{args.out}: the dataset was already complete; nothing to fly")
+    else:
+        print(f"wrote {args.out} in {result.wall_s:.1f} s"
+              + (f" ({result.flown} maneuvers flown now)" if args.resume else ""))
     return 0 if result.ok else 1
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from synth.campaign import fly_campaign, load_campaign, summarize
+    from synth.campaign import FlyInterrupted, fly_campaign, load_campaign, summarize
 
     t0 = time.perf_counter()
     campaign = load_campaign("demo")
@@ -111,7 +176,14 @@ def _demo(args: argparse.Namespace) -> int:
     _prepare_out(report_dir, True, "fpr demo", [out], check_only=True)
     print(f"fpr demo: flying the demo campaign ({len(campaign.jobs)} maneuvers, seven fleet "
           f"configurations) into {out}")
-    result = fly_campaign(campaign, out, workers=args.workers, overwrite=True, progress=True)
+    # replaces an earlier dataset fpr wrote at --out (its own files only); a directory holding
+    # anything else is refused, the message listing it
+    try:
+        result = fly_campaign(campaign, out, workers=args.workers, overwrite=True, progress=True)
+    except FlyInterrupted as exc:
+        print(f"fpr demo: interrupted: {exc.n_done} of {exc.n_jobs} maneuvers written to {out}; "
+              "`fpr demo` again starts over", file=sys.stderr)
+        return 130
     print(summarize(result.manifest))
     print(f"\ndataset written to {out} ({time.perf_counter() - t0:.1f} s). "
           "Load it with synth.dataset.load_dataset().")
@@ -134,8 +206,20 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _show(args: argparse.Namespace) -> int:
     from synth.campaign import summarize
-    from synth.dataset import load_dataset
+    from synth.dataset import (
+        dataset_status,
+        incomplete_message,
+        load_dataset,
+        read_manifest_if_dataset,
+        written_entries,
+    )
 
+    manifest = read_manifest_if_dataset(args.dataset)
+    if manifest is not None and manifest.get("complete", True) is False:
+        print(f"INCOMPLETE: {incomplete_message(args.dataset, dataset_status(args.dataset, manifest))}")
+        print("written so far:")
+        print(summarize({**manifest, "maneuvers": written_entries(args.dataset, manifest)}))
+        return 1
     ds = load_dataset(args.dataset)
     print(summarize(ds.manifest))
     return 0
@@ -144,9 +228,15 @@ def _show(args: argparse.Namespace) -> int:
 CALIBRATE_EPILOG = """\
 PROBLEM.toml is a problem file: your flight data (CSV, text or Parquet), column names and units,
 sensor positions, CG, the channel models and which parameters are free; see the README section
-"Calibrating your own data" or estimator/io/__init__.py. A dataset directory written by
-`fpr fly` works too (then --select-* flags pick maneuvers, and the recovery table compares each
-estimate with the injected truth).
+"Calibrating flight data" and the problem-file schema in estimator/io/__init__.py. A dataset
+directory written by `fpr fly` works too (then --kind, --config, --aircraft, --mach-min,
+--mach-max and --gear pick maneuvers, and the recovery table compares each estimate with the
+injected truth).
+
+By default the Mach-bin calibration workflow runs (estimator/workflow.py): it needs a Mach signal
+(map a `mach` column in the problem file; a dataset has one) and at least 3 maneuvers of steady
+Mach in a bin; it writes report.html with its CSV tables. --single runs one estimation over all
+selected maneuvers instead, with or without Mach.
 
 Every estimation ends with a verdict: SUCCESS, SUCCESS WITH WARNINGS (read each warning) or
 FAILURE (do not use the estimates), with its reasons per channel, maneuver and time: the fit is
@@ -384,8 +474,11 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", type=Path, default=Path("fpr-out/demo"),
                    help="where to write the demo dataset (default: fpr-out/demo; replaced)")
     d.add_argument("--workers", type=int, default=None, help="worker processes (default: all CPUs)")
-    s = sub.add_parser("show", help="summarise a dataset written by `fpr fly`")
-    s.add_argument("dataset", type=Path)
+    show_help = ("summarise a dataset written by `fpr fly`: maneuvers per kind, Mach and "
+                 "configuration, failures; an interrupted (incomplete) dataset is said to be one, with "
+                 "the command that completes it (exit status 1)")
+    s = sub.add_parser("show", help=show_help, description=show_help[0].upper() + show_help[1:] + ".")
+    s.add_argument("dataset", type=Path, help="the dataset directory (fpr fly --out)")
     from campaigns import montecarlo_cli
 
     montecarlo_cli.add_parser(sub)

@@ -535,9 +535,9 @@ def fly_campaign(
     jobs = {j.index: j for j in campaign.jobs}
     done: dict[int, list[dict]] = {}
     if stored is not None:
+        # the manifest's own source label stays: the same file may be named another way today
+        header["campaign"]["source"] = stored.get("campaign", {}).get("source", campaign.source)
         _check_same_campaign(out_dir, stored, header)
-        # keep the manifest's own source label: the same file may be named another way today
-        header["campaign"]["source"] = stored["campaign"]["source"]
         if stored.get("complete", True) is not False:
             failures = tuple((jobs[f["job_index"]], f["error"]) for f in stored.get("failures", [])
                              if f.get("job_index") in jobs)

@@ -195,7 +195,16 @@ def dataset_status(directory: str | Path, manifest: Mapping | None = None) -> Da
 def incomplete_message(directory: str | Path, status: DatasetStatus) -> str:
     """What an incomplete dataset is and how to complete it (for errors and `fpr show`)."""
     return (f"{directory}: incomplete dataset: {status.n_done} of {status.n_jobs} maneuvers written "
-            f"(`fpr fly` was interrupted); complete it with: {resume_command(directory)}")
+            "(`fpr fly` was interrupted, or is still running); complete it with: "
+            f"{resume_command(directory)}")
+
+
+def written_entries(directory: str | Path, manifest: Mapping) -> list[dict]:
+    """The manifest entries of an incomplete dataset's finished jobs, read from their files."""
+    directory = Path(directory)
+    done = set(dataset_status(directory, manifest).done)
+    return [read_maneuver_metadata(directory / f) for job in manifest.get("jobs", [])
+            if job["job_index"] in done for f in job["files"]]
 
 
 def _listing(names: list[str]) -> str:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import shlex
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -60,8 +61,18 @@ def read_manifest(path: str | Path) -> tuple[Path, dict]:
         manifest = json.loads(mpath.read_text())
     except json.JSONDecodeError as exc:
         raise DataError(f"{mpath}: not valid JSON ({exc}); the dataset is damaged") from None
-    if manifest.get("format") != FORMAT:
-        raise DataError(f"{mpath}: format is {manifest.get('format')!r}, expected {FORMAT!r}")
+    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
+        got = manifest.get("format") if isinstance(manifest, dict) else type(manifest).__name__
+        raise DataError(f"{mpath}: format is {got!r}, expected {FORMAT!r}")
+    if manifest.get("complete", True) is False:
+        # `fpr fly` writes the manifest first, "complete": false, and its planned jobs with their
+        # files; a file present is a whole one (written to a temporary name, then renamed)
+        jobs = manifest.get("jobs") or []
+        done = sum(1 for j in jobs if all((path / f).is_file() for f in j.get("files", [])))
+        raise DataError(
+            f"{path}: incomplete dataset: {done} of {len(jobs)} maneuvers written (`fpr fly` was "
+            f"interrupted, or is still running); complete it with: fpr fly --resume --out "
+            f"{shlex.quote(str(path))}")
     if not manifest.get("maneuvers"):
         raise DataError(f"{mpath}: the manifest lists no maneuvers")
     return path, manifest

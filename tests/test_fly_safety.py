@@ -1,0 +1,275 @@
+"""`fpr fly` keeps the user's files, says whether a dataset is complete, resumes an interrupted one
+to the same bytes, and leaves no worker behind (issue 11)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from campaigns.cli import main
+from estimator.io.errors import DataError
+from estimator.io.fprdataset import read_manifest
+from synth.campaign import fly_campaign, parse_campaign
+from synth.dataset import MANIFEST, IncompleteDatasetError, load_dataset, prepare_directory, write_manifest
+
+REPO = Path(__file__).resolve().parent.parent
+
+#: one short maneuver per job; 7 configurations x 3 Mach numbers: enough jobs that a run killed
+#: at its first file is far from done, few enough to fly in seconds
+KILL_CAMPAIGN = """\
+name = "kill-test"
+seed = 17
+[errors]
+preset = "typical"
+[[flights]]
+configurations = "all"
+mach = [0.45, 0.55, 0.65]
+maneuvers = ["pitch_doublet"]
+[flights.maneuver]
+duration_s = 10.0
+"""
+
+TINY = {
+    "name": "tiny",
+    "seed": 3,
+    "errors": {"preset": "typical"},
+    "flights": [{"configurations": ["PV1-NP", "PT1-BOOM"], "mach": [0.6], "maneuvers": ["pitch_doublet"],
+                 "maneuver": {"duration_s": 10.0}}],
+}
+
+
+def _files(directory: Path) -> dict[str, bytes]:
+    return {p.relative_to(directory).as_posix(): p.read_bytes()
+            for p in sorted(directory.rglob("*")) if p.is_file()}
+
+
+def _fly_tiny(out: Path, raw: dict = TINY, **kw):
+    res = fly_campaign(parse_campaign(raw, source="tiny"), out, workers=1, **kw)
+    assert res.ok, res.failures
+    return res
+
+
+# ------------------------------------------------------------------------- the user's files
+def test_fly_overwrite_keeps_user_files_and_lists_them(tmp_path, capsys):
+    out = tmp_path / "ds"
+    _fly_tiny(out)
+    before = _files(out)
+    (out / "my_notes.txt").write_text("flight 421: left vane sticky")
+    (out / "maneuvers" / "backup.csv").write_text("t,alpha\n0,1\n")
+    code = main(["fly", "--config", "PV1-NP", "--mach", "0.6", "--maneuver", "pitch_doublet",
+                 "--out", str(out), "--overwrite", "--workers", "1"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "my_notes.txt" in err and "maneuvers/backup.csv" in err and "Traceback" not in err
+    assert (out / "my_notes.txt").read_text() == "flight 421: left vane sticky"
+    assert (out / "maneuvers" / "backup.csv").exists()
+    # refused before anything was removed: the dataset is untouched too
+    assert {k: v for k, v in _files(out).items() if k in before} == before
+
+
+def test_overwrite_removes_exactly_the_datasets_own_files(tmp_path):
+    out = tmp_path / "ds"
+    _fly_tiny(out)  # two jobs: m0000, m0001
+    (out / "maneuvers" / ".m0001.parquet.k2j_x9.tmp").write_bytes(b"half a file")  # a killed write
+    one_job = {**TINY, "flights": [{**TINY["flights"][0], "configurations": ["PV1-NP"]}]}
+    _fly_tiny(out, one_job, overwrite=True)
+    assert sorted(_files(out)) == sorted([MANIFEST, "maneuvers/m0000.parquet"]), "stale files left"
+    # a file of the tool's name pattern that the manifest does not list is the user's
+    (out / "maneuvers" / "m0007.parquet").write_bytes(b"mine")
+    with pytest.raises(FileExistsError, match="maneuvers/m0007.parquet"):
+        prepare_directory(out, overwrite=True)
+    assert (out / "maneuvers" / "m0007.parquet").read_bytes() == b"mine"
+
+
+def test_demo_replaces_only_its_own_dataset(tmp_path, monkeypatch, capsys):
+    import campaigns.cli as cli
+    import synth.campaign
+
+    # the demo campaign shrunk to two maneuvers, no calibration: only the dataset part is tested
+    monkeypatch.setattr(synth.campaign, "load_campaign", lambda name: parse_campaign(TINY, source="tiny"))
+    monkeypatch.setattr(cli, "_workflow", lambda *a, **k: 0)
+    out = tmp_path / "demo"
+    _fly_tiny(out)  # an earlier demo's dataset ...
+    before = _files(out)
+    (out / "my_notes.txt").write_text("keep me")  # ... beside which the user put a file
+    code = main(["demo", "--out", str(out), "--workers", "1"])
+    err = capsys.readouterr().err
+    assert code == 2 and "my_notes.txt" in err and "Traceback" not in err
+    assert (out / "my_notes.txt").read_text() == "keep me"
+    assert {k: v for k, v in _files(out).items() if k != "my_notes.txt"} == before
+    # the library call the demo makes refuses the same way
+    with pytest.raises(FileExistsError, match="my_notes.txt"):
+        fly_campaign(parse_campaign(TINY, source="tiny"), out, workers=1, overwrite=True)
+    # without the user's file, the demo replaces its own dataset
+    (out / "my_notes.txt").unlink()
+    (out / "maneuvers" / "m0001.parquet").unlink()
+    assert main(["demo", "--out", str(out), "--workers", "1"]) == 0
+    assert _files(out) == before
+
+
+def test_out_naming_a_file_is_a_clear_error(tmp_path, capsys):
+    target = tmp_path / "flight.csv"
+    target.write_text("t,alpha\n0,1\n")
+    code = main(["fly", "--maneuver", "all", "--config", "all", "--out", str(target)])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "is a file" in err and str(target) in err and "Traceback" not in err
+    assert target.read_text() == "t,alpha\n0,1\n"
+
+
+# ------------------------------------------------------------------------------------ flags
+def test_maneuver_all_and_config_all_are_accepted():
+    from campaigns.cli import build_parser
+    from synth.campaign import flags_campaign
+    from synth.maneuvers import MANEUVER_KINDS
+
+    args = build_parser().parse_args(["fly", "--maneuver", "all", "--config", "all", "--out", "x"])
+    camp = parse_campaign(flags_campaign(configurations=args.config, maneuvers=args.maneuver), source="flags")
+    assert {j.maneuver["kind"] for j in camp.jobs} == set(MANEUVER_KINDS)
+    assert len({j.configuration_id for j in camp.jobs}) == len(camp.fleet.configurations)
+
+
+def test_fly_and_show_help_point_only_at_things_that_exist(capsys):
+    from aircraft_models import load_fleet
+    from synth.maneuvers import MANEUVER_KINDS
+
+    with pytest.raises(SystemExit):
+        main(["fly", "--help"])
+    text = capsys.readouterr().out
+    for kind in MANEUVER_KINDS:
+        assert kind in text
+    for cid in load_fleet("fleet_default").configurations:
+        assert cid in text
+    for path in ("campaigns/default.toml", "campaigns/demo.toml", "synth/errors.py"):
+        assert path in text and (REPO / path).exists(), path
+    assert "--resume" in text and "SPEC" not in text
+    with pytest.raises(SystemExit):
+        main(["show", "--help"])
+    assert "incomplete" in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------------ incomplete datasets
+def _interrupt(out: Path) -> None:
+    """What a run killed after its first maneuver leaves: the first manifest, some files."""
+    manifest = json.loads((out / MANIFEST).read_text())
+    write_manifest(out, {**manifest, "complete": False, "maneuvers": [], "failures": []})
+    (out / "maneuvers" / "m0001.parquet").unlink()
+
+
+def test_readers_refuse_an_incomplete_dataset_and_say_how_to_resume(tmp_path):
+    out = tmp_path / "ds"
+    _fly_tiny(out)
+    _interrupt(out)
+    with pytest.raises(IncompleteDatasetError, match=r"1 of 2 maneuvers.*fpr fly --resume --out"):
+        load_dataset(out)
+    with pytest.raises(DataError, match=r"1 of 2 maneuvers.*fpr fly --resume --out"):
+        read_manifest(out)
+    with pytest.raises(FileExistsError, match="incomplete.*--resume"):
+        prepare_directory(out)
+
+
+def test_resume_refuses_another_campaign_and_completes_its_own(tmp_path, capsys):
+    out = tmp_path / "ds"
+    _fly_tiny(out)
+    reference = _files(out)
+    _interrupt(out)
+    code = main(["fly", "--mach", "0.7", "--maneuver", "3211", "--out", str(out), "--resume"])
+    err = capsys.readouterr().err
+    assert code == 2 and "another campaign" in err and "definition" in err
+    res = fly_campaign(parse_campaign(TINY, source="elsewhere/tiny.toml"), out, workers=1, resume=True)
+    assert res.flown == 1
+    assert _files(out) == reference
+
+
+# ---------------------------------------------------------- killed runs: resume, no orphans
+def _proc_stat(pid: int) -> list[str] | None:
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return text[text.rindex(")") + 2:].split()  # state, ppid, ... (the name may hold spaces)
+
+
+def _children(pid: int) -> list[tuple[int, str]]:
+    """(pid, start time) of every child of ``pid`` (the start time tells a reused pid apart)."""
+    kids = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit() and (st := _proc_stat(int(d.name))) is not None and int(st[1]) == pid:
+            kids.append((int(d.name), st[19]))
+    return kids
+
+
+def _alive(child: tuple[int, str]) -> bool:
+    st = _proc_stat(child[0])
+    return st is not None and st[19] == child[1] and st[0] not in "ZX"
+
+
+@pytest.fixture(scope="module")
+def kill_campaign(tmp_path_factory):
+    base = tmp_path_factory.mktemp("kill")
+    toml = base / "kill.toml"
+    toml.write_text(KILL_CAMPAIGN)
+    ref = base / "reference"
+    assert main(["fly", str(toml), "--out", str(ref), "--workers", "2"]) == 0
+    return toml, _files(ref)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="finds worker processes in /proc")
+@pytest.mark.parametrize("how", ["SIGINT", "SIGKILL"])
+def test_a_killed_fly_leaves_no_worker_and_resumes_to_the_same_bytes(kill_campaign, tmp_path, how, capsys):
+    toml, reference = kill_campaign
+    out = tmp_path / "ds"
+    log_out, log_err = tmp_path / "stdout.txt", tmp_path / "stderr.txt"
+    with open(log_out, "w") as fo, open(log_err, "w") as fe:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "campaigns.cli", "fly", str(toml), "--out", str(out), "--workers", "2"],
+            stdout=fo, stderr=fe, cwd=REPO, start_new_session=True)
+    try:
+        # wait for the first maneuver file (bounded: a stuck start fails instead of hanging)
+        deadline = time.monotonic() + 120.0
+        while not (out / "maneuvers").is_dir() or not any((out / "maneuvers").glob("m*.parquet")):
+            assert proc.poll() is None, f"fpr fly ended early: {log_err.read_text()}"
+            assert time.monotonic() < deadline, "no maneuver file within 120 s"
+            time.sleep(0.01)
+        workers = _children(proc.pid)
+        assert len(workers) == 2, workers
+        if how == "SIGINT":
+            os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole group
+        else:
+            os.kill(proc.pid, signal.SIGKILL)  # the parent alone
+        code = proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    # no worker outlives its parent by more than 5 s (the issue's bound)
+    deadline = time.monotonic() + 5.0
+    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not [w for w in workers if _alive(w)], "orphaned worker processes"
+    err = log_err.read_text()
+    if how == "SIGINT":
+        assert code == 130, err
+        assert "interrupted:" in err and f"fpr fly --resume --out {out}" in err
+        assert "Traceback" not in err
+    else:
+        assert code == -signal.SIGKILL
+    # the dataset says it is incomplete, and how to complete it
+    assert json.loads((out / MANIFEST).read_text())["complete"] is False
+    assert main(["show", str(out)]) == 1
+    shown = capsys.readouterr().out
+    assert "INCOMPLETE" in shown and f"fpr fly --resume --out {out}" in shown
+    assert f"of {len(reference) - 1} maneuvers written" in shown
+    # resumed, it is byte for byte the uninterrupted run (no stray temporary file either)
+    assert main(["fly", "--resume", "--out", str(out), "--workers", "2"]) == 0
+    got = _files(out)
+    assert sorted(got) == sorted(reference)
+    assert [k for k in reference if got[k] != reference[k]] == []
+    assert main(["show", str(out)]) == 0
