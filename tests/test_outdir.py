@@ -184,6 +184,13 @@ def test_a_report_file_the_user_edited_is_refused_not_deleted(dataset, earlier_r
     assert _snapshot(out) == before
 
 
+def test_out_naming_the_input_dataset_is_refused(dataset, capsys):
+    before = _snapshot(dataset)
+    assert main(["calibrate", str(dataset), "--out", str(dataset), "--overwrite"]) == 2
+    assert "is an input of this run" in capsys.readouterr().err
+    assert _snapshot(dataset) == before
+
+
 # --------------------------------------------------------------------------------------------------
 # fpr calibrate --single
 

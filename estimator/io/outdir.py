@@ -117,11 +117,13 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _same_file(a: Path, b: Path) -> bool:
+def _file_id(p: Path) -> tuple[int, int] | None:
+    """(device, inode) of an existing path (a link followed: the input it points at), else None."""
     try:
-        return os.path.samefile(a, b)
+        st = os.stat(p)
     except OSError:
-        return os.path.abspath(a) == os.path.abspath(b)
+        return None
+    return st.st_dev, st.st_ino
 
 
 @dataclass
@@ -189,10 +191,11 @@ def _check(out: Path, overwrite: bool, protect: Iterable[str | os.PathLike]) -> 
     """Every refusal of :func:`prepare_output`, without changing anything; the survey of an
     existing folder (None when it does not exist yet)."""
     protect = [Path(p) for p in protect]
-    for p in protect:
-        if p.exists() and _same_file(p, out):
-            raise OutputFolderError(f"{out} is an input of this run ({p}); results go to a folder of their "
-                                    "own: choose another --out")
+    inputs = {i: p for p in protect if (i := _file_id(p)) is not None}
+    out_id = _file_id(out)
+    if out_id is not None and out_id in inputs:
+        raise OutputFolderError(f"{out} is an input of this run ({inputs[out_id]}); results go to a folder "
+                                "of their own: choose another --out")
     if out.exists() and not out.is_dir():
         raise OutputFolderError(f"{out} exists and is not a folder; choose another --out")
     if not out.exists():
@@ -200,7 +203,7 @@ def _check(out: Path, overwrite: bool, protect: Iterable[str | os.PathLike]) -> 
     s = _survey(out)
 
     def is_input(rel: str) -> bool:
-        return any(p.exists() and _same_file(p, out / rel.rstrip("/")) for p in protect)
+        return _file_id(out / rel.rstrip("/")) in inputs
 
     strangers = [f"{r} (an input of this run)" if is_input(r) else r for r in s.foreign] + s.changed
     if s.listing_problem and not strangers:
