@@ -23,7 +23,7 @@ import time
 import traceback
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +53,8 @@ COLUMNS = ("replication", "record", "name", "family", "kind", "unit", "estimate"
            "std_crb", "std_colored", "z_crb", "z_colored", "mean", "std", "three_sigma", "n")
 #: the estimator's verdict codes (:class:`estimator.verdict.Verdict`) -> their names, for tables
 VERDICT_NAMES = {v.code: v.name.lower().replace("_", " ") for v in Verdict}
+#: a replication's scratch dataset directory (its name differs per run; kept out of the messages)
+_SCRATCH = re.compile(r"[^\s'\"]*fpr-mc-r\d{5}-[a-z0-9_]{8}")
 #: maneuver keys: one per (job, segment), as synth.campaign numbers them (so the noise of a
 #: maneuver does not depend on which other maneuvers are flown)
 _SEGMENTS_PER_JOB = 64
@@ -398,7 +400,18 @@ def run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequenc
     # (Dask workers run single-threaded, local processes do not), which moved the least-squares
     # truth projection by 1e-13 between executors; the estimator itself already runs on one
     with threadpool_limits(limits=1):
-        return _run_replication(scenario, index, truths, models)
+        return _scrubbed(_run_replication(scenario, index, truths, models))
+
+
+def _scrubbed(result: ReplicationResult) -> ReplicationResult:
+    """``result`` with the scratch directory's path in its texts replaced by ``<replication
+    data>``: the path differs per run, and the replication's file must not."""
+    def scrub(text: str) -> str:
+        return _SCRATCH.sub("<replication data>", text)
+
+    return replace(result, message=scrub(result.message),
+                   warnings=tuple(dict.fromkeys(scrub(w) for w in result.warnings)),
+                   findings=tuple((sev, code, scrub(msg)) for sev, code, msg in result.findings))
 
 
 def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequence[TruthTrajectory]],
@@ -421,8 +434,7 @@ def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequen
             result = estimate(problem, SolverOptions(max_iterations=est.max_iterations,
                                                      colored=est.colored))
             truth = _truth_of(problem, result) if result.success else None
-        # the scratch directory's name differs per run: keep it out of the (compared) messages
-        notes = tuple(dict.fromkeys(str(w.message).replace(tmp, "<replication data>") for w in caught))
+        notes = tuple(dict.fromkeys(str(w.message) for w in caught))  # scrubbed by run_replication
         status = int(result.status)
         code, n_warn, n_fail, findings = verdict_of(result)
         judged = {"verdict_code": code, "n_warnings": n_warn, "n_failures": n_fail, "findings": findings}
@@ -494,10 +506,10 @@ def run_replication_safely(scenario: Scenario, index: int,
             noise_seed = scenario.draw(index).noise_seed
         except Exception:  # the draw itself failed; the traceback below says why
             noise_seed = -1
-        return ReplicationResult(
+        return _scrubbed(ReplicationResult(
             index=index, ok=False, status=-1,
             message=f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", noise_seed=noise_seed,
-            scenario_hash=scenario.hash, elapsed_s=time.perf_counter() - t0)
+            scenario_hash=scenario.hash, elapsed_s=time.perf_counter() - t0))
 
 
 def failure_record(result: ReplicationResult) -> str:
