@@ -62,7 +62,8 @@ def _add_fly(sub: argparse._SubParsersAction) -> None:
     p.add_argument("campaign", nargs="?", help="campaign TOML file or shipped name "
                    "(default, demo); omit to describe the campaign with flags")
     p.add_argument("--out", required=True, type=Path,
-                   help="dataset directory to create (new or empty)")
+                   help="dataset directory to create (new or empty; an existing dataset with "
+                   "--overwrite or --resume)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--overwrite", action="store_true",
                       help="replace a dataset fpr fly wrote at --out (only its own files are "

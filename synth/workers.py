@@ -15,7 +15,9 @@ Two mechanisms, because neither alone is enough:
   the worker was started by (``os.getppid()`` changes when the parent dies: the worker is
   re-parented to init or a subreaper) and ends the worker with ``os._exit``.
 
-Ctrl-C needs neither: the terminal sends SIGINT to the whole foreground process group.
+Ctrl-C needs neither: the terminal sends SIGINT to the whole foreground process group. A pool
+that wants a clean stop (no traceback from every worker) ignores SIGINT in its workers and ends
+them from the parent, as :func:`synth.campaign.fly_campaign` does.
 """
 
 from __future__ import annotations
