@@ -31,10 +31,14 @@ A case may allow more than one (``reject|flag``: caught either way). The outcome
 per case is ``clear error`` (a rejection that passes the checks above), ``correct result`` (a
 result judged correct above) or ``anything else`` (a traceback, a silent success, a vague
 message, a wrong channel named, wrong advice, or estimates that moved); the reason is given.
-The base itself must be a correct result: verdict SUCCESS or SUCCESS WITH WARNINGS and every
-calibration estimate within 4 coloured deviations of the testbed's truth.
+A case may also require a specific fix in the message (``own_rate``, ``skip_rows = 3``,
+``--single``, ...) or forbid wrong advice (``mrad`` for a spike). The base itself must be a
+correct result: verdict SUCCESS or SUCCESS WITH WARNINGS and every compared estimate within 4
+deviations of the testbed's truth.
 
-The script exits 1 if any case is "anything else". A full run takes about 2 minutes on 2 cores.
+The script exits 1 if any case is "anything else". A full run takes well under a minute on 2
+cores. ``--out`` must be empty or a folder this script made (it holds a ``.bad_inputs`` marker):
+its ``base/`` and ``cases/`` are replaced on every run.
 """
 
 from __future__ import annotations
@@ -83,6 +87,8 @@ CAMPAIGN = {
 }
 DOUBLET, RUDDER = "m0000", "m0001"
 DATA = "flight421.csv"
+#: Marks a working folder as this script's: only such a folder has its base/ and cases/ replaced.
+MARKER = ".bad_inputs"
 PROBLEM = "problem.toml"
 #: Recorder time of the first sample of each maneuver in the CSV (not 0: a real recorder's clock).
 T_FIRST_S = {DOUBLET: 1520.0, RUDDER: 1700.0}
@@ -255,6 +261,8 @@ class Case:
         problem file) or ``""`` (nothing to locate).
     fix : a regular expression the rejection must also match (a specific fix, e.g. ``own_rate``).
     forbid : a regular expression no message may match (wrong advice).
+    says : a regular expression the output of an accepted case must match (what was adjusted is
+        reported, e.g. the nominal rate of jittered time stamps).
     argv : extra command-line arguments; ``single=False`` runs the Mach-bin workflow instead.
     judge : a custom judge ``judge(run) -> (class, reason) or None`` tried first.
     """
@@ -269,6 +277,7 @@ class Case:
     when: str = "time"
     fix: str = ""
     forbid: str = ""
+    says: str = ""
     single: bool = True
     judge: Callable | None = None
     problem: str = PROBLEM
@@ -469,13 +478,13 @@ def _write_jittered(d: Path, rate_hz: float, seed: int) -> None:
     (d / PROBLEM).write_text(text)
 
 
-@case("time base", "accept")
+@case("time base", "accept", says=r"nominal 40 Hz")
 def time_jitter_40hz(d):
     """Time stamps of a 40 Hz recorder: ~1 % jitter, written to the millisecond."""
     _write_jittered(d, 40.0, seed=1)
 
 
-@case("time base", "accept")
+@case("time base", "accept", says=r"nominal 50 Hz")
 def time_jitter_50hz(d):
     """The same flight recorded at 50 Hz with ~1 % jitter, written to the millisecond (the
     ranges end at the last 50 Hz sample)."""
@@ -1061,6 +1070,8 @@ def judge(c: Case, run: Run, base: dict | None) -> tuple[str, str]:
         new_faults = [f for f in res["findings"] if f["code"] in DATA_FAULTS]
         if new_faults:
             return "anything else", f"a data fault on good data: {new_faults[0]['message'][:80]}"
+        if c.says and not re.search(c.says, everything):
+            return "anything else", f"accepted without saying /{c.says}/"
         ok, text = compare_with_base(res, base)
         return ("correct result" if ok else "anything else"), f"{verdict}; {text}"
     return "anything else", f"silently accepted: exit {run.status}, verdict {verdict}"
@@ -1120,7 +1131,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.only and set(args.only) - names:
         raise SystemExit(f"unknown case(s) {sorted(set(args.only) - names)}; known: {sorted(names)}")
     root = args.out.resolve()
+    marker = root / MARKER
+    if root.exists() and any(root.iterdir()) and not marker.is_file():
+        # the folder's base/ and cases/ are replaced on every run: only in a folder of our own
+        raise SystemExit(f"{root} is not empty and was not made by bad_inputs.py (no {MARKER}); "
+                         "choose another --out")
     root.mkdir(parents=True, exist_ok=True)
+    marker.write_text("working folder of campaigns/benchmarks/bad_inputs.py: base/ and cases/ are "
+                      "replaced on every run, dataset/ is kept\n")
     t_start = time.perf_counter()
     ds = fly_base(root)
     base_dir = root / "base"
