@@ -285,6 +285,46 @@ def assign_bins(problem: Problem, opt: WorkflowOptions) -> pd.DataFrame:
     return df
 
 
+#: How to run without Mach bins, for messages: the command line's flag and the library's function.
+SINGLE_ESTIMATION = "fpr calibrate --single, or estimator.solver.estimate from Python"
+
+
+def no_bins_message(source: str, bins: pd.DataFrame, opt: WorkflowOptions) -> str:
+    """Why the workflow has no gear-up bin to start from (:func:`assign_bins`'s table), and the ways on.
+
+    Without any Mach signal the Mach-bin workflow cannot run at all: the message says so, how to
+    map Mach, and that one estimation over all maneuvers needs no Mach (``--single``). With Mach,
+    it lists the bins and their maneuver counts against the minimum.
+    """
+    n = len(bins)
+    no_mach = bins["mach_mean"].isna() if n else pd.Series(dtype=bool)
+    single = (f"or run one estimation over all {n} maneuvers instead of the Mach-bin workflow "
+              f"({SINGLE_ESTIMATION})")
+    how_mach = ("map the Mach number under [columns] (mach = { column = \"MACH\", unit = \"1\" }; "
+                "an fpr dataset has it)")
+    if n and no_mach.all():
+        return (f"{source}: no Mach signal in any of the {n} maneuver(s): the Mach-bin workflow sorts the "
+                f"maneuvers into Mach bins by their mean Mach. {how_mach[0].upper()}{how_mach[1:]}, "
+                f"{single}")
+    parts = []
+    for gear in (False, True):
+        g = bins[bins["bin"].notna() & (bins["gear_down"] == gear)]
+        if len(g):
+            counts = g.groupby("bin").size()
+            parts.append(f"gear-{'down' if gear else 'up'} bins: " + ", ".join(
+                f"Mach {b:.2f}: {c} maneuver(s)" for b, c in counts.items()))
+    varying = int(bins["reason"].str.startswith("Mach varies").sum()) if n else 0
+    if varying:
+        parts.append(f"{varying} maneuver(s) left out for Mach varying by more than "
+                     f"{opt.max_mach_variation} (--max-mach-variation)")
+    if n and no_mach.any():
+        parts.append(f"{int(no_mach.sum())} maneuver(s) with no Mach signal ({how_mach})")
+    found = "; ".join(parts) if parts else "no maneuvers"
+    return (f"{source}: no gear-up Mach bin has {opt.min_maneuvers} or more maneuvers of steady Mach "
+            f"(variation <= {opt.max_mach_variation}), which each bin needs: {found}. Add or select "
+            f"maneuvers so that a bin has {opt.min_maneuvers}, {single}")
+
+
 # ---------------------------------------------------------------------------------- apportioning
 def apportion(biases_left: Mapping[str, float], biases_right: Mapping[str, float],
               covariance: np.ndarray | None = None) -> pd.DataFrame:
@@ -405,8 +445,7 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
             + (" ... (all in maneuvers.csv)" if len(left) > 8 else ""))
     up = bins[bins["used"] & ~bins["gear_down"]]
     if up.empty:
-        raise ValueError(f"{problem.source}: no gear-up Mach bin has {opt.min_maneuvers} or more maneuvers "
-                         f"of steady Mach (variation <= {opt.max_mach_variation}); nothing to calibrate")
+        raise ValueError(no_bins_message(problem.source, bins, opt))
     bl, br = opt.vane_biases
     has_vanes = bl in problem.parameters.specs and br in problem.parameters.specs
     # ---- step 2

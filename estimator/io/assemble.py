@@ -15,7 +15,7 @@ import numpy as np
 
 from estimator.io.consistency import check_euler_rates
 from estimator.io.errors import DataError, Where, warn
-from estimator.io.plausibility import check_plausible, check_tas_against_mach
+from estimator.io.plausibility import SpikeError, check_plausible, check_tas_against_mach
 from estimator.io.timebase import check_finite, check_sampling, check_time, resample, select_range
 from estimator.io.units import UNITS, get_unit, to_si
 from estimator.problem import ManeuverData
@@ -147,11 +147,15 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
         if name in own and np.count_nonzero(keep) < 2:
             raise DataError(f"{where}: {table.labels[name]} (own_rate) has fewer than 2 samples in the "
                             "maneuver; widen the time range or leave the channel out")
+        if name not in own and not not_num.any():
+            _check_slower(name, vi, t_s, where, table.labels[name], name in channel_columns)
         check_finite(vi[keep], not_num[keep],
                      table.raw_text[name][idx][keep] if name in table.raw_text else None, t_s[keep],
                      rows[keep], where, table.labels[name])
         present[name] = keep
-    check_sampling(t_s, rows, where, req.resample_hz)
+    for name in sorted((channel_columns & set(values)) - own):
+        _warn_held(values[name][idx], t_s, where, table.labels[name])
+    t_s = check_sampling(t_s, rows, where, req.resample_hz)
     si = {name: to_si(v[idx], table.units[name], table.labels[name])
           for name, v in values.items() if name != "t"}
     check_plausible("t", table.labels["t"], t_s, table.units["t"], t_s, rows, where)
@@ -198,6 +202,58 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
     )
 
 
+def regular_period(present: np.ndarray) -> int | None:
+    """``k >= 2`` if the rows flagged in ``present`` are (nearly: 90 % of the intervals) every
+    ``k``-th row, as a slower channel's samples in a faster file; else None."""
+    rows = np.flatnonzero(present)
+    if rows.size < 3 or rows.size == present.size:
+        return None
+    d = np.diff(rows)
+    k = int(np.median(d))
+    return k if k >= 2 and np.mean(d == k) >= 0.9 else None
+
+
+def _ordinal(k: int) -> str:
+    return f"{k}{'th' if 10 <= k % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(k % 10, 'th')}"
+
+
+def _check_slower(name: str, v: np.ndarray, t_s: np.ndarray, where: Where, label: str,
+                  is_channel: bool) -> None:
+    """Empty cells at a regular interval are a slower channel's, not lost data: say what to do."""
+    if not np.isnan(v).any():
+        return
+    k = regular_period(np.isfinite(v))
+    if k is None:
+        return
+    rate = 1.0 / float(np.median(np.diff(t_s)))
+    what = (f"{where}: {label} has values only on every {_ordinal(k)} row ({rate / k:.3g} Hz in a "
+            f"{rate:.3g} Hz file) and is empty between them: recorded at a slower rate")
+    if name in REQUIRED or name in ("phi", "theta", "psi"):
+        raise DataError(f"{what}. {name} is needed at every sample (own_rate = true is for slow measured "
+                        "channels such as a GPS height): resample it onto the file's time base (interpolate "
+                        "it in the file), or resample the whole file to its rate")
+    if is_channel:
+        raise DataError(f"{what}. Mark it own_rate = true under [columns] ({name} = {{ column = ..., "
+                        "unit = ..., own_rate = true }): it is then fitted at its own samples only")
+    raise DataError(f"{what}. If it is a measured channel, mark it own_rate = true under [columns]; a data "
+                    f"signal the channel models read at every sample ({name}) must be filled in between "
+                    "(hold or interpolate it in the file)")
+
+
+def _warn_held(v: np.ndarray, t_s: np.ndarray, where: Where, label: str) -> None:
+    """A slower channel written at the file's rate by repeating each sample: it is fitted as a
+    staircase, late by up to a slow period; say so (it is not wrong enough to refuse)."""
+    starts = np.r_[True, np.diff(v) != 0]
+    k = regular_period(starts)
+    if k is None or np.count_nonzero(starts) < 10:
+        return
+    rate = 1.0 / float(np.median(np.diff(t_s)))
+    warn(f"{where}: {label} holds each value for {k} rows ({rate / k:.3g} Hz in a {rate:.3g} Hz file): a "
+         f"slower channel written by repeating its samples, which delays it by up to "
+         f"{1e3 * (k - 1) / rate:.0f} ms. Blank the repeated rows in the file and mark it own_rate = true "
+         "under [columns], so that it is fitted at its own samples only")
+
+
 def _own_rate_on_grid(t_s: np.ndarray, v: np.ndarray, t_new_s: np.ndarray, label: str,
                       where: Where) -> np.ndarray:
     """An own-rate column on a resampled grid: each sample moves to the grid time it falls on
@@ -227,6 +283,8 @@ def _check_accel(table: SourceTable, si: Mapping[str, np.ndarray], t_s, rows, wh
         return
     try:
         check_plausible("accel", label, acc, "m/s^2", t_s, rows, where)
+    except SpikeError:
+        raise
     except DataError:
         mean_g = float(np.mean(np.linalg.norm(acc, axis=1))) / 9.80665
         raise DataError(

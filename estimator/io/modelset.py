@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.io.errors import DataError, warn
+from estimator.io.errors import DataError, close_match, warn
 from estimator.modelfile import MODELS_DIR, parse_model_set
 from estimator.parameters import ParameterSpec
 from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, ManeuverData
@@ -95,6 +95,18 @@ def merge_model_set(raw: Mapping, parameter_overrides: Mapping | None, extra_cha
         raise
     except ValueError as exc:
         raise DataError(str(exc)) from None
+    # a [parameter.NAME] the model set does not declare and no channel uses is a typo, not a new
+    # parameter: left alone, its settings would silently change nothing
+    used = referenced(chans)
+    known = sorted({s.name for s in specs} - (set(parameter_overrides or {}) - set(raw.get("parameter", {}))))
+    for name in parameter_overrides or {}:
+        if name not in raw.get("parameter", {}) and name not in used:
+            close = close_match(name, known)
+            raise DataError(
+                f"{where}: [parameter.{name}] is not a parameter of the model set ({source}) and no "
+                "channel uses it" + (f" (did you mean {close!r}?)" if close else "")
+                + f"; its parameters: {' '.join(known)}. Fix the name, or use it in a [[channel]] model"
+            )
     return chans, specs, set(parameter_overrides or {})
 
 

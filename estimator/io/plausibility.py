@@ -38,6 +38,10 @@ from estimator.io.errors import DataError, Where, at_row
 from estimator.io.units import UNITS, from_si, to_si, units_of
 
 
+class SpikeError(DataError):
+    """A few samples far outside the plausible range (:func:`check_plausible`): not a unit error."""
+
+
 @dataclass(frozen=True)
 class Check:
     """A plausible interval of one statistic of a channel's SI values.
@@ -49,6 +53,9 @@ class Check:
     low, high : plausible interval of the statistic, SI.
     typical : a typical value to rank unit suggestions by closeness (None: rank by ``prefer``).
     prefer : unit suggestions in order of preference.
+    sample_low, sample_high : for the statistics of the bulk ("median", "mean_norm"): the range
+        every single sample (the norm for "mean_norm") must stay in, SI (None: not checked).
+        "maxabs" and "minmax" check every sample against ``low``/``high`` themselves.
     """
 
     what: str
@@ -57,6 +64,8 @@ class Check:
     high: float
     typical: float | None = None
     prefer: tuple[str, ...] = ()
+    sample_low: float | None = None
+    sample_high: float | None = None
 
 
 _G = 9.80665
@@ -68,11 +77,13 @@ _CHECKS: dict[str, Check] = {
     "p": Check("a body rate", "maxabs", 0.0, 6.0, prefer=("deg/s",)),
     "q": Check("a body rate", "maxabs", 0.0, 6.0, prefer=("deg/s",)),
     "r": Check("a body rate", "maxabs", 0.0, 6.0, prefer=("deg/s",)),
-    "accel": Check("a specific force in flight", "mean_norm", 0.4 * _G, 4.0 * _G, typical=_G),
-    "tas": Check("a true airspeed", "median", 15.0, 700.0, typical=150.0),
-    "h": Check("a pressure altitude", "median", -500.0, 25000.0, typical=5000.0),
+    "accel": Check("a specific force in flight", "mean_norm", 0.4 * _G, 4.0 * _G, typical=_G,
+                   sample_low=0.0, sample_high=15.0 * _G),
+    "tas": Check("a true airspeed", "median", 15.0, 700.0, typical=150.0, sample_low=0.0, sample_high=1000.0),
+    "h": Check("a pressure altitude", "median", -500.0, 25000.0, typical=5000.0, sample_low=-1000.0,
+               sample_high=30000.0),
     "gear": Check("a gear-down flag", "minmax", 0.0, 1.0),
-    "mach": Check("a Mach number", "median", 0.0, 5.0),
+    "mach": Check("a Mach number", "median", 0.0, 5.0, sample_low=0.0, sample_high=5.0),
 }
 _BY_DIMENSION: dict[str, Check] = {
     "angle": Check("an angle", "maxabs", 0.0, 2 * math.pi + 0.05, prefer=("deg", "mrad")),
@@ -114,10 +125,26 @@ def _ok(check: Check, v: np.ndarray, t_s: np.ndarray) -> bool:
     return check.low <= s <= check.high
 
 
+def _bulk(check: Check, v: np.ndarray) -> np.ndarray:
+    """The values a unit is judged by: for the per-sample statistics, without the 1 % most extreme
+    samples (a spike the jump test cannot see, inside a signal that is out of range as a whole,
+    must not choose the unit)."""
+    if check.statistic not in ("maxabs", "minmax") or v.size < 100:
+        return v
+    x = np.abs(v) if check.statistic == "maxabs" else v
+    if check.statistic == "minmax":
+        lo, hi = np.quantile(x, [0.005, 0.995])
+    else:
+        lo, hi = -np.inf, np.quantile(x, 0.99)
+    return v[(x >= lo) & (x <= hi)]
+
+
 def suggest_units(check: Check, raw: np.ndarray, declared: str, t_s_of: Callable) -> list[str]:
-    """Units of the declared dimension in which the raw values would pass ``check``, best first."""
+    """Units of the declared dimension in which the bulk of the raw values (:func:`_bulk`) would
+    pass ``check``, best first."""
     dim = UNITS[declared].dimension
     ok = []
+    raw = _bulk(check, raw)
     for u in units_of(dim):
         if u == declared or u == "bool":
             continue
@@ -133,9 +160,59 @@ def suggest_units(check: Check, raw: np.ndarray, declared: str, t_s_of: Callable
     return sorted(ok, key=lambda u: check.prefer.index(u) if u in check.prefer else len(check.prefer))
 
 
+#: More spikes than this fraction of a maneuver's samples suggest a wrong or corrupted column.
+SPIKE_MAX_FRACTION = 0.01
+
+
+def _per_sample(check: Check, v: np.ndarray) -> tuple[np.ndarray, float, float] | None:
+    """The per-sample quantity, its plausible range, or None if the check has none."""
+    if check.statistic == "maxabs":
+        return np.abs(v), -math.inf, check.high
+    if check.statistic == "minmax":
+        return v, check.low, check.high
+    if check.sample_low is None and check.sample_high is None:
+        return None
+    x = np.linalg.norm(v, axis=1) if v.ndim == 2 else v
+    lo = -math.inf if check.sample_low is None else check.sample_low
+    return x, lo, math.inf if check.sample_high is None else check.sample_high
+
+
+def spikes(x: np.ndarray, out: np.ndarray, jump: float) -> np.ndarray:
+    """Mask of the out-of-range samples that are spikes: runs of consecutive out-of-range samples
+    (one or a burst) that jump by more than ``jump`` away from the in-range sample on each side
+    they have. A whole signal in the wrong unit, or one that drifts out of range, stays near its
+    neighbours where it crosses the limit and has no such jumps."""
+    result = np.zeros(out.shape, dtype=bool)
+    if not out.any() or out.all():
+        return result
+    edges = np.flatnonzero(np.diff(np.r_[0, out.astype(np.int8), 0]))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):  # out[a:b] is one run
+        sides = [(a, a - 1)] if a > 0 else []
+        sides += [(b - 1, b)] if b < out.size else []
+        if all(abs(x[i] - x[j]) > jump for i, j in sides):
+            result[a:b] = True
+    return result
+
+
+def _scalar(v: np.ndarray) -> np.ndarray:
+    """Per-sample values as messages show them: the magnitude of an (N, 3) vector."""
+    return np.linalg.norm(v, axis=1) if v.ndim == 2 else v
+
+
+def _samples_text(values: np.ndarray, unit: str, t_s: np.ndarray, rows: np.ndarray, idx: np.ndarray,
+                  limit: int = 5) -> str:
+    parts = [f"{values[i]:.6g} {unit} {at_row(t_s[i], int(rows[i]))}" for i in idx[:limit]]
+    return "; ".join(parts) + (f"; ... ({idx.size - limit} more, the last at t = {t_s[idx[-1]]:.3f} s)"
+                               if idx.size > limit else "")
+
+
 def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s: np.ndarray,
                     rows: np.ndarray, where: Where) -> None:
     """Raise :class:`DataError` if ``values_si`` cannot be right in the declared ``unit``.
+
+    A few samples far outside the plausible range that jump away from their neighbours are
+    spikes (:func:`spikes`): named with their times, and never taken for a unit mistake (a unit
+    is suggested only from the rest of the data).
 
     Parameters
     ----------
@@ -150,26 +227,70 @@ def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s
     check = check_for(name, UNITS[unit].dimension)
     if check is None or values_si.size == 0:
         return
-    if _ok(check, values_si, t_s):
+    raw_all = from_si(values_si, unit, label)
+    spike = np.zeros(len(t_s), dtype=bool)
+    per = _per_sample(check, values_si)
+    if per is not None and name != "t":
+        x, lo, hi = per
+        out = (x < lo - 1e-9) | (x > hi + 1e-9)
+        jump = (hi - lo) / 10.0 if check.statistic not in ("maxabs", "minmax") else (
+            hi if check.statistic == "maxabs" else hi - lo)
+        spike = spikes(x, out, jump)  # never part of the statistics a unit is judged by
+    keep = ~spike
+    v, tk, rk, raw = values_si[keep], t_s[keep], rows[keep], raw_all[keep]
+    if v.size and _ok(check, v, tk):
+        if spike.any():
+            _raise_spikes(check, label, unit, raw_all, raw, t_s, rows, np.flatnonzero(spike), where)
+        if per is not None and name != "t":
+            x, lo, hi = _per_sample(check, v)
+            bad = np.flatnonzero((x < lo - 1e-9) | (x > hi + 1e-9))
+            if bad.size:
+                raise DataError(
+                    f"{where}: {label} has {bad.size} sample(s) outside what {check.what} can be "
+                    f"({lo:.4g} to {hi:.4g} in SI, declared unit {unit!r}): "
+                    f"{_samples_text(_scalar(raw), unit, tk, rk, bad)}; "
+                    "check that the column is the right one, and replace those samples in the file or "
+                    "exclude them with the maneuver's t_start_s/t_end_s"
+                )
         return
-    stat, i = _statistic(check, values_si, t_s)
-    raw = from_si(values_si, unit, label)
-    raw_stat, _ = _statistic(check, raw, from_si(t_s, unit, label) if name == "t" else t_s)
-    t_of = (lambda v: v) if name == "t" else (lambda v: t_s)
+    stat, i = _statistic(check, v, tk)
+    raw_stat, _ = _statistic(check, raw, from_si(tk, unit, label) if name == "t" else tk)
+    t_of = (lambda q: q) if name == "t" else (lambda q: tk)
     cands = suggest_units(check, raw, unit, t_of)
     stat_text = {
         "maxabs": "largest |value|", "median": "median", "median_step": "median time step",
         "mean_norm": "mean magnitude", "minmax": "value",
     }[check.statistic]
-    place = f" {at_row(t_s[i], int(rows[i]))}" if check.statistic in ("maxabs", "minmax") else ""
+    place = f" {at_row(tk[i], int(rk[i]))}" if check.statistic in ("maxabs", "minmax") else ""
     si_text = "" if UNITS[unit].factor == 1.0 and not UNITS[unit].offset else f" (= {stat:.6g} in SI)"
     lo, hi = check.low, check.high
     hint = (f"the values look like {cands[0]}: set unit = \"{cands[0]}\" for it under [columns]"
             if cands else "check that the column is the right one and that its unit is declared correctly")
+    n_spikes = int(spike.sum())
+    also = (f" ({n_spikes} spike(s) beyond that left aside: "
+            f"{_samples_text(_scalar(raw_all), unit, t_s, rows, np.flatnonzero(spike), 3)})"
+            if n_spikes else "")
     raise DataError(
         f"{where}: {label} is declared in {unit!r} but its {stat_text} is {raw_stat:.6g} {unit}"
-        f"{place}{si_text}, which cannot be {check.what} (plausible: {lo:.4g} to "
+        f"{place}{si_text}{also}, which cannot be {check.what} (plausible: {lo:.4g} to "
         f"{hi:.4g} in SI); {hint}"
+    )
+
+
+def _raise_spikes(check: Check, label: str, unit: str, raw_all: np.ndarray, raw_rest: np.ndarray,
+                  t_s: np.ndarray, rows: np.ndarray, idx: np.ndarray, where: Where) -> None:
+    shown, rest, what = _scalar(raw_all), _scalar(raw_rest), "magnitude" if raw_all.ndim == 2 else "value"
+    rest_text = (f"median {what} {np.median(rest):.4g} {unit}" if check.statistic in ("median", "mean_norm")
+                 else f"values {np.min(rest):.4g} to {np.max(rest):.4g} {unit}")
+    many = idx.size > SPIKE_MAX_FRACTION * len(t_s)
+    raise SpikeError(
+        f"{where}: {label} has {idx.size} spike(s), sample(s) that jump far outside what "
+        f"{check.what} can be: {_samples_text(shown, unit, t_s, rows, idx)}. The rest of it is "
+        f"plausible in {unit!r} ({rest_text}), so the unit is not the problem"
+        + (f"; {100 * idx.size / len(t_s):.1f} % of the samples is more than a few spikes: check that "
+           "the column is the right one and was recorded properly. " if many else ". ")
+        + "Replace the spike(s) in the file (e.g. by interpolating between their neighbours), or "
+        "exclude them from the maneuver with t_start_s/t_end_s (split the maneuver around them)"
     )
 
 

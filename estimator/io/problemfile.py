@@ -2,23 +2,25 @@
 
 from __future__ import annotations
 
+import codecs
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from estimator.io.assemble import ManeuverRequest, SourceTable
+from estimator.io.assemble import DIMENSIONS, REQUIRED, ManeuverRequest, SourceTable
 from estimator.io.build import build_problem
 from estimator.io.dataset_problem import load_dataset_maneuvers
-from estimator.io.errors import DataError
-from estimator.io.modelset import merge_model_set, read_model_set
+from estimator.io.errors import DataError, close_match
+from estimator.io.modelset import OWN_SIGNALS, merge_model_set, read_model_set
 from estimator.io.tables import infer_format, numeric, pick_column, read_table
-from estimator.problem import LEVER_ARMS, Problem
+from estimator.parameters import ParameterSpec
+from estimator.problem import LEVER_ARMS, STATE_SIGNALS, ChannelSpec, Problem
 
 TOP_KEYS = ("title", "g_mps2", "lever_arm", "model", "channels", "resample_hz", "sensors", "aircraft",
             "columns", "files", "data", "parameter", "channel")
-FILE_KEYS = ("path", "format", "header", "delimiter", "skip_rows", "aircraft", "configuration",
+FILE_KEYS = ("path", "format", "header", "delimiter", "skip_rows", "encoding", "aircraft", "configuration",
              "maneuvers", "resample_hz", "columns", "r_cg_body_m", "r_cg_body_in", "r_cg_body_ft")
 MANEUVER_KEYS = ("id", "t_start_s", "t_end_s", "configuration", "r_cg_body_m", "r_cg_body_in",
                  "r_cg_body_ft")
@@ -29,7 +31,36 @@ _LENGTH_SUFFIXES = (("_m", 1.0), ("_in", 0.0254), ("_ft", 0.3048))
 def _keys(d: Mapping, valid, where: str) -> None:
     unknown = sorted(set(d) - set(valid))
     if unknown:
-        raise DataError(f"{where}: unknown key(s) {unknown}; valid: {list(valid)}")
+        close = {k: m for k in unknown if (m := close_match(k, valid)) is not None}
+        hint = (" (did you mean " + ", ".join(f"{m!r} for {k!r}" if len(unknown) > 1 else repr(m)
+                                             for k, m in close.items()) + "?)") if close else ""
+        raise DataError(f"{where}: unknown key(s) {unknown}{hint}; valid: {list(valid)}")
+
+
+def column_names(channels: Sequence[ChannelSpec], specs: Sequence[ParameterSpec]) -> dict[str, list[str]]:
+    """The canonical names ``[columns]`` may map, by kind: the estimator's inputs, the model set's
+    channels (their measurement columns) and the data signals its models read (``gear``, ``mach``).
+    """
+    params = {s.name for s in specs}
+    chan_cols = [c.column for c in channels]
+    signals = set(DIMENSIONS) - set(REQUIRED) - set(chan_cols)
+    for c in channels:
+        signals |= set(c.expression.names) - STATE_SIGNALS - OWN_SIGNALS - params - set(chan_cols)
+    return {"inputs": list(REQUIRED), "channels": list(dict.fromkeys(chan_cols)),
+            "data signals": sorted(signals)}
+
+
+def _check_names(table: Mapping, valid: Mapping[str, list[str]], where: str) -> None:
+    known = [n for names in valid.values() for n in names]
+    for name in table:
+        if name not in known:
+            listing = "; ".join(f"{k}: {' '.join(v)}" for k, v in valid.items())
+            m = close_match(name, known)
+            raise DataError(
+                f"{where}: {name!r} is not a name the estimator or the model set knows"
+                + (f" (did you mean {m!r}?)" if m else "") + f"; valid names: {listing}. Fix the "
+                "name (a data signal of your own is mapped once a [[channel]] model uses it)"
+            )
 
 
 def _vector(v, where: str) -> np.ndarray:
@@ -68,7 +99,12 @@ def _cg(d: Mapping, where: str) -> np.ndarray | None:
     return parse_positions({key.replace("r_cg_body", "cg"): v}, where)["cg"]
 
 
-def _column_specs(table: Mapping, where: str) -> dict[str, dict]:
+def _column_specs(table: Mapping, where: str, valid: Mapping[str, list[str]] | None = None
+                  ) -> dict[str, dict]:
+    if not isinstance(table, Mapping):
+        raise DataError(f"{where}: must be a table of name = {{ column = ..., unit = ... }}, got {table!r}")
+    if valid is not None:
+        _check_names(table, valid, where)
     out = {}
     for name, spec in table.items():
         w = f"{where}.{name}"
@@ -86,9 +122,23 @@ def _column_specs(table: Mapping, where: str) -> dict[str, dict]:
 def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: str) -> SourceTable:
     path = (base / entry["path"]).resolve() if not Path(entry["path"]).is_absolute() else Path(entry["path"])
     fmt = infer_format(path, entry.get("format"), where)
-    header = bool(entry.get("header", True))
-    df = read_table(path, fmt, header=header, delimiter=entry.get("delimiter"),
-                    skip_rows=int(entry.get("skip_rows", 0)))
+    header = entry.get("header")
+    if header is not None and not isinstance(header, bool):
+        raise DataError(f"{where}: header = {header!r} must be true or false (no quotes)")
+    skip = entry.get("skip_rows", 0)
+    if isinstance(skip, bool) or not isinstance(skip, int) or skip < 0:
+        raise DataError(f"{where}: skip_rows = {skip!r} must be a whole number of lines, 0 or more")
+    encoding = entry.get("encoding")
+    if encoding is not None:
+        try:
+            codecs.lookup(str(encoding))
+        except LookupError:
+            raise DataError(f"{where}: encoding = {encoding!r} is not a text encoding Python knows; e.g. "
+                            "\"utf-8\", \"latin-1\", \"cp1252\", \"utf-16\"") from None
+    named = [spec["column"] for spec in columns.values() if isinstance(spec["column"], str)]
+    df = read_table(path, fmt, header=header, delimiter=entry.get("delimiter"), skip_rows=skip,
+                    named_columns=named, encoding=None if encoding is None else str(encoding))
+    header = header is not False and not all(isinstance(c, (int, np.integer)) for c in df.columns)
     values, bad, text, units, labels = {}, {}, {}, {}, {}
     for name, spec in columns.items():
         src = spec["column"]
@@ -107,7 +157,8 @@ def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: s
                        own_rate=own)
 
 
-def _file_pairs(raw: Mapping, base: Path, where: str) -> list[tuple[SourceTable, ManeuverRequest]]:
+def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[str]]
+                ) -> list[tuple[SourceTable, ManeuverRequest]]:
     files = raw.get("files")
     if not files:
         raise DataError(f"{where}: no data: add [[files]] entries (path = ...) or [data] dataset = ...")
@@ -118,7 +169,7 @@ def _file_pairs(raw: Mapping, base: Path, where: str) -> list[tuple[SourceTable,
             raise DataError(f"{where}: [aircraft.{ac}] must be a table with r_cg_body_m = [x, y, z]")
         _keys(d, ("r_cg_body_m", "r_cg_body_in", "r_cg_body_ft"), f"{where}: [aircraft.{ac}]")
         cgs[ac] = _cg(d, f"{where}: [aircraft.{ac}]")
-    global_cols = _column_specs(raw.get("columns", {}), f"{where}: [columns]")
+    global_cols = _column_specs(raw.get("columns", {}), f"{where}: [columns]", valid)
     pairs = []
     for i, entry in enumerate(files):
         w = f"{where}: [[files]] #{i + 1}"
@@ -126,7 +177,7 @@ def _file_pairs(raw: Mapping, base: Path, where: str) -> list[tuple[SourceTable,
         if "path" not in entry:
             raise DataError(f"{w}: needs path = \"...\" (relative to the problem file)")
         w = f"{where}: [[files]] {entry['path']}"
-        cols = {**global_cols, **_column_specs(entry.get("columns", {}), f"{w} columns")}
+        cols = {**global_cols, **_column_specs(entry.get("columns", {}), f"{w} columns", valid)}
         table = _read_file(entry, cols, base, w)
         if "aircraft" in entry:
             ac = str(entry["aircraft"])
@@ -197,7 +248,7 @@ def load_problem(path: str | Path) -> Problem:
         pairs, pos = load_dataset_maneuvers(ds if ds.is_absolute() else base / ds, data.get("select"))
         sensors = {**pos, **sensors}
     else:
-        pairs = _file_pairs(raw, base, where)
+        pairs = _file_pairs(raw, base, where, column_names(chans, specs))
     if "imu" not in sensors:
         raise DataError(f"{where}: [sensors] needs imu = [x, y, z], the accelerometer position (body axes, "
                         "m from the reference point): the lever-arm correction depends on it")

@@ -5,13 +5,14 @@ The reader returns the raw table; :mod:`estimator.io.assemble` does units and ch
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 
-from estimator.io.errors import DataError
+from estimator.io.errors import DataError, warn
 
 FORMATS = ("csv", "whitespace", "parquet")
 _EXTENSIONS = {".csv": "csv", ".txt": "whitespace", ".dat": "whitespace", ".asc": "whitespace",
@@ -33,18 +34,25 @@ def infer_format(path: Path, fmt: str | None, where: str) -> str:
     return _EXTENSIONS[ext]
 
 
-def read_table(path: Path, fmt: str, header: bool = True, delimiter: str | None = None,
-               skip_rows: int = 0) -> pd.DataFrame:
+def read_table(path: Path, fmt: str, header: bool | None = True, delimiter: str | None = None,
+               skip_rows: int = 0, named_columns: Sequence[str] = (), encoding: str | None = None
+               ) -> pd.DataFrame:
     """Read a whole data file.
 
     Parameters
     ----------
     path : the file.
     fmt : one of :data:`FORMATS`.
-    header : text formats: the first line (after ``skip_rows``) names the columns. Without a
-        header the columns are numbered 0, 1, 2, ...
+    header : text formats: the first line (after ``skip_rows``) names the columns (None: the
+        default, True). Without a header the columns are numbered 0, 1, 2, ... A header is checked
+        against the first line (:func:`first_line_kind`): a first line of numbers is data, read as
+        such with a :class:`DataWarning` when every column is taken by index, an error naming the
+        fix when some are taken by name; a first line of names read with ``header = false`` is an
+        error.
     delimiter : csv only: the field separator (default ``,``).
     skip_rows : text formats: lines to skip before the header (or the data).
+    named_columns : the source columns the problem takes by name (for the header check).
+    encoding : text formats: the file's text encoding (default UTF-8).
 
     Returns
     -------
@@ -52,20 +60,93 @@ def read_table(path: Path, fmt: str, header: bool = True, delimiter: str | None 
     """
     if not path.exists():
         raise DataError(f"{path}: no such data file; paths in [[files]] are relative to the problem file")
+    explicit = header is not None
+    header = True if header is None else header
+    sep = r"\s+" if fmt == "whitespace" else (delimiter or ",")
     try:
         if fmt == "parquet":
             df = pq.read_table(path).to_pandas()
         else:
-            sep = r"\s+" if fmt == "whitespace" else (delimiter or ",")
+            header = _check_header(path, fmt, sep, header, explicit, skip_rows, named_columns, encoding)
             df = pd.read_csv(path, sep=sep, header=0 if header else None, skiprows=skip_rows,
-                             skipinitialspace=True, engine="python" if fmt == "whitespace" else "c")
+                             skipinitialspace=True, engine="python" if fmt == "whitespace" else "c",
+                             encoding=encoding or "utf-8")
+    except DataError:
+        raise
+    except UnicodeError as exc:
+        raise DataError(_encoding_message(path, encoding, exc)) from None
     except (OSError, ValueError, pd.errors.ParserError) as exc:
-        raise DataError(f"{path}: cannot read it as {fmt}: {exc}; check format/header/delimiter") from None
+        raise DataError(f"{path}: cannot read it as {fmt}: {exc}; check format, header, delimiter "
+                        "and skip_rows under its [[files]] entry") from None
     if header or fmt == "parquet":
         df.columns = [str(c).strip() for c in df.columns]
     if len(df) == 0:
-        raise DataError(f"{path}: no data rows")
+        raise DataError(f"{path}: no data rows{' after the header' if header else ''}; is it the right file "
+                        "(and skip_rows right)?")
     return df
+
+
+def _encoding_message(path: Path, encoding: str | None, exc: UnicodeError) -> str:
+    with open(path, "rb") as fh:
+        head = fh.read(4)
+    guess = ("utf-16" if head[:2] in (b"\xff\xfe", b"\xfe\xff") else
+             "latin-1" if (encoding or "utf-8").replace("-", "").lower() == "utf8" else "utf-8")
+    return (f"{path}: cannot decode it as {encoding or 'UTF-8'} text ({exc.reason} at byte "
+            f"{getattr(exc, 'start', '?')}); give its encoding under this [[files]] entry, e.g. "
+            f"encoding = \"{guess}\" (common: \"utf-8\", \"latin-1\", \"cp1252\", \"utf-16\")")
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+def first_line_kind(cells: Sequence[str]) -> str:
+    """``"numbers"`` if every non-empty cell of a line parses as a number, ``"names"`` if none
+    does, else ``"mixed"`` (also for an empty line)."""
+    full = [c.strip() for c in cells if c.strip()]
+    numbers = sum(_is_number(c) for c in full)
+    if full and numbers == len(full):
+        return "numbers"
+    return "names" if full and numbers == 0 else "mixed"
+
+
+def _check_header(path: Path, fmt: str, sep: str, header: bool, explicit: bool, skip_rows: int,
+                  named_columns: Sequence[str], encoding: str | None) -> bool:
+    """Whether the file is to be read with a header, after checking the first lines against it."""
+    head = pd.read_csv(path, sep=sep, header=None, skiprows=skip_rows, nrows=2, dtype=str,
+                       skipinitialspace=True, keep_default_na=False, encoding=encoding or "utf-8",
+                       engine="python" if fmt == "whitespace" else "c")
+    if len(head) == 0:
+        return header
+    first = [str(c) for c in head.iloc[0]]
+    second = first_line_kind([str(c) for c in head.iloc[1]]) if len(head) > 1 else "mixed"
+    kind = first_line_kind(first)
+    shown = ", ".join(first[:6]) + (", ..." if len(first) > 6 else "")
+    line = "the first line" + (f" after skip_rows = {skip_rows}" if skip_rows else "")
+    given = "header = true" + ("" if explicit else " (the default)")
+    if header and kind == "numbers":
+        if named_columns:
+            raise DataError(
+                f"{path}: read with {given}, but {line} is numbers ({shown}), not column names: "
+                f"the file has no header, so columns {list(named_columns)[:5]} cannot be found by "
+                "name. Set header = false under its [[files]] entry and give each column under "
+                "[columns] by its 0-based column index (e.g. t = { column = 0, unit = \"s\" })"
+            )
+        warn(f"{path}: read with {given}, but {line} is numbers ({shown}), not column names: it is "
+             "read as the first data row (every column is taken by index). Set header = false under "
+             "its [[files]] entry to say so")
+        return False
+    if not header and kind == "names" and second == "numbers":
+        raise DataError(
+            f"{path}: read with header = false, but {line} looks like column names ({shown}) and the "
+            "next one is numbers: set header = true (the default) to read it as the header, or "
+            f"skip_rows = {skip_rows + 1} to skip it"
+        )
+    return header
 
 
 def pick_column(df: pd.DataFrame, source: str | int, canonical: str, path: Path, header: bool) -> pd.Series:

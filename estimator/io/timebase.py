@@ -2,19 +2,30 @@
 
 The estimator integrates the state equations sample by sample on a uniform grid, so a
 maneuver's data must be finite, gap-free and uniformly sampled. Nothing is repaired silently:
-non-uniform sampling is resampled only when the problem file asks for it (``resample_hz``).
+non-uniform sampling is resampled only when the problem file asks for it (``resample_hz``), and
+time stamps that fit a uniform grid but for a recorder's clock resolution or jitter are taken as
+that grid's samples with a warning that says so.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from estimator.io.errors import DataError, Where, at_row
+from estimator.io.errors import DataError, Where, at_row, warn
 
 #: A time step larger than this times the median step is a gap (lost samples): an error.
 GAP_FACTOR = 1.5
 #: Sampling is uniform if every step is within this fraction of the median step.
 JITTER_FRACTION = 0.01
+#: Otherwise, stamps within this fraction of a step of a uniform grid are that grid's samples
+#: (a recorder's clock resolution or jitter), taken as such with a warning.
+STAMP_TOLERANCE = 0.1
+#: Sampling rates recorders use, Hz: the nominal rate is one of these when the stamps fit it.
+COMMON_RATES_HZ = (1.0, 2.0, 4.0, 5.0, 8.0, 10.0, 12.5, 16.0, 20.0, 25.0, 32.0, 40.0, 50.0, 60.0, 64.0,
+                   80.0, 100.0, 120.0, 125.0, 128.0, 200.0, 250.0, 256.0, 400.0, 500.0, 512.0, 1000.0,
+                   1024.0)
 
 
 def check_time(t_s: np.ndarray, rows: np.ndarray, where: Where, label: str) -> None:
@@ -77,8 +88,58 @@ def check_finite(values: np.ndarray, not_numeric: np.ndarray, raw_text, t_s: np.
     )
 
 
-def check_sampling(t_s: np.ndarray, rows: np.ndarray, where: Where, resample_hz: float | None) -> None:
-    """Reject gaps; reject non-uniform sampling unless it is to be resampled."""
+def _rate_text(rate_hz: float) -> str:
+    return f"{rate_hz:.6g}" if abs(rate_hz - round(rate_hz, 3)) < 1e-9 else f"{rate_hz:.4f}"
+
+
+def grid_deviation(t_s: np.ndarray, rate_hz: float) -> tuple[float, float]:
+    """The uniform grid ``t0 + k / rate_hz`` closest to the stamps (least largest deviation):
+    its origin ``t0`` and the largest ``|t_k - (t0 + k / rate_hz)|``, s."""
+    r = t_s - np.arange(t_s.size) / rate_hz
+    lo, hi = float(np.min(r)), float(np.max(r))
+    return 0.5 * (lo + hi), 0.5 * (hi - lo)
+
+
+def nominal_rate(t_s: np.ndarray) -> tuple[float, bool]:
+    """The sampling rate the stamps were meant to have, Hz, and whether it is a round one.
+
+    The mean rate (span / (n - 1), which quantized or jittered stamps do not bias, unlike the
+    median step) is taken as the nearest of :data:`COMMON_RATES_HZ`, or the nearest whole or half
+    hertz, when that one's uniform grid fits every stamp within :data:`STAMP_TOLERANCE` of a step;
+    else the least-squares rate if its grid fits (a drifting clock; False); else, for a suggestion,
+    a round rate within 1 % of the mean rate, or the mean rate (False).
+    """
+    n = t_s.size
+    mean_hz = (n - 1) / float(t_s[-1] - t_s[0])
+    cands = [min(COMMON_RATES_HZ, key=lambda f: abs(math.log(f / mean_hz))), round(mean_hz),
+             round(2.0 * mean_hz) / 2.0]
+    for f in cands:
+        if f > 0 and abs(f / mean_hz - 1.0) < 0.02 and grid_deviation(t_s, f)[1] <= STAMP_TOLERANCE / f:
+            return float(f), True
+    k = np.arange(n) - 0.5 * (n - 1)
+    fit_hz = float(np.sum(k * k) / np.sum(k * (t_s - np.mean(t_s))))  # least-squares step, inverted
+    if grid_deviation(t_s, fit_hz)[1] <= STAMP_TOLERANCE / fit_hz:
+        return fit_hz, False  # a uniform grid, but not at a round rate (a drifting clock)
+    # nothing fits a grid (non-uniform data): still a round rate to suggest if one is close
+    for f in cands:
+        if f > 0 and abs(f / mean_hz - 1.0) < 0.01:
+            return float(f), True
+    return mean_hz, False
+
+
+def check_sampling(t_s: np.ndarray, rows: np.ndarray, where: Where, resample_hz: float | None
+                   ) -> np.ndarray:
+    """Reject gaps; accept recorder stamps that fit a uniform grid; reject other non-uniform
+    sampling unless it is to be resampled.
+
+    Returns
+    -------
+    The maneuver's sample times: ``t_s`` itself when uniform or to be resampled; the uniform grid
+    the stamps fit (:func:`nominal_rate`, with a :class:`DataWarning` saying so) when their steps
+    vary by more than :data:`JITTER_FRACTION` but no stamp is more than :data:`STAMP_TOLERANCE` of
+    a step off that grid (a recorder's clock resolution or jitter: 1 ms stamps at 64 Hz, a 50 Hz
+    recorder counting 1/1024 s ticks).
+    """
     dt = np.diff(t_s)
     step = float(np.median(dt))
     gaps = np.flatnonzero(dt > GAP_FACTOR * step)
@@ -90,17 +151,29 @@ def check_sampling(t_s: np.ndarray, rows: np.ndarray, where: Where, resample_hz:
             f"median {step:.4g} s; {gaps.size} gap(s) in the maneuver); lost samples cannot be "
             "reconstructed: split the maneuver into ranges on either side of the gap"
         )
-    if resample_hz is None:
-        jitter = np.abs(dt - step)
-        j = int(np.argmax(jitter))
-        if jitter[j] > JITTER_FRACTION * step:
-            raise DataError(
-                f"{where}: non-uniform sampling: the step {at_row(t_s[j], int(rows[j]))} is "
-                f"{dt[j]:.6g} s against the median {step:.6g} s (more than "
-                f"{100 * JITTER_FRACTION:.0f} % off); the estimator needs a uniform time base. Add "
-                f"resample_hz = {1.0 / step:.3g} under this [[files]] entry (or at the top level) to "
-                "interpolate the data linearly onto a uniform grid, or resample it yourself"
-            )
+    jitter = np.abs(dt - step)
+    j = int(np.argmax(jitter))
+    if resample_hz is not None or jitter[j] <= JITTER_FRACTION * step:
+        return t_s
+    rate, round_rate = nominal_rate(t_s)
+    t0, dev = grid_deviation(t_s, rate)
+    name = f"nominal {_rate_text(rate)} Hz" if round_rate else f"uniform {_rate_text(rate)} Hz"
+    if dev <= STAMP_TOLERANCE / rate:
+        warn(f"{where}: time stamps jitter by up to {1e3 * dev:.3g} ms ({100 * dev * rate:.1f} % of a step) "
+             f"around a {name} grid (a recorder's clock resolution or jitter): taken as {name} samples, "
+             f"t = {t0:.4f} s + k / {_rate_text(rate)} Hz. If the samples were really taken at their "
+             f"stamped times, set resample_hz = {_rate_text(rate)} to interpolate them onto that grid "
+             "instead")
+        return t0 + np.arange(t_s.size) / rate
+    k = int(np.argmax(np.abs(t_s - t0 - np.arange(t_s.size) / rate)))
+    raise DataError(
+        f"{where}: non-uniform sampling: the step {at_row(t_s[j], int(rows[j]))} is "
+        f"{dt[j]:.6g} s against the median {step:.6g} s, and the stamps stray up to {1e3 * dev:.3g} ms "
+        f"from a uniform {_rate_text(rate)} Hz grid (at t = {t_s[k]:.3f} s; more than "
+        f"{100 * STAMP_TOLERANCE:.0f} % of a step); the estimator needs a uniform time base. Add "
+        f"resample_hz = {_rate_text(rate)} under this [[files]] entry (or at the top level) to "
+        "interpolate the data linearly onto a uniform grid, or resample it yourself"
+    )
 
 
 def resample(t_s: np.ndarray, columns: dict[str, np.ndarray], rate_hz: float,

@@ -1,0 +1,297 @@
+"""Real files come in without surprises (issue 11): headers, recorder time stamps, slow channels,
+spikes, name typos, a problem without Mach, and --help that points only at what exists.
+
+Each test builds its files in tmp_path with the helpers of test_io.py.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from test_io import DEG, SENSORS, SI_COLUMNS, flight_frame, raises, si_problem, write_problem
+
+from estimator.io import DataWarning, load_problem
+
+ORDER = list(flight_frame().columns)
+
+
+def index_columns(names=("time", "ax", "ay", "az", "p", "q", "r", "phi", "theta", "psi", "tas", "h",
+                         "alpha_zl")) -> str:
+    """[columns] by 0-based index into a file written in flight_frame's column order."""
+    units = {"time": "s", "ax": "m/s^2", "ay": "m/s^2", "az": "m/s^2", "p": "rad/s", "q": "rad/s",
+             "r": "rad/s", "tas": "m/s", "h": "m"}
+    return "[columns]\n" + "\n".join(
+        f'{"t" if c == "time" else c} = {{ column = {ORDER.index(c)}, unit = "{units.get(c, "rad")}" }}'
+        for c in names) + "\n"
+
+
+def load_quietly(path):
+    """load_problem, and the DataWarnings it gave (text)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DataWarning)
+        prob = load_problem(path)
+    return prob, [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+
+
+# ----------------------------------------------------------------------------------- a. headers
+@pytest.mark.parametrize("fmt", ["csv", "whitespace"])
+def test_headerless_file_read_with_default_header_keeps_its_first_row(tmp_path, fmt):
+    """Columns by index, header = true by default, a file without a header: the first line is
+    data (it parses as numbers), read as such and said so; no row is lost."""
+    frame = flight_frame()
+    name = "flight.csv" if fmt == "csv" else "flight.dat"
+    frame.to_csv(tmp_path / name, index=False, header=False, sep="," if fmt == "csv" else " ")
+    path = write_problem(tmp_path, f'channels = ["theta", "alpha_zl"]\n{SENSORS}{index_columns()}'
+                                   f'[[files]]\npath = "{name}"\n')
+    prob, warned = load_quietly(path)
+    (m,) = prob.maneuvers
+    assert m.n == len(frame)
+    assert m.t_s[0] == pytest.approx(frame["time"].iloc[0])
+    np.testing.assert_allclose(m.measurements["alpha_zl"], frame["alpha_zl"], rtol=1e-12)
+    assert any(name in w and "header = false" in w and "numbers" in w for w in warned), warned
+
+
+def test_headerless_file_with_columns_by_name_is_an_error_naming_the_fix(tmp_path):
+    frame = flight_frame()
+    frame.to_csv(tmp_path / "flight.csv", index=False, header=False)
+    path = si_problem(tmp_path, frame)
+    frame.to_csv(tmp_path / "flight.csv", index=False, header=False)  # si_problem wrote a header
+    msg = raises(path, "flight.csv", "first line", "numbers", "header = false", "0-based column index")
+    assert "cannot read" not in msg
+
+
+def test_file_with_a_header_read_with_header_false_is_an_error_naming_the_fix(tmp_path):
+    frame = flight_frame()
+    frame.to_csv(tmp_path / "flight.csv", index=False)
+    path = write_problem(tmp_path, f'channels = ["theta", "alpha_zl"]\n{SENSORS}{index_columns()}'
+                                   '[[files]]\npath = "flight.csv"\nheader = false\n')
+    raises(path, "flight.csv", "first line", "column names", "header = true")
+
+
+# --------------------------------------------------------------------------- b. recorder clocks
+def _stamped(frame, t_written):
+    """The frame (sampled uniformly) with its time column written as a recorder would."""
+    out = frame.copy()
+    out["time"] = t_written
+    return out
+
+
+def _check_taken_as_nominal(tmp_path, frame, t_written, rate_hz, fragment):
+    prob, warned = load_quietly(si_problem(tmp_path, _stamped(frame, t_written)))
+    (m,) = prob.maneuvers
+    assert m.n == len(frame)  # every sample kept, none interpolated away
+    np.testing.assert_allclose(np.diff(m.t_s), 1.0 / rate_hz, rtol=1e-9)
+    np.testing.assert_allclose(m.measurements["alpha_zl"], frame["alpha_zl"])
+    assert abs(m.t_s[0] - t_written[0]) < 0.2 / rate_hz
+    hit = [w for w in warned if "flight.csv" in w and fragment in w]
+    assert hit, warned
+    return hit[0]
+
+
+def test_50hz_recorder_on_a_1024hz_clock_is_taken_as_50hz(tmp_path):
+    """Stamps counted in 1/1024 s ticks: steps of 19.5 and 20.5 ms, median 19.5 ms (51.2 Hz)."""
+    frame = flight_frame(duration_s=40.0)
+    frame["time"] = 100.0 + np.arange(len(frame)) / 50.0
+    t = np.floor(frame["time"].to_numpy() * 1024.0) / 1024.0
+    msg = _check_taken_as_nominal(tmp_path, frame, t, 50.0, "nominal 50 Hz")
+    assert "ms" in msg and "51.2" not in msg
+
+
+def test_40hz_recorder_with_clock_jitter_written_in_ms_is_taken_as_40hz(tmp_path):
+    frame = flight_frame()
+    rng = np.random.default_rng(11)
+    t = np.round(frame["time"].to_numpy() + rng.normal(0.0, 3e-4, len(frame)), 3)
+    assert np.max(np.abs(np.diff(t) - 0.025)) > 0.01 * 0.025  # refused on the old 1 % rule
+    _check_taken_as_nominal(tmp_path, frame, t, 40.0, "nominal 40 Hz")
+
+
+def test_64hz_written_with_3_decimals_is_taken_as_64hz(tmp_path):
+    frame = flight_frame(duration_s=30.0)
+    frame["time"] = 100.0 + np.arange(len(frame)) / 64.0
+    _check_taken_as_nominal(tmp_path, frame, np.round(frame["time"].to_numpy(), 3), 64.0,
+                            "nominal 64 Hz")
+
+
+def test_non_uniform_sampling_suggests_the_nominal_rate_not_the_median_step(tmp_path):
+    """Steps of 22 ms (60 %) and 29.5 ms (40 %): the median says 45 Hz, the data average 40 Hz."""
+    frame = flight_frame()
+    rng = np.random.default_rng(5)
+    steps = np.where(rng.random(len(frame) - 1) < 0.6, 0.022, 0.0295)
+    t = 100.0 + np.concatenate([[0.0], np.cumsum(steps)])
+    t = 100.0 + (t - 100.0) * (0.025 * (len(frame) - 1)) / (t[-1] - 100.0)  # a mean step of 25 ms
+    frame = _stamped(frame, t)
+    frame["psi"] = 1.0 + 0.002 * (frame["time"] - 100.0)
+    msg = raises(si_problem(tmp_path, frame), "flight.csv", "maneuver flight", "non-uniform sampling",
+                 "resample_hz = 40")
+    assert "resample_hz = 45" not in msg
+
+
+# ----------------------------------------------------------------------- c. a slower channel
+GPS_COLUMNS = SI_COLUMNS + 'h_dgps = { column = "gps", unit = "m" }\n'
+
+
+def test_undeclared_slow_channel_error_names_own_rate(tmp_path):
+    frame = flight_frame()
+    frame["gps"] = np.where(np.arange(len(frame)) % 4 == 0, frame["h"], np.nan)
+    frame.to_csv(tmp_path / "flight.csv", index=False)
+    path = write_problem(tmp_path, f'channels = ["theta", "h", "h_dgps"]\n{SENSORS}{GPS_COLUMNS}'
+                                   '[[files]]\npath = "flight.csv"\n')
+    msg = raises(path, "flight.csv", "h_dgps (column 'gps')", "every 4th row", "10 Hz",
+                 "own_rate = true")
+    assert "trim" not in msg
+    # following the advice works
+    path.write_text(path.read_text().replace('unit = "m" }\n[[', 'unit = "m", own_rate = true }\n[['))
+    m = load_problem(path).maneuvers[0]
+    assert np.count_nonzero(np.isfinite(m.measurements["h_dgps"])) == (len(frame) + 3) // 4
+
+
+def test_slow_required_input_says_to_resample_it(tmp_path):
+    """own_rate is not for the IMU: the message says so and what to do instead."""
+    frame = flight_frame()
+    frame.loc[frame.index % 2 == 1, "q"] = np.nan
+    msg = raises(si_problem(tmp_path, frame), "flight.csv", "q (column 'q')", "every 2nd row",
+                 "resample")
+    assert "own_rate = true" not in msg.replace("own_rate = true is for", "")
+
+
+def test_slow_channel_written_by_repeating_its_values_is_named(tmp_path):
+    frame = flight_frame()
+    held = frame["h"].to_numpy()[(np.arange(len(frame)) // 4) * 4]
+    frame["gps"] = held
+    frame.to_csv(tmp_path / "flight.csv", index=False)
+    path = write_problem(tmp_path, f'channels = ["theta", "h", "h_dgps"]\n{SENSORS}{GPS_COLUMNS}'
+                                   '[[files]]\npath = "flight.csv"\n')
+    _, warned = load_quietly(path)
+    assert any("h_dgps (column 'gps')" in w and "4 rows" in w and "own_rate = true" in w
+               for w in warned), warned
+
+
+# ------------------------------------------------------------------------------------- d. spikes
+def test_one_sample_spike_is_named_as_a_spike_not_a_unit_error(tmp_path):
+    frame = flight_frame()
+    frame["alpha_zl"] = frame["alpha_zl"] / DEG
+    frame.loc[400, "alpha_zl"] = 1000.0
+    path = si_problem(tmp_path, frame)
+    path.write_text(path.read_text().replace('alpha_zl = { column = "alpha_zl", unit = "rad" }',
+                                             'alpha_zl = { column = "alpha_zl", unit = "deg" }'))
+    msg = raises(path, "flight.csv", "maneuver flight", "alpha_zl (column 'alpha_zl')", "spike",
+                 "1000", "t = 110.000 s", "data row 400")
+    assert "mrad" not in msg and "set unit" not in msg
+
+
+def test_a_few_spikes_are_listed_with_their_times(tmp_path):
+    frame = flight_frame()
+    for i, v in ((100, 9.0), (900, -12.0), (1500, 40.0)):
+        frame.loc[i, "q"] = v  # rad/s: far beyond what an aircraft does
+    msg = raises(si_problem(tmp_path, frame), "flight.csv", "q (column 'q')", "3 spike",
+                 "t = 102.500 s", "t = 122.500 s", "t = 137.500 s")
+    assert "set unit" not in msg
+
+
+def test_a_burst_of_bad_samples_is_named_whole(tmp_path):
+    frame = flight_frame()
+    frame.loc[50:60, "tas"] = 5000.0  # m/s, 11 samples
+    raises(si_problem(tmp_path, frame), "flight.csv", "tas (column 'tas')", "11 spike(s)",
+           "t = 101.250 s", "the last at t = 101.500 s", "median value 150")
+
+
+def test_imu_spike_is_caught(tmp_path):
+    frame = flight_frame()
+    frame.loc[700, "az"] = -1000.0 * 9.80665
+    raises(si_problem(tmp_path, frame), "flight.csv", "az (column 'az')", "spike", "t = 117.500 s")
+
+
+def test_a_real_unit_error_still_gets_the_unit_advice(tmp_path):
+    frame = flight_frame()
+    frame["alpha_zl"] = frame["alpha_zl"] / DEG
+    frame.loc[400, "alpha_zl"] = 1000.0  # and a spike on top
+    raises(si_problem(tmp_path, frame), "flight.csv", "alpha_zl (column 'alpha_zl')", 'set unit = "deg"')
+
+
+# -------------------------------------------------------------------------------------- e. typos
+def test_canonical_name_typo_is_an_error_with_the_close_match(tmp_path):
+    path = si_problem(tmp_path)
+    path.write_text(path.read_text().replace('alpha_zl = { column', 'alpha_lz = { column'))
+    raises(path, "problem.toml", "[columns]", "'alpha_lz'", "did you mean 'alpha_zl'", "beta_zsp")
+
+
+def test_per_file_canonical_name_typo_is_an_error(tmp_path):
+    files = '[[files]]\npath = "flight.csv"\ncolumns = { alpah_zr = { column = "alpha_zr", unit = "rad" } }\n'
+    raises(si_problem(tmp_path, files=files), "flight.csv", "'alpah_zr'", "did you mean 'alpha_zr'")
+
+
+def test_unknown_key_suggests_the_close_match(tmp_path):
+    path = si_problem(tmp_path)
+    path.write_text(path.read_text().replace('aircraft = "PV1"\n', 'aircraft = "PV1"\nheadr = true\n'))
+    raises(path, "[[files]]", "'headr'", "did you mean 'header'")
+    path = si_problem(tmp_path)
+    path.write_text(path.read_text().replace('unit = "rad" }', 'unit = "rad", own_rat = true }', 1))
+    raises(path, "[columns]", "'own_rat'", "did you mean 'own_rate'")
+
+
+def test_parameter_typo_is_an_error_with_the_close_match(tmp_path):
+    path = si_problem(tmp_path, files='[[files]]\npath = "flight.csv"\n[parameter.b_lx]\nfree = false\n')
+    raises(path, "[parameter.b_lx]", "did you mean 'b_l'")
+
+
+# ------------------------------------------------------------------------------- f. no Mach
+def _fake_problem(mach_means):
+    mans = [SimpleNamespace(id=f"m{i}", aircraft="A", configuration="A",
+                            meta={} if mm is None else {"mach_mean": mm, "mach_min": mm - 0.01,
+                                                        "mach_max": mm + 0.01})
+            for i, mm in enumerate(mach_means)]
+    return SimpleNamespace(maneuvers=mans, source="my_flight.toml")
+
+
+def test_workflow_without_mach_says_so_and_names_single():
+    from estimator.workflow import run_workflow
+
+    with pytest.raises(ValueError) as info:
+        run_workflow(_fake_problem([None] * 5))
+    msg = str(info.value)
+    for frag in ("my_flight.toml", "no Mach signal", "mach = { column", "--single"):
+        assert frag in msg, msg
+    assert "nothing to calibrate" not in msg
+
+
+def test_workflow_with_too_small_bins_names_them_and_single():
+    from estimator.workflow import run_workflow
+
+    with pytest.raises(ValueError) as info:
+        run_workflow(_fake_problem([0.5, 0.5, 0.7, None]))
+    msg = str(info.value)
+    for frag in ("Mach 0.50", "2 maneuver", "Mach 0.70", "1 maneuver", "--single", "no Mach signal"):
+        assert frag in msg, msg
+
+
+def test_fpr_calibrate_on_data_without_mach_names_single(tmp_path, capsys):
+    from campaigns.cli import main
+
+    path = si_problem(tmp_path)
+    path.write_text(path.read_text().replace('mach = { column = "mach", unit = "1" }\n', ""))
+    assert main(["calibrate", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "no Mach signal" in err and "--single" in err and "mach" in err
+
+
+# ------------------------------------------------------------------------------------- h. --help
+def test_calibrate_help_points_only_at_what_exists():
+    from campaigns.cli import CALIBRATE_EPILOG, build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+    cal = sub.choices["calibrate"]
+    options = {s for a in cal._actions for s in a.option_strings}
+    for flag in re.findall(r"(?<![\w-])--[a-z][a-z-]*\*?", CALIBRATE_EPILOG):
+        assert flag in options, f"{flag} in `fpr calibrate --help` is not an option"
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    headings = [h.strip() for h in re.findall(r"^#+ (.*)$", readme, flags=re.M)]
+    for section in re.findall(r'README section\s+"([^"]+)"', CALIBRATE_EPILOG):
+        assert any(h.startswith(section) for h in headings), f"no README section {section!r}"
+    for path in re.findall(r"\b((?:estimator|campaigns|synth)/[\w/]+\.py)\b", CALIBRATE_EPILOG):
+        assert (Path(__file__).resolve().parents[1] / path).is_file(), path
