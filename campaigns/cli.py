@@ -246,14 +246,15 @@ or sign error, outliers, turbulence), and every parameter the data do not determ
 as held or on a bound, with why. Exit status: 0 success, 3 success with warnings, 1 failure,
 2 bad input or usage.
 
-Writes to --out: result.json (everything, the verdict first), parameters.csv (estimates,
-Cramer-Rao and coloured-residual standard deviations, state: estimated / held / on_bound / fixed
-and why), findings.csv (the verdict's reasons), fit_quality.csv (per maneuver and channel),
-residuals.csv, correlation.csv, time_history_match.png, residual_crossplots.png, and for synthetic
-datasets recovery.csv.
+With --single, writes to --out: result.json (everything, the verdict first), parameters.csv
+(estimates, Cramer-Rao and coloured-residual standard deviations, state: estimated / held /
+on_bound / fixed and why), findings.csv (the verdict's reasons), fit_quality.csv (per maneuver and
+channel), residuals.csv, correlation.csv, time_history_match.png, residual_crossplots.png, and for
+synthetic datasets recovery.csv.
 
 examples:
   fpr calibrate my_flight.toml --out results/flight421
+  fpr calibrate my_flight.toml --single --out results/flight421-single
   fpr calibrate data/small --kind pitch_doublet shss --mach-min 0.55 --mach-max 0.65 --out res
 """
 
