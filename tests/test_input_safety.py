@@ -73,6 +73,24 @@ def test_file_with_a_header_read_with_header_false_is_an_error_naming_the_fix(tm
     raises(path, "flight.csv", "first line", "column names", "header = true")
 
 
+def test_text_in_another_encoding_names_the_encoding_key(tmp_path):
+    frame = flight_frame().rename(columns={"phi": "phi°"})
+    frame.to_csv(tmp_path / "flight.csv", index=False, encoding="latin-1")
+    path = si_problem(tmp_path, frame)
+    frame.to_csv(tmp_path / "flight.csv", index=False, encoding="latin-1")
+    path.write_text(path.read_text().replace('column = "phi"', 'column = "phi°"'))
+    raises(path, "flight.csv", "UTF-8", 'encoding = "latin-1"')
+    text = path.read_text().replace('path = "flight.csv"', 'path = "flight.csv"\nencoding = "latin-1"')
+    path.write_text(text)
+    m = load_problem(path).maneuvers[0]
+    np.testing.assert_allclose(m.measurements["phi"], frame["phi°"])
+
+
+def test_header_must_be_a_boolean(tmp_path):
+    path = si_problem(tmp_path, files='[[files]]\npath = "flight.csv"\nheader = "false"\n')
+    raises(path, "flight.csv", "header = 'false'", "true or false")
+
+
 # --------------------------------------------------------------------------- b. recorder clocks
 def _stamped(frame, t_written):
     """The frame (sampled uniformly) with its time column written as a recorder would."""
@@ -232,6 +250,12 @@ def test_unknown_key_suggests_the_close_match(tmp_path):
     path = si_problem(tmp_path)
     path.write_text(path.read_text().replace('unit = "rad" }', 'unit = "rad", own_rat = true }', 1))
     raises(path, "[columns]", "'own_rat'", "did you mean 'own_rate'")
+
+
+def test_sensor_typo_is_named(tmp_path):
+    path = si_problem(tmp_path)
+    path.write_text(path.read_text().replace("vane_left = [", "vane_lft = ["))
+    raises(path, "vane_left", "[sensors]", "'vane_lft'", "misspelling")
 
 
 def test_parameter_typo_is_an_error_with_the_close_match(tmp_path):

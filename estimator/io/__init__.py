@@ -65,8 +65,10 @@ z down) from the aircraft's reference point::
     format = "csv"            # csv | whitespace | parquet; default from the extension
                               # (.csv; .txt .dat .asc; .parquet .pq)
     header = true             # text files: first line names the columns; false: by index only
+                              # (a first line of numbers is data, not a header: see below)
     delimiter = ","           # csv only (default ",")
     skip_rows = 0             # text files: lines before the header (e.g. a title block)
+    encoding = "utf-8"        # text files (default utf-8; e.g. "latin-1", "cp1252", "utf-16")
     aircraft = "PV1"          # default: the only [aircraft.*] table
     configuration = "PV1-NP"  # default: the aircraft id
     resample_hz = 40.0        # overrides the top-level value for this file
@@ -108,13 +110,14 @@ configuration from its entry. The truth (``true_*`` columns) is not part of the 
 maneuver's ``meta`` keeps its manifest entry and the dataset path, and :func:`load_truth` reads
 the truth for the comparison afterwards.
 
-Canonical names. ``t``, ``ax``, ``ay``, ``az``, ``p``, ``q``, ``r`` are required. A name that
-is the ``column`` of a model-set channel (tejas: ``phi theta psi tas h alpha_zl alpha_zr
-alpha_zsp beta_zsp beta_znp alpha_zb beta_zbu beta_zbl``) is that channel's measurement; any
-other name is a data signal the channel models may use (``gear``, ``mach``). A channel without
-data in some maneuvers (a nose probe on one aircraft, a boom on another) is simply not fitted
-there; its aircraft- or configuration-scoped parameters are held fixed for the aircraft that have
-no data for them.
+Canonical names. ``t``, ``ax``, ``ay``, ``az``, ``p``, ``q``, ``r`` are required. A name that is
+the ``column`` of a model-set channel (tejas: ``phi theta psi tas h h_dgps alpha_zl alpha_zr
+alpha_zsp beta_zsp beta_znp alpha_zb beta_zbu beta_zbl``) is that channel's measurement; ``gear``,
+``mach`` and any other name a channel model reads are data signals. Any other name is an error (a
+typo such as ``alpha_lz`` would silently drop the channel): the message suggests the closest valid
+name and lists them all. A channel without data in some maneuvers (a nose probe on one aircraft, a
+boom on another) is simply not fitted there; its aircraft- or configuration-scoped parameters are
+held fixed for the aircraft that have no data for them.
 
 Units (``value_SI = value * factor + offset``): time ``s ms``; angle ``rad deg mrad``; angular
 rate ``rad/s deg/s``; acceleration ``m/s^2 g ft/s^2`` (g = 9.80665 m/s^2); speed ``m/s kt ft/s
@@ -128,28 +131,48 @@ What is checked
 Bad input raises :class:`DataError` naming the file, maneuver, time range, channel and source
 column, the time and data row (0-based, after the header) of the first bad sample, and the fix:
 
-- a missing file, an unknown key, an unknown unit (the valid ones are listed), a unit of the
-  wrong dimension, a column the file does not have (its columns are listed);
+- a missing file, an unknown key, an unknown canonical name under ``[columns]``, a
+  ``[parameter.NAME]`` the model set does not have and no channel uses (each with the closest
+  valid name suggested), an unknown unit (the valid ones are listed), a unit of the wrong
+  dimension, a column the file does not have (its columns are listed), text that is not UTF-8
+  (or the declared ``encoding``);
+- the header: a first line (after ``skip_rows``) that parses as numbers is data, not a header.
+  With every column taken by index it is read as the first data row, with a
+  :class:`DataWarning`; with columns taken by name it is an error (set ``header = false`` and give
+  0-based column indices). A first line of names read with ``header = false`` is an error;
 - no data for a required input; a channel listed in ``channels`` that no maneuver has data for
   (unlisted channels without data are left out with a :class:`DataWarning`); a channel model
   using a data signal a maneuver lacks; a sensor without a position;
 - time not strictly increasing (duplicated or going back) anywhere in a file; a maneuver's time
   range outside the file's span;
 - NaN, empty or non-numeric cells in any mapped column inside a maneuver (an ``own_rate``
-  channel may be empty between its samples, but needs two of them);
+  channel may be empty between its samples, but needs two of them). A column empty on all but
+  every k-th row is named as a slower channel: the message says to mark it ``own_rate = true``
+  (a measured channel) or to fill it in (an IMU input, an Euler angle, a data signal). A channel
+  that repeats each value for k rows (a slower channel written by holding) gives a warning
+  naming ``own_rate``;
 - gaps: a step longer than :data:`~estimator.io.timebase.GAP_FACTOR` (1.5) times the median step;
-- non-uniform sampling: a step off the median by more than
-  :data:`~estimator.io.timebase.JITTER_FRACTION` (1 %) is an error unless ``resample_hz`` is
-  given, in which case the maneuver is linearly interpolated onto ``t_start + k / resample_hz``
-  (no anti-aliasing filter; downsampling by more than 2 gives a warning);
+- non-uniform sampling: steps off the median by more than
+  :data:`~estimator.io.timebase.JITTER_FRACTION` (1 %). Stamps that stay within
+  :data:`~estimator.io.timebase.STAMP_TOLERANCE` (10 %) of a step of a uniform grid — a recorder's
+  clock resolution or jitter (1 ms stamps at 64 Hz, 1/1024 s ticks at 50 Hz) — are taken as that
+  grid's samples, at its nominal rate (a common recorder rate or whole hertz when it fits, else
+  the fitted rate), with a :class:`DataWarning` giving the largest deviation. Other non-uniform
+  sampling is an error naming the nominal rate, unless ``resample_hz`` is given, in which case
+  the maneuver is linearly interpolated from its stamps onto ``t_start + k / resample_hz`` (no
+  anti-aliasing filter; downsampling by more than 2 gives a warning);
 - units that cannot be right: values far outside what an aircraft does in the declared unit
   (angles declared rad beyond ~1.6 rad, rates beyond 6 rad/s, a mean specific force outside
   0.4 to 4 g, airspeed outside 15 to 700 m/s, altitude outside -500 to 25 000 m, a time step
   outside 0.1 ms to 2 s, ...); true airspeed / Mach that is not a speed of sound; Euler angles
   that change 57 times faster or slower than the body rates say (a degree/radian mistake of
   that angle, or of the rates if all angles disagree alike). The message gives the observed
-  value and suggests the unit that fits (:mod:`estimator.io.plausibility`,
+  value and suggests the unit that fits the bulk of the data (:mod:`estimator.io.plausibility`,
   :mod:`estimator.io.consistency`);
+- spikes: samples (one, or a burst) that jump far outside the plausible range while the rest of
+  the channel is plausible are named with their times and rows as spikes, never as a unit error
+  (and a unit is never suggested from them): replace them in the file or cut them out of the
+  maneuver's time range;
 - a maneuver shorter than :data:`~estimator.io.modelset.MIN_DURATION_S` (5 s) or with fewer than
   :data:`~estimator.io.modelset.MIN_SAMPLES_PER_FREE_PARAMETER` (10) samples per free
   per-maneuver parameter: those parameters (initial conditions, IMU biases) are estimated from
@@ -158,6 +181,9 @@ column, the time and data row (0-based, after the header) of the first bad sampl
 
 Each maneuver's ``meta`` holds its file and time range (or its manifest entry) and, from the
 data, ``mach_mean``, ``mach_min``, ``mach_max`` and ``gear_down`` when Mach and gear are mapped.
+The calibration workflow (:mod:`estimator.workflow`, ``fpr calibrate``) sorts maneuvers into Mach
+bins by ``mach_mean``: without a ``mach`` column it stops with a message saying so and naming
+the single estimation over all maneuvers (``fpr calibrate --single``), which needs no Mach.
 
 Start values of the initial conditions ``u0 v0 w0 phi0 theta0 psi0 h0`` come from the first
 :data:`~estimator.io.modelset.IC_AVERAGE_SAMPLES` samples of each maneuver (measured TAS, the first
@@ -175,12 +201,12 @@ from estimator.io.modelset import (
     initial_condition_starts,
 )
 from estimator.io.problemfile import load_problem
-from estimator.io.timebase import GAP_FACTOR, JITTER_FRACTION
+from estimator.io.timebase import GAP_FACTOR, JITTER_FRACTION, STAMP_TOLERANCE
 from estimator.io.units import UNITS, to_si
 
 __all__ = [
     "DATASET_COLUMNS", "GAP_FACTOR", "IC_AVERAGE_SAMPLES", "JITTER_FRACTION", "MIN_DURATION_S",
-    "MIN_SAMPLES_PER_FREE_PARAMETER", "UNITS", "DataError", "DataWarning", "initial_condition_starts",
-    "load_dataset_maneuvers", "load_problem", "load_truth", "problem_from_dataset", "subproblem",
-    "to_si",
+    "MIN_SAMPLES_PER_FREE_PARAMETER", "STAMP_TOLERANCE", "UNITS", "DataError", "DataWarning",
+    "initial_condition_starts", "load_dataset_maneuvers", "load_problem", "load_truth",
+    "problem_from_dataset", "subproblem", "to_si",
 ]

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from estimator.io.assemble import ManeuverRequest, SourceTable, build_maneuver, check_dimensions
-from estimator.io.errors import DataError, warn
+from estimator.io.errors import DataError, close_match, warn
 from estimator.io.modelset import (
     check_data_names,
     check_maneuver_lengths,
@@ -89,9 +89,12 @@ def build_problem(
         raise DataError(f"{source}: no channel has data; map at least the measured channels under [columns]")
     for c in chans:
         if c.sensor and c.sensor not in sensors:
+            unused = [n for n in sensors if n != "imu" and all(ch.sensor != n for ch in channels)]
+            typo = close_match(c.sensor, unused)
             raise DataError(
                 f"{source}: channel {c.name} is measured at sensor {c.sensor!r}, which has no "
-                f"position; add {c.sensor} = [x, y, z] under [sensors] (known: {sorted(sensors)})"
+                f"position; add {c.sensor} = [x, y, z] under [sensors] (known: {sorted(sensors)}"
+                + (f"; is {typo!r}, which no channel uses, a misspelling of it?" if typo else "") + ")"
             )
     check_data_names(chans, specs, maneuvers)
     final = finalize_parameters(specs, user_declared, chans, maneuvers, source)

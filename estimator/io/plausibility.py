@@ -18,12 +18,20 @@ beta_*), theta
 bank angle (phi)       max abs                          <= pi (+0.05) rad
 other angles but psi   max abs                           <= 2 pi (+0.05) rad
 body rate (p, q, r)    max abs                          <= 6 rad/s (344 deg/s)
-IMU acceleration       mean of the norm of (ax, ay, az) 0.4 g to 4 g (1 g in steady flight)
-true airspeed (tas)    median                           15 to 700 m/s
-altitude (h)           median                           -500 to 25 000 m
+IMU acceleration       mean of the norm of (ax, ay, az) 0.4 g to 4 g (1 g in steady flight);
+                                                        every sample's norm <= 15 g
+true airspeed (tas)    median                           15 to 700 m/s; every sample 0 to 1000 m/s
+altitude (h)           median                           -500 to 25 000 m; every sample -1000 to
+                                                        30 000 m
 gear flag (gear)       min, max                         0 to 1
-Mach (mach)            median                           0 to 5
+Mach (mach)            median                           0 to 5; every sample 0 to 5
 =====================  ===============================  =========================================
+
+Samples out of range that jump away from the rest (:func:`spikes`: one sample or a burst, far
+from the in-range samples either side) are spikes: when the rest of the channel is plausible
+they are named with their times, never taken for a unit mistake, and a unit is suggested only
+from the bulk of the data (without the 1 % most extreme samples), so that one 1000-deg sample
+in a column of degrees does not read as "set unit = mrad".
 """
 
 from __future__ import annotations

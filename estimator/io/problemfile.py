@@ -63,6 +63,15 @@ def _check_names(table: Mapping, valid: Mapping[str, list[str]], where: str) -> 
             )
 
 
+def _number(v, key: str, where: str, what: str) -> float | None:
+    """A number from the problem file (None stays None)."""
+    if v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise DataError(f"{where}: {key} = {v!r} must be a number ({what}), without quotes")
+    return float(v)
+
+
 def _vector(v, where: str) -> np.ndarray:
     if (not isinstance(v, list) or len(v) != 3
             or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
@@ -112,6 +121,9 @@ def _column_specs(table: Mapping, where: str, valid: Mapping[str, list[str]] | N
             raise DataError(f"{w}: must be a table {{ column = \"NAME\" or index, unit = \"...\" }}, "
                             f"got {spec!r}")
         _keys(spec, COLUMN_KEYS, w)
+        for flag in ("optional", "own_rate"):
+            if not isinstance(spec.get(flag, False), bool):
+                raise DataError(f"{w}: {flag} = {spec[flag]!r} must be true or false (no quotes)")
         if "column" not in spec or "unit" not in spec:
             raise DataError(f"{w}: needs column (name or 0-based index) and unit, e.g. "
                             f"{name} = {{ column = \"{name.upper()}\", unit = \"deg\" }}")
@@ -191,7 +203,7 @@ def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[s
         if ac not in cgs and file_cg is None:
             raise DataError(f"{w}: no CG for aircraft {ac!r}: add [aircraft.{ac}] r_cg_body_m = [x, y, z] "
                             "(or r_cg_body_m under this [[files]] entry or its maneuvers)")
-        rate = entry.get("resample_hz", raw.get("resample_hz"))
+        rate = _number(entry.get("resample_hz", raw.get("resample_hz")), "resample_hz", w, "Hz, e.g. 40.0")
         mans = entry.get("maneuvers") or [{"id": Path(entry["path"]).stem}]
         for j, man in enumerate(mans):
             mw = f"{w} maneuvers[{j}]"
@@ -200,7 +212,8 @@ def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[s
             _keys(man, MANEUVER_KEYS, mw)
             cg = _cg(man, mw)
             cg = cg if cg is not None else file_cg if file_cg is not None else cgs[ac]
-            t0, t1 = man.get("t_start_s"), man.get("t_end_s")
+            t0 = _number(man.get("t_start_s"), "t_start_s", mw, "s, in the file's time base")
+            t1 = _number(man.get("t_end_s"), "t_end_s", mw, "s, in the file's time base")
             pairs.append((table, ManeuverRequest(
                 id=str(man["id"]), t_start_s=None if t0 is None else float(t0),
                 t_end_s=None if t1 is None else float(t1), aircraft=ac,

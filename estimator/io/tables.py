@@ -117,9 +117,14 @@ def first_line_kind(cells: Sequence[str]) -> str:
 def _check_header(path: Path, fmt: str, sep: str, header: bool, explicit: bool, skip_rows: int,
                   named_columns: Sequence[str], encoding: str | None) -> bool:
     """Whether the file is to be read with a header, after checking the first lines against it."""
-    head = pd.read_csv(path, sep=sep, header=None, skiprows=skip_rows, nrows=2, dtype=str,
-                       skipinitialspace=True, keep_default_na=False, encoding=encoding or "utf-8",
-                       engine="python" if fmt == "whitespace" else "c")
+    try:
+        head = pd.read_csv(path, sep=sep, header=None, skiprows=skip_rows, nrows=2, dtype=str,
+                           skipinitialspace=True, keep_default_na=False, encoding=encoding or "utf-8",
+                           engine="python" if fmt == "whitespace" else "c")
+    except UnicodeError:
+        raise
+    except (ValueError, pd.errors.ParserError):
+        return header  # ragged first lines: the full read says what is wrong, if anything
     if len(head) == 0:
         return header
     first = [str(c) for c in head.iloc[0]]
