@@ -13,7 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from test_io import DEG, SENSORS, SI_COLUMNS, flight_frame, raises, si_problem, write_problem
+from test_io import DEG, SENSORS, SI_COLUMNS, flight_frame, one_range, raises, si_problem, write_problem
 
 from estimator.io import DataWarning, load_problem
 
@@ -89,6 +89,61 @@ def test_text_in_another_encoding_names_the_encoding_key(tmp_path):
 def test_header_must_be_a_boolean(tmp_path):
     path = si_problem(tmp_path, files='[[files]]\npath = "flight.csv"\nheader = "false"\n')
     raises(path, "flight.csv", "header = 'false'", "true or false")
+
+
+def test_two_columns_of_the_mapped_name_are_an_error(tmp_path):
+    frame = flight_frame()
+    frame["alpha_zl_counts"] = (frame["alpha_zl"] * 1e4).round()
+    path = si_problem(tmp_path, frame)
+    text = (tmp_path / "flight.csv").read_text().replace("alpha_zl_counts", "alpha_zl", 1)
+    (tmp_path / "flight.csv").write_text(text)
+    raises(path, "flight.csv", "2 columns are named 'alpha_zl'", "[12, 16]", "column = 12")
+
+
+def test_title_lines_without_skip_rows_name_skip_rows(tmp_path):
+    frame = flight_frame()
+    path = si_problem(tmp_path, frame)
+    title = "FLIGHT 421\nexported 2024-05-01\nDRU 3\n"
+    (tmp_path / "flight.csv").write_text(title + frame.to_csv(index=False))
+    raises(path, "flight.csv", "skip_rows = 3")
+
+
+def test_european_export_names_delimiter_and_decimal(tmp_path):
+    frame = flight_frame()
+    path = si_problem(tmp_path, frame)
+    frame.to_csv(tmp_path / "flight.csv", index=False, sep=";", decimal=",")
+    raises(path, "flight.csv", 'delimiter = ";"', 'decimal = ","')
+    path.write_text(path.read_text().replace('path = "flight.csv"', 'path = "flight.csv"\ndelimiter = ";"'))
+    raises(path, "flight.csv", "time", "decimal comma", 'decimal = ","')
+    path.write_text(path.read_text().replace('delimiter = ";"', 'delimiter = ";"\ndecimal = ","'))
+    m = load_problem(path).maneuvers[0]
+    np.testing.assert_allclose(m.measurements["alpha_zl"], frame["alpha_zl"])
+
+
+def test_empty_file_folder_and_misspelt_path(tmp_path):
+    path = si_problem(tmp_path)
+    (tmp_path / "flight.csv").write_text("")
+    raises(path, "flight.csv", "empty (0 bytes)")
+    (tmp_path / "flight.csv").unlink()
+    (tmp_path / "flight.csv").mkdir()
+    raises(path, "flight.csv", "is a directory", "give the file's path")
+    (tmp_path / "flight.csv").rmdir()
+    flight_frame().to_csv(tmp_path / "flight421.csv", index=False)
+    path.write_text(path.read_text().replace('path = "flight.csv"', 'path = "flight42.csv"'))
+    raises(path, "flight42.csv", "no such data file", "did you mean 'flight421.csv'")
+
+
+def test_unit_spellings_get_the_unit_meant(tmp_path):
+    path = si_problem(tmp_path)
+    path.write_text(path.read_text().replace('unit = "m/s" }', 'unit = "knots" }'))
+    raises(path, "tas (column 'tas')", "unknown unit 'knots'", "did you mean 'kt'", "set unit")
+
+
+def test_time_in_seconds_declared_ms_says_so(tmp_path):
+    path = si_problem(tmp_path, files=one_range("pd1", 110.0, 140.0))
+    path.write_text(path.read_text().replace('t = { column = "time", unit = "s" }',
+                                             't = { column = "time", unit = "ms" }'))
+    raises(path, "flight.csv", "maneuver pd1", "t (column 'time')", "declared in 'ms'", 'set unit = "s"')
 
 
 # --------------------------------------------------------------------------- b. recorder clocks

@@ -66,7 +66,8 @@ z down) from the aircraft's reference point::
                               # (.csv; .txt .dat .asc; .parquet .pq)
     header = true             # text files: first line names the columns; false: by index only
                               # (a first line of numbers is data, not a header: see below)
-    delimiter = ","           # csv only (default ",")
+    delimiter = ","           # csv only (default ","; ";" for many European exports)
+    decimal = "."             # text files: the decimal mark (default "."; "," for a decimal comma)
     skip_rows = 0             # text files: lines before the header (e.g. a title block)
     encoding = "utf-8"        # text files (default utf-8; e.g. "latin-1", "cp1252", "utf-16")
     aircraft = "PV1"          # default: the only [aircraft.*] table
@@ -134,8 +135,11 @@ column, the time and data row (0-based, after the header) of the first bad sampl
 - a missing file, an unknown key, an unknown canonical name under ``[columns]``, a
   ``[parameter.NAME]`` the model set does not have and no channel uses (each with the closest
   valid name suggested), an unknown unit (the valid ones are listed), a unit of the wrong
-  dimension, a column the file does not have (its columns are listed), text that is not UTF-8
-  (or the declared ``encoding``);
+  dimension, a column the file does not have (its columns are listed, with the closest), a
+  column name the file has twice, a data path that is missing, a folder or an empty file, text
+  that is not UTF-8 (or the declared ``encoding``), a file that does not parse (the message names
+  the ``delimiter`` its lines use, a decimal comma, or the ``skip_rows`` of a title block),
+  numbers with a decimal comma (``decimal = ","``);
 - the header: a first line (after ``skip_rows``) that parses as numbers is data, not a header.
   With every column taken by index it is read as the first data row, with a
   :class:`DataWarning`; with columns taken by name it is an error (set ``header = false`` and give

@@ -124,7 +124,7 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
     where = Where(str(table.path), req.id, None if req.t_start_s is None and req.t_end_s is None else (
         req.t_start_s if req.t_start_s is not None else float(table.t_s[0]),
         req.t_end_s if req.t_end_s is not None else float(table.t_s[-1])))
-    idx = select_range(table.t_s, req.t_start_s, req.t_end_s, where)
+    idx = select_range(table.t_s, req.t_start_s, req.t_end_s, where, table.labels["t"], table.units["t"])
     t_s = table.t_s[idx]
     rows = table.rows[idx]
     own = table.own_rate & set(table.values)

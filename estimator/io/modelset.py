@@ -57,7 +57,7 @@ def read_model_set(name_or_path: str | Path, base_dir: Path | None = None) -> tu
         with open(path, "rb") as fh:
             return tomllib.load(fh), str(path)
     except tomllib.TOMLDecodeError as exc:
-        raise DataError(f"{path}: not valid TOML: {exc}") from None
+        raise DataError(f"{path}: not valid TOML: {exc}; fix the syntax there") from None
 
 
 def merge_model_set(raw: Mapping, parameter_overrides: Mapping | None, extra_channels: Sequence | None,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import codecs
+import re
 import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -14,18 +15,20 @@ from estimator.io.build import build_problem
 from estimator.io.dataset_problem import load_dataset_maneuvers
 from estimator.io.errors import DataError, close_match
 from estimator.io.modelset import OWN_SIGNALS, merge_model_set, read_model_set
-from estimator.io.tables import infer_format, numeric, pick_column, read_table
+from estimator.io.tables import check_data_path, infer_format, numeric, pick_column, read_table
 from estimator.parameters import ParameterSpec
 from estimator.problem import LEVER_ARMS, STATE_SIGNALS, ChannelSpec, Problem
 
 TOP_KEYS = ("title", "g_mps2", "lever_arm", "model", "channels", "resample_hz", "sensors", "aircraft",
             "columns", "files", "data", "parameter", "channel")
-FILE_KEYS = ("path", "format", "header", "delimiter", "skip_rows", "encoding", "aircraft", "configuration",
+FILE_KEYS = ("path", "format", "header", "delimiter", "decimal", "skip_rows", "encoding", "aircraft",
+             "configuration",
              "maneuvers", "resample_hz", "columns", "r_cg_body_m", "r_cg_body_in", "r_cg_body_ft")
 MANEUVER_KEYS = ("id", "t_start_s", "t_end_s", "configuration", "r_cg_body_m", "r_cg_body_in",
                  "r_cg_body_ft")
 COLUMN_KEYS = ("column", "unit", "optional", "own_rate")
 _LENGTH_SUFFIXES = (("_m", 1.0), ("_in", 0.0254), ("_ft", 0.3048))
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
 
 
 def _keys(d: Mapping, valid, where: str) -> None:
@@ -131,8 +134,21 @@ def _column_specs(table: Mapping, where: str, valid: Mapping[str, list[str]] | N
     return out
 
 
+def _check_decimal_comma(cells: np.ndarray, bad: np.ndarray, label: str, path: Path, entry: Mapping) -> None:
+    """Text cells that are numbers with a decimal comma ("1,52"): name the ``decimal`` key."""
+    if entry.get("decimal", ".") == ",":
+        return
+    shown = [str(c).strip() for c in cells[bad][:50]]
+    if sum(bool(_DECIMAL_COMMA.match(c)) for c in shown) > len(shown) / 2:
+        raise DataError(
+            f"{path}: {label} holds numbers with a decimal comma ({shown[0]!r} in data row "
+            f"{int(np.flatnonzero(bad)[0])}); set decimal = \",\" under its [[files]] entry (and the "
+            "delimiter its fields are separated by, e.g. delimiter = \";\")")
+
+
 def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: str) -> SourceTable:
     path = (base / entry["path"]).resolve() if not Path(entry["path"]).is_absolute() else Path(entry["path"])
+    check_data_path(path, entry.get("format"))
     fmt = infer_format(path, entry.get("format"), where)
     header = entry.get("header")
     if header is not None and not isinstance(header, bool):
@@ -147,9 +163,14 @@ def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: s
         except LookupError:
             raise DataError(f"{where}: encoding = {encoding!r} is not a text encoding Python knows; e.g. "
                             "\"utf-8\", \"latin-1\", \"cp1252\", \"utf-16\"") from None
+    for key in ("delimiter", "decimal"):
+        if key in entry and (not isinstance(entry[key], str) or len(entry[key]) != 1):
+            raise DataError(f"{where}: {key} = {entry[key]!r} must be one character in quotes, e.g. "
+                            f"{key} = \"{';' if key == 'delimiter' else ','}\"")
     named = [spec["column"] for spec in columns.values() if isinstance(spec["column"], str)]
     df = read_table(path, fmt, header=header, delimiter=entry.get("delimiter"), skip_rows=skip,
-                    named_columns=named, encoding=None if encoding is None else str(encoding))
+                    named_columns=named, encoding=None if encoding is None else str(encoding),
+                    decimal=entry.get("decimal"))
     header = header is not False and not all(isinstance(c, (int, np.integer)) for c in df.columns)
     values, bad, text, units, labels = {}, {}, {}, {}, {}
     for name, spec in columns.items():
@@ -162,6 +183,7 @@ def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: s
         values[name], bad[name] = numeric(series)
         if bad[name].any():
             text[name] = series.to_numpy()
+            _check_decimal_comma(text[name], bad[name], f"{name} (column {src!r})", path, entry)
         units[name] = spec["unit"]
         labels[name] = f"{name} (column {src!r})"
     own = frozenset(n for n, spec in columns.items() if spec.get("own_rate", False) and n in values)
@@ -240,7 +262,11 @@ def load_problem(path: str | Path) -> Problem:
     except FileNotFoundError:
         raise DataError(f"{path}: no such problem file") from None
     except tomllib.TOMLDecodeError as exc:
-        raise DataError(f"{path}: not valid TOML: {exc}") from None
+        raise DataError(f"{path}: not valid TOML: {exc}; fix the syntax there (an unclosed quote or "
+                        "bracket, a missing = or comma, text without quotes?)") from None
+    except IsADirectoryError:
+        raise DataError(f"{path}: is a folder; give the problem file (TOML), or the dataset folder to "
+                        "fpr calibrate directly") from None
     where = str(path)
     _keys(raw, TOP_KEYS, where)
     base = path.resolve().parent

@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from estimator.io.errors import DataError, Where, at_row, warn
+from estimator.io.units import UNITS
 
 #: A time step larger than this times the median step is a gap (lost samples): an error.
 GAP_FACTOR = 1.5
@@ -52,8 +53,12 @@ def check_time(t_s: np.ndarray, rows: np.ndarray, where: Where, label: str) -> N
 
 
 def select_range(t_s: np.ndarray, t_start_s: float | None, t_end_s: float | None,
-                 where: Where) -> np.ndarray:
-    """Indices of the samples with ``t_start_s <= t <= t_end_s`` (None: the file's start/end)."""
+                 where: Where, label: str = "t", unit: str = "s") -> np.ndarray:
+    """Indices of the samples with ``t_start_s <= t <= t_end_s`` (None: the file's start/end).
+
+    ``label`` and ``unit`` name the time column and its declared unit in messages: a range that
+    would fit if the time were in another unit says so.
+    """
     step = float(np.median(np.diff(t_s))) if len(t_s) > 1 else 0.0
     t0 = t_s[0] if t_start_s is None else float(t_start_s)
     t1 = t_s[-1] if t_end_s is None else float(t_end_s)
@@ -61,10 +66,16 @@ def select_range(t_s: np.ndarray, t_start_s: float | None, t_end_s: float | None
         raise DataError(f"{where}: t_end_s = {t1:.3f} s is not after t_start_s = {t0:.3f} s; fix the range")
     tol = 0.5 * step
     if t0 < t_s[0] - tol or t1 > t_s[-1] + tol:
+        hint = ""
+        for other, factor in (("ms", 1e-3), ("s", 1.0)):
+            scale = factor / UNITS[unit].factor  # the time in SI if declared in `other`
+            if other != unit and t_s[0] * scale - tol * scale <= t0 and t1 <= t_s[-1] * scale + tol * scale:
+                hint = (f"; the range fits if the time column {label}, declared in {unit!r}, is in "
+                        f"{other!r}: if it is, set unit = \"{other}\" for t under [columns]")
         raise DataError(
             f"{where}: the requested range is outside the file's time span t = {t_s[0]:.3f} to "
-            f"{t_s[-1]:.3f} s; fix t_start_s/t_end_s (are they in the "
-            "file's time base, in seconds?)"
+            f"{t_s[-1]:.3f} s (time column {label}){hint}; {'otherwise ' if hint else ''}fix "
+            "t_start_s/t_end_s (they are in the file's time base, in seconds)"
         )
     idx = np.flatnonzero((t_s >= t0 - 1e-9 * max(1.0, abs(t0))) & (t_s <= t1 + 1e-9 * max(1.0, abs(t1))))
     if idx.size < 2:

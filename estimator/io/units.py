@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.io.errors import DataError
+from estimator.io.errors import DataError, close_match
 
 
 @dataclass(frozen=True)
@@ -56,8 +56,29 @@ def get_unit(name: str, where: str) -> Unit:
         For an unknown name; the message lists the valid names by dimension.
     """
     if not isinstance(name, str) or name not in UNITS:
-        raise DataError(f"{where}: unknown unit {name!r}; valid units: {valid_units_text()}")
+        key = str(name).strip().lower().replace(" ", "")
+        meant = (_SPELLINGS.get(key) or {u.lower(): u for u in UNITS}.get(key)
+                 or close_match(str(name), UNITS))
+        raise DataError(f"{where}: unknown unit {name!r}" + (f" (did you mean {meant!r}?)" if meant else "")
+                        + f"; set unit = one of the valid units: {valid_units_text()}")
     return UNITS[name]
+
+
+#: Common spellings of the units, lower case and without blanks -> the unit's name here.
+_SPELLINGS = {
+    "sec": "s", "second": "s", "seconds": "s", "msec": "ms", "millisecond": "ms", "milliseconds": "ms",
+    "radian": "rad", "radians": "rad", "degree": "deg", "degrees": "deg", "°": "deg",
+    "milliradian": "mrad", "milliradians": "mrad",
+    "rad/sec": "rad/s", "rps": "rad/s", "deg/sec": "deg/s", "dps": "deg/s", "°/s": "deg/s",
+    "m/s2": "m/s^2", "m/s/s": "m/s^2", "m/sec^2": "m/s^2", "ft/s2": "ft/s^2", "ft/sec^2": "ft/s^2",
+    "knot": "kt", "knots": "kt", "kts": "kt", "kn": "kt", "kias": "kt", "ktas": "kt", "m/sec": "m/s",
+    "mps": "m/s", "fps": "ft/s", "ft/sec": "ft/s", "kph": "km/h", "kmh": "km/h", "km/hr": "km/h",
+    "meter": "m", "meters": "m", "metre": "m", "metres": "m", "feet": "ft", "foot": "ft",
+    "inch": "in", "inches": "in", "-": "1", "none": "1", "": "1", "mach": "1", "flag": "bool",
+    "pascal": "Pa", "pa": "Pa", "hpa": "hPa", "kpa": "kPa", "mb": "mbar", "millibar": "mbar",
+    "lb/ft^2": "psf", "lbf/ft^2": "psf", "kelvin": "K", "k": "K", "c": "degC", "°c": "degC",
+    "celsius": "degC", "degc": "degC",
+}
 
 
 def valid_units_text() -> str:
