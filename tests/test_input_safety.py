@@ -108,6 +108,16 @@ def test_title_lines_without_skip_rows_name_skip_rows(tmp_path):
     raises(path, "flight.csv", "skip_rows = 3")
 
 
+def test_units_row_under_the_header_is_named(tmp_path):
+    frame = flight_frame()
+    path = si_problem(tmp_path, frame)
+    lines = frame.to_csv(index=False).splitlines(keepends=True)
+    units = ",".join(["s", "m/s^2", "m/s^2", "m/s^2", *["rad/s"] * 3, *["rad"] * 3, "m/s", "m", "rad", "rad",
+                      "1", "1"]) + "\n"
+    (tmp_path / "flight.csv").write_text(lines[0] + units + "".join(lines[1:]))
+    raises(path, "flight.csv", "line after the header", "units row", "Remove that line")
+
+
 def test_european_export_names_delimiter_and_decimal(tmp_path):
     frame = flight_frame()
     path = si_problem(tmp_path, frame)
@@ -270,7 +280,19 @@ def test_a_burst_of_bad_samples_is_named_whole(tmp_path):
     frame = flight_frame()
     frame.loc[50:60, "tas"] = 5000.0  # m/s, 11 samples
     raises(si_problem(tmp_path, frame), "flight.csv", "tas (column 'tas')", "11 spike(s)",
-           "t = 101.250 s", "the last at t = 101.500 s", "median value 150")
+           "5000 m/s from t = 101.250 to 101.500 s (data rows 50 to 60, 11 samples)", "median value 150")
+
+
+def test_a_stuck_value_burst_is_one_item(tmp_path):
+    frame = flight_frame()
+    frame["alpha_zl"] = frame["alpha_zl"] / DEG
+    frame.loc[400:479, "alpha_zl"] = 200.0  # a failed synchro, 2 s
+    path = si_problem(tmp_path, frame)
+    path.write_text(path.read_text().replace('alpha_zl = { column = "alpha_zl", unit = "rad" }',
+                                             'alpha_zl = { column = "alpha_zl", unit = "deg" }'))
+    msg = raises(path, "flight.csv", "80 spike(s)", "200 deg from t = 110.000 to 111.975 s",
+                 "data rows 400 to 479, 80 samples", "more than a few")
+    assert "set unit" not in msg
 
 
 def test_imu_spike_is_caught(tmp_path):

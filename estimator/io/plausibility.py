@@ -209,9 +209,22 @@ def _scalar(v: np.ndarray) -> np.ndarray:
 
 def _samples_text(values: np.ndarray, unit: str, t_s: np.ndarray, rows: np.ndarray, idx: np.ndarray,
                   limit: int = 5) -> str:
-    parts = [f"{values[i]:.6g} {unit} {at_row(t_s[i], int(rows[i]))}" for i in idx[:limit]]
-    return "; ".join(parts) + (f"; ... ({idx.size - limit} more, the last at t = {t_s[idx[-1]]:.3f} s)"
-                               if idx.size > limit else "")
+    """The samples ``idx``, a run of consecutive ones as one item: ``"200 deg from t = 1530.000 to
+    1531.975 s (data rows 400 to 479, 80 samples)"``."""
+    runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1) if idx.size else []
+    parts = []
+    for r in runs[:limit]:
+        i, j = int(r[0]), int(r[-1])
+        if r.size == 1:
+            parts.append(f"{values[i]:.6g} {unit} {at_row(t_s[i], int(rows[i]))}")
+        else:
+            lo, hi = float(np.min(values[r])), float(np.max(values[r]))
+            val = f"{lo:.6g} {unit}" if lo == hi else f"{lo:.6g} to {hi:.6g} {unit}"
+            parts.append(f"{val} from t = {t_s[i]:.3f} to {t_s[j]:.3f} s (data rows {int(rows[i])} to "
+                         f"{int(rows[j])}, {r.size} samples)")
+    rest = sum(r.size for r in runs[limit:])
+    return "; ".join(parts) + (f"; ... ({rest} more sample(s), the last at t = {t_s[idx[-1]]:.3f} s)"
+                               if rest else "")
 
 
 def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s: np.ndarray,
@@ -295,8 +308,8 @@ def _raise_spikes(check: Check, label: str, unit: str, raw_all: np.ndarray, raw_
         f"{where}: {label} has {idx.size} spike(s), sample(s) that jump far outside what "
         f"{check.what} can be: {_samples_text(shown, unit, t_s, rows, idx)}. The rest of it is "
         f"plausible in {unit!r} ({rest_text}), so the unit is not the problem"
-        + (f"; {100 * idx.size / len(t_s):.1f} % of the samples is more than a few spikes: check that "
-           "the column is the right one and was recorded properly. " if many else ". ")
+        + (f"; that is {100 * idx.size / len(t_s):.1f} % of the samples, more than a few spikes: check "
+           "that the column is the right one and was recorded properly. " if many else ". ")
         + "Replace the spike(s) in the file (e.g. by interpolating between their neighbours), or "
         "exclude them from the maneuver with t_start_s/t_end_s (split the maneuver around them)"
     )

@@ -198,7 +198,7 @@ def _check_header(path: Path, fmt: str, sep: str, header: bool, explicit: bool, 
     """Whether the file is to be read with a header, after checking the first lines against it,
     and the first line's cells."""
     try:
-        head = pd.read_csv(path, sep=sep, header=None, skiprows=skip_rows, nrows=2, dtype=str,
+        head = pd.read_csv(path, sep=sep, header=None, skiprows=skip_rows, nrows=3, dtype=str,
                            skipinitialspace=True, keep_default_na=False, encoding=encoding or "utf-8",
                            engine="python" if fmt == "whitespace" else "c")
     except UnicodeError:
@@ -225,6 +225,15 @@ def _check_header(path: Path, fmt: str, sep: str, header: bool, explicit: bool, 
              "read as the first data row (every column is taken by index). Set header = false under "
              "its [[files]] entry to say so")
         return False, first
+    if header and len(head) > 2 and first_line_kind([str(c) for c in head.iloc[2]]) == "numbers":
+        cells = [str(c).strip() for c in head.iloc[1] if str(c).strip()]
+        if cells and sum(not _is_number(c) for c in cells) > len(cells) / 2:
+            shown2 = ", ".join(cells[:6]) + (", ..." if len(cells) > 6 else "")
+            raise DataError(
+                f"{path}: the line after the header holds text ({shown2}), not numbers, and the "
+                "data start on the next one: a units row? Remove that line from the file (the units "
+                "are declared under [columns])"
+            )
     if not header and kind == "names" and second == "numbers":
         raise DataError(
             f"{path}: read with header = false, but {line} looks like column names ({shown}) and the "

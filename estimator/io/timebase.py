@@ -72,6 +72,9 @@ def select_range(t_s: np.ndarray, t_start_s: float | None, t_end_s: float | None
             if other != unit and t_s[0] * scale - tol * scale <= t0 and t1 <= t_s[-1] * scale + tol * scale:
                 hint = (f"; the range fits if the time column {label}, declared in {unit!r}, is in "
                         f"{other!r}: if it is, set unit = \"{other}\" for t under [columns]")
+        if not hint and t1 > t_s[-1] + tol and t0 < t_s[-1]:
+            hint = (f"; the file ends inside the range, after {t_s.size} rows: if it was cut short, "
+                    "copy it whole again")
         raise DataError(
             f"{where}: the requested range is outside the file's time span t = {t_s[0]:.3f} to "
             f"{t_s[-1]:.3f} s (time column {label}){hint}; {'otherwise ' if hint else ''}fix "
