@@ -3,7 +3,10 @@ r"""The paper's calibration workflow over a fleet (Saraf & Kumaresan §3-4; SPEC
 1. **Mach bins.** Each gear-up maneuver goes to the bin of its mean Mach (bins ``bin_width``
    wide, centred on multiples of it); a maneuver whose Mach varies by more than
    ``max_mach_variation`` (``mach_max - mach_min``) is left out and reported, as are bins with
-   too few maneuvers.
+   too few maneuvers. Without a Mach signal, or with no gear-up bin of enough maneuvers, the
+   workflow stops with a message that says so (the bins and their counts) and names the single
+   estimation over all maneuvers (``fpr calibrate --single``) as the way on
+   (:func:`no_bins_message`).
 2. **All aircraft together, biases free.** Each bin is estimated with every aircraft's maneuvers
    (per-aircraft vane biases ``b_l``, ``b_r``; shared tables with ``f1(0)`` held).
 3. **Apportionment** (paper §4.1, Fig. 4). Per bin, aircraft ``a`` has the mean vane bias
