@@ -257,12 +257,15 @@ class Case:
         which it must name.
     names : a rejection must name one of these (channel or column); a flag's first finding must
         name one of them; empty: no channel applies.
-    when : a rejection must say where: ``"time"`` (``t =`` or ``row``), ``"line"`` (a line of the
-        problem file) or ``""`` (nothing to locate).
+    when : a rejection must say where: ``"time"`` (``t =`` or ``row``), ``"line"`` (a numbered
+        line of the problem file), ``"row"`` (``t =``, a row or a line of the data file) or ``""``
+        (nothing to locate).
     fix : a regular expression the rejection must also match (a specific fix, e.g. ``own_rate``).
     forbid : a regular expression no message may match (wrong advice).
     says : a regular expression the output of an accepted case must match (what was adjusted is
         reported, e.g. the nominal rate of jittered time stamps).
+    same_samples : an accepted case must have the base's maneuvers and number of samples (no
+        row lost or added).
     argv : extra command-line arguments; ``single=False`` runs the Mach-bin workflow instead.
     judge : a custom judge ``judge(run) -> (class, reason) or None`` tried first.
     """
@@ -278,6 +281,7 @@ class Case:
     fix: str = ""
     forbid: str = ""
     says: str = ""
+    same_samples: bool = True
     single: bool = True
     judge: Callable | None = None
     problem: str = PROBLEM
@@ -484,7 +488,7 @@ def time_jitter_40hz(d):
     _write_jittered(d, 40.0, seed=1)
 
 
-@case("time base", "accept", says=r"nominal 50 Hz")
+@case("time base", "accept", says=r"nominal 50 Hz", same_samples=False)
 def time_jitter_50hz(d):
     """The same flight recorded at 50 Hz with ~1 % jitter, written to the millisecond (the
     ranges end at the last 50 Hz sample)."""
@@ -534,9 +538,17 @@ def nan_rows_between_maneuvers(d):
 
 # --- headers -----------------------------------------------------------------------------------
 
-@case("headers", "reject", when="", fix=r"header")
+@case("headers", "reject", when="", fix=r"header = false")
+def headerless_file_columns_by_name(d):
+    """The file has no header line; the problem maps the columns by name, header = true (default)."""
+    write(d, read(d), header=False)
+
+
+@case("headers", "reject|accept", when="", fix=r"header = false", says=r"first data row")
 def headerless_file_header_true(d):
-    """The file has no header line; the problem maps by index but keeps header = true (default)."""
+    """The file has no header line; the problem maps by index but keeps header = true (default):
+    the first line must be data, not lost (accepted: the estimates must be the base's, and the
+    output must say the first line was read as data)."""
     df = read(d)
     names = ["Time", *[c for c, *_ in COLUMNS.values()]]
     write(d, df, header=False)
@@ -580,7 +592,7 @@ def title_block_without_skip_rows(d):
     (d / DATA).write_text("Flight 421 PV1\nrecorder DAS-2 export 2024-05-14\n\n" + text)
 
 
-@case("headers", "reject|accept", names=("Time",))
+@case("headers", "reject|accept", when="row")
 def units_row_under_header(d):
     """A second header line with the units (s, g, g, ...) under the names."""
     lines = (d / DATA).read_text().splitlines()
@@ -596,9 +608,10 @@ def blanks_around_header_names(d):
     (d / DATA).write_text("\n".join(lines) + "\n")
 
 
-@case("headers", "reject", names=("AOA_L", "aoa_l"), when="")
+@case("headers", "reject", names=("AOA_L", "aoa_l"), when="", forbid=r"did you mean 'AOA_R'")
 def header_case_differs(d):
-    """The file's header says aoa_l where the problem maps AOA_L."""
+    """The file's header says aoa_l where the problem maps AOA_L (a close match offered must be
+    aoa_l, not AOA_R: that is the right vane, mapped to alpha_zr)."""
     edit_text(d / DATA, "AOA_L", "aoa_l")
 
 
@@ -759,9 +772,10 @@ def required_input_not_mapped(d):
     edit_problem(d, column_line("q") + "\n", "")
 
 
-@case("typos", "reject", names=("AOA_R", "alpha_zr"), when="")
+@case("typos", "reject", names=("AOA_R", "alpha_zr"), when="", forbid=r"did you mean 'AOA_L'")
 def column_missing_from_file(d):
-    """The file lacks the right vane's column the problem maps."""
+    """The file lacks the right vane's column the problem maps (a close match offered must not be
+    AOA_L: that is the left vane, mapped to alpha_zl)."""
     write(d, read(d).drop(columns=["AOA_R"]))
 
 
@@ -1007,7 +1021,7 @@ def _channels(f: dict) -> set[str]:
 FIX_WORDS = (r"\bdid you mean\b|\b(set|use|give|add|remove|declare|trim|pass|check|fix|rename|mark|split|"
              r"save|convert|change|replace|correct|write|drop|sort|fill|widen|map|choose|keep|put)\b")
 CLASSES = ("clear error", "correct result", "anything else")
-WHEN = {"time": r"\bt = |\brows?\b", "line": r"\bline \d+"}
+WHEN = {"time": r"\bt = |\brows?\b", "line": r"\bline \d+", "row": r"\bt = |\brows?\b|\blines?\b"}
 
 
 def judge_error(c: Case, run: Run) -> tuple[str, str]:
@@ -1029,7 +1043,14 @@ def judge_error(c: Case, run: Run) -> tuple[str, str]:
     return "clear error", ""
 
 
-def judge(c: Case, run: Run, base: dict | None) -> tuple[str, str]:
+def samples(run: Run) -> tuple[int, int] | None:
+    """(maneuvers, samples) as the command printed them."""
+    m = re.search(r"^(\d+) maneuvers, (\d+) samples", run.stdout, re.M)
+    return (int(m.group(1)), int(m.group(2))) if m else None
+
+
+def judge(c: Case, run: Run, base: dict | None, base_samples: tuple[int, int] | None = None
+          ) -> tuple[str, str]:
     allowed = set(c.expect.split("|"))
     everything = run.stdout + run.stderr
     if run.status is None:
@@ -1072,6 +1093,8 @@ def judge(c: Case, run: Run, base: dict | None) -> tuple[str, str]:
             return "anything else", f"a data fault on good data: {new_faults[0]['message'][:80]}"
         if c.says and not re.search(c.says, everything):
             return "anything else", f"accepted without saying /{c.says}/"
+        if c.same_samples and samples(run) != base_samples:
+            return "anything else", f"{samples(run)} (maneuvers, samples) where the base has {base_samples}"
         ok, text = compare_with_base(res, base)
         return ("correct result" if ok else "anything else"), f"{verdict}; {text}"
     return "anything else", f"silently accepted: exit {run.status}, verdict {verdict}"
@@ -1175,7 +1198,7 @@ def main(argv: list[str] | None = None) -> int:
         shutil.copytree(base_dir / "input", d / "input")
         c.edit(d / "input")
         run = run_cli(d / "input" / c.problem, d / "results", single=c.single)
-        outcome, reason = judge(c, run, base)
+        outcome, reason = judge(c, run, base, samples(base_run))
         msg = first_line(run)
         shown = msg if len(msg) <= w else msg[: w - 3] + "..."
         emit(f"{c.name:<34}{c.category:<15}{c.expect:<14}{outcome:<15}{str(run.status):>4}  {shown}")
