@@ -273,7 +273,8 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="results directory (default: fpr-out/calibrate-<name>)")
     p.add_argument("--overwrite", action="store_true",
-                   help="replace the results of an earlier run in --out")
+                   help="replace the results of an earlier run in --out (only the files fpr wrote "
+                   "there, as listed in its .fpr-written.json; a folder holding anything else is refused)")
     p.add_argument("--max-iterations", type=int, default=40)
     p.add_argument("--no-colored", action="store_true",
                    help="skip the coloured-residual (Morelli-Klein) standard deviations")
@@ -474,7 +475,9 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("demo", help="fly the demo fleet campaign, run the calibration workflow, "
                        "print Table 2 (model and truth) and the recovery summary, write the report")
     d.add_argument("--out", type=Path, default=Path("fpr-out/demo"),
-                   help="where to write the demo dataset (default: fpr-out/demo; replaced)")
+                   help="where to write the demo dataset (default: fpr-out/demo); the report goes to "
+                   "<out>-report. An earlier demo's dataset and report are replaced; a folder holding "
+                   "anything else is refused")
     d.add_argument("--workers", type=int, default=None, help="worker processes (default: all CPUs)")
     show_help = ("summarise a dataset written by `fpr fly`: maneuvers per kind, Mach and "
                  "configuration, failures; an interrupted (incomplete) dataset is said to be one, with "
