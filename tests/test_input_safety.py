@@ -320,6 +320,19 @@ def test_per_file_canonical_name_typo_is_an_error(tmp_path):
     raises(si_problem(tmp_path, files=files), "flight.csv", "'alpah_zr'", "did you mean 'alpha_zr'")
 
 
+def test_a_missing_column_is_never_matched_to_another_channels_column(tmp_path):
+    # alpha_zr's column is gone: the nearest name left is alpha_zl's column, which following the
+    # advice would feed the right vane with the left vane's data
+    path = si_problem(tmp_path, frame=flight_frame().drop(columns=["alpha_zr"]))
+    msg = raises(path, "flight.csv", "no column 'alpha_zr'", "alpha_zr")
+    assert "did you mean 'alpha_zl'" not in msg, msg
+
+
+def test_a_column_name_differing_in_case_is_offered(tmp_path):
+    path = si_problem(tmp_path, frame=flight_frame().rename(columns={"alpha_zr": "ALPHA_ZR"}))
+    raises(path, "no column 'alpha_zr'", "did you mean 'ALPHA_ZR'")
+
+
 def test_unknown_key_suggests_the_close_match(tmp_path):
     path = si_problem(tmp_path)
     path.write_text(path.read_text().replace('aircraft = "PV1"\n', 'aircraft = "PV1"\nheadr = true\n'))

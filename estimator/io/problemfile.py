@@ -179,7 +179,8 @@ def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: s
             isinstance(src, str) and src in df.columns)
         if spec.get("optional", False) and not present:
             continue
-        series = pick_column(df, src, name, path, header)
+        series = pick_column(df, src, name, path, header,
+                             taken=[str(s["column"]) for n, s in columns.items() if n != name])
         values[name], bad[name] = numeric(series)
         if bad[name].any():
             text[name] = series.to_numpy()

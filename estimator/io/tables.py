@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import csv
 import re
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -243,8 +243,12 @@ def _check_header(path: Path, fmt: str, sep: str, header: bool, explicit: bool, 
     return header, first
 
 
-def pick_column(df: pd.DataFrame, source: str | int, canonical: str, path: Path, header: bool) -> pd.Series:
+def pick_column(df: pd.DataFrame, source: str | int, canonical: str, path: Path, header: bool,
+                taken: Iterable[str] = ()) -> pd.Series:
     """The source column for a canonical name, by name or by 0-based index.
+
+    ``taken``: the file's columns mapped to other canonical names; a missing column's "did you
+    mean" never offers one of them (following it would feed one sensor with another's data).
 
     Raises
     ------
@@ -276,7 +280,10 @@ def pick_column(df: pd.DataFrame, source: str | int, canonical: str, path: Path,
         )
     if source not in df.columns:
         shown = list(df.columns[:60]) + (["..."] if df.shape[1] > 60 else [])
-        near = close_match(source, [str(c) for c in df.columns])
+        free = [str(c) for c in df.columns if str(c) not in set(taken)]
+        # a name that differs only in case is the likeliest meaning; else the closest free one
+        near = next((c for c in free if c.casefold() == str(source).casefold()), None) or close_match(
+            source, free)
         raise DataError(
             f"{path}: no column {source!r} (mapped to {canonical} under [columns])"
             + (f"; did you mean {near!r}?" if near else "") + f"; the file has columns {shown}; fix "
