@@ -1,0 +1,300 @@
+"""The package boundaries, read from the source (no module is imported).
+
+`estimator/` never imports `synth/`, JSBSim or `campaigns/`; `synth/` never imports `estimator/` or
+`campaigns/`: they meet only through the dataset format, and `campaigns/` (with the CLI) joins them.
+Shipped code never imports the tests, their helpers or test-only packages.
+
+Every module of the four packages is parsed with :mod:`ast`; every import is collected — plain and
+``from`` imports, relative ones resolved against the module's package, imports inside functions,
+``try``/``if TYPE_CHECKING`` blocks, and ``importlib.import_module`` / ``__import__`` calls with a
+literal name. A rule holds directly (the import line itself) and transitively (through the repository's
+own modules, parent packages' ``__init__`` included: importing ``aircraft_models`` runs its
+``__init__``, so if that imported ``synth``, ``estimator`` would import ``synth`` at run time too).
+"""
+
+from __future__ import annotations
+
+import ast
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+PACKAGES = ("estimator", "synth", "campaigns", "aircraft_models")
+
+#: the tests' own modules (``tests/*.py``: helpers such as ``_analytic_fpr``, ``conftest``, test files)
+#: and the packages only the ``test`` extra installs
+TEST_ONLY = frozenset({"tests", "conftest", "pytest", "_pytest", "hypothesis",
+                       *(p.stem for p in (REPO / "tests").glob("*.py"))})
+
+
+@dataclass(frozen=True)
+class Rule:
+    """Modules under ``packages`` never import a module under any of ``forbidden``."""
+
+    packages: tuple[str, ...]
+    forbidden: frozenset[str]
+    why: str
+    #: (importing module, forbidden top-level name) pairs tolerated for now; each must still occur
+    known: frozenset[tuple[str, str]] = frozenset()
+
+
+RULES = (
+    Rule(("estimator",), frozenset({"synth", "jsbsim", "campaigns"}),
+         "estimator/ never imports synth/, JSBSim or campaigns/ (they meet only through the dataset format)"),
+    Rule(("synth",), frozenset({"estimator", "campaigns"}),
+         "synth/ never imports estimator/ or campaigns/ (they meet only through the dataset format)"),
+    Rule(("estimator", "synth"), TEST_ONLY,
+         "estimator/ and synth/ never import the tests, their helpers or test-only packages"),
+    Rule(("campaigns", "aircraft_models"), TEST_ONLY,
+         "shipped code never imports the tests, their helpers or test-only packages",
+         # the colored-noise benchmark borrows the test's problem and sandwich through sys.path
+         # (issue 12: one analytic flight for tests and benchmarks removes it)
+         known=frozenset({("campaigns.benchmarks.bench_colored", "test_colored_uncertainty")})),
+)
+
+
+@dataclass(frozen=True)
+class Import:
+    """One import of a module: the absolute name imported, where, and the statement as written."""
+
+    target: str
+    line: int
+    statement: str
+
+
+def _top(name: str) -> str:
+    return name.split(".", 1)[0]
+
+
+def _under(name: str, roots: frozenset[str]) -> bool:
+    return _top(name) in roots
+
+
+def imports_of(source: str, module: str, is_package: bool = False) -> list[Import]:
+    """Every import in ``source``, the code of ``module`` (dotted name), relative ones made absolute.
+
+    ``from a.b import c`` yields ``a.b.c`` (``c`` may be a submodule); calls of
+    ``importlib.import_module`` / ``__import__`` with a literal first argument count as imports.
+    """
+    tree = ast.parse(source, filename=module)
+    # the package a relative import starts from: the module itself for an __init__
+    package = module.split(".") if is_package else module.split(".")[:-1]
+    found: list[Import] = []
+
+    def add(target: str, node: ast.AST) -> None:
+        found.append(Import(target, node.lineno, ast.get_source_segment(source, node) or ast.unparse(node)))
+
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                add(alias.name, node)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                # a relative import above the top package cannot run; resolved as far as it goes
+                base = package[: max(len(package) - (node.level - 1), 0)]
+                prefix = ".".join([*base, *([node.module] if node.module else [])])
+            else:
+                prefix = node.module or ""
+            for alias in node.names:
+                add(prefix if alias.name == "*" else f"{prefix}.{alias.name}".lstrip("."), node)
+        elif isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant) \
+                and isinstance(node.args[0].value, str):
+            func = node.func
+            name = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", None)
+            if name in ("import_module", "__import__"):
+                add(node.args[0].value, node)
+    return found
+
+
+def _modules() -> dict[str, Path]:
+    """Dotted name -> file of every module of the four packages."""
+    out = {}
+    for pkg in PACKAGES:
+        for path in sorted((REPO / pkg).rglob("*.py")):
+            parts = path.relative_to(REPO).with_suffix("").parts
+            out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return out
+
+
+def _graph(modules: dict[str, Path]) -> dict[str, list[Import]]:
+    return {name: imports_of(path.read_text(encoding="utf-8"), name, path.name == "__init__.py")
+            for name, path in modules.items()}
+
+
+def _internal(target: str, modules: dict[str, Path]) -> list[str]:
+    """The repository modules that importing ``target`` runs: its longest known prefix and parents."""
+    parts = target.split(".")
+    return [".".join(parts[:i]) for i in range(1, len(parts) + 1) if ".".join(parts[:i]) in modules]
+
+
+def _where(name: str, imp: Import, modules: dict[str, Path]) -> str:
+    return f"{modules[name].relative_to(REPO).as_posix()}:{imp.line}: `{imp.statement}`"
+
+
+def violations(modules: dict[str, Path], graph: dict[str, list[Import]],
+               rules: tuple[Rule, ...] = RULES) -> list[str]:
+    """Every broken rule: direct imports by file and line, transitive ones with the chain of imports.
+
+    A forbidden import is reported once, where it is written; the modules that only reach it through
+    that line are not listed again. One that breaks no rule where it stands (``aircraft_models`` may
+    import ``synth``) but is reached from a module under a rule is reported with the shortest chain.
+    """
+    direct, reached = [], {}
+    for rule in rules:
+        for name in sorted(m for m in modules if _top(m) in rule.packages):
+            # breadth-first through the repository's modules; the first (shortest) path to each is kept
+            chain: dict[str, list[tuple[str, Import]]] = {name: []}
+            queue = [name]
+            while queue:
+                current = queue.pop(0)
+                for imp in graph[current]:
+                    if _under(imp.target, rule.forbidden):
+                        if (current, _top(imp.target)) in rule.known:
+                            continue
+                        steps = [*chain[current], (current, imp)]
+                        if len(steps) == 1:
+                            direct.append((name, imp, rule))
+                        else:
+                            reached.setdefault((rule, current, imp), []).append((name, steps))
+                        continue
+                    for nxt in _internal(imp.target, modules):
+                        if nxt not in chain:
+                            chain[nxt] = [*chain[current], (current, imp)]
+                            queue.append(nxt)
+
+    def rel(name: str) -> str:
+        return modules[name].relative_to(REPO).as_posix()
+
+    problems = [f"{rel(name)} imports {imp.target}: {_where(name, imp, modules)}\n    rule: {rule.why}"
+                for name, imp, rule in direct]
+    written = {(name, imp) for name, imp, _ in direct}
+    for (rule, site, imp), origins in reached.items():
+        if (site, imp) in written:
+            continue  # that import line is reported itself; fixing it fixes every module reaching it
+        origins.sort(key=lambda o: (len(o[1]), o[0]))
+        name, steps = origins[0]
+        how = " -> ".join(_where(m, i, modules) for m, i in steps)
+        also = [rel(n) for n, _ in origins[1:]]
+        more = (f"\n    also reached from: {', '.join(also[:5])}{' ...' if len(also) > 5 else ''}"
+                if also else "")
+        problems.append(f"{rel(name)} imports, through the repository's modules, {imp.target}: {how}"
+                        f"{more}\n    rule: {rule.why}")
+    return sorted(problems)
+
+
+# --------------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def tree():
+    modules = _modules()
+    return modules, _graph(modules)
+
+
+def test_every_module_keeps_the_boundaries(tree):
+    problems = violations(*tree)
+    assert not problems, "package boundaries broken:\n" + "\n".join(problems)
+
+
+def test_the_scan_sees_every_package_and_its_imports(tree):
+    """The boundary test could fail: the scan finds the modules and the imports that do cross."""
+    modules, graph = tree
+    assert {_top(m) for m in modules} == set(PACKAGES)
+    assert len(modules) > 60
+    targets = {name: {_top(i.target) for i in imps} for name, imps in graph.items()}
+    assert "jsbsim" in targets["synth.flight"] | targets["synth.jsbsim_io"]
+    assert {"estimator", "synth"} <= targets["campaigns.cli"]
+    # relative imports are resolved against the package
+    # `from .runner import run_montecarlo` in campaigns/montecarlo/__init__.py
+    assert "campaigns.montecarlo.runner.run_montecarlo" in {i.target for i in graph["campaigns.montecarlo"]}
+
+
+def test_known_exceptions_still_occur(tree):
+    """A tolerated import that is gone must leave the list (the list only shrinks)."""
+    modules, graph = tree
+    for rule in RULES:
+        for name, target in rule.known:
+            assert target in {_top(i.target) for i in graph.get(name, [])}, \
+                f"{name} no longer imports {target}: remove it from the rule's known exceptions"
+
+
+SYNTHETIC = [
+    # (module, is_package, source, forbidden target expected, its line)
+    ("estimator.solver", False, "import synth\n", "synth", 1),
+    ("estimator.solver", False, "import numpy as np, jsbsim\n", "jsbsim", 1),
+    ("estimator.io.build", False, "from synth.campaign import fly_campaign\n",
+     "synth.campaign.fly_campaign", 1),
+    ("estimator.io.build", False, "def f():\n    from campaigns import truth\n    return truth\n",
+     "campaigns.truth", 2),
+    ("estimator.io.build", False, "try:\n    import jsbsim.x\nexcept ImportError:\n    pass\n",
+     "jsbsim.x", 2),
+    ("estimator.io.build", False,
+     "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from synth import truth\n", "synth.truth", 3),
+    ("estimator.io.build", False, "import importlib\nm = importlib.import_module('synth.flight')\n",
+     "synth.flight", 2),
+    ("estimator.io", True, "x = __import__('campaigns')\n", "campaigns", 1),
+    # beyond the top package: cannot run, still resolved to the package it names
+    ("synth.flight", False, "from ..estimator import solver\n", "estimator.solver", 1),
+    ("synth.flight", False, "import numpy\nfrom _analytic_fpr import analytic\n",
+     "_analytic_fpr.analytic", 2),
+    ("synth.flight", False, "import pytest\n", "pytest", 1),
+    ("estimator.model", False, "from tests import conftest\n", "tests.conftest", 1),
+]
+
+
+def _path(module: str, is_package: bool) -> Path:
+    parts = module.split(".")
+    return REPO.joinpath(*parts, "__init__.py") if is_package else REPO.joinpath(*parts).with_suffix(".py")
+
+
+@pytest.mark.parametrize("module, is_package, source, target, line", SYNTHETIC)
+def test_a_forbidden_import_is_named_with_file_line_and_rule(module, is_package, source, target, line):
+    path = _path(module, is_package)
+    problems = violations({module: path}, {module: imports_of(source, module, is_package)})
+    assert len(problems) == 1, problems
+    rel = path.relative_to(REPO).as_posix()
+    assert f"{rel} imports {target}: {rel}:{line}: `" in problems[0], problems[0]
+    assert "\n    rule: " in problems[0]
+
+
+@pytest.mark.parametrize("module, is_package, source", [
+    ("estimator.io.build", False, "from . import units\nfrom ..core import kinematics\nimport numpy\n"),
+    ("estimator.io", True, "from .build import x\nfrom .. import model\n"),
+    ("synth.flight", False, "import jsbsim\nfrom aircraft_models import load_fleet\n"),
+    ("campaigns.cli", False, "import estimator\nimport synth\nimport jsbsim\n"),
+    # a name that merely starts like a forbidden package is another package
+    ("estimator.model", False, "import synthesis_tools\nimport campaigns_extra\n"),
+])
+def test_allowed_imports_pass(module, is_package, source):
+    path = _path(module, is_package)
+    assert violations({module: path}, {module: imports_of(source, module, is_package)}) == []
+
+
+def test_relative_imports_resolve_against_the_package():
+    got = [i.target for i in imports_of("from . import a\nfrom ..core import b\nfrom .x import *\n",
+                                        "estimator.io.build")]
+    assert got == ["estimator.io.a", "estimator.core.b", "estimator.io.x"]
+    got = [i.target for i in imports_of("from . import a\nfrom .. import b\n", "estimator.io",
+                                        is_package=True)]
+    assert got == ["estimator.io.a", "estimator.b"]
+
+
+def test_a_forbidden_import_through_another_package_is_caught():
+    """estimator -> aircraft_models -> synth: each import allowed alone, the chain breaks the rule."""
+    modules = {"estimator.model": REPO / "estimator" / "model.py",
+               "aircraft_models": REPO / "aircraft_models" / "__init__.py",
+               "aircraft_models.extra": REPO / "aircraft_models" / "extra.py"}
+    graph = {"estimator.model": imports_of("import numpy\nfrom aircraft_models.extra import x\n",
+                                           "estimator.model"),
+             # the parent package's __init__ runs too: the forbidden import hides there
+             "aircraft_models.extra": imports_of("X = 1\n", "aircraft_models.extra"),
+             "aircraft_models": imports_of("\nfrom synth.flight import fly_maneuver\n", "aircraft_models",
+                                           is_package=True)}
+    problems = violations(modules, graph)
+    assert len(problems) == 1, problems
+    assert problems[0].startswith("estimator/model.py imports, through the repository's modules, "
+                                  "synth.flight.fly_maneuver: estimator/model.py:2: "), problems[0]
+    assert "aircraft_models/__init__.py:2: `from synth.flight import fly_maneuver`" in problems[0]
+    assert "rule: estimator/ never imports synth/" in problems[0]
