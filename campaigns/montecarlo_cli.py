@@ -31,8 +31,15 @@ the calibrated channel against the true flow angle); a failed replication leaves
 rNNNNN.failed.json with its error instead. Interrupted? Run the same command again: finished
 replications are skipped, and the files end the same, byte for byte, as an uninterrupted run's
 (wall times go to OUT/timings.csv). Nothing in OUT is ever unpickled or executed (an old
-flights/*.pkl cache is ignored and the flight flown again). At the end: summary.txt,
-summary_parameters.csv, summary_channels.csv, summary.png in OUT.
+flights/*.pkl cache is ignored and the flight flown again), and the run removes nothing but its
+own temporary files: anything else in OUT (notes, plots, subfolders) is left alone and not taken
+for a result. Ctrl-C stops the workers and says how many replications are written (exit 130);
+the same command resumes.
+
+At the end: summary.txt, summary_parameters.csv, summary_families.csv, summary_channels.csv and
+summary.png in OUT (or --summary-dir), listed in .fpr-summary.json there: a later summary replaces
+those files only while they are unchanged; a file of one of these names that the summary did not
+write (or that was edited since) is never replaced: the command is refused at once, naming it.
 
 examples:
   fpr montecarlo mc_20maneuvers --out runs/mc20
@@ -68,6 +75,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--retry-failed", action="store_true",
                    help="run again the replications that failed in an earlier run")
     p.add_argument("--no-summary", action="store_true", help="do not summarise at the end")
+    p.add_argument("--summary-dir", type=Path, default=None, metavar="DIR",
+                   help="write the summary files into DIR instead of OUT (created when missing)")
     p.set_defaults(mc_command="montecarlo")
     s = subparsers.add_parser(
         "montecarlo-summary",
@@ -75,43 +84,51 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Summarise the replications of a Monte Carlo output directory: per parameter "
         "bias, RMSE, Monte Carlo scatter against the mean Cramer-Rao and coloured-residual "
         "deviations; per channel the distribution of 3-sigma accuracies; failures. Writes "
-        "summary.txt, summary_*.csv and summary.png into the directory.",
+        "summary.txt, summary_*.csv and summary.png into the directory (or --summary-dir), replacing "
+        "only the files an earlier summary wrote there (listed in .fpr-summary.json), unchanged: a "
+        "file of one of those names that the summary did not write, or that was edited since, is "
+        "never replaced (the command is refused, naming it; exit status 2).",
     )
     s.add_argument("out", type=Path, help="the --out directory of `fpr montecarlo`")
     s.add_argument("--replications", type=int, default=None, metavar="N",
                    help="summarise replications 0..N-1 only (default: every file present)")
     s.add_argument("--all-kinds", action="store_true",
                    help="list every parameter (initial conditions, IMU biases) one by one in the text")
+    s.add_argument("--summary-dir", type=Path, default=None, metavar="DIR",
+                   help="write the summary files into DIR instead of OUT (created when missing)")
     s.set_defaults(mc_command="montecarlo-summary")
 
 
-def _write_summary(out: Path, replications: int | None, all_kinds: bool = False) -> str:
-    from campaigns.montecarlo import summarize
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, turned into an interrupt so that the run stops its workers and says how to resume."""
 
-    summary = summarize(out, replications)
-    kinds = ("time_delay", "bias", "scale", "table", "imu_bias", "initial_condition") if all_kinds else \
-        ("time_delay", "bias", "scale", "table")
-    text = summary.text(kinds=kinds, max_rows=100000 if all_kinds else 80)
-    (out / "summary.txt").write_text(text + "\n")
-    summary.parameters.to_csv(out / "summary_parameters.csv")
-    summary.families.to_csv(out / "summary_families.csv")
-    summary.channels.to_csv(out / "summary_channels.csv")
-    if summary.n_ok:
-        summary.plot(out / "summary.png")
-    return text
+
+def _on_sigterm(signum, frame) -> None:
+    raise _Terminated()
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand parsed by :func:`add_parser`; returns the exit status (0 ok, 1 some
-    replications failed or the run is incomplete)."""
-    from campaigns.montecarlo import load_scenario, run_montecarlo
-    from campaigns.montecarlo.runner import finished_replications, read_state
+    replications failed or the run is incomplete, 130 interrupted by Ctrl-C, 143 by SIGTERM)."""
+    import signal
 
+    from campaigns.montecarlo import MonteCarloInterrupted, load_scenario, run_montecarlo
+    from campaigns.montecarlo.runner import finished_replications, read_state
+    from campaigns.montecarlo.summary import check_summary_files, write_summary
+
+    summary_dir = args.summary_dir or args.out
     if args.mc_command == "montecarlo-summary":
         read_state(args.out)  # a clear error when OUT is not a Monte Carlo directory
-        print(_write_summary(args.out, args.replications, args.all_kinds))
-        print(f"\nwritten: {args.out}/summary.txt, summary_*.csv, summary.png")
+        text, written = write_summary(args.out, summary_dir, replications=args.replications,
+                                      all_kinds=args.all_kinds, tool="fpr montecarlo-summary",
+                                      advice="or write the summary elsewhere with --summary-dir DIR")
+        print(text)
+        print(f"\nwritten into {summary_dir}: {', '.join(p.name for p in written)}")
         return 0
+    advice = "write the summary elsewhere with --summary-dir DIR, or skip it with --no-summary"
+    if not args.no_summary:
+        # refused now, not after the replications: the summary never replaces a user's file
+        check_summary_files(summary_dir, tool="fpr montecarlo", advice=advice)
     scenario = load_scenario(args.scenario)
     n = args.replications or scenario.replications
     where = f"Dask scheduler {args.scheduler}" if args.scheduler else \
@@ -119,12 +136,24 @@ def run(args: argparse.Namespace) -> int:
     print(f"scenario {scenario.name!r} ({scenario.source}): {len(scenario.campaign.jobs)} maneuvers, "
           f"{len(scenario.fixed_jobs)} flown once and re-instrumented, {n} replications, "
           f"{len(scenario.distributions)} drawn error/wind values -> {args.out} on {where}")
-    report = run_montecarlo(scenario, args.out, replications=args.replications, workers=args.workers,
-                            scheduler=args.scheduler, retry_failed=args.retry_failed, progress=True)
+    try:  # only the main thread may set a handler; elsewhere SIGTERM keeps its default
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:
+        previous = None
+    try:
+        report = run_montecarlo(scenario, args.out, replications=args.replications, workers=args.workers,
+                                scheduler=args.scheduler, retry_failed=args.retry_failed, progress=True)
+    except MonteCarloInterrupted as exc:
+        print(f"fpr montecarlo: {exc}", file=sys.stderr)
+        return 143 if isinstance(exc.__context__, _Terminated) else 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     print(report.text())
     if not args.no_summary:
         print()
-        print(_write_summary(args.out, n))
+        print(write_summary(args.out, summary_dir, replications=n, tool="fpr montecarlo",
+                            advice=advice)[0])
     have = finished_replications(args.out)
     complete = all(k in have for k in range(n))
     return 0 if complete and not report.failed else 1

@@ -17,17 +17,31 @@ Two mechanisms, because neither alone is enough:
 
 Ctrl-C needs neither: the terminal sends SIGINT to the whole foreground process group. A pool
 that wants a clean stop (no traceback from every worker) ignores SIGINT in its workers and ends
-them from the parent, as :func:`synth.campaign.fly_campaign` does.
+them from the parent, as :func:`synth.campaign.fly_campaign` does; the public helpers for that::
+
+    pool = ProcessPoolExecutor(max_workers=n, mp_context=pool_context(),
+                               initializer=init_pool_worker, initargs=(os.getpid(),))
+    try:
+        ...                       # submit, wait, write the results
+    except BaseException:         # KeyboardInterrupt (Ctrl-C), or an error writing a result
+        stop_pool(pool)
+        raise
+    pool.shutdown(wait=True)
+
+A worker ended by :func:`stop_pool` receives SIGTERM first (a handler set in the initializer may
+clean up, e.g. remove scratch files, and exit), SIGKILL only if it has not ended after a timeout.
 """
 
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import multiprocessing
 import os
 import signal
 import sys
 import threading
+from concurrent.futures import ProcessPoolExecutor
 
 _PR_SET_PDEATHSIG = 1
 
@@ -60,3 +74,52 @@ def bind_to_parent(parent_pid: int, poll_s: float = 1.0) -> None:
 
     _stop = threading.Event()
     threading.Thread(target=_watch, name="fpr-parent-watch", daemon=True).start()
+
+
+def pool_context():
+    """The multiprocessing context for a pool of :func:`bind_to_parent` workers: ``fork`` on Linux,
+    so that the workers are children of the process that creates the pool (under a forkserver, the
+    default from Python 3.14, the server would be their parent); None (the default) elsewhere."""
+    return multiprocessing.get_context("fork") if sys.platform.startswith("linux") else None
+
+
+def init_pool_worker(parent_pid: int) -> None:
+    """A pool initializer: :func:`bind_to_parent`, and SIGINT ignored — the terminal sends Ctrl-C to
+    the whole process group, and the parent alone handles it (with :func:`stop_pool`), so no worker
+    prints a traceback of its own.
+
+    Parameters
+    ----------
+    parent_pid : ``os.getpid()`` of the process creating the pool, taken there.
+    """
+    bind_to_parent(parent_pid)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 5.0) -> None:
+    """Stop a pool now: cancel the tasks that have not started and end the running workers
+    (SIGTERM, then SIGKILL for a worker still running after ``timeout_s``). Results of the tasks
+    they were running are lost.
+
+    A second Ctrl-C while the workers are being stopped is ignored (in the main thread): the stop
+    completes, and the interrupt that led here goes on.
+    """
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: signals are the main thread's
+        previous = None
+    try:
+        # the pool's own process table: the public API has no way to end running tasks
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            if proc.is_alive():
+                proc.terminate()
+        for proc in procs:
+            proc.join(timeout=timeout_s)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(timeout=timeout_s)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)

@@ -12,10 +12,13 @@ The tiny scenario of tests/test_montecarlo.py (a replication takes about a secon
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import math
 import os
 import pathlib
 import pickle
+import shutil
 import signal
 import subprocess
 import sys
@@ -27,9 +30,11 @@ import pytest
 from test_montecarlo import SCENARIO_TOML, _scenario
 
 from campaigns import montecarlo_cli
-from campaigns.montecarlo import run_montecarlo, runner, summarize
+from campaigns.montecarlo import ReplicationResult, run_montecarlo, runner, summarize
+from campaigns.montecarlo import summary as summary_module
 from campaigns.montecarlo.flight_cache import flight_bytes, flight_file, read_flight
 from campaigns.montecarlo.summary import load_results
+from estimator.io import outdir
 from synth.truth import TruthTrajectory
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -259,3 +264,245 @@ def test_worker_processes_end_when_the_run_is_killed(tmp_path):
         for w in _children(child.pid) + workers:
             if _alive(w):
                 os.kill(w, signal.SIGKILL)
+
+
+# ---------------------------------------------------------------------------- the summary's files,
+# foreign files in a run folder, Ctrl-C
+
+
+@pytest.fixture(scope="module")
+def run3(tmp_path_factory) -> tuple[Path, Path]:
+    """(scenario file, run folder): replications 0..2 of the tiny scenario, written by the command
+    line without a summary; each test copies the folder."""
+    base = tmp_path_factory.mktemp("mc_run3")
+    toml = base / "mc_test.toml"
+    toml.write_text(SCENARIO_TOML)
+    out = base / "run"
+    assert montecarlo_cli.main(["montecarlo", str(toml), "--out", str(out), "--workers", "1",
+                                "--replications", "3", "--no-summary"]) == 0
+    return toml, out
+
+
+def _copy(run: Path, to: Path) -> Path:
+    shutil.copytree(run, to)
+    return to
+
+
+def test_a_users_summary_file_is_refused_by_name_never_replaced(run3, tmp_path, capsys):
+    out = _copy(run3[1], tmp_path / "run")
+    mine = b"my notes on this run\n"
+    (out / "summary.txt").write_bytes(mine)
+    before = _files(out)
+    assert montecarlo_cli.main(["montecarlo-summary", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{out / 'summary.txt'} (fpr montecarlo-summary did not write it)" in err, err
+    assert f"Move it out of {out} (or rename it), or write the summary elsewhere with --summary-dir" in err
+    assert _files(out) == before  # nothing written, nothing replaced
+    # the run command refuses before any replication is run, not after
+    toml = run3[0]
+    assert montecarlo_cli.main(["montecarlo", str(toml), "--out", str(out), "--workers", "1",
+                                "--replications", "4"]) == 2
+    err = capsys.readouterr().err
+    assert f"{out / 'summary.txt'} (fpr montecarlo did not write it)" in err, err
+    assert "--summary-dir DIR, or skip it with --no-summary" in err
+    assert _files(out) == before and sorted(runner.finished_replications(out)) == [0, 1, 2]
+    # elsewhere, the summary is written; the user's file stays
+    elsewhere = tmp_path / "summaries"
+    assert montecarlo_cli.main(["montecarlo-summary", str(out), "--summary-dir", str(elsewhere)]) == 0
+    assert capsys.readouterr().out.startswith("Monte Carlo mc_test: 3 replications")
+    assert sorted(p.name for p in elsewhere.iterdir()) == sorted([*summary_module.SUMMARY_FILES,
+                                                                   summary_module.SUMMARY_LISTING])
+    assert _files(out) == before
+
+
+def test_the_summarys_own_files_are_replaced_an_edited_one_is_not(run3, tmp_path, capsys):
+    out = _copy(run3[1], tmp_path / "run")
+    (out / "summary_notes.txt").write_bytes(b"a name beside the summary's: never looked at")
+    assert montecarlo_cli.main(["montecarlo-summary", str(out), "--replications", "2"]) == 0
+    assert capsys.readouterr().out.startswith("Monte Carlo mc_test: 2 replications")
+    listing = json.loads((out / summary_module.SUMMARY_LISTING).read_text())
+    assert sorted(e["path"] for e in listing["files"]) == sorted(summary_module.SUMMARY_FILES)
+    for e in listing["files"]:
+        assert e["sha256"] == hashlib.sha256((out / e["path"]).read_bytes()).hexdigest()
+    # the summary's own earlier files, unchanged: replaced
+    assert montecarlo_cli.main(["montecarlo-summary", str(out)]) == 0
+    assert (out / "summary.txt").read_text().startswith("Monte Carlo mc_test: 3 replications")
+    assert (out / "summary_notes.txt").read_bytes() == b"a name beside the summary's: never looked at"
+    # one the user edited since: refused, named, kept as edited
+    edited = (out / "summary_channels.csv").read_bytes() + b"my own row\n"
+    (out / "summary_channels.csv").write_bytes(edited)
+    before = _files(out)
+    assert montecarlo_cli.main(["montecarlo-summary", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{out / 'summary_channels.csv'} (changed since fpr montecarlo-summary wrote it)" in err, err
+    assert _files(out) == before
+
+
+def test_prepare_files_replaces_only_the_files_it_listed(tmp_path):
+    names = ("a.txt", "b.png")
+    kw = {"listing_name": ".fpr-test.json", "tool": "the tool"}
+    (tmp_path / "other.txt").write_text("the user's")
+    with outdir.prepare_files(tmp_path, names, **kw) as folder:
+        folder.record(tmp_path / "a.txt").write_text("one")
+    assert (tmp_path / ".fpr-test.json").is_file() and not (tmp_path / outdir.LISTING_NAME).exists()
+    with outdir.prepare_files(tmp_path, names, **kw) as folder:  # its own: replaced
+        assert not (tmp_path / "a.txt").exists()
+        folder.record(tmp_path / "b.png").write_text("two")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".fpr-test.json", "b.png", "other.txt"]
+    (tmp_path / "a.txt").write_text("the user's a")  # not listed now: the user's
+    with pytest.raises(outdir.OutputFolderError, match=r"a\.txt \(the tool did not write it\)"):
+        outdir.prepare_files(tmp_path, names, **kw)
+    (tmp_path / "a.txt").unlink()
+    (tmp_path / "b.png").unlink()
+    (tmp_path / "b.png").symlink_to(tmp_path / "other.txt")  # a listed name that became a link
+    with pytest.raises(outdir.OutputFolderError, match=r"b\.png \(replaced by a link"):
+        outdir.check_files(tmp_path, names, **kw)
+    (tmp_path / "b.png").unlink()
+    (tmp_path / ".fpr-test.json").write_text("{not json")
+    with pytest.raises(outdir.OutputFolderError, match=r"\.fpr-test\.json \(not a listing fpr wrote"):
+        outdir.prepare_files(tmp_path, names, **kw)
+    with pytest.raises(ValueError, match="a file name"):
+        outdir.check_files(tmp_path, ["sub/a.txt"], **kw)
+    assert (tmp_path / "other.txt").read_text() == "the user's"
+
+
+def test_foreign_files_in_a_run_folder_survive_a_resume_and_are_not_taken_for_results(run3, tmp_path,
+                                                                                      capsys):
+    toml, run = run3
+    out = _copy(run, tmp_path / "run")
+    (out / "replications" / "r00002.parquet").unlink()  # the resume has one replication to run
+    foreign = {"notes.txt": b"mine", "plots/fig.png": b"\x89PNG mine", "summary_notes.txt": b"mine",
+               "replications/my_table.parquet": b"not a replication", "replications/r2.parquet": b"x",
+               "flights/README": b"about the flights", ".lock.bak": b"mine"}
+    for name, data in foreign.items():
+        (out / name).parent.mkdir(exist_ok=True)
+        (out / name).write_bytes(data)
+    assert montecarlo_cli.main(["montecarlo", str(toml), "--out", str(out), "--workers", "1"
+                                , "--replications", "3"]) == 0
+    text = capsys.readouterr().out
+    assert "1 replications run now, 2 already done, 3 requested" in text
+    assert "Monte Carlo mc_test: 3 replications, 3 summarised" in text
+    for name, data in foreign.items():
+        assert (out / name).read_bytes() == data, name
+    assert sorted(runner.finished_replications(out)) == [0, 1, 2]
+    assert (out / "replications" / "r00002.parquet").read_bytes() == \
+        (run / "replications" / "r00002.parquet").read_bytes()
+    # a folder that is not a run folder: refused, what is there named, nothing touched
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "thesis.tex").write_bytes(b"mine")
+    (other / "figures").mkdir()
+    assert montecarlo_cli.main(["montecarlo", str(toml), "--out", str(other), "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert f"{other}: not empty and not a Monte Carlo output" in err and "figures/, thesis.tex" in err
+    assert sorted(p.name for p in other.iterdir()) == ["figures", "thesis.tex"]
+
+
+def test_a_file_with_a_result_name_the_run_did_not_write_is_refused(run3, tmp_path, capsys):
+    toml, run = run3
+    out = _copy(run, tmp_path / "run")
+    rep = out / "replications"
+    # replication 0's file under replication 3's name (copied by hand); a failure record of another
+    # scenario; a user's timings.csv: none is counted as done, written over or appended to
+    shutil.copyfile(rep / "r00000.parquet", rep / "r00003.parquet")
+    other = ReplicationResult(index=4, ok=False, status=-1, message="of another scenario",
+                              noise_seed=1, scenario_hash="0" * 64)
+    runner.write_replication(out, other)
+    (out / "timings.csv").write_bytes(b"my,own,timings\n1,2,3\n")
+    before = _files(out)
+    assert montecarlo_cli.main(["montecarlo", str(toml), "--out", str(out), "--workers", "1",
+                                "--replications", "5", "--no-summary"]) == 2
+    err = capsys.readouterr().err
+    assert ("replications/r00003.parquet, replications/r00004.failed.json, timings.csv carry the name "
+            "of a file of this run but were not written by it") in err, err
+    assert f"Move them out of {out} and run the same command again" in err
+    after = _files(out)
+    assert {k: v for k, v in after.items() if k != "montecarlo.json"} == \
+        {k: v for k, v in before.items() if k != "montecarlo.json"}
+    # the summary does not read them as this run's either
+    (out / "timings.csv").unlink()
+    (rep / "r00004.failed.json").unlink()
+    assert montecarlo_cli.main(["montecarlo-summary", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{rep / 'r00003.parquet'}: replication 0 of scenario hash" in err and "not replication 3" in err
+
+
+def _ignores(pid: int, signum: int) -> bool:
+    """Whether process ``pid`` ignores signal ``signum`` (its SigIgn mask in /proc)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("SigIgn:"):
+            return bool(int(line.split()[1], 16) >> (signum - 1) & 1)
+    raise AssertionError(f"no SigIgn in /proc/{pid}/status")
+
+
+_INTERRUPTED_IN_CHILD = """
+import sys, time
+from pathlib import Path
+from campaigns.montecarlo import replication
+real = replication.write_scratch_dataset
+
+def held(scenario, draws, truths, models, directory):
+    # replications other than 0 wait here, inside their scratch directory, until the run is
+    # interrupted: the Ctrl-C comes while they run, whatever the machine's speed
+    real(scenario, draws, truths, models, directory)
+    if not Path(directory).name.startswith("fpr-mc-r00000-"):
+        (Path(directory) / "held").touch()
+        while True:
+            time.sleep(0.05)
+
+replication.write_scratch_dataset = held
+from campaigns.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp_path, capsys):
+    toml, whole = run3
+    out = tmp_path / "cut"
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    args = ["montecarlo", str(toml), "--out", str(out), "--workers", "2", "--replications", "3",
+            "--no-summary"]
+    # its own process group, as a terminal's foreground job: Ctrl-C goes to the run and its workers
+    child = subprocess.Popen([sys.executable, "-c", _INTERRUPTED_IN_CHILD, *args], cwd=ROOT,
+                             env=dict(os.environ, TMPDIR=str(scratch)), process_group=0,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 120
+        # replication 0 written, both workers held inside a replication (1 and 2)
+        while not ((out / "replications" / "r00000.parquet").exists()
+                   and len(list(scratch.glob("fpr-mc-r*/held"))) == 2):
+            assert child.poll() is None, child.communicate()
+            assert time.monotonic() < deadline, "the workers were not busy within 120 s"
+            time.sleep(0.1)
+        workers = _children(child.pid)
+        assert len(workers) == 2, workers
+        for w in workers:  # the workers leave Ctrl-C to the run (no traceback from each)
+            assert _ignores(w, signal.SIGINT), f"worker {w} does not ignore SIGINT"
+        os.killpg(child.pid, signal.SIGINT)
+        stdout, stderr = child.communicate(timeout=60)
+        end = time.monotonic() + 5.0
+        while any(_alive(w) for w in workers) and time.monotonic() < end:
+            time.sleep(0.1)
+        assert not [w for w in workers if _alive(w)], "a worker outlived the interrupted run by 5 s"
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+        for w in workers:
+            if _alive(w):
+                os.kill(w, signal.SIGKILL)
+    assert child.returncode == 130, stderr
+    assert (f"fpr montecarlo: interrupted: 1 of 3 replications written to {out}; run the same "
+            "command again to resume") in stderr, stderr
+    assert "Traceback" not in stderr + stdout and "KeyboardInterrupt" not in stderr, stderr
+    assert sorted(p.name for p in (out / "replications").iterdir()) == ["r00000.parquet"]
+    assert list(scratch.iterdir()) == []  # the stopped workers removed their scratch datasets
+    # the same command again completes it, to the bytes of an uninterrupted run
+    assert montecarlo_cli.main(args) == 0
+    assert "2 replications run now, 1 already done, 3 requested" in capsys.readouterr().out
+    a, b = _files(whole), _files(out)
+    assert set(a) == set(b)
+    assert sorted(k for k in a if a[k] != b[k]) == ["timings.csv"]

@@ -15,12 +15,13 @@ turns the files into bias, RMSE and scatter / Cramér-Rao tables and plots.
 """
 
 from .replication import ReplicationResult, run_replication
-from .runner import RunReport, read_replication, run_montecarlo, scenario_of
+from .runner import MonteCarloInterrupted, RunReport, read_replication, run_montecarlo, scenario_of
 from .scenario import Distribution, Scenario, ScenarioError, load_scenario, parse_scenario
 from .summary import MonteCarloSummary, load_results, summarize, summarize_results
 
 __all__ = [
-    "Distribution", "MonteCarloSummary", "ReplicationResult", "RunReport", "Scenario", "ScenarioError",
+    "Distribution", "MonteCarloInterrupted", "MonteCarloSummary", "ReplicationResult", "RunReport",
+    "Scenario", "ScenarioError",
     "load_results", "load_scenario", "parse_scenario", "read_replication", "run_montecarlo",
     "run_replication", "scenario_of", "summarize", "summarize_results",
 ]

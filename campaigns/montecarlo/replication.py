@@ -16,13 +16,15 @@ about zero (a mean offset is an error too), the definition of the rest of the pr
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
+import shutil
 import tempfile
 import time
 import traceback
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -55,6 +57,9 @@ COLUMNS = ("replication", "record", "name", "family", "kind", "unit", "estimate"
 VERDICT_NAMES = {v.code: v.name.lower().replace("_", " ") for v in Verdict}
 #: a replication's scratch dataset directory (its name differs per run; kept out of the messages)
 _SCRATCH = re.compile(r"[^\s'\"]*fpr-mc-r\d{5}-[a-z0-9_]{8}")
+#: the scratch directories of the replications running in this process (a worker stopped by the
+#: run removes them on its way out: :func:`remove_scratch_directories`)
+_OPEN_SCRATCH: set[str] = set()
 #: maneuver keys: one per (job, segment), as synth.campaign numbers them (so the noise of a
 #: maneuver does not depend on which other maneuvers are flown)
 _SEGMENTS_PER_JOB = 64
@@ -414,6 +419,26 @@ def _scrubbed(result: ReplicationResult) -> ReplicationResult:
                    findings=tuple((sev, code, scrub(msg)) for sev, code, msg in result.findings))
 
 
+@contextlib.contextmanager
+def _scratch_directory(index: int) -> Iterator[str]:
+    """A temporary directory for replication ``index``'s scratch dataset, known to
+    :func:`remove_scratch_directories` while it exists."""
+    with tempfile.TemporaryDirectory(prefix=f"fpr-mc-r{index:05d}-") as tmp:
+        _OPEN_SCRATCH.add(tmp)
+        try:
+            yield tmp
+        finally:
+            _OPEN_SCRATCH.discard(tmp)
+
+
+def remove_scratch_directories() -> None:
+    """Remove the scratch directories of the replications running in this process — for a worker
+    process that is being stopped (its replications are abandoned; nothing of them is kept)."""
+    for tmp in list(_OPEN_SCRATCH):
+        shutil.rmtree(tmp, ignore_errors=True)
+        _OPEN_SCRATCH.discard(tmp)
+
+
 def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequence[TruthTrajectory]],
                      models: Models | None) -> ReplicationResult:
     t0 = time.perf_counter()
@@ -424,7 +449,7 @@ def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequen
         if md.reflown or md.job.index not in own:
             own[md.job.index] = fly(scenario, md)
     est = scenario.estimator
-    with tempfile.TemporaryDirectory(prefix=f"fpr-mc-r{index:05d}-") as tmp:
+    with _scratch_directory(index) as tmp:
         write_scratch_dataset(scenario, draw.maneuvers, own, models, Path(tmp))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

@@ -30,6 +30,17 @@ The run removes only what it wrote itself: its own temporary files left by a kil
 failure record of a replication that now succeeded; anything else in the folder is left alone
 (there is no overwrite mode: a new run goes to a new or empty directory).
 
+Ctrl-C (or SIGTERM, through ``fpr montecarlo``) stops the run: the worker processes ignore SIGINT
+(no traceback from each of them), the run cancels what has not started, stops the workers (each
+removes its replication's scratch dataset on its way out), keeps every replication already written
+and raises :class:`MonteCarloInterrupted`, which says how many are written and that the same
+command resumes.
+
+Before a run resumes, every replication file present is checked to belong to this run (its
+metadata names this scenario's hash and its own index); one that does not — a file of another
+scenario copied in, a user's file of such a name — is refused by name, never counted as done. A
+``timings.csv`` that this module did not start (another header) is refused too, not appended to.
+
 Executors: local processes (:class:`concurrent.futures.ProcessPoolExecutor`, the default),
 in-process (``workers=1``, for debugging and tests), or a Dask distributed cluster
 (``scheduler=ADDRESS`` or a :class:`dask.distributed.Client`). Replication ``k``'s results do not
@@ -44,6 +55,7 @@ import io
 import json
 import os
 import re
+import signal
 import socket
 import sys
 import tempfile
@@ -60,10 +72,17 @@ import pyarrow.parquet as pq
 from synth.campaign import software_versions
 from synth.flight import FlightError
 from synth.truth import TruthTrajectory
-from synth.workers import bind_to_parent
+from synth.workers import init_pool_worker, pool_context, stop_pool
 
 from .flight_cache import flight_bytes, flight_file, read_flight
-from .replication import Models, ReplicationResult, failure_record, fly, run_replication_safely
+from .replication import (
+    Models,
+    ReplicationResult,
+    failure_record,
+    fly,
+    remove_scratch_directories,
+    run_replication_safely,
+)
 from .scenario import Scenario, ScenarioError, parse_scenario, scenario_hash, with_replications
 
 FORMAT = "fpr-montecarlo"
@@ -162,7 +181,7 @@ def append_timing(out_dir: Path, result: ReplicationResult, executor: str = "") 
     path = Path(out_dir) / TIMINGS_FILE
     row = io.StringIO()
     writer = csv.writer(row, lineterminator="\n")
-    if not path.exists():
+    if not path.exists() or path.stat().st_size == 0:  # empty: a run killed between open and write
         writer.writerow(TIMINGS_COLUMNS)
     writer.writerow([result.index, int(result.ok), repr(float(result.elapsed_s)),
                      datetime.now(UTC).isoformat(timespec="seconds"), socket.gethostname(), executor])
@@ -201,9 +220,15 @@ def read_state(out_dir: Path) -> dict:
     if not path.exists():
         raise FileNotFoundError(f"{path}: no {STATE_FILE}; is {out_dir} the --out directory of "
                                 "`fpr montecarlo`?")
-    state = json.loads(path.read_text())
-    if state.get("format") != FORMAT:
-        raise ValueError(f"{path}: format {state.get('format')!r}, expected {FORMAT!r}")
+    try:
+        state = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: not a state file `fpr montecarlo` wrote ({exc}); is {out_dir} the "
+                         "--out directory of `fpr montecarlo`? Choose another --out") from None
+    if not isinstance(state, dict) or state.get("format") != FORMAT:
+        found = state.get("format") if isinstance(state, dict) else type(state).__name__
+        raise ValueError(f"{path}: format {found!r}, expected {FORMAT!r}: not a state file "
+                         f"`fpr montecarlo` wrote; choose another --out")
     return state
 
 
@@ -229,6 +254,60 @@ def own_temporary_files(out_dir: Path) -> list[Path]:
     return sorted(out)
 
 
+def _replication_meta(path: Path) -> dict | None:
+    """The metadata a replication file carries (:meth:`ReplicationResult.meta`), None when the file
+    is not one this module writes (unreadable, no metadata, a link or a folder)."""
+    if path.is_symlink() or not path.is_file():
+        return None
+    try:
+        if path.name.endswith(".failed.json"):
+            meta = json.loads(path.read_text(encoding="utf-8"))
+        else:  # the footer only: no table is read
+            meta = json.loads((pq.read_schema(path).metadata or {})[METADATA_KEY])
+    except Exception:  # noqa: BLE001 (whatever a stranger's file makes a reader raise: not ours)
+        return None
+    return meta if isinstance(meta, dict) else None
+
+
+def foreign_files(out_dir: Path, scenario_hash: str) -> list[str]:
+    """Files in a run folder that carry a name this module writes but that it did not write for
+    this run: replication files whose metadata does not name ``scenario_hash`` and their own index
+    (another scenario's, a user's), and a ``timings.csv`` that does not start with this module's
+    header. Relative POSIX paths; empty when the folder holds only its own files of those names."""
+    out_dir = Path(out_dir)
+    out = []
+    rep = out_dir / _REP
+    for p in sorted(rep.iterdir()) if rep.is_dir() else ():
+        m = _OWN_NAMES[_REP].fullmatch(p.name)
+        if m is None:
+            continue  # not a name of ours: left alone, never read
+        meta = _replication_meta(p)
+        if meta is None or meta.get("scenario_hash") != scenario_hash or meta.get("replication") != \
+                int(m.group(1)):
+            out.append(f"{_REP}/{p.name}")
+    timings = out_dir / TIMINGS_FILE
+    if timings.is_symlink() or (timings.exists() and not timings.is_file()):
+        out.append(TIMINGS_FILE)
+    elif timings.exists() and timings.stat().st_size:
+        with open(timings, "rb") as fh:
+            first = fh.readline().rstrip(b"\r\n")
+        if first != ",".join(TIMINGS_COLUMNS).encode():
+            out.append(TIMINGS_FILE)
+    return out
+
+
+def _refuse_foreign(out_dir: Path, scenario: Scenario) -> None:
+    found = foreign_files(out_dir, scenario.hash)
+    if found:
+        shown = ", ".join(found[:10]) + (f" and {len(found) - 10} more" if len(found) > 10 else "")
+        raise ScenarioError(
+            f"{out_dir}: {shown} carr{'ies' if len(found) == 1 else 'y'} the name of a file of this "
+            f"run but {'was' if len(found) == 1 else 'were'} not written by it (another scenario's "
+            "replication, or not written by `fpr montecarlo`); the run neither counts such a file as "
+            f"done nor writes over it. Move {'it' if len(found) == 1 else 'them'} out of {out_dir} "
+            "and run the same command again")
+
+
 def prepare_output(scenario: Scenario, out_dir: Path) -> Path:
     """Create the output directory, or check that an existing one holds this scenario's run.
 
@@ -239,9 +318,14 @@ def prepare_output(scenario: Scenario, out_dir: Path) -> Path:
     """
     out_dir = Path(out_dir)
     state_path = out_dir / STATE_FILE
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ScenarioError(f"{out_dir} exists and is not a folder; choose another --out")
     if out_dir.exists() and any(out_dir.iterdir()):
         if not state_path.exists():
-            raise ScenarioError(f"{out_dir}: not empty and not a Monte Carlo output (no {STATE_FILE}); "
+            held = sorted(p.name + ("/" if p.is_dir() else "") for p in out_dir.iterdir())
+            shown = ", ".join(held[:10]) + (f" and {len(held) - 10} more" if len(held) > 10 else "")
+            raise ScenarioError(f"{out_dir}: not empty and not a Monte Carlo output (no {STATE_FILE}; "
+                                f"it holds {shown}); a run never writes among files it did not make: "
                                 "choose a new or empty --out directory")
         state = read_state(out_dir)
         if state.get("scenario_hash") != scenario.hash:
@@ -336,6 +420,20 @@ def replication_task(payload: ScenarioPayload, index: int,
 
 
 # ---------------------------------------------------------------------------- the run
+
+
+class MonteCarloInterrupted(KeyboardInterrupt):
+    """:func:`run_montecarlo` stopped by Ctrl-C (or a signal turned into KeyboardInterrupt): the
+    replications written so far are kept, and running the same command again resumes."""
+
+    def __init__(self, out_dir: Path, n_written: int, n_replications: int):
+        self.out_dir, self.n_written, self.n_replications = Path(out_dir), n_written, n_replications
+        super().__init__(
+            f"interrupted: {n_written} of {n_replications} replications written to {out_dir}; run "
+            "the same command again to resume")
+
+    def __str__(self) -> str:
+        return str(self.args[0])
 
 
 @dataclass(frozen=True)
@@ -447,6 +545,7 @@ def run_montecarlo(
     n = scenario.replications
     out_dir = prepare_output(scenario, Path(out_dir))
     with _Lock(out_dir):
+        _refuse_foreign(out_dir, scenario)
         have = finished_replications(out_dir)
         wanted = range(n) if indices is None else sorted(set(int(i) for i in indices))
         bad = [i for i in wanted if not 0 <= i < n]
@@ -481,6 +580,12 @@ def run_montecarlo(
                 flown, executor = _run_in_process(scenario, out_dir, todo, record)
             else:
                 flown, executor = _run_processes(scenario, payload, out_dir, todo, n_workers, record)
+        except KeyboardInterrupt:
+            if bar is not None:
+                bar.close()
+                bar = None
+            have = finished_replications(out_dir)
+            raise MonteCarloInterrupted(out_dir, sum(k in have for k in range(n)), n) from None
         finally:
             if bar is not None:
                 bar.close()
@@ -539,10 +644,25 @@ def _run_in_process(scenario, out_dir, todo, record) -> tuple[int, str]:
     return flown, "in-process"
 
 
+def _on_worker_sigterm(signum, frame) -> None:
+    # the run stops this worker (stop_pool): its replication is abandoned, so is its scratch data
+    remove_scratch_directories()
+    os._exit(128 + signum)
+
+
+def _init_pool_worker(parent_pid: int) -> None:
+    """Pool initializer: the worker ends with the run's process, leaves Ctrl-C to it, and removes
+    its scratch data when the run stops it (SIGTERM; a forked worker would otherwise inherit the
+    parent's handler)."""
+    init_pool_worker(parent_pid)
+    signal.signal(signal.SIGTERM, _on_worker_sigterm)
+
+
 def _run_processes(scenario, payload, out_dir, todo, workers, record) -> tuple[int, str]:
     cache = str(out_dir / _FLIGHTS)
     # the workers end with this process, however it ends (a kill leaves no orphan computing on)
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=bind_to_parent, initargs=(os.getpid(),))
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=pool_context(),
+                               initializer=_init_pool_worker, initargs=(os.getpid(),))
     try:
         missing = _missing_flights(scenario, out_dir, todo)
         flown = _store_flights(scenario, out_dir,
@@ -552,9 +672,12 @@ def _run_processes(scenario, payload, out_dir, todo, workers, record) -> tuple[i
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
             for fut in finished:
                 record(fut.result())
-    finally:
-        # an interrupt (Ctrl-C, an error writing a file) cancels what has not started
-        pool.shutdown(wait=True, cancel_futures=True)
+    except BaseException:
+        # Ctrl-C, or an error writing a file: cancel what has not started, end the running workers
+        # now (their replications are lost; every file written so far is whole)
+        stop_pool(pool)
+        raise
+    pool.shutdown(wait=True)
     return flown, f"processes({workers})"
 
 

@@ -20,6 +20,12 @@ distribution over replications of the 3-sigma accuracy — :func:`estimator.work
 3 x the rms about zero, computed by the replication — of the residuals (the paper's Table 2) and
 of the calibrated channel against the true flow angle. The time a replication took comes from
 the run's ``timings.csv`` (kept apart from the replication files, which stay bit-identical).
+
+The files. :func:`write_summary` writes :data:`SUMMARY_FILES` into the run folder (or another
+folder) and records them, with their sizes and SHA-256, in :data:`SUMMARY_LISTING` there
+(:func:`estimator.io.outdir.prepare_files`): a later summary replaces exactly those files, and a
+file of one of those names that the summary did not write, or that changed since (a user's notes
+in ``summary.txt``), is never replaced — the summary is refused, naming it.
 """
 
 from __future__ import annotations
@@ -31,8 +37,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from estimator.io.outdir import check_files, prepare_files
+
 from .replication import VERDICT_NAMES, ReplicationResult
-from .runner import finished_replications, read_replication, read_state, replication_file, with_timings
+from .runner import (
+    STATE_FILE,
+    finished_replications,
+    read_replication,
+    read_state,
+    replication_file,
+    with_timings,
+)
 
 #: the parameter kinds of the calibration proper (shown one by one in the text summary)
 CALIBRATION_KINDS = ("time_delay", "bias", "scale", "table")
@@ -42,6 +57,11 @@ POOLED_KINDS = ("imu_bias", "initial_condition")
 KIND_ORDER = ("imu_bias", "time_delay", "bias", "scale", "table", "initial_condition")
 #: a reported deviation "covers" an error within this many deviations
 COVERAGE_SIGMAS = 3.0
+#: the files :func:`write_summary` writes (summary.png only when a replication succeeded)
+SUMMARY_FILES = ("summary.txt", "summary_parameters.csv", "summary_families.csv",
+                 "summary_channels.csv", "summary.png")
+#: the listing of the summary files written (names, sizes, SHA-256), beside them
+SUMMARY_LISTING = ".fpr-summary.json"
 
 
 @dataclass(frozen=True)
@@ -380,15 +400,29 @@ def load_results(out_dir: str | Path, replications: int | None = None) -> list[R
     A failure record is read whole (:meth:`ReplicationResult.from_meta`: its verdict and findings
     too). Each result's ``elapsed_s`` comes from the run's ``timings.csv`` (0 without a line)."""
     out_dir = Path(out_dir)
+    # the run's scenario: a replication file of another run copied in is not read as this run's
+    # (a folder of replication files alone, without montecarlo.json, is read as it is)
+    expected = read_state(out_dir).get("scenario_hash") if (out_dir / STATE_FILE).exists() else None
     have = finished_replications(out_dir)
     keys = sorted(k for k in have if replications is None or k < replications)
     out = []
     for k in keys:
-        if have[k] == "failed":
-            meta = json.loads(replication_file(out_dir, k, failed=True).read_text())
-            out.append(ReplicationResult.from_meta(meta))
-        else:
-            out.append(read_replication(replication_file(out_dir, k)))
+        path = replication_file(out_dir, k, failed=have[k] == "failed")
+        try:
+            if have[k] == "failed":
+                r = ReplicationResult.from_meta(json.loads(path.read_text(encoding="utf-8")))
+            else:
+                r = read_replication(path)
+        except (ValueError, KeyError, TypeError, UnicodeDecodeError, OSError) as exc:
+            if str(path) in str(exc):  # read_replication's own message names the file already
+                raise
+            raise ValueError(f"{path}: not a replication file `fpr montecarlo` wrote ({exc}); move it "
+                             "out of the run folder") from None
+        if (expected is not None and r.scenario_hash != expected) or r.index != k:
+            raise ValueError(f"{path}: replication {r.index} of scenario hash {r.scenario_hash[:12]}, "
+                             f"not replication {k} of this run ({str(expected)[:12]}); move it out of "
+                             "the run folder")
+        out.append(r)
     return with_timings(out_dir, out)
 
 
@@ -396,3 +430,53 @@ def summarize(out_dir: str | Path, replications: int | None = None) -> MonteCarl
     """Summarise the run in ``out_dir`` (every replication file, or those of 0..N-1)."""
     state = read_state(Path(out_dir))
     return summarize_results(load_results(out_dir, replications), name=str(state.get("name", "")))
+
+
+def check_summary_files(directory: str | Path, *, tool: str = "fpr montecarlo-summary",
+                        advice: str = "") -> None:
+    """Raise the refusal :func:`write_summary` would give for ``directory``, writing nothing (for a
+    run that summarises at its end: it stops before the work instead)."""
+    check_files(directory, SUMMARY_FILES, listing_name=SUMMARY_LISTING, tool=tool, advice=advice)
+
+
+def write_summary(out_dir: str | Path, directory: str | Path | None = None, *,
+                  replications: int | None = None, all_kinds: bool = False,
+                  tool: str = "fpr montecarlo-summary", advice: str = "") -> tuple[str, list[Path]]:
+    """Summarise the run in ``out_dir`` and write :data:`SUMMARY_FILES` into ``directory``.
+
+    Parameters
+    ----------
+    out_dir : the run folder.
+    directory : where the files go (default: ``out_dir``); created when missing.
+    replications : summarise replications 0..N-1 only (default: every file present).
+    all_kinds : list every parameter in the text (initial conditions, IMU biases too).
+    tool, advice : who writes, and what else the user can do, said in a refusal.
+
+    Returns
+    -------
+    The summary's text and the files written.
+
+    Raises
+    ------
+    estimator.io.outdir.OutputFolderError
+        A file of one of :data:`SUMMARY_FILES` in ``directory`` was not written by a summary, or
+        changed since (named; nothing is written). Earlier summary files, unchanged, are replaced.
+    """
+    directory = Path(out_dir if directory is None else directory)
+    # checked before the (possibly long) reading of every replication file
+    check_summary_files(directory, tool=tool, advice=advice)
+    summary = summarize(out_dir, replications)
+    kinds = (*CALIBRATION_KINDS, *POOLED_KINDS) if all_kinds else CALIBRATION_KINDS
+    text = summary.text(kinds=kinds, max_rows=100000 if all_kinds else 80)
+    with prepare_files(directory, SUMMARY_FILES, listing_name=SUMMARY_LISTING, tool=tool,
+                       advice=advice) as folder:
+        def record(name: str) -> Path:
+            return folder.record(directory / name)
+
+        record("summary.txt").write_text(text + "\n")
+        summary.parameters.to_csv(record("summary_parameters.csv"))
+        summary.families.to_csv(record("summary_families.csv"))
+        summary.channels.to_csv(record("summary_channels.csv"))
+        if summary.n_ok:
+            summary.plot(record("summary.png"))
+    return text, [p for p in folder.recorded if p.exists()]

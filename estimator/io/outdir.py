@@ -17,6 +17,12 @@ ends with an exception). A run killed outright (SIGKILL, power loss) leaves the 
 without hashes: the next ``--overwrite`` removes them as the tool's own, since the tool claimed each
 name before it created the file.
 
+A tool that writes a few files of fixed names into a folder that also holds other things (the
+summary of a Monte Carlo run folder) uses :func:`prepare_files` instead: a listing of its own
+name (e.g. ``.fpr-summary.json``) records those files, and a file of one of those names is
+replaced only when that listing says the tool wrote it and it is unchanged since; anything else in
+the folder is never looked at.
+
 Pure standard library; no file in the folder is ever executed, unpickled or followed out of the
 folder through a link.
 
@@ -287,10 +293,12 @@ class OutputFolder:
     and hash, so that a file later edited under the same name is no longer taken for the tool's.
     """
 
-    def __init__(self, path: Path, tool: str, created: bool = False) -> None:
+    def __init__(self, path: Path, tool: str, created: bool = False,
+                 listing_name: str = LISTING_NAME) -> None:
         self.path = Path(path)
         self.tool = tool
         self._created = created  # the run made the folder: removed again if it writes nothing
+        self.listing_name = listing_name  # another name for a set of files in a shared folder
         self._listing = _Listing(tool=tool, started_utc=_now())
         self._closed = False
         self._save()
@@ -305,8 +313,8 @@ class OutputFolder:
         rel = os.path.relpath(os.path.abspath(p), os.path.abspath(self.path)).replace(os.sep, "/")
         if not _safe_relative(rel):
             raise OutputFolderError(f"{p} is not inside the output folder {self.path}")
-        if rel in (LISTING_NAME, _LISTING_TMP):
-            raise OutputFolderError(f"{p}: {LISTING_NAME} is the output folder's own listing")
+        if rel in (LISTING_NAME, _LISTING_TMP, self.listing_name, self.listing_name + ".tmp"):
+            raise OutputFolderError(f"{p}: {rel} is the output folder's own listing")
         if self._closed:
             raise RuntimeError(f"{self.path}: the output folder is closed; nothing more can be recorded")
         parts = rel.split("/")
@@ -347,7 +355,7 @@ class OutputFolder:
         if not files and not self._listing.dirs:
             # nothing written (the run stopped first): no listing, so the next run needs no
             # --overwrite; a folder this run created goes too
-            (self.path / LISTING_NAME).unlink(missing_ok=True)
+            (self.path / self.listing_name).unlink(missing_ok=True)
             if self._created:
                 try:
                     self.path.rmdir()
@@ -366,9 +374,102 @@ class OutputFolder:
 
     def _save(self) -> None:
         # through a temporary file and an atomic rename: a crash never leaves half a listing
-        tmp = self.path / _LISTING_TMP
+        tmp = self.path / (self.listing_name + ".tmp")
         tmp.write_text(self._listing.to_json(), encoding="utf-8")
-        os.replace(tmp, self.path / LISTING_NAME)
+        os.replace(tmp, self.path / self.listing_name)
+
+
+def _check_files(folder: Path, names: Iterable[str], listing_name: str, tool: str,
+                 advice: str) -> list[str]:
+    """Every refusal of :func:`prepare_files`, changing nothing; the names (of ``names``) present
+    that the tool wrote there and that are unchanged since."""
+    names = list(dict.fromkeys(names))
+    for n in (*names, listing_name):
+        if "/" in n or not _safe_relative(n):
+            raise ValueError(f"{n!r}: a file name inside {folder} is expected, not a path")
+    if folder.exists() and not folder.is_dir():
+        raise OutputFolderError(f"{folder} exists and is not a folder; {advice or 'choose another folder'}")
+    if not folder.exists():
+        return []
+    listed: dict[str, tuple[int | None, str | None]] = {}
+    strangers: list[str] = []
+    lp = folder / listing_name
+    if lp.is_symlink() or (lp.exists() and not lp.is_file()):
+        strangers.append(f"{lp} (not a plain file)")
+    elif lp.exists():
+        try:
+            listed = _Listing.parse(lp.read_text(encoding="utf-8")).files
+        except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
+            strangers.append(f"{lp} (not a listing fpr wrote: {exc})")
+    ours = []
+    for name in names:
+        p = folder / name
+        try:
+            st = p.lstat()
+        except FileNotFoundError:
+            continue
+        if name not in listed:
+            strangers.append(f"{p} ({tool} did not write it)")
+        elif not stat.S_ISREG(st.st_mode):
+            strangers.append(f"{p} (replaced by a link, folder or special file)")
+        else:
+            size, digest = listed[name]
+            # unhashed: claimed by a run that was killed before it closed; the name was the tool's
+            if size is not None and (st.st_size != size or _sha256(p) != digest):
+                strangers.append(f"{p} (changed since {tool} wrote it)")
+            else:
+                ours.append(name)
+    if strangers:
+        one = len(strangers) == 1
+        raise OutputFolderError(
+            f"{_names(strangers)}: {tool} replaces only files it wrote itself, unchanged, and "
+            f"{'this one is' if one else 'these are'} not. Move {'it' if one else 'them'} out of "
+            f"{folder} (or rename {'it' if one else 'them'})" + (f", {advice}" if advice else ""))
+    return ours
+
+
+def check_files(folder: str | os.PathLike, names: Iterable[str], *, listing_name: str, tool: str,
+                advice: str = "") -> None:
+    """Raise the :class:`OutputFolderError` that :func:`prepare_files` would, changing nothing.
+
+    For a command that writes the files only at the end of a long run: it stops at once instead.
+    """
+    _check_files(Path(folder), names, listing_name, tool, advice)
+
+
+def prepare_files(folder: str | os.PathLike, names: Iterable[str], *, listing_name: str, tool: str,
+                  advice: str = "") -> OutputFolder:
+    """Make ready to (re)write the files ``names`` in ``folder``, a folder that may hold anything else.
+
+    The tool's earlier files of those names are removed — only those that the listing
+    ``listing_name`` in ``folder`` records, unchanged since (size and SHA-256) — and the returned
+    :class:`OutputFolder` lists the files written from now on in that listing (``record`` each path
+    before writing it; close it, or use it as a context manager). Nothing else in ``folder`` is
+    looked at, listed or removed; it is created (with its parents) when missing.
+
+    Parameters
+    ----------
+    folder : where the files go.
+    names : the file names (no paths) the tool writes there, e.g. ``("summary.txt", "summary.png")``.
+    listing_name : the listing's file name in ``folder``, one per tool and set of files
+        (e.g. ``".fpr-summary.json"``; not :data:`LISTING_NAME`, which lists a whole output folder).
+    tool : who writes, e.g. ``"fpr montecarlo-summary"``; said in refusals.
+    advice : appended to a refusal: what else the user can do (e.g. ``"or choose --summary-dir"``).
+
+    Raises
+    ------
+    OutputFolderError
+        ``folder`` is a file; or a file of one of ``names`` exists that the listing does not record,
+        that changed since, or that is a link or folder (each named, with the path); or the listing
+        itself is not one fpr wrote.
+    """
+    folder = Path(folder)
+    ours = _check_files(folder, names, listing_name, tool, advice)
+    created = not folder.exists()
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in ours:  # the tool's own, unchanged (checked above); never a link
+        (folder / name).unlink(missing_ok=True)
+    return OutputFolder(folder, tool, created=created, listing_name=listing_name)
 
 
 def input_paths(problem) -> list[Path]:
