@@ -14,21 +14,14 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from _campaigns import linear_campaign
 
 from campaigns.cli import EXIT_STATUS, main
-from synth.campaign import fly_campaign, parse_campaign
 from synth.dataset import load_dataset
 
-CAMPAIGN = {
-    "name": "cli", "seed": 5, "local_flow_truth": "local_flow_linear",
-    "adc_baseline": "adc_baseline_linear",
-    "environment": {"planet": "flat", "wind_ned_mps": [4.0, 2.0, 0.0]},
-    "errors": {"preset": "typical", "nose_probe_irregularity": False,
-               "imu": {"accel_noise_mps2": 0.0, "gyro_noise_deg_s": 0.0,
-                       "accel_quant_mps2": 0.0, "gyro_quant_deg_s": 0.0}},
-    "flights": [{"configurations": ["PV1-NP"], "mach": [0.6],
-                 "maneuvers": ["pitch_doublet", "pullup_rudder_doublets"], "altitude_m": 6000.0}],
-}
+CAMPAIGN = linear_campaign("cli", 5, [
+    {"configurations": ["PV1-NP"], "mach": [0.6], "maneuvers": ["pitch_doublet", "pullup_rudder_doublets"],
+     "altitude_m": 6000.0}], wind_ned_mps=[4.0, 2.0, 0.0], quiet_imu=True)
 DEG = 180.0 / math.pi
 KT = 1.0 / 0.514444
 FT = 1.0 / 0.3048
@@ -36,11 +29,8 @@ G0 = 9.80665
 
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory):
-    out = tmp_path_factory.mktemp("cli") / "ds"
-    res = fly_campaign(parse_campaign(CAMPAIGN, source="cli"), out, workers=1)
-    assert res.ok, res.failures
-    return out
+def dataset(fly_once):
+    return fly_once(CAMPAIGN, "cli")
 
 
 def _write_user_files(ds_dir, tmp_path):

@@ -42,12 +42,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from _campaigns import linear_campaign
 
 from campaigns.cli import EXIT_STATUS, main
 from estimator.io import load_problem, problem_from_dataset
 from estimator.solver import SolverOptions, estimate
 from estimator.verdict import Finding, Severity, Verdict
-from synth.campaign import fly_campaign, parse_campaign
 from synth.dataset import load_dataset, write_maneuver
 
 DEG = 180.0 / math.pi
@@ -55,20 +55,15 @@ KT = 1.0 / 0.514444
 FT = 1.0 / 0.3048
 G0 = 9.80665
 
-CAMPAIGN = {
-    "name": "faults", "seed": 11,
-    "local_flow_truth": "local_flow_linear", "adc_baseline": "adc_baseline_linear",
-    "environment": {"planet": "flat", "wind_ned_mps": [6.0, -4.0, 0.0], "turbulence": "none"},
-    # the nose probe's irregularity and high-AOA noise are off: they are model-structure errors of
-    # the linear pair (the verdict warns about them), and the base must be a clean success
-    "errors": {"preset": "typical", "nose_probe_irregularity": False,
-               "sensors": {"nose_probe": {"high_alpha_noise_deg_per_deg": 0.0}}},
-    "flights": [
-        {"configurations": ["PV1-NP"], "mach": [0.5], "maneuvers": ["pitch_doublet"], "altitude_m": 6000.0},
-        {"configurations": ["PV1-NP"], "mach": [0.5], "maneuvers": ["pullup_rudder_doublets"],
-         "altitude_m": 6000.0, "maneuver": {"rudder_norm": 0.4}},
-    ],
-}
+CAMPAIGN = linear_campaign("faults", 11, [
+    {"configurations": ["PV1-NP"], "mach": [0.5], "maneuvers": ["pitch_doublet"], "altitude_m": 6000.0},
+    {"configurations": ["PV1-NP"], "mach": [0.5], "maneuvers": ["pullup_rudder_doublets"],
+     "altitude_m": 6000.0, "maneuver": {"rudder_norm": 0.4}},
+], wind_ned_mps=[6.0, -4.0, 0.0], turbulence="none",
+    # the nose probe's irregularity (off in every linear campaign) and high-AOA noise are off: they
+    # are model-structure errors of the linear pair (the verdict warns about them), and the base
+    # must be a clean success
+    errors={"sensors": {"nose_probe": {"high_alpha_noise_deg_per_deg": 0.0}}})
 DOUBLET, RUDDER = "m0000", "m0001"
 
 #: Codes of findings that name a fault in the data itself (estimator/diagnostics.py, "Order and
@@ -81,16 +76,12 @@ DATA_FAULTS = {"stuck_channel", "dead_channel", "dead_input", "accel_sign", "uni
 
 
 @pytest.fixture(scope="module")
-def flights(tmp_path_factory):
-    """The calm base dataset and the same maneuvers in light turbulence."""
-    root = tmp_path_factory.mktemp("faults")
+def flights(fly_once):
+    """The calm base dataset and the same maneuvers in light turbulence (shared: faults go into copies)."""
     out = {}
     for turbulence in ("none", "light"):
         camp = {**CAMPAIGN, "environment": {**CAMPAIGN["environment"], "turbulence": turbulence}}
-        res = fly_campaign(parse_campaign(camp, source=f"test_faults ({turbulence})"), root / turbulence,
-                           workers=1)
-        assert res.ok, res.failures
-        out[turbulence] = root / turbulence
+        out[turbulence] = fly_once(camp, f"test_faults ({turbulence})")
     return out
 
 

@@ -141,17 +141,16 @@ WUT_CAMPAIGN = {
 }
 
 
-def test_single_wind_up_turn_sideslip_biases_are_honest_and_the_weak_points_flagged(tmp_path):
+def test_single_wind_up_turn_sideslip_biases_are_honest_and_the_weak_points_flagged(fly_once):
     import warnings
 
     from campaigns.truth import recovery_table, true_parameters
     from estimator.io import problem_from_dataset
-    from synth.campaign import fly_campaign, parse_campaign
 
-    fly_campaign(parse_campaign(WUT_CAMPAIGN, source="test_identifiability"), tmp_path / "wut")
+    data = fly_once(WUT_CAMPAIGN, "test_identifiability", workers=None)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        prob = problem_from_dataset(tmp_path / "wut")
+        prob = problem_from_dataset(data)
     res = estimate(prob)
     df = res.to_pandas()
     # judged at the solution, the probes' delays are determined and estimated

@@ -6,9 +6,9 @@ removes exactly those files. A user's summary, plot, notes or backup in a result
 file the user has since edited, and the run's own input file are never removed: the command refuses
 (exit status 2) and names them.
 
-The CLI tests run on a small synthetic fleet (two aircraft, Mach 0.6, a pitch doublet and a 3211 of
-10 s each: one Mach bin of four maneuvers), flown once per module; an earlier run's report is made
-once and copied into each test's folder.
+The CLI tests run on the shared tiny campaign (tests/_campaigns.py: two aircraft, Mach 0.6, a pitch
+doublet and a 3211 of 10 s each, one Mach bin of four maneuvers), flown once per session; an earlier
+run's report is made once and copied into each test's folder.
 """
 
 from __future__ import annotations
@@ -19,33 +19,21 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from _campaigns import TINY_CAMPAIGN
 
 from campaigns.cli import main
 from estimator.io.outdir import LISTING_NAME, OutputFolderError, check_output, prepare_output
-from synth.campaign import fly_campaign, parse_campaign
+from synth.campaign import parse_campaign
 from synth.dataset import load_dataset
-
-CAMPAIGN = {
-    "name": "outdir", "seed": 11, "local_flow_truth": "local_flow_linear",
-    "adc_baseline": "adc_baseline_linear",
-    "environment": {"planet": "flat", "wind_ned_mps": [0.0, 0.0, 0.0]},
-    "errors": {"preset": "typical", "nose_probe_irregularity": False},
-    "flights": [{"configurations": ["PV1-NP", "PV2-NP"], "mach": [0.6],
-                 "maneuvers": ["pitch_doublet", "3211"], "maneuver": {"duration_s": 10.0},
-                 "altitude_m": 6000.0}],
-}
-
 
 # --------------------------------------------------------------------------------------------------
 # fixtures
 
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("outdir") / "data"
-    res = fly_campaign(parse_campaign(CAMPAIGN, source="test_outdir"), out, workers=1)
-    assert res.ok, res.failures
-    return out
+def dataset(tiny_dataset) -> Path:
+    """The shared tiny campaign (tests/_campaigns.py), flown once per session; never edited here."""
+    return tiny_dataset
 
 
 @pytest.fixture(scope="module")
@@ -244,7 +232,7 @@ def tiny_demo(monkeypatch):
     """``fpr demo`` flying the small fleet instead of the demo campaign (minutes)."""
     import synth.campaign
 
-    campaign = parse_campaign(CAMPAIGN, source="tiny demo")
+    campaign = parse_campaign(TINY_CAMPAIGN, source="tiny demo")
     monkeypatch.setattr(synth.campaign, "load_campaign", lambda name: campaign)
 
 

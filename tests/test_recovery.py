@@ -25,32 +25,18 @@ import warnings
 import numpy as np
 import pandas as pd
 import pytest
+from _campaigns import linear_campaign
 
 from campaigns.truth import recovery_table, true_parameters
 from estimator.io import problem_from_dataset
 from estimator.solver import SolverOptions, estimate
-from synth.campaign import fly_campaign, parse_campaign
 
-CAMPAIGN = {
-    "name": "recovery",
-    "seed": 11,
-    "local_flow_truth": "local_flow_linear",
-    "adc_baseline": "adc_baseline_linear",
-    "environment": {"planet": "flat", "wind_ned_mps": [6.0, -4.0, 0.0], "turbulence": "none"},
-    "errors": {
-        "preset": "typical",
-        # a pseudo-random function of alpha and beta that no table can find (paper §4.2)
-        "nose_probe_irregularity": False,
-        "imu": {"accel_noise_mps2": 0.0, "gyro_noise_deg_s": 0.0,
-                "accel_quant_mps2": 0.0, "gyro_quant_deg_s": 0.0},
-    },
-    "flights": [{
-        "configurations": ["PV1-NP", "PT1-BOOM"],
-        "mach": [0.6],
-        "maneuvers": ["pitch_doublet", "3211", "windup_turn", "shss", "pullup_rudder_doublets"],
-        "altitude_m": 6000.0,
-    }],
-}
+CAMPAIGN = linear_campaign("recovery", 11, [{
+    "configurations": ["PV1-NP", "PT1-BOOM"],
+    "mach": [0.6],
+    "maneuvers": ["pitch_doublet", "3211", "windup_turn", "shss", "pullup_rudder_doublets"],
+    "altitude_m": 6000.0,
+}], wind_ned_mps=[6.0, -4.0, 0.0], turbulence="none", quiet_imu=True)
 
 #: Every parameter's estimate must lie within this many Cramér-Rao standard deviations of its truth.
 Z_MAX = 3.0
@@ -76,10 +62,9 @@ _KNOWN = ("f5[1]",)
 
 
 @pytest.fixture(scope="module")
-def recovery(tmp_path_factory) -> pd.DataFrame:
+def recovery(fly_once) -> pd.DataFrame:
     t0 = time.perf_counter()
-    out = tmp_path_factory.mktemp("recovery") / "data"
-    fly_campaign(parse_campaign(CAMPAIGN, source="test_recovery"), out)
+    out = fly_once(CAMPAIGN, "test_recovery", workers=None)
     t_fly = time.perf_counter() - t0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

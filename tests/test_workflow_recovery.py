@@ -26,35 +26,22 @@ import warnings
 import numpy as np
 import pandas as pd
 import pytest
+from _campaigns import linear_campaign
 
 from campaigns.workflow_truth import installation_recovery, recovery, true_accuracy
 from estimator.io import problem_from_dataset
 from estimator.workflow import WorkflowOptions, run_workflow
-from synth.campaign import fly_campaign, parse_campaign
 
-CAMPAIGN = {
-    "name": "workflow-recovery",
-    "seed": 23,
-    "local_flow_truth": "local_flow_linear",
-    "adc_baseline": "adc_baseline_linear",
-    "environment": {"planet": "flat", "wind_ned_mps": [5.0, -3.0, 0.0], "turbulence": "none"},
-    "errors": {
-        "preset": "typical",
-        "nose_probe_irregularity": False,
-        "imu": {"accel_noise_mps2": 0.0, "gyro_noise_deg_s": 0.0,
-                "accel_quant_mps2": 0.0, "gyro_quant_deg_s": 0.0},
-    },
-    "flights": [
-        {"configurations": ["PV1-NP", "PV2-NP", "PT1-BOOM"], "mach": [0.5, 0.6],
-         "maneuvers": ["pitch_doublet", "3211", "shss"], "altitude_m": 6000.0},
-        # to 12 deg or 4.5 g: PT1 (forward CG) reaches neither 14 deg nor 6 g at Mach 0.6
-        {"configurations": ["PV1-NP", "PV2-NP", "PT1-BOOM"], "mach": [0.5, 0.6],
-         "maneuvers": ["windup_turn"], "altitude_m": 6000.0,
-         "maneuver": {"alpha_max_rad": 0.2094, "nz_max": 4.5}},
-        {"configurations": ["PV1-NP", "PV2-NP", "PT1-BOOM"], "mach": [0.3],
-         "maneuvers": ["pitch_doublet", "3211"], "altitude_m": 1000.0, "gear_down": True},
-    ],
-}
+CAMPAIGN = linear_campaign("workflow-recovery", 23, [
+    {"configurations": ["PV1-NP", "PV2-NP", "PT1-BOOM"], "mach": [0.5, 0.6],
+     "maneuvers": ["pitch_doublet", "3211", "shss"], "altitude_m": 6000.0},
+    # to 12 deg or 4.5 g: PT1 (forward CG) reaches neither 14 deg nor 6 g at Mach 0.6
+    {"configurations": ["PV1-NP", "PV2-NP", "PT1-BOOM"], "mach": [0.5, 0.6],
+     "maneuvers": ["windup_turn"], "altitude_m": 6000.0,
+     "maneuver": {"alpha_max_rad": 0.2094, "nz_max": 4.5}},
+    {"configurations": ["PV1-NP", "PV2-NP", "PT1-BOOM"], "mach": [0.3],
+     "maneuvers": ["pitch_doublet", "3211"], "altitude_m": 1000.0, "gear_down": True},
+], wind_ned_mps=[5.0, -3.0, 0.0], turbulence="none", quiet_imu=True)
 
 #: Installation biases: every one within this many Cramér-Rao deviations of its truth.
 Z_MAX = 3.0
@@ -63,9 +50,8 @@ MAX_OUTSIDE = 0.05
 
 
 @pytest.fixture(scope="module")
-def workflow(tmp_path_factory):
-    out = tmp_path_factory.mktemp("wfrec") / "data"
-    fly_campaign(parse_campaign(CAMPAIGN, source="test_workflow_recovery"), out)
+def workflow(fly_once):
+    out = fly_once(CAMPAIGN, "test_workflow_recovery", workers=None)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         problem = problem_from_dataset(out, overrides={"h0": {"free": True}})

@@ -9,29 +9,27 @@ status 1 and report.html opens with the failure. The Mach 0.5 bin is calibrated 
 
 from __future__ import annotations
 
+import shutil
+
 import pandas as pd
 import pytest
+from _campaigns import linear_campaign
 
 from campaigns.cli import EXIT_STATUS, main
-from synth.campaign import fly_campaign, parse_campaign
 from synth.dataset import load_dataset, write_maneuver
 
-CAMPAIGN = {
-    "name": "wfverdict", "seed": 21, "local_flow_truth": "local_flow_linear",
-    "adc_baseline": "adc_baseline_linear",
-    "environment": {"planet": "flat", "wind_ned_mps": [5.0, -3.0, 0.0], "turbulence": "none"},
-    "errors": {"preset": "typical", "nose_probe_irregularity": False},
-    "flights": [{"configurations": ["PV1-NP", "PV2-NP"], "mach": [0.5, 0.6],
-                 "maneuvers": ["pitch_doublet", "3211"], "maneuver": {"duration_s": 20.0},
-                 "altitude_m": 6000.0}],
-}
+CAMPAIGN = linear_campaign("wfverdict", 21, [
+    {"configurations": ["PV1-NP", "PV2-NP"], "mach": [0.5, 0.6], "maneuvers": ["pitch_doublet", "3211"],
+     "maneuver": {"duration_s": 20.0}, "altitude_m": 6000.0}],
+    wind_ned_mps=[5.0, -3.0, 0.0], turbulence="none")
 
 
 @pytest.fixture(scope="module")
-def faulty(tmp_path_factory):
+def faulty(fly_once, tmp_path_factory):
     """The fleet's dataset with the left vane of one Mach 0.6 maneuver stuck at its first value."""
+    # the flown folder is shared (tests/conftest.py): the fault goes into a copy
     out = tmp_path_factory.mktemp("wfverdict") / "data"
-    assert fly_campaign(parse_campaign(CAMPAIGN, source="test_workflow_verdict"), out, workers=1).ok
+    shutil.copytree(fly_once(CAMPAIGN, "test_workflow_verdict"), out)
     ds = load_dataset(out)
     entry = next(e for e, _ in ds if abs(e["mach_nominal"] - 0.6) < 1e-9)
     df = ds.load(entry["id"])

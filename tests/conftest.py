@@ -1,0 +1,54 @@
+"""Shared test fixtures: the synthetic campaigns the end-to-end tests fly, flown once per session.
+
+:func:`fly_once` flies a campaign dict once per test session, however many modules ask for it, into
+a session temporary folder; :func:`tiny_dataset` is the shared tiny campaign
+(:data:`_campaigns.TINY_CAMPAIGN`) flown. The campaign dicts themselves are built in
+``tests/_campaigns.py`` (a plain module, so that test files can import them; pytest advises against
+importing from a conftest). A flown folder is shared: read it, and copy it
+(:func:`shutil.copytree`) before editing a file in it. Seeds are explicit in every campaign dict;
+the same dict flies to byte-identical files (tests/test_campaign.py).
+
+The ``slow`` marker (pyproject.toml) marks tests that take seconds — a module fixture that flies
+and calibrates, or a run of estimations; ``python -m pytest -m "not slow"`` is the fast lane.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import pytest
+from _campaigns import TINY_CAMPAIGN, TINY_SOURCE
+
+from synth.campaign import fly_campaign, parse_campaign
+
+
+@pytest.fixture(scope="session")
+def fly_once(tmp_path_factory) -> Callable[..., Path]:
+    """``fly_once(campaign, source, workers=1) -> Path``: the campaign dict flown once per session.
+
+    ``source`` is the label the manifest records (as ``parse_campaign``'s). Every maneuver must fly
+    (asserted). The folder is shared between modules: copy it before editing anything in it.
+    """
+    flown: dict[str, Path] = {}
+
+    def fly(campaign: Mapping, source: str, workers: int | None = 1) -> Path:
+        # workers change only how fast it flies, never the bytes: not part of the key
+        key = json.dumps({"campaign": campaign, "source": source}, sort_keys=True)
+        if key not in flown:
+            out = tmp_path_factory.mktemp(f"flown-{campaign.get('name', 'campaign')}") / "data"
+            res = fly_campaign(parse_campaign(copy.deepcopy(dict(campaign)), source=source), out,
+                               workers=workers)
+            assert res.ok, res.failures
+            flown[key] = out
+        return flown[key]
+
+    return fly
+
+
+@pytest.fixture(scope="session")
+def tiny_dataset(fly_once) -> Path:
+    """:data:`TINY_CAMPAIGN` flown (shared: copy before editing)."""
+    return fly_once(TINY_CAMPAIGN, TINY_SOURCE)
