@@ -143,9 +143,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         report = run_montecarlo(scenario, args.out, replications=args.replications, workers=args.workers,
                                 scheduler=args.scheduler, retry_failed=args.retry_failed, progress=True)
-    except MonteCarloInterrupted as exc:
-        print(f"fpr montecarlo: {exc}", file=sys.stderr)
-        return 143 if isinstance(exc.__context__, _Terminated) else 130
+    except KeyboardInterrupt as exc:  # MonteCarloInterrupted, or an interrupt before the replications
+        stopped = isinstance(exc, MonteCarloInterrupted)
+        print(f"fpr montecarlo: {exc if stopped else 'interrupted; run the same command again to resume'}",
+              file=sys.stderr)
+        return 143 if isinstance(exc.__context__ if stopped else exc, _Terminated) else 130
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

@@ -314,7 +314,8 @@ def prepare_output(scenario: Scenario, out_dir: Path) -> Path:
     Raises
     ------
     ScenarioError
-        The directory holds a run of another scenario, or something that is not a run.
+        The directory holds a run of another scenario, or something that is not a run, or files
+        with the names of this run's results that it did not write (:func:`foreign_files`).
     """
     out_dir = Path(out_dir)
     state_path = out_dir / STATE_FILE
@@ -335,6 +336,7 @@ def prepare_output(scenario: Scenario, out_dir: Path) -> Path:
                 f"(hash {scenario.hash[:12]}); "
                 "results of two scenarios must not mix. Choose another --out, delete the directory to "
                 f"start over, or resume it with the scenario it was made from ({out_dir / 'scenario.toml'})")
+        _refuse_foreign(out_dir, scenario)  # before anything is written
     (out_dir / _REP).mkdir(parents=True, exist_ok=True)
     (out_dir / _FLIGHTS).mkdir(parents=True, exist_ok=True)
     for p in own_temporary_files(out_dir):  # leftovers of a run killed while writing
@@ -545,7 +547,6 @@ def run_montecarlo(
     n = scenario.replications
     out_dir = prepare_output(scenario, Path(out_dir))
     with _Lock(out_dir):
-        _refuse_foreign(out_dir, scenario)
         have = finished_replications(out_dir)
         wanted = range(n) if indices is None else sorted(set(int(i) for i in indices))
         bad = [i for i in wanted if not 0 <= i < n]

@@ -388,7 +388,7 @@ def _check_files(folder: Path, names: Iterable[str], listing_name: str, tool: st
         if "/" in n or not _safe_relative(n):
             raise ValueError(f"{n!r}: a file name inside {folder} is expected, not a path")
     if folder.exists() and not folder.is_dir():
-        raise OutputFolderError(f"{folder} exists and is not a folder; {advice or 'choose another folder'}")
+        raise OutputFolderError(f"{folder} exists and is not a folder; choose another folder")
     if not folder.exists():
         return []
     listed: dict[str, tuple[int | None, str | None]] = {}
@@ -421,10 +421,13 @@ def _check_files(folder: Path, names: Iterable[str], listing_name: str, tool: st
                 ours.append(name)
     if strangers:
         one = len(strangers) == 1
+        # a folder an older version wrote into, before it kept the listing, has none at all
+        older = "" if lp.exists() or lp.is_symlink() else \
+            f" ({folder} holds no {listing_name}: even a file an older fpr wrote there is not recognised)"
         raise OutputFolderError(
             f"{_names(strangers)}: {tool} replaces only files it wrote itself, unchanged, and "
-            f"{'this one is' if one else 'these are'} not. Move {'it' if one else 'them'} out of "
-            f"{folder} (or rename {'it' if one else 'them'})" + (f", {advice}" if advice else ""))
+            f"{'this one is' if one else 'these are'} not{older}. Move {'it' if one else 'them'} out "
+            f"of {folder} (or rename {'it' if one else 'them'})" + (f", {advice}" if advice else ""))
     return ours
 
 
