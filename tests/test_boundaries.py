@@ -84,7 +84,7 @@ def imports_of(source: str, module: str, is_package: bool = False) -> list[Impor
     found: list[Import] = []
 
     def add(target: str, node: ast.AST) -> None:
-        found.append(Import(target, node.lineno, ast.get_source_segment(source, node) or ast.unparse(node)))
+        found.append(Import(target, node.lineno, ast.unparse(node)))
 
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):

@@ -39,7 +39,6 @@ def twin_runs(tmp_path_factory):
     return out
 
 
-@pytest.mark.slow
 def test_same_seed_gives_bit_identical_files(twin_runs):
     a, b = _files(twin_runs["a"]), _files(twin_runs["b"])
     assert a.keys() == b.keys()
@@ -47,7 +46,6 @@ def test_same_seed_gives_bit_identical_files(twin_runs):
     assert not differing, f"same seed, different bytes in {differing}"
 
 
-@pytest.mark.slow
 def test_other_seed_gives_other_data(twin_runs):
     a, c = _files(twin_runs["a"]), _files(twin_runs["c"])
     parquet = [k for k in a if k.endswith(".parquet")]
@@ -59,7 +57,6 @@ def test_other_seed_gives_other_data(twin_runs):
     assert (da["true_alpha_cg_rad"] != dc["true_alpha_cg_rad"]).any()
 
 
-@pytest.mark.slow
 def test_manifest_records_what_was_flown(twin_runs):
     ds = load_dataset(twin_runs["a"])
     (entry,) = ds.manifest["maneuvers"]
@@ -110,7 +107,6 @@ def test_fly_help_explains_itself(capsys):
         assert word in text
 
 
-@pytest.mark.slow
 def test_fly_by_flags_writes_a_dataset(tmp_path, capsys):
     out = tmp_path / "flags"
     code = main(["fly", "--config", "PV3-NP", "--mach", "0.4", "--maneuver", "3211",

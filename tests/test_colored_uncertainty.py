@@ -461,6 +461,7 @@ def fast_mc():
     return mc, orc, ratios(mc["values"], reported, groups), matters, kinds
 
 
+@pytest.mark.slow
 def test_fast_monte_carlo_is_consistent(fast_mc):
     """The harness: every replication converged with the same free set; the solver's per-channel
     form equals the independent one; the sandwich with the *true* noise covariance predicts the
@@ -483,6 +484,7 @@ def test_fast_monte_carlo_is_consistent(fast_mc):
     assert matters.sum() >= 10
 
 
+@pytest.mark.slow
 def test_cross_channel_form_is_closer_than_per_channel_where_it_matters(fast_mc):
     """Where the cross-correlations matter (the true sandwich's per-channel form off by >10 %:
     flow-table values, biases, the flow channels' initial conditions and IMU biases) the
@@ -504,6 +506,7 @@ def test_cross_channel_form_is_closer_than_per_channel_where_it_matters(fast_mc)
     assert g > K_SE * se, (err, se)
 
 
+@pytest.mark.slow
 def test_colored_deviation_matches_monte_carlo_scatter(fast_mc):
     """Must-show 3 (first half): Monte Carlo scatter / reported coloured deviation within
     0.85-1.15, pooled, and within 3 bootstrap standard errors of 1; per parameter kind within

@@ -232,6 +232,7 @@ def test_jacobian_matches_finite_differences(flight, lever_arm):
                     f"{np.abs(fd - an).max():.3e} (scale {scale:.3e})")
 
 
+@pytest.mark.slow
 @settings(max_examples=6, deadline=None)
 @given(tau=st.floats(-0.2, 0.2))
 def test_known_time_shift_is_recovered(tau):

@@ -252,6 +252,7 @@ def test_robust_option_excludes_the_spike(spiked, clean):
     assert back < 3.0 * sigma and back < 0.5 * sigma, (back / sigma, moved / sigma)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("maneuver", [DOUBLET, RUDDER])
 def test_sign_flipped_accelerometer(base, tmp_path_factory, maneuver):
     """The body-z accelerometer recorded with the wrong sign in one maneuver. The fault drags the
@@ -270,6 +271,7 @@ def _dead_gyros(df):
     return df.assign(p_rps=0.0, q_rps=0.0, r_rps=0.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("maneuver", [
     DOUBLET,
     # the rudder doublets: the staged start leaves f3 at its +-0.2 bounds, and putting the parameters

@@ -23,8 +23,6 @@ from synth.flight import FlightError, fly_maneuver
 from synth.maneuvers import KINDS, ManeuverSpec
 from synth.truth import TruthTrajectory
 
-pytestmark = pytest.mark.slow
-
 DEG = math.pi / 180.0
 
 # Excitation each maneuver must reach for the calibration to see anything (SPEC §7, paper §3).

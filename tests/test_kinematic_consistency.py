@@ -72,7 +72,6 @@ def reconstruct(kind: str, planet: str, lever_arm: str = "differentiated") -> di
     }
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("lever_arm", ["differentiated", "imu_point"])
 @pytest.mark.parametrize("kind", ["pitch_doublet", "windup_turn"])
 def test_flat_earth_reconstruction_reproduces_truth(kind, lever_arm, record_property):
@@ -88,7 +87,6 @@ def test_flat_earth_reconstruction_reproduces_truth(kind, lever_arm, record_prop
     assert res["alpha_deg"] < TOL_ANGLE_DEG and res["beta_deg"] < TOL_ANGLE_DEG, res
 
 
-@pytest.mark.slow
 def test_wgs84_drift_is_reported_and_larger(record_property):
     flat = reconstruct("pitch_doublet", "flat")
     wgs = reconstruct("pitch_doublet", "wgs84")

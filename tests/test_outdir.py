@@ -110,6 +110,7 @@ path = "{csv.as_posix()}"
 # fpr calibrate: the workflow report
 
 
+@pytest.mark.slow
 def test_every_file_a_report_writes_is_listed(earlier_report, earlier_single):
     _assert_listing_is_the_folder(earlier_report)
     _assert_listing_is_the_folder(earlier_single)
@@ -117,6 +118,7 @@ def test_every_file_a_report_writes_is_listed(earlier_report, earlier_single):
     assert {"result.json", "recovery.csv", "time_history_match.png"} <= set(_listed(earlier_single))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("user_files", [("summary.csv", "plot.png", "backup.csv"), ("notes.txt",)])
 def test_overwrite_refuses_a_report_folder_holding_user_files(dataset, earlier_report, tmp_path, capsys,
                                                               user_files):
@@ -132,6 +134,7 @@ def test_overwrite_refuses_a_report_folder_holding_user_files(dataset, earlier_r
     assert _snapshot(out) == before  # the user's files, and the earlier report, untouched
 
 
+@pytest.mark.slow
 def test_an_input_file_inside_the_results_folder_survives(dataset, earlier_report, tmp_path, capsys):
     out = _copy(earlier_report, tmp_path / "results")
     problem, csv = _user_csv_problem(dataset, out, tmp_path)
@@ -143,6 +146,7 @@ def test_an_input_file_inside_the_results_folder_survives(dataset, earlier_repor
     assert (out / "report.html").exists()
 
 
+@pytest.mark.slow
 def test_an_earlier_report_is_refused_without_overwrite_and_replaced_with_it(dataset, earlier_report,
                                                                             tmp_path, capsys):
     out = _copy(earlier_report, tmp_path / "results")
@@ -161,6 +165,7 @@ def test_an_earlier_report_is_refused_without_overwrite_and_replaced_with_it(dat
     _assert_listing_is_the_folder(out)
 
 
+@pytest.mark.slow
 def test_a_report_file_the_user_edited_is_refused_not_deleted(dataset, earlier_report, tmp_path, capsys):
     out = _copy(earlier_report, tmp_path / "results")
     with open(out / "findings.csv", "a") as fh:
@@ -236,6 +241,7 @@ def tiny_demo(monkeypatch):
     monkeypatch.setattr(synth.campaign, "load_campaign", lambda name: campaign)
 
 
+@pytest.mark.slow
 def test_demo_refuses_a_report_folder_holding_user_files_before_flying(tiny_demo, earlier_report,
                                                                        tmp_path, capsys):
     data = tmp_path / "demo"
@@ -250,6 +256,7 @@ def test_demo_refuses_a_report_folder_holding_user_files_before_flying(tiny_demo
     assert not data.exists(), "the campaign was flown before the report folder was checked"
 
 
+@pytest.mark.slow
 def test_demo_replaces_its_own_earlier_report(tiny_demo, earlier_report, tmp_path, capsys):
     data = tmp_path / "demo"
     report = _copy(earlier_report, tmp_path / "demo-report")

@@ -31,6 +31,9 @@ from campaigns.truth import recovery_table, true_parameters
 from estimator.io import problem_from_dataset
 from estimator.solver import SolverOptions, estimate
 
+#: 14 maneuvers flown and estimated once for the module: ~5 s
+pytestmark = pytest.mark.slow
+
 CAMPAIGN = linear_campaign("recovery", 11, [{
     "configurations": ["PV1-NP", "PT1-BOOM"],
     "mach": [0.6],

@@ -21,6 +21,7 @@ def tiny_run(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_tiny_study_writes_table_plot_and_conclusions(tiny_run):
     text = (tiny_run / "tolerance.txt").read_text()
     assert text.splitlines()[4].startswith("$ python -m campaigns.studies.tolerance --out ")
@@ -55,6 +56,7 @@ def test_tiny_study_writes_table_plot_and_conclusions(tiny_run):
     assert delay["tau_err_max_ms"] < 1.0 and delay["tau_at_bound"] == 0
 
 
+@pytest.mark.slow
 def test_tiny_study_resumes_without_recomputing(tiny_run):
     before = {p: p.stat().st_mtime_ns for p in tiny_run.glob("points/*/replications/*.parquet")}
     # every level of every factor has its run, except the base levels: they share one; the light
@@ -149,6 +151,7 @@ def test_failing_groups_ignores_missing_sensors():
     assert tolerance.failing_groups(row) == ["vane AOA"]
 
 
+@pytest.mark.slow
 def test_swept_truth_is_the_truth_the_replication_compared_with(tiny_run):
     """The projection used for points whose estimations all failed gives the truths a converged
     replication of the same point holds."""

@@ -32,6 +32,9 @@ from campaigns.workflow_truth import installation_recovery, recovery, true_accur
 from estimator.io import problem_from_dataset
 from estimator.workflow import WorkflowOptions, run_workflow
 
+#: the fleet flown and the workflow run once for the module: ~35 s
+pytestmark = pytest.mark.slow
+
 CAMPAIGN = linear_campaign("workflow-recovery", 23, [
     {"configurations": ["PV1-NP", "PV2-NP", "PT1-BOOM"], "mach": [0.5, 0.6],
      "maneuvers": ["pitch_doublet", "3211", "shss"], "altitude_m": 6000.0},

@@ -18,6 +18,9 @@ from _campaigns import linear_campaign
 from campaigns.cli import EXIT_STATUS, main
 from synth.dataset import load_dataset, write_maneuver
 
+#: a workflow of two Mach bins through the CLI: ~11 s
+pytestmark = pytest.mark.slow
+
 CAMPAIGN = linear_campaign("wfverdict", 21, [
     {"configurations": ["PV1-NP", "PV2-NP"], "mach": [0.5, 0.6], "maneuvers": ["pitch_doublet", "3211"],
      "maneuver": {"duration_s": 20.0}, "altitude_m": 6000.0}],
