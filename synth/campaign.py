@@ -42,10 +42,8 @@ from __future__ import annotations
 import copy
 import importlib.metadata
 import json
-import multiprocessing
 import os
 import platform
-import signal
 import sys
 import tomllib
 import traceback
@@ -76,6 +74,7 @@ from synth.flight import FlightError, fly_maneuver
 from synth.instrument import instrument
 from synth.local_flow import load_adc_baseline, load_local_flow_truth
 from synth.maneuvers import MANEUVER_KINDS, ManeuverSpec
+from synth.workers import init_pool_worker, pool_context, stop_pool
 
 CAMPAIGN_DIR = Path(__file__).resolve().parent.parent / "campaigns"
 _TOP_KEYS = {
@@ -260,12 +259,7 @@ def _init_worker(fleet_source: str, out_dir: str, common_rate_hz: float, seed: i
     """Load the worker state; in a pool worker (``parent_pid`` given) also tie the worker's life
     to its parent's and leave Ctrl-C to the parent."""
     if parent_pid is not None:
-        from synth.workers import bind_to_parent
-
-        bind_to_parent(parent_pid)
-        # the terminal sends SIGINT to the whole process group: the parent alone handles it (and
-        # stops the workers), so no worker dies with a traceback of its own
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        init_pool_worker(parent_pid)
     _WORKER.update(
         fleet=load_fleet(fleet_source), out_dir=Path(out_dir), rate=common_rate_hz, seed=seed,
         truth_model=load_local_flow_truth(local_flow_truth), adc=load_adc_baseline(adc_baseline),
@@ -467,27 +461,6 @@ def campaign_of_dataset(out_dir: str | Path) -> Campaign:
     return parse_campaign(camp["definition"], source=str(camp.get("source", out_dir)))
 
 
-def _pool_context():
-    # fork on Linux: the workers are then children of this process, which bind_to_parent checks
-    # (a forkserver, the default from Python 3.14, would be their parent instead)
-    return multiprocessing.get_context("fork") if sys.platform.startswith("linux") else None
-
-
-def _stop_pool(pool: ProcessPoolExecutor) -> None:
-    """Stop a pool now: cancel what has not started and end the running workers (their
-    half-written files are temporary ones, removed on resume or overwrite)."""
-    procs = list((getattr(pool, "_processes", None) or {}).values())
-    pool.shutdown(wait=False, cancel_futures=True)
-    for proc in procs:
-        if proc.is_alive():
-            proc.terminate()
-    for proc in procs:
-        proc.join(timeout=5.0)
-        if proc.is_alive():
-            proc.kill()
-            proc.join(timeout=5.0)
-
-
 def fly_campaign(
     campaign: Campaign,
     out_dir: str | Path,
@@ -579,13 +552,13 @@ def fly_campaign(
             for job in todo:
                 _tick(_run_job(job))
         elif todo:
-            pool = ProcessPoolExecutor(max_workers=workers, mp_context=_pool_context(),
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=pool_context(),
                                        initializer=_init_worker, initargs=(*init_args, os.getpid()))
             try:
                 for fut in as_completed([pool.submit(_run_job, job) for job in todo]):
                     _tick(fut.result())
             except BaseException:
-                _stop_pool(pool)
+                stop_pool(pool)
                 raise
             pool.shutdown(wait=True)
     except KeyboardInterrupt:

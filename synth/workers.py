@@ -84,7 +84,8 @@ def pool_context():
 
 
 def init_pool_worker(parent_pid: int) -> None:
-    """A pool initializer: :func:`bind_to_parent`, and SIGINT ignored — the terminal sends Ctrl-C to
+    """A pool initializer: :func:`bind_to_parent`, SIGTERM at its default (end the worker), and SIGINT
+    ignored — the terminal sends Ctrl-C to
     the whole process group, and the parent alone handles it (with :func:`stop_pool`), so no worker
     prints a traceback of its own.
 
@@ -94,6 +95,9 @@ def init_pool_worker(parent_pid: int) -> None:
     """
     bind_to_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # a forked worker inherits the parent's handlers: the CLI's SIGTERM handler would turn
+    # stop_pool's SIGTERM into an exception inside the task instead of ending the worker
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 5.0) -> None:
