@@ -340,6 +340,30 @@ def test_a_killed_run_listed_its_files_before_writing_them(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == []
 
 
+def test_an_unhashed_entry_in_a_finished_listing_is_not_the_tools(tmp_path):
+    # a hand-edited (or foreign) listing naming a user's file without size and hash must not get
+    # it removed: only a run killed while writing leaves such an entry
+    import json
+    import os
+
+    out = tmp_path / "o"
+    _run(out)
+    (out / "mynotes.txt").write_text("mine")
+    doc = json.loads((out / LISTING_NAME).read_text())
+    doc["files"].append({"path": "mynotes.txt", "size": None, "sha256": None})
+    (out / LISTING_NAME).write_text(json.dumps(doc))
+    with pytest.raises(OutputFolderError, match=r"mynotes\.txt \(listed without size and hash"):
+        prepare_output(out, overwrite=True, tool="fpr test")
+    assert (out / "mynotes.txt").read_text() == "mine"
+    # ... nor in an unfinished one when the file is older than that run
+    doc["finished_utc"] = None
+    (out / LISTING_NAME).write_text(json.dumps(doc))
+    os.utime(out / "mynotes.txt", (0, 0))
+    with pytest.raises(OutputFolderError, match=r"mynotes\.txt \(listed without size and hash"):
+        prepare_output(out, overwrite=True, tool="fpr test")
+    assert (out / "mynotes.txt").read_text() == "mine"
+
+
 def test_inputs_are_never_removed(tmp_path):
     out = tmp_path / "o"
     (a, _) = _run(out)

@@ -178,6 +178,12 @@ def _survey(folder: Path) -> _Survey:
                     changed.append(f"{rel} (replaced by a link or special file)")
                 elif size is not None and (st.st_size != size or _sha256(Path(e.path)) != digest):
                     changed.append(f"{rel} (changed since {listing.tool or 'the tool'} wrote it)")
+                elif size is None and not _unhashed_is_ours(listing, st.st_mtime):
+                    # an entry without size and hash is a file a killed run had begun to write:
+                    # only a run that stopped before it finished leaves one, and only a file
+                    # written since that run started can be it
+                    changed.append(f"{rel} (listed without size and hash, but not by a run that was "
+                                   "stopped while writing it)")
                 else:
                     ours.append(rel)
             else:
@@ -185,6 +191,18 @@ def _survey(folder: Path) -> _Survey:
 
     walk(folder, "")
     return _Survey(listing, problem, ours, ours_dirs, foreign, changed)
+
+
+def _unhashed_is_ours(listing: _Listing, mtime_s: float) -> bool:
+    """A listed file without size and hash counts as the tool's only if the listing's run never
+    finished and the file was modified after that run started (2 s of clock resolution)."""
+    if listing.finished_utc is not None:
+        return False
+    try:
+        started = datetime.strptime(listing.started_utc, "%Y-%m-%d %H:%M:%S UTC").replace(tzinfo=UTC)
+    except ValueError:
+        return False
+    return mtime_s >= started.timestamp() - 2.0
 
 
 def _names(items: list[str]) -> str:
