@@ -301,6 +301,55 @@ def test_imu_spike_is_caught(tmp_path):
     raises(si_problem(tmp_path, frame), "flight.csv", "az (column 'az')", "spike", "t = 117.500 s")
 
 
+def _deg_problem(tmp_path, frame):
+    """flight_frame's alpha_zl written in degrees and declared so."""
+    path = si_problem(tmp_path, frame)
+    path.write_text(path.read_text().replace('alpha_zl = { column = "alpha_zl", unit = "rad" }',
+                                             'alpha_zl = { column = "alpha_zl", unit = "deg" }'))
+    return path
+
+
+@pytest.mark.parametrize("spike_deg, neighbour_deg", [(95.0, None), (100.0, 15.0), (-95.0, 15.0)])
+def test_a_moderate_spike_is_a_spike_not_a_unit_error(tmp_path, spike_deg, neighbour_deg):
+    """One sample just beyond what a flow angle can be (1.6 rad = 92 deg) in a column of degrees
+    (2 to 6 deg): named with its time and row, no unit suggested (mrad would be wrong)."""
+    frame = flight_frame()
+    frame["alpha_zl"] = frame["alpha_zl"] / DEG
+    if neighbour_deg is not None:
+        frame.loc[[399, 401], "alpha_zl"] = neighbour_deg
+    frame.loc[400, "alpha_zl"] = spike_deg
+    msg = raises(_deg_problem(tmp_path, frame), "flight.csv", "maneuver flight",
+                 "alpha_zl (column 'alpha_zl')", "spike",
+                 f"{spike_deg:g} deg at t = 110.000 s (data row 400)",
+                 "the unit is not the problem")
+    assert "mrad" not in msg and "set unit" not in msg, msg
+
+
+def test_a_short_excursion_out_of_range_is_named_not_taken_for_a_unit_error(tmp_path):
+    """A smooth excursion to 100 deg (no jump a spike test sees) in 5 of 2401 samples: the bulk is
+    plausible in deg, so the samples are named and no unit is suggested."""
+    frame = flight_frame()
+    frame["alpha_zl"] = frame["alpha_zl"] / DEG
+    ramp = np.r_[np.linspace(5.0, 100.0, 30), np.linspace(100.0, 5.0, 30)]
+    frame.loc[400:459, "alpha_zl"] = ramp
+    msg = raises(_deg_problem(tmp_path, frame), "flight.csv", "alpha_zl (column 'alpha_zl')",
+                 "outside what a flow angle can be", "data rows", "the unit is not the problem")
+    assert "mrad" not in msg and "set unit" not in msg, msg
+
+
+@pytest.mark.parametrize("scale, declared, suggestion", [(1.0 / DEG, "rad", "deg"), (1000.0, "deg", "mrad")])
+def test_a_real_unit_error_with_a_spike_still_gets_the_unit_advice(tmp_path, scale, declared, suggestion):
+    """A whole column in the wrong unit (degrees declared rad; mrad declared deg, a quarter of its
+    samples beyond 92 "deg") keeps its unit advice, a 95-unit spike on top or not."""
+    frame = flight_frame()
+    frame["alpha_zl"] = frame["alpha_zl"] * scale
+    frame.loc[400, "alpha_zl"] = -95.0
+    path = si_problem(tmp_path, frame)
+    path.write_text(path.read_text().replace('alpha_zl = { column = "alpha_zl", unit = "rad" }',
+                                             f'alpha_zl = {{ column = "alpha_zl", unit = "{declared}" }}'))
+    raises(path, "flight.csv", "alpha_zl (column 'alpha_zl')", f'set unit = "{suggestion}"')
+
+
 def test_a_real_unit_error_still_gets_the_unit_advice(tmp_path):
     frame = flight_frame()
     frame["alpha_zl"] = frame["alpha_zl"] / DEG

@@ -668,6 +668,36 @@ def spike_1000deg(d):
     write(d, df)
 
 
+@case("spikes", "reject|flag", names=("alpha_zl", "AOA_L"), forbid=r"mrad|set unit")
+def spike_95deg(d):
+    """One sample of the left vane reads 95 deg (the rest 1 to 10 deg), 10 s into the pitch
+    doublet: just beyond a flow angle's 92 deg, a jump smaller than 92 deg (not a unit error)."""
+    df = read(d)
+    df.loc[row_at(df, DOUBLET, 10.0), "AOA_L"] = 95.0
+    write(d, df)
+
+
+@case("spikes", "reject|flag", names=("alpha_zl", "AOA_L"), forbid=r"mrad|set unit")
+def spike_100deg_next_to_15deg(d):
+    """One left-vane sample of 100 deg between two of 15 deg, 10 s into the pitch doublet."""
+    df = read(d)
+    i = row_at(df, DOUBLET, 10.0)
+    df.loc[[i - 1, i + 1], "AOA_L"] = 15.0
+    df.loc[i, "AOA_L"] = 100.0
+    write(d, df)
+
+
+@case("spikes", "reject|flag", names=("alpha_zl", "AOA_L"), forbid=r"mrad|set unit")
+def spike_minus95deg_next_to_15deg(d):
+    """One left-vane sample of -95 deg between two of +15 deg (|value| jumps by 80 deg only, the
+    signed value by 110 deg), 10 s into the pitch doublet."""
+    df = read(d)
+    i = row_at(df, DOUBLET, 10.0)
+    df.loc[[i - 1, i + 1], "AOA_L"] = 15.0
+    df.loc[i, "AOA_L"] = -95.0
+    write(d, df)
+
+
 @case("spikes", "reject|flag", names=("alpha_zl", "AOA_L"))
 def spike_30deg(d):
     """One sample of the left vane 30 deg off, 12 s into the pitch doublet."""

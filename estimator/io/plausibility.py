@@ -27,11 +27,14 @@ gear flag (gear)       min, max                         0 to 1
 Mach (mach)            median                           0 to 5; every sample 0 to 5
 =====================  ===============================  =========================================
 
-Samples out of range that jump away from the rest (:func:`spikes`: one sample or a burst, far
-from the in-range samples either side) are spikes: when the rest of the channel is plausible
-they are named with their times, never taken for a unit mistake, and a unit is suggested only
-from the bulk of the data (without the 1 % most extreme samples), so that one 1000-deg sample
-in a column of degrees does not read as "set unit = mrad".
+Samples out of range that jump away from the rest (:func:`spikes`: one sample or a burst whose
+signed value jumps from the in-range samples either side by far more than the signal's own
+steps) are spikes. A unit is judged only by the bulk of the data (:func:`_bulk`: without its
+1 % most extreme samples, and at least without the most extreme one): when the bulk is
+plausible in the declared unit, the out-of-range samples, spikes or not, are named with their
+times and rows, and no unit is ever suggested, so that one 95-deg or 1000-deg sample in a
+column of degrees never reads as "set unit = mrad". A unit is suggested only when the bulk
+itself is implausible.
 """
 
 from __future__ import annotations
@@ -134,17 +137,18 @@ def _ok(check: Check, v: np.ndarray, t_s: np.ndarray) -> bool:
 
 
 def _bulk(check: Check, v: np.ndarray) -> np.ndarray:
-    """The values a unit is judged by: for the per-sample statistics, without the 1 % most extreme
-    samples (a spike the jump test cannot see, inside a signal that is out of range as a whole,
-    must not choose the unit)."""
-    if check.statistic not in ("maxabs", "minmax") or v.size < 100:
+    """The values a unit is judged by: for the per-sample statistics ("maxabs", "minmax"),
+    without the 1 % most extreme samples, and at least without the single most extreme one
+    (each end for "minmax"). A few samples out of range, whether or not the jump test of
+    :func:`spikes` sees them, must not choose the unit, nor hide that the unit is right."""
+    if check.statistic not in ("maxabs", "minmax") or v.size < 3:
         return v
-    x = np.abs(v) if check.statistic == "maxabs" else v
-    if check.statistic == "minmax":
-        lo, hi = np.quantile(x, [0.005, 0.995])
-    else:
-        lo, hi = -np.inf, np.quantile(x, 0.99)
-    return v[(x >= lo) & (x <= hi)]
+    if check.statistic == "maxabs":
+        k = max(1, v.size // 100)
+        return v[np.sort(np.argsort(np.abs(v), kind="stable")[: v.size - k])]
+    k = max(1, v.size // 200)
+    order = np.argsort(v, kind="stable")
+    return v[np.sort(order[k: v.size - k])] if v.size > 2 * k else v
 
 
 def suggest_units(check: Check, raw: np.ndarray, declared: str, t_s_of: Callable) -> list[str]:
@@ -187,9 +191,9 @@ def _per_sample(check: Check, v: np.ndarray) -> tuple[np.ndarray, float, float] 
 
 def spikes(x: np.ndarray, out: np.ndarray, jump: float) -> np.ndarray:
     """Mask of the out-of-range samples that are spikes: runs of consecutive out-of-range samples
-    (one or a burst) that jump by more than ``jump`` away from the in-range sample on each side
-    they have. A whole signal in the wrong unit, or one that drifts out of range, stays near its
-    neighbours where it crosses the limit and has no such jumps."""
+    (one or a burst) whose signed value jumps by more than ``jump`` away from the in-range sample
+    on each side they have. A whole signal in the wrong unit, or one that drifts out of range,
+    stays near its neighbours where it crosses the limit and has no such jumps."""
     result = np.zeros(out.shape, dtype=bool)
     if not out.any() or out.all():
         return result
@@ -200,6 +204,33 @@ def spikes(x: np.ndarray, out: np.ndarray, jump: float) -> np.ndarray:
         if all(abs(x[i] - x[j]) > jump for i, j in sides):
             result[a:b] = True
     return result
+
+
+#: A spike jumps by more than this many times the signal's own large steps (:func:`jump_threshold`).
+SPIKE_STEP_FACTOR = 5.0
+
+
+def jump_threshold(check: Check, x: np.ndarray, out: np.ndarray) -> float:
+    """The jump that makes an out-of-range run a spike (:func:`spikes`), SI.
+
+    ``SPIKE_STEP_FACTOR`` times the 99th percentile of the signal's steps between in-range
+    samples (its own fast motion, noise and quantization: a signal crossing the limit smoothly
+    steps no further than that), and at least a floor, so that a signal that hardly moves does
+    not make every crossing a spike: a tenth of a "maxabs" check's limit (0.16 rad = 9 deg for a
+    flow angle) or of a "minmax" check's span, a hundredth of the per-sample span of the others.
+    """
+    if check.statistic == "maxabs":
+        floor = check.high / 10.0
+    elif check.statistic == "minmax":
+        floor = (check.high - check.low) / 10.0
+    else:
+        lo = check.sample_low if check.sample_low is not None else check.low
+        hi = check.sample_high if check.sample_high is not None else check.high
+        floor = (hi - lo) / 100.0
+    inside = ~out[1:] & ~out[:-1]
+    steps = np.abs(np.diff(x))[inside]
+    steps = steps[np.isfinite(steps)]
+    return max(floor, SPIKE_STEP_FACTOR * float(np.quantile(steps, 0.99))) if steps.size else floor
 
 
 def _scalar(v: np.ndarray) -> np.ndarray:
@@ -249,15 +280,15 @@ def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s
     if check is None or values_si.size == 0:
         return
     raw_all = from_si(values_si, unit, label)
-    spike = np.zeros(len(t_s), dtype=bool)
+    spike = out = np.zeros(len(t_s), dtype=bool)
     per = _per_sample(check, values_si)
     if per is not None and name != "t":
         x, lo, hi = per
         out = (x < lo - 1e-9) | (x > hi + 1e-9)
-        jump = (hi - lo) / 10.0 if check.statistic not in ("maxabs", "minmax") else (
-            hi if check.statistic == "maxabs" else hi - lo)
-        spike = spikes(x, out, jump)  # never part of the statistics a unit is judged by
-    keep = ~spike
+        # jumps on the signed values: -95 deg next to +15 deg is a jump of 110 deg, not 80
+        signed = values_si if check.statistic == "maxabs" else x
+        spike = spikes(signed, out, jump_threshold(check, signed, out))
+    keep = ~spike  # spikes are never part of the statistics a unit is judged by
     v, tk, rk, raw = values_si[keep], t_s[keep], rows[keep], raw_all[keep]
     if v.size and _ok(check, v, tk):
         if spike.any():
@@ -274,6 +305,11 @@ def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s
                     "exclude them with the maneuver's t_start_s/t_end_s"
                 )
         return
+    if out.any() and v.size and _ok(check, to_si(_bulk(check, raw), unit, label), tk):
+        # the bulk is plausible in the declared unit: a few samples out of range (spikes that
+        # jump less than the threshold, or a short excursion) are the problem, never the unit
+        _raise_spikes(check, label, unit, raw_all, raw_all[~out], t_s, rows, np.flatnonzero(out), where,
+                      spikes_only=False)
     stat, i = _statistic(check, v, tk)
     raw_stat, _ = _statistic(check, raw, from_si(tk, unit, label) if name == "t" else tk)
     t_of = (lambda q: q) if name == "t" else (lambda q: tk)
@@ -299,18 +335,24 @@ def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s
 
 
 def _raise_spikes(check: Check, label: str, unit: str, raw_all: np.ndarray, raw_rest: np.ndarray,
-                  t_s: np.ndarray, rows: np.ndarray, idx: np.ndarray, where: Where) -> None:
+                  t_s: np.ndarray, rows: np.ndarray, idx: np.ndarray, where: Where,
+                  spikes_only: bool = True) -> None:
+    """Raise :class:`SpikeError` naming the samples ``idx`` (spikes, or with ``spikes_only``
+    False, out-of-range samples some of which may not jump) and the fix; ``raw_rest`` is the
+    rest of the channel, plausible in the declared unit."""
     shown, rest, what = _scalar(raw_all), _scalar(raw_rest), "magnitude" if raw_all.ndim == 2 else "value"
     rest_text = (f"median {what} {np.median(rest):.4g} {unit}" if check.statistic in ("median", "mean_norm")
                  else f"values {np.min(rest):.4g} to {np.max(rest):.4g} {unit}")
     many = idx.size > SPIKE_MAX_FRACTION * len(t_s)
+    kind = ("spike(s), sample(s) that jump far outside" if spikes_only
+            else "sample(s) (spikes or a short excursion) outside")
     raise SpikeError(
-        f"{where}: {label} has {idx.size} spike(s), sample(s) that jump far outside what "
+        f"{where}: {label} has {idx.size} {kind} what "
         f"{check.what} can be: {_samples_text(shown, unit, t_s, rows, idx)}. The rest of it is "
         f"plausible in {unit!r} ({rest_text}), so the unit is not the problem"
         + (f"; that is {100 * idx.size / len(t_s):.1f} % of the samples, more than a few spikes: check "
            "that the column is the right one and was recorded properly. " if many else ". ")
-        + "Replace the spike(s) in the file (e.g. by interpolating between their neighbours), or "
+        + "Replace the sample(s) in the file (e.g. by interpolating between their neighbours), or "
         "exclude them from the maneuver with t_start_s/t_end_s (split the maneuver around them)"
     )
 
