@@ -200,6 +200,43 @@ def test_64hz_written_with_3_decimals_is_taken_as_64hz(tmp_path):
                             "nominal 64 Hz")
 
 
+@pytest.mark.parametrize("rate_hz", [40.0, 64.0, 80.0])
+def test_time_rounded_to_2_decimals_is_taken_as_its_nominal_grid(tmp_path, rate_hz):
+    """Time written to 0.01 s: at 40 Hz the stamps are up to 5 ms (20 % of a step) off the grid,
+    at 64 Hz 32 %, at 80 Hz 40 % (steps of 10 and 20 ms, no gap). Every stamp is within half the
+    rounding of the grid, so the grid is taken (exactly, not interpolated from the stamps), and
+    the warning says the stamps were rounded."""
+    frame = flight_frame(duration_s=30.0)
+    exact = 100.0 + np.arange(len(frame)) / rate_hz
+    frame["time"] = exact
+    msg = _check_taken_as_nominal(tmp_path, frame, np.round(exact, 2), rate_hz, "rounded to 0.01 s")
+    assert f"nominal {rate_hz:g} Hz grid" in msg and "more decimals" in msg
+    assert "resample_hz" not in msg
+    prob, _ = load_quietly(tmp_path / "problem.toml")
+    np.testing.assert_allclose(prob.maneuvers[0].t_s, exact, rtol=0, atol=1e-9)
+
+
+def test_jittered_time_rounded_to_2_decimals_says_to_export_more_decimals(tmp_path):
+    """40 Hz stamps with 1.5 ms of jitter, written to 0.01 s: they stray beyond the rounding, but
+    interpolating from stamps that may be 5 ms off (resample_hz) is no fix: more decimals are."""
+    frame = flight_frame()
+    rng = np.random.default_rng(3)
+    t = np.round(frame["time"].to_numpy() + rng.normal(0.0, 1.5e-3, len(frame)), 2)
+    assert np.all(np.diff(t) > 0)
+    msg = raises(si_problem(tmp_path, _stamped(frame, t)), "flight.csv", "maneuver flight",
+                 "rounded to 0.01 s", "export the time with more decimals")
+    assert not msg.split("; ")[-1].startswith("Add resample_hz"), msg
+
+
+def test_time_rounded_coarser_than_the_step_says_so_not_drop_rows(tmp_path):
+    """40 Hz written to 0.1 s: four samples share each stamp. Dropping duplicated rows would lose
+    three samples in four: the message names the rounding and more decimals."""
+    frame = flight_frame()
+    msg = raises(si_problem(tmp_path, _stamped(frame, np.round(frame["time"].to_numpy(), 1))), "flight.csv",
+                 "rounded to 0.1 s", "more decimals")
+    assert "drop duplicated rows" not in msg
+
+
 def test_non_uniform_sampling_suggests_the_nominal_rate_not_the_median_step(tmp_path):
     """Steps of 22 ms (60 %) and 29.5 ms (40 %): the median says 45 Hz, the data average 40 Hz."""
     frame = flight_frame()

@@ -444,20 +444,21 @@ def time_gap(d):
     write(d, df.drop(index=df.index[i: i + 80]))
 
 
-def _jittered(df: pd.DataFrame, rate_hz: float, seed: int) -> pd.DataFrame:
-    """The data on a recorder's clock at ``rate_hz``: the time stamp of each sample jitters by ~1 % of
-    the step and is written in milliseconds (3 decimals), the values interpolated onto the jittered
-    times."""
+def _jittered(df: pd.DataFrame, rate_hz: float, seed: int, jitter: float = 0.01,
+              decimals: int = 3) -> pd.DataFrame:
+    """The data on a recorder's clock at ``rate_hz``: the time stamp of each sample jitters by
+    ``jitter`` (~1 %) of the step and is written with ``decimals`` decimals (milliseconds), the
+    values interpolated onto the jittered times."""
     rng = np.random.default_rng(seed)
     parts = []
     for mid in (DOUBLET, RUDDER):
         m = df.iloc[rows_of(df, mid)]
         t = m["Time"].to_numpy()
         n = int(np.floor((t[-1] - t[0]) * rate_hz)) + 1
-        tj = t[0] + np.arange(n) / rate_hz + rng.normal(0.0, 0.01 / rate_hz, n)
+        tj = t[0] + np.arange(n) / rate_hz + rng.normal(0.0, jitter / rate_hz, n)
         # the first and last stamps on the nominal grid: the problem's ranges end there
-        tj = np.clip(np.round(tj, 3), t[0], t[-1])
-        tj[0], tj[-1] = t[0], round(t[0] + (n - 1) / rate_hz, 3)
+        tj = np.clip(np.round(tj, decimals), t[0], t[-1])
+        tj[0], tj[-1] = t[0], round(t[0] + (n - 1) / rate_hz, decimals)
         out = {"Time": tj}
         for c in m.columns[1:]:
             v = m[c].to_numpy()
@@ -473,9 +474,14 @@ def _jittered(df: pd.DataFrame, rate_hz: float, seed: int) -> pd.DataFrame:
     return pd.concat(parts)
 
 
-def _write_jittered(d: Path, rate_hz: float, seed: int) -> None:
-    df = _jittered(read(d), rate_hz, seed)
+def _write_jittered(d: Path, rate_hz: float, seed: int, jitter: float = 0.01, decimals: int = 3) -> None:
+    df = _jittered(read(d), rate_hz, seed, jitter, decimals)
     write(d, df)
+    _ends_at_last_stamps(d, df)
+
+
+def _ends_at_last_stamps(d: Path, df: pd.DataFrame) -> None:
+    """Each maneuver's t_end_s at its last time stamp in ``df``."""
     t = df["Time"].to_numpy()
     ends = iter([t[t < T_FIRST_S[RUDDER]][-1], t[-1]])
     text = re.sub(r"t_end_s = [0-9.]+", lambda m: f"t_end_s = {next(ends):.3f}", (d / PROBLEM).read_text())
@@ -493,6 +499,43 @@ def time_jitter_50hz(d):
     """The same flight recorded at 50 Hz with ~1 % jitter, written to the millisecond (the
     ranges end at the last 50 Hz sample)."""
     _write_jittered(d, 50.0, seed=2)
+
+
+@case("time base", "accept", says=r"rounded to 0\.01 s.*nominal 40 Hz grid")
+def time_rounded_2_decimals_40hz(d):
+    """The 40 Hz time written to 0.01 s (1520.00, 1520.02, 1520.05, ...): stamps up to 5 ms (20 %
+    of a step) off the grid, within half the rounding; the grid is taken."""
+    df = read(d)
+    df["Time"] = np.round(df["Time"].to_numpy(), 2)
+    write(d, df)
+    _ends_at_last_stamps(d, df)
+
+
+# 64 Hz written to 0.01 s: steps of 15.6 ms, stamps up to 5 ms (32 % of a step) off the 64 Hz grid.
+# Accepted on the grid: every stamp is within half the rounding of it, so the stamps hold no
+# evidence against a uniform 64 Hz recorder and the grid is the best estimate of the sample times
+# there is (exact if the recorder was uniform); refusing would leave the user only resample_hz,
+# which interpolates from stamps up to 5 ms off (worse for the delays), or a re-export. The
+# warning says that jitter under 5 ms cannot be seen in such stamps and how to check.
+@case("time base", "accept", says=r"rounded to 0\.01 s.*nominal 64 Hz grid", same_samples=False)
+def time_rounded_2_decimals_64hz(d):
+    """The same flight recorded at 64 Hz, time written to 0.01 s (steps of 10 and 20 ms)."""
+    _write_jittered(d, 64.0, seed=3, jitter=0.0, decimals=2)
+
+
+@case("time base", "reject", names=("Time",), fix=r"more decimals")
+def time_rounded_2_decimals_with_jitter(d):
+    """A 40 Hz recorder with 1.5 ms (6 %) of clock jitter, time written to 0.01 s: the stamps
+    stray beyond the rounding, and interpolating from stamps up to 5 ms off is no fix."""
+    _write_jittered(d, 40.0, seed=4, jitter=0.06, decimals=2)
+
+
+@case("time base", "reject", names=("Time",), fix=r"more decimals")
+def time_rounded_1_decimal_40hz(d):
+    """The 40 Hz time written to 0.1 s: about four samples share each stamp."""
+    df = read(d)
+    df["Time"] = np.round(df["Time"].to_numpy(), 1)
+    write(d, df)
 
 
 @case("time base", "reject", names=("h_dgps", "GPS_ALT"), fix=r"own_rate")
@@ -1049,7 +1092,7 @@ def _channels(f: dict) -> set[str]:
 
 #: A fix: an imperative, or a close match offered ("did you mean 'resample_hz'?").
 FIX_WORDS = (r"\bdid you mean\b|\b(set|use|give|add|remove|declare|trim|pass|check|fix|rename|mark|split|"
-             r"save|convert|change|replace|correct|write|drop|sort|fill|widen|map|choose|keep|put)\b")
+             r"save|convert|change|replace|correct|write|drop|sort|fill|widen|map|choose|keep|put|export)\b")
 CLASSES = ("clear error", "correct result", "anything else")
 WHEN = {"time": r"\bt = |\brows?\b", "line": r"\bline \d+", "row": r"\bt = |\brows?\b|\blines?\b"}
 

@@ -155,7 +155,7 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
         present[name] = keep
     for name in sorted((channel_columns & set(values)) - own):
         _warn_held(values[name][idx], t_s, where, table.labels[name])
-    t_s = check_sampling(t_s, rows, where, req.resample_hz)
+    t_s = check_sampling(t_s, rows, where, req.resample_hz, table.labels["t"])
     si = {name: to_si(v[idx], table.units[name], table.labels[name])
           for name, v in values.items() if name != "t"}
     check_plausible("t", table.labels["t"], t_s, table.units["t"], t_s, rows, where)
