@@ -60,7 +60,9 @@ def read_table(path: Path, fmt: str, header: bool | None = True, delimiter: str 
 
     Parameters
     ----------
-    path : the file.
+    path : the file, already checked with :func:`check_data_path` (the problem-file reader does
+        that before it infers the format from the extension, so that a missing file or a folder
+        is named as such).
     fmt : one of :data:`FORMATS`.
     header : text formats: the first line (after ``skip_rows``) names the columns (None: the
         default, True). Without a header the columns are numbered 0, 1, 2, ... A header is checked
@@ -79,7 +81,6 @@ def read_table(path: Path, fmt: str, header: bool | None = True, delimiter: str 
     The table; columns are named by the header (stripped of blanks) or numbered from 0. Header
     names that occur more than once are in ``df.attrs["duplicate_names"]`` (name -> indices).
     """
-    check_data_path(path, fmt)
     explicit = header is not None
     header = True if header is None else header
     sep = r"\s+" if fmt == "whitespace" else (delimiter or ",")
