@@ -36,18 +36,19 @@ from __future__ import annotations
 import math
 import re
 import shutil
+import tomllib
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
-from _campaigns import linear_campaign
 
 from campaigns.cli import EXIT_STATUS, main
 from estimator.io import load_problem, problem_from_dataset
 from estimator.solver import SolverOptions, estimate
 from estimator.verdict import Finding, Severity, Verdict
+from synth.campaign import resolve_campaign_path
 from synth.dataset import load_dataset, write_maneuver
 
 DEG = 180.0 / math.pi
@@ -55,15 +56,11 @@ KT = 1.0 / 0.514444
 FT = 1.0 / 0.3048
 G0 = 9.80665
 
-CAMPAIGN = linear_campaign("faults", 11, [
-    {"configurations": ["PV1-NP"], "mach": [0.5], "maneuvers": ["pitch_doublet"], "altitude_m": 6000.0},
-    {"configurations": ["PV1-NP"], "mach": [0.5], "maneuvers": ["pullup_rudder_doublets"],
-     "altitude_m": 6000.0, "maneuver": {"rudder_norm": 0.4}},
-], wind_ned_mps=[6.0, -4.0, 0.0], turbulence="none",
-    # the nose probe's irregularity (off in every linear campaign) and high-AOA noise are off: they
-    # are model-structure errors of the linear pair (the verdict warns about them), and the base
-    # must be a clean success
-    errors={"sensors": {"nose_probe": {"high_alpha_noise_deg_per_deg": 0.0}}})
+#: The shipped campaign campaigns/faults_base.toml, which the bad-input corpus
+#: (campaigns/benchmarks/bad_inputs.py) flies too: the nose probe's irregularity and high-AOA noise
+#: are off there (model-structure errors of the linear pair, which the verdict warns about): the
+#: base must be a clean success.
+CAMPAIGN = tomllib.loads(resolve_campaign_path("faults_base").read_text(encoding="utf-8"))
 DOUBLET, RUDDER = "m0000", "m0001"
 
 #: Codes of findings that name a fault in the data itself (estimator/diagnostics.py, "Order and

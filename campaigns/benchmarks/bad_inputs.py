@@ -5,9 +5,9 @@
 A small, good input is made once, the way an engineer brings one: a problem file (TOML) and a
 CSV of flight data in engineering units (deg, kt, ft, g, deg/s; a 10 Hz GPS height among the
 40 Hz channels, declared ``own_rate``), two maneuvers at Mach 0.5 flown by the testbed (``synth``;
-the pitch doublet and the pull-up with rudder doublets of tests/test_faults.py, whose calibration
-is a clean success). The dataset and the base files are cached in ``--out`` (default
-``fpr-out/bad_inputs``).
+the shipped campaign ``campaigns/faults_base.toml``, a pitch doublet and a pull-up with rudder
+doublets, also the base of tests/test_faults.py; its calibration is a clean success). The
+dataset and the base files are cached in ``--out`` (default ``fpr-out/bad_inputs``).
 
 Each case copies the base and changes one thing (a unit, the time base, the header, the
 encoding, a spike, a stuck channel, a typo, a range, a truncated file, ...), then runs it as the
@@ -70,21 +70,10 @@ KT = 1.0 / 0.514444
 FT = 1.0 / 0.3048
 G0 = 9.80665
 
-#: The good flights (as tests/test_faults.py's CAMPAIGN): PV1-NP at Mach 0.5, a pitch doublet and
-#: a pull-up with rudder doublets, typical sensor errors, steady wind, calm air, the linear
-#: local-flow truth the model set represents exactly.
-CAMPAIGN = {
-    "name": "bad_inputs", "seed": 11,
-    "local_flow_truth": "local_flow_linear", "adc_baseline": "adc_baseline_linear",
-    "environment": {"planet": "flat", "wind_ned_mps": [6.0, -4.0, 0.0], "turbulence": "none"},
-    "errors": {"preset": "typical", "nose_probe_irregularity": False,
-               "sensors": {"nose_probe": {"high_alpha_noise_deg_per_deg": 0.0}}},
-    "flights": [
-        {"configurations": ["PV1-NP"], "mach": [0.5], "maneuvers": ["pitch_doublet"], "altitude_m": 6000.0},
-        {"configurations": ["PV1-NP"], "mach": [0.5], "maneuvers": ["pullup_rudder_doublets"],
-         "altitude_m": 6000.0, "maneuver": {"rudder_norm": 0.4}},
-    ],
-}
+#: The good flights: the shipped campaign campaigns/faults_base.toml (the base of tests/test_faults.py
+#: too), PV1-NP at Mach 0.5, a pitch doublet and a pull-up with rudder doublets, typical sensor
+#: errors, steady wind, calm air, the linear local-flow truth the model set represents exactly.
+CAMPAIGN = "faults_base"
 DOUBLET, RUDDER = "m0000", "m0001"
 DATA = "flight421.csv"
 #: Marks a working folder as this script's: only such a folder has its base/ and cases/ replaced.
@@ -128,13 +117,13 @@ def compared(p: dict) -> bool:
 
 def fly_base(root: Path) -> Path:
     """The synthetic dataset (flown once, cached in ``root/dataset``)."""
-    from synth.campaign import fly_campaign, parse_campaign
+    from synth.campaign import fly_campaign, load_campaign
 
     ds = root / "dataset"
     if not (ds / "manifest.json").is_file():
         if ds.exists():
             shutil.rmtree(ds)  # an incomplete earlier attempt, in our own cache folder
-        res = fly_campaign(parse_campaign(CAMPAIGN, source="bad_inputs.py"), ds, workers=1)
+        res = fly_campaign(load_campaign(CAMPAIGN), ds, workers=1)
         if not res.ok:
             raise SystemExit(f"flying the base dataset failed: {res.failures}")
     return ds
