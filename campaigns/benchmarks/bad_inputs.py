@@ -513,7 +513,7 @@ def time_rounded_2_decimals_64hz(d):
 
 
 @case("time base", "reject", names=("Time",), fix=r"more decimals")
-def time_rounded_2_decimals_with_jitter(d):
+def time_rounded_2_decimals_jittered(d):
     """A 40 Hz recorder with 1.5 ms (6 %) of clock jitter, time written to 0.01 s: the stamps
     stray beyond the rounding, and interpolating from stamps up to 5 ms off is no fix."""
     _write_jittered(d, 40.0, seed=4, jitter=0.06, decimals=2)
