@@ -1,11 +1,15 @@
 """The calibration report of a workflow run: Table 2 (model and truth), Figs. 3-8, CSV tables.
 
 Joins the estimator's workflow (:mod:`estimator.workflow`), its renderer (:mod:`estimator.report`)
-and, for synthetic datasets, the truth (:mod:`campaigns.workflow_truth`).
+and, for synthetic datasets, the truth (:mod:`campaigns.workflow_truth`). What it shows of the
+aircraft (Table 2's rows, the channels of the figures, the apportioned bias families) is what the
+model set declares (``[requirements]``, ``[report]``, ``[workflow]``: the workflow's
+``declarations``); no channel name is written here.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -26,6 +30,19 @@ from estimator.verdict import Verdict, reasons
 from estimator.workflow import RAD2DEG, WorkflowResult
 
 _LEVEL = {Verdict.SUCCESS: "success", Verdict.SUCCESS_WITH_WARNINGS: "warning", Verdict.FAILURE: "failure"}
+#: Fig. 3 shows a maneuver of these kinds if the reference bin has one (the paper's pitch doublet).
+TIME_HISTORY_KINDS = ("pitch_doublet", "3211")
+
+
+def _mean_bias_label(families) -> tuple[str, str]:
+    """The apportioned biases' mean as plain text and as matplotlib math: "(b_l + b_r)/2"."""
+    names = list(families)
+    if len(names) == 1:
+        text = names[0]
+    else:
+        text = f"({' + '.join(names)})/{len(names)}"
+    math = re.sub(r"_(\w+)", r"_{\1}", text)
+    return text, f"${math}$"
 
 
 def verdict_banner(wf: WorkflowResult) -> Banner:
@@ -112,7 +129,9 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
     sections.append(Section(
         "Table 2: 3-sigma of measurement minus model",
         "Per sensor and Mach bin at the final estimate (installation biases fixed), 3 x rms about zero, "
-        "against the desired accuracy (paper Table 2). Nose-probe sideslip below its usable angle of attack.",
+        "against the desired accuracy (paper Table 2)"
+        + "".join(f"; {r.sensor} below the usable angle of attack"
+                  for r in wf.declarations.requirements.values() if r.low_alpha_only) + ".",
         tables=[("", accuracy_table_html(wf.accuracy, "3-sigma of measurement - model (deg)"))],
         csv=[("table2_model.csv", wf.accuracy)]))
     out: dict = {"accuracy": wf.accuracy, "true_accuracy": None, "installation_recovery": None,
@@ -133,26 +152,30 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
             csv=[("table2_truth.csv", tacc)]))
     # Fig. 4 and the apportionment
     fig4 = []
+    decl = wf.declarations
+    bias_text, bias_math = _mean_bias_label(decl.apportion.values())
     if not wf.vane_bias.empty:
         vb = wf.vane_bias.copy()
-        fig4.append(("Fig. 4: average vane bias (b_l + b_r)/2 vs Mach per aircraft, fleet mean",
+        fig4.append((f"Fig. 4: average vane bias {bias_text} vs Mach per aircraft, fleet mean",
                      figure_bias_vs_mach(vb, reference_mach=float(wf.installation["mach"].iloc[0])
-                                         if not wf.installation.empty else None)))
+                                         if not wf.installation.empty else None, bias_label=bias_math)))
     tabs = [("Installation biases (deg), held for every Mach", wf.installation.reset_index())]
     csvs = [("vane_biases.csv", wf.vane_bias), ("installation_biases.csv", wf.installation.reset_index())]
     if truth and out["installation_recovery"] is not None and len(out["installation_recovery"]):
         tabs.append(("Installation biases against the truth", out["installation_recovery"]))
         csvs.append(("installation_recovery.csv", out["installation_recovery"]))
     sections.append(Section("Vane bias apportionment (paper §4.1)",
-                            "Per Mach bin the fleet mean of (b_l + b_r)/2 is the correction model's update; "
+                            f"Per Mach bin the fleet mean of {bias_text} is the correction model's update; "
                             "each aircraft's deviation from it is its mean installation bias.",
                             tables=tabs, figures=fig4, csv=csvs))
     # Figs. 6 and 8: table updates, and the tables for the flight-control team
     upd = wf.table_updates()
     figs, csvs = [], []
     if not upd.empty:
-        figs.append(("Figs. 6 and 8: correction-table updates vs breakpoint per Mach (f1 as f1(alpha) - "
-                     "alpha), gear down dashed", figure_table_updates(upd)))
+        ident = (f" ({wf.identity_table} as {wf.identity_table}(x) - x)"
+                 if wf.identity_table in set(upd["table"]) else "")
+        figs.append((f"Figs. 6 and 8: correction-table updates vs breakpoint per Mach{ident}, gear down "
+                     "dashed", figure_table_updates(upd)))
         csvs.append(("table_updates.csv", upd))
     for name, (values, states) in wf.correction_tables().items():
         csvs.append((f"correction_table_{name}.csv", values.reset_index()))
@@ -168,41 +191,51 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
     # Figs. 5 and 7: error cross-plots; Fig. 3: a time-history match
     ref = min(final, key=lambda s: abs(s.mach - 0.5))
     res = ref.residuals
+    reqs = decl.requirements
+
+    def limit(name: str) -> float | None:
+        return reqs[name].desired_deg if name in reqs else None
+
     figs = []
-    for name in ("alpha_zl", "alpha_zr"):
+    for name in decl.crossplots:
         if name in res:
             r = res[name]
             figs.append((f"Fig. 5: {name} measurement - model vs model at Mach {ref.mach:.2f}",
                          figure_crossplot(r.y * RAD2DEG, r.e * RAD2DEG, f"{name}, Mach {ref.mach:.2f}",
-                                          "model (deg)", "measurement - model (deg)", limit_deg=0.5)))
-    pooled = [s.residuals["beta_znp"] for s in final if "beta_znp" in s.residuals]
+                                          "model (deg)", "measurement - model (deg)", limit_deg=limit(name))))
+    lim_ch = decl.alpha_limit_channel
+    pooled = [s.residuals[lim_ch] for s in final if lim_ch in s.residuals]
     if pooled:
         a = np.concatenate([p.alpha_t_rad for p in pooled]) * RAD2DEG
         e = np.concatenate([p.e for p in pooled]) * RAD2DEG
-        figs.append(("Fig. 7: nose-probe sideslip error vs angle of attack, all Mach bins; its usable "
-                     f"range ends at alpha = {wf.nose_probe_alpha_limit_deg} deg",
-                     figure_crossplot(a, e, "nose probe AOSS", "alpha (deg)", "measurement - model (deg)",
-                                      limit_deg=0.5, x_limit_deg=wf.nose_probe_alpha_limit_deg)))
+        figs.append((f"Fig. 7: {reqs[lim_ch].sensor} ({lim_ch}) error vs angle of attack, all Mach bins; "
+                     f"its usable range ends at alpha = {wf.alpha_limit_deg} deg",
+                     figure_crossplot(a, e, reqs[lim_ch].sensor, "alpha (deg)", "measurement - model (deg)",
+                                      limit_deg=limit(lim_ch), x_limit_deg=wf.alpha_limit_deg)))
     if samples:
         s = samples.get((ref.mach, "up"), {})
-        for name in ("alpha_zl", "beta_znp", "beta_zbu"):
+        for name in decl.truth_crossplots:
             if name in s:
                 d = s[name]
                 figs.append((f"{name}: calibrated - true vs true angle at Mach {ref.mach:.2f} (truth)",
                              figure_crossplot(d["true_rad"].to_numpy() * RAD2DEG,
                                               d["error_rad"].to_numpy() * RAD2DEG,
                                               f"{name} against the truth", "true angle (deg)",
-                                              "calibrated - true (deg)", limit_deg=0.5)))
-    sections.append(Section("Error cross-plots", "", figures=figs,
-                            tables=[("Nose-probe error growth with alpha", wf.nose_probe_growth)]))
-    mid = next((m.id for m in ref.problem.maneuvers if m.meta.get("kind") in ("pitch_doublet", "3211")),
+                                              "calibrated - true (deg)", limit_deg=limit(name))))
+    growth = ([(f"{reqs[lim_ch].sensor} ({lim_ch}): error growth with alpha", wf.alpha_limit_growth)]
+              if lim_ch else [])
+    sections.append(Section("Error cross-plots", "", figures=figs, tables=growth))
+    mid = next((m.id for m in ref.problem.maneuvers if m.meta.get("kind") in TIME_HISTORY_KINDS),
                ref.problem.maneuvers[0].id)
+    units = {c.name: (c.display_scale, c.display_unit) for c in ref.problem.channels}
     chans = {}
-    for name, r in res.items():
+    for name in decl.time_history:
+        r = res.get(name)
+        if r is None:
+            continue
         sel = r.maneuver == mid
-        if sel.any() and name in ("theta", "tas", "alpha_zl", "alpha_zr", "alpha_zsp", "beta_zsp",
-                                  "beta_znp", "alpha_zb"):
-            scale, unit = (RAD2DEG, "deg") if name != "tas" else (1.0, "m/s")
+        if sel.any():
+            scale, unit = units[name]
             chans[name] = (r.z[sel] * scale, r.y[sel] * scale, unit)
     if chans:
         t = res[next(iter(chans))].t_s[res[next(iter(chans))].maneuver == mid]

@@ -32,7 +32,7 @@ from estimator.calibrated import calibrated_channel
 from estimator.io import load_truth
 from estimator.problem import Problem
 from estimator.result import EstimationResult
-from estimator.workflow import RAD2DEG, REQUIREMENTS, WorkflowResult, apportion, three_sigma
+from estimator.workflow import RAD2DEG, WorkflowResult, apportion_biases, three_sigma
 
 
 def calibrated_errors(problem: Problem, result: EstimationResult) -> dict[str, pd.DataFrame]:
@@ -79,12 +79,12 @@ def calibrated_errors(problem: Problem, result: EstimationResult) -> dict[str, p
 def true_accuracy(wf: WorkflowResult) -> tuple[pd.DataFrame, dict[tuple[float, str], dict]]:
     """Table 2 against the truth, and the error samples per (Mach, gear) stage for plots."""
     rows, samples = [], {}
-    limit = wf.nose_probe_alpha_limit_deg
+    limit = wf.alpha_limit_deg
     for st in wf.usable:
         errs = calibrated_errors(st.problem, st.result)
         samples[(st.mach, "down" if st.gear_down else "up")] = errs
         for name, df in errs.items():
-            req = REQUIREMENTS.get(name)
+            req = wf.declarations.requirements.get(name)
             if req is None:
                 continue
             e = df["error_rad"].to_numpy() * RAD2DEG
@@ -112,32 +112,40 @@ def installation_recovery(wf: WorkflowResult) -> pd.DataFrame:
     """
     if wf.installation.empty:
         return pd.DataFrame()
-    bl, br = "b_l", "b_r"
+    families = dict(wf.declarations.apportion)  # label -> bias family
     rows = []
     for mach, g in wf.installation.groupby("mach"):
         st = next(s for s in wf.first if s.mach == mach)
         truth = true_parameters(st.problem, st.result.free_estimated).values
         ac = [a for a in sorted({m.aircraft for m in st.problem.maneuvers})
-              if f"{bl}[{a}]" in truth and f"{br}[{a}]" in truth]
-        ap = apportion({a: truth[f"{bl}[{a}]"] for a in ac}, {a: truth[f"{br}[{a}]"] for a in ac})
+              if all(f"{fam}[{a}]" in truth for fam in families.values())]
+        if not ac:
+            continue
+        ap = apportion_biases({k: {a: truth[f"{fam}[{a}]"] for a in ac} for k, fam in families.items()})
         inj = {}
         for m in st.problem.maneuvers:
             i = m.meta.get("injected", {})
-            inj.setdefault(m.aircraft, (i.get("vane_left.installation_bias_rad", math.nan),
-                                        i.get("vane_right.installation_bias_rad", math.nan)))
+            # the synthesizer's raw installation bias of the vane the family belongs to
+            inj.setdefault(m.aircraft, {fam: i.get(f"{_sensor_of(st.problem, fam)}.installation_bias_rad",
+                                                   math.nan) for fam in families.values()})
         for a in g.index:
             if a not in ap.index:
                 continue
             r = wf.installation.loc[a]
-            for side, j in (("left", 0), ("right", 1)):
+            for side, fam in families.items():
                 t = ap.loc[a, f"installation_{side}"] * RAD2DEG
                 est, std = r[f"installation_{side}_deg"], r[f"std_installation_{side}_deg"]
                 std_col = r.get(f"std_colored_installation_{side}_deg", math.nan)
                 rows.append({"aircraft": a, "vane": side, "mach": mach, "estimate_deg": est,
                              "truth_deg": t, "error_deg": est - t, "std_deg": std, "z": (est - t) / std,
                              "std_colored_deg": std_col, "z_colored": (est - t) / std_col,
-                             "injected_raw_deg": float(inj[a][j]) * RAD2DEG})
+                             "injected_raw_deg": float(inj[a][fam]) * RAD2DEG})
     return pd.DataFrame(rows)
+
+
+def _sensor_of(problem: Problem, family: str) -> str | None:
+    """The sensor of the channel whose model uses a bias family (its installation bias's truth)."""
+    return next((c.sensor for c in problem.channels if family in c.expression.names), None)
 
 
 def recovery(wf: WorkflowResult) -> pd.DataFrame:

@@ -168,8 +168,9 @@ def figure_time_history(
     return fig
 
 
-def figure_bias_vs_mach(bias: pd.DataFrame, reference_mach: float | None = None) -> Figure:
-    """Mean vane bias ``(b_l + b_r)/2`` against Mach per aircraft, with the fleet mean (paper Fig. 4).
+def figure_bias_vs_mach(bias: pd.DataFrame, reference_mach: float | None = None, *,
+                        bias_label: str = "mean bias") -> Figure:
+    """Mean vane bias (Tejas: ``(b_l + b_r)/2``) against Mach per aircraft, and the fleet mean (Fig. 4).
 
     The fleet mean per Mach (the unweighted mean over the aircraft at that Mach) is the update to the
     correction model; each aircraft's distance from it is its installation bias (SPEC §8).
@@ -182,6 +183,8 @@ def figure_bias_vs_mach(bias: pd.DataFrame, reference_mach: float | None = None)
         optionally ``true_mean_bias_deg`` ([deg], drawn as open markers "truth").
     reference_mach : if given, a vertical line marks the Mach number at which the installation biases
         are fixed [-].
+    bias_label : what the mean bias is, for the axis label and title (matplotlib mathtext allowed,
+        e.g. ``"$(b_l + b_r)/2$"``).
 
     Returns
     -------
@@ -226,8 +229,8 @@ def figure_bias_vs_mach(bias: pd.DataFrame, reference_mach: float | None = None)
         labels.append("truth (open markers)")
     ax.legend(handles, labels, fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     ax.set_xlabel("Mach number [-]", fontsize=9)
-    ax.set_ylabel(r"$(b_l + b_r)/2$ [deg]", fontsize=9)
-    ax.set_title(r"mean vane bias $(b_l + b_r)/2$ per aircraft (error bars $\pm 1\sigma$)", fontsize=10)
+    ax.set_ylabel(f"{bias_label} [deg]", fontsize=9)
+    ax.set_title(f"mean vane bias {bias_label} per aircraft (error bars $\\pm 1\\sigma$)", fontsize=10)
     _style_axes(ax)
     return fig
 

@@ -8,23 +8,30 @@ r"""The paper's calibration workflow over a fleet (Saraf & Kumaresan §3-4; SPEC
    estimation over all maneuvers (``fpr calibrate --single``) as the way on
    (:func:`no_bins_message`).
 2. **All aircraft together, biases free.** Each bin is estimated with every aircraft's maneuvers
-   (per-aircraft vane biases ``b_l``, ``b_r``; shared tables with ``f1(0)`` held).
-3. **Apportionment** (paper §4.1, Fig. 4). Per bin, aircraft ``a`` has the mean vane bias
+   (per-aircraft vane biases, Tejas: ``b_l``, ``b_r``; shared tables with ``f1(0)`` held).
+3. **Apportionment** (paper §4.1, Fig. 4) of the bias families the model set names
+   (``[workflow] apportion_biases``). Per bin, aircraft ``a`` has the mean vane bias
    ``m_a = (b_l,a + b_r,a) / 2``; the fleet mean ``M = mean_a m_a`` is the correction model's
    update; ``m_a - M`` is the aircraft's mean installation bias. Installation biases are taken
-   at the reference Mach (0.5) and held for every Mach: ``b_l,a^inst = b_l,a - M``,
-   ``b_r,a^inst = b_r,a - M`` there (a fleet whose installation biases average to zero: the only
-   split the data allow). Standard deviations follow from the estimates' covariance.
-4. **Installation biases fixed.** Each bin is estimated again with ``b_l``, ``b_r`` held at the
-   installation biases and ``f1`` (now including ``f1(0)``) and ``f2`` free: the correction-model
-   update valid for the whole fleet; the other sensors' tables, biases and scale factors come
-   out of the same estimation.
+   at the reference Mach (the model set's ``reference_mach``, paper 0.5) and held for every Mach:
+   ``b_l,a^inst = b_l,a - M``, ``b_r,a^inst = b_r,a - M`` there (a fleet whose installation
+   biases average to zero: the only split the data allow). Standard deviations follow from the
+   estimates' covariance. One family (a single vane) or more apportion the same way.
+4. **Installation biases fixed.** Each bin is estimated again with the biases held at the
+   installation biases and the model set's ``apportion_tables`` free (Tejas: ``f1``, now
+   including ``f1(0)``, started where the fleet-mean bias puts it, and ``f2``): the
+   correction-model update valid for the whole fleet; the other sensors' tables, biases and scale
+   factors come out of the same estimation.
 5. **Gear down.** The gear-down maneuvers of each bin, biases held: the gear-down tables.
-6. **Accuracy** (Table 2). Per sensor and bin, 3 sigma of measurement minus model at the final
-   estimate (about zero: a mean offset counts), against the desired accuracy; the nose probe's
-   sideslip only below its usable angle of attack, found from the growth of its error with alpha
-   (paper Fig. 7): the highest alpha up to which every 2-degree alpha band keeps its 3 sigma
+6. **Accuracy** (Table 2). Per sensor and bin (the model set's ``[requirements]``), 3 sigma of
+   measurement minus model at the final estimate (about zero: a mean offset counts), against the
+   desired accuracy; a ``low_alpha_only`` channel (Tejas: the nose probe's sideslip) only below
+   the usable angle of attack found from the growth of the ``alpha_limit_channel``'s error with
+   alpha (paper Fig. 7): the highest alpha up to which every 2-degree alpha band keeps its 3 sigma
    within the desired value.
+
+What is particular to the aircraft (channels, requirements, the families apportioned) comes from
+the model set (:class:`~estimator.io.modelset.Declarations`, carried by the problem's channels).
 
 Every estimation carries a verdict (:mod:`estimator.verdict`). A bin whose first estimation is a
 failure is left out of the apportionment and the later steps (its biases are not to be trusted),
@@ -47,6 +54,7 @@ import numpy as np
 import pandas as pd
 
 from estimator.io import subproblem
+from estimator.io.modelset import Declarations, Requirement, declarations_of
 from estimator.model import Model
 from estimator.problem import Problem
 from estimator.result import EstimationResult
@@ -57,34 +65,11 @@ from estimator.verdict import Status as _Status
 RAD2DEG = 180.0 / math.pi
 
 
-@dataclass(frozen=True)
-class Requirement:
-    """Desired 3-sigma accuracy of a calibrated channel (paper §4, Table 2).
-
-    Attributes
-    ----------
-    sensor : how tables name it.
-    desired_deg : desired 3-sigma accuracy, deg.
-    low_alpha_only : judged only below the sensor's usable angle of attack (the nose probe).
-    """
-
-    sensor: str
-    desired_deg: float
-    low_alpha_only: bool = False
-
-
-#: The paper's desired accuracies; the boom (a flight-test reference, not in the paper's table)
-#: is held to the vanes' +-0.5 deg.
-REQUIREMENTS: Mapping[str, Requirement] = {
-    "alpha_zl": Requirement("vane AOA left", 0.5),
-    "alpha_zr": Requirement("vane AOA right", 0.5),
-    "alpha_zsp": Requirement("side-probe AOA", 1.0),
-    "beta_zsp": Requirement("side-probe AOSS", 1.0),
-    "beta_znp": Requirement("nose-probe AOSS (low AOA)", 0.5, low_alpha_only=True),
-    "alpha_zb": Requirement("boom AOA", 0.5),
-    "beta_zbu": Requirement("boom AOSS upper vane", 0.5),
-    "beta_zbl": Requirement("boom AOSS lower vane", 0.5),
-}
+__all__ = [
+    "ChannelResiduals", "Requirement", "Stage", "WorkflowOptions", "WorkflowResult", "alpha_limit",
+    "apportion", "apportion_biases", "assign_bins", "no_bins_message", "run_workflow",
+    "stage_residuals", "three_sigma", "vane_biases",
+]
 
 
 @dataclass(frozen=True)
@@ -96,13 +81,13 @@ class WorkflowOptions:
     bin_width : Mach bin width; bins are centred on its multiples.
     max_mach_variation : maneuvers whose Mach varies by more than this are left out.
     min_maneuvers : bins with fewer maneuvers are left out.
-    reference_mach : Mach of the bin whose installation biases hold for every bin (paper: 0.5).
-    vane_biases : the left and right vane bias families.
-    vane_tables : the vane correction tables re-estimated with the installation biases held.
-    nose_probe_channel : the channel whose usable alpha range is found from its error growth.
-    alpha_band_deg : width of the alpha bands of that search, deg.
+    reference_mach : Mach of the bin whose installation biases hold for every bin; None: the model
+        set's (``[workflow] reference_mach``, paper: 0.5).
+    alpha_band_deg : width of the alpha bands of the usable-alpha search, deg.
     min_band_samples : bands with fewer samples are not judged.
-    requirements : channel -> desired accuracy.
+    declarations : what the model set declares (requirements, the bias families apportioned and
+        the tables re-estimated, the usable-alpha channel); None: those of the model set the
+        problem's channels come from (:func:`~estimator.io.modelset.declarations_of`).
     solver : estimator settings for every estimation (the steps that start from an earlier
         step's estimate start from it: ``start = "given"``).
     progress : called with a line of text as the workflow proceeds.
@@ -111,13 +96,10 @@ class WorkflowOptions:
     bin_width: float = 0.1
     max_mach_variation: float = 0.05
     min_maneuvers: int = 3
-    reference_mach: float = 0.5
-    vane_biases: tuple[str, str] = ("b_l", "b_r")
-    vane_tables: tuple[str, ...] = ("f1", "f2")
-    nose_probe_channel: str = "beta_znp"
+    reference_mach: float | None = None
     alpha_band_deg: float = 2.0
     min_band_samples: int = 200
-    requirements: Mapping[str, Requirement] = field(default_factory=lambda: dict(REQUIREMENTS))
+    declarations: Declarations | None = None
     solver: SolverOptions = field(default_factory=SolverOptions)
     progress: Callable[[str], None] | None = None
 
@@ -155,17 +137,20 @@ class WorkflowResult:
     maneuvers : one row per maneuver: id, aircraft, configuration, mach_mean, mach_variation,
         gear_down, bin (centre Mach, NaN if left out), used, reason.
     first, final, gear_down : the estimations of steps 2, 4 and 5 (one per bin).
-    vane_bias : per bin and aircraft (step 3): b_l, b_r, their mean, its std, the fleet mean and
-        the aircraft's deviation from it, deg.
-    installation : per aircraft: installation biases b_l, b_r, their mean and stds (deg), and
-        the Mach they were taken at.
+    vane_bias : per bin and aircraft (step 3): each apportioned bias (``<family>_deg``), their
+        mean, its std, the fleet mean and the aircraft's deviation from it, deg.
+    installation : per aircraft: installation biases (``installation_<label>_deg`` per
+        apportioned family, their mean, and stds), and the Mach they were taken at.
     accuracy : Table 2: sensor, channel, mach, gear, n, three_sigma_deg, desired_deg, passed.
-    nose_probe_growth : alpha band (deg), samples, 3 sigma (deg) of the nose probe's residual.
-    nose_probe_alpha_limit_deg : its usable alpha limit (None without nose-probe data).
+    alpha_limit_growth : alpha band (deg), samples, 3 sigma (deg) of the residual of the model
+        set's ``alpha_limit_channel`` (Tejas: the nose probe's sideslip).
+    alpha_limit_deg : its usable alpha limit (None without its data).
     notes : what a reader must know (exclusions, fallbacks).
     elapsed_s : wall time.
     findings : the workflow's own findings (a failed bin left out) and every stage's warnings and
         failures, each message prefixed with its stage.
+    declarations : what the model set declared (requirements, apportionment, report channels).
+    reference_mach : the Mach the installation biases were meant to be taken at.
     """
 
     maneuvers: pd.DataFrame
@@ -175,13 +160,18 @@ class WorkflowResult:
     vane_bias: pd.DataFrame
     installation: pd.DataFrame
     accuracy: pd.DataFrame
-    nose_probe_growth: pd.DataFrame
-    nose_probe_alpha_limit_deg: float | None
+    alpha_limit_growth: pd.DataFrame
+    alpha_limit_deg: float | None
     notes: tuple[str, ...] = ()
     elapsed_s: float = 0.0
-    #: the table that starts at the identity (its update is shown)
-    identity_table: str = "f1"
     findings: tuple[Finding, ...] = ()
+    declarations: Declarations = field(default_factory=Declarations)
+    reference_mach: float | None = None
+
+    @property
+    def identity_table(self) -> str | None:
+        """The table that starts at the identity (its update is shown), from the model set."""
+        return self.declarations.identity_table
 
     @property
     def stages(self) -> tuple[Stage, ...]:
@@ -329,45 +319,59 @@ def no_bins_message(source: str, bins: pd.DataFrame, opt: WorkflowOptions) -> st
 
 
 # ---------------------------------------------------------------------------------- apportioning
-def apportion(biases_left: Mapping[str, float], biases_right: Mapping[str, float],
-              covariance: np.ndarray | None = None) -> pd.DataFrame:
-    """Split per-aircraft vane biases into a fleet mean and per-aircraft installation biases.
+def apportion_biases(biases: Mapping[str, Mapping[str, float]],
+                     covariance: np.ndarray | None = None) -> pd.DataFrame:
+    """Split per-aircraft biases into a fleet mean and per-aircraft installation biases.
 
     Parameters
     ----------
-    biases_left, biases_right : aircraft -> b_l, b_r (any angle unit; the same out).
-    covariance : (2A, 2A) covariance of (b_l of every aircraft, then b_r), in the order of
-        ``biases_left``; None: no standard deviations.
+    biases : label -> (aircraft -> bias), one entry per apportioned family (any angle unit; the
+        same out), every family naming the same aircraft.
+    covariance : (F A, F A) covariance of the biases (every aircraft's of the first family, then
+        of the next), in the order of ``biases``; None: no standard deviations.
 
     Returns
     -------
-    One row per aircraft: ``b_l``, ``b_r``, ``mean_bias`` = (b_l + b_r)/2, ``fleet_mean`` (the
-    correction-model update), ``installation_mean`` = mean_bias - fleet_mean,
-    ``installation_left`` = b_l - fleet_mean, ``installation_right`` = b_r - fleet_mean, and
-    ``std_*`` of each (NaN without a covariance).
+    One row per aircraft: each family's bias (a column per label), ``mean_bias`` (their mean),
+    ``fleet_mean`` (its mean over the aircraft: the correction-model update),
+    ``installation_mean`` = mean_bias - fleet_mean, ``installation_<label>`` = the family's bias
+    - fleet_mean, and ``std_*`` of each (NaN without a covariance).
     """
-    ac = list(biases_left)
-    if set(ac) != set(biases_right) or not ac:
-        raise ValueError(f"apportion: left and right biases must name the same aircraft, got "
-                         f"{sorted(biases_left)} and {sorted(biases_right)}")
-    n = len(ac)
-    b = np.array([biases_left[a] for a in ac] + [biases_right[a] for a in ac], dtype=float)
+    labels = list(biases)
+    ac = list(biases[labels[0]]) if labels else []
+    if not ac or any(set(biases[k]) != set(ac) for k in labels):
+        raise ValueError("apportion: every bias family must name the same aircraft, got "
+                         + " and ".join(str(sorted(biases[k])) for k in labels))
+    n, f = len(ac), len(labels)
+    b = np.array([biases[k][a] for k in labels for a in ac], dtype=float)
     # every output is linear in b: rows of L
-    half = 0.5 * np.hstack([np.eye(n), np.eye(n)])            # mean bias per aircraft
-    fleet = np.full((1, n), 1.0 / n) @ half                     # fleet mean
+    pick = {k: np.hstack([np.eye(n) if j == i else np.zeros((n, n)) for j in range(f)])
+            for i, k in enumerate(labels)}
+    mean = sum(pick.values()) / f                               # mean bias per aircraft
+    fleet = np.full((1, n), 1.0 / n) @ mean                     # fleet mean
     L = {
-        "mean_bias": half,
+        "mean_bias": mean,
         "fleet_mean": np.repeat(fleet, n, axis=0),
-        "installation_mean": half - fleet,
-        "installation_left": np.hstack([np.eye(n), np.zeros((n, n))]) - fleet,
-        "installation_right": np.hstack([np.zeros((n, n)), np.eye(n)]) - fleet,
+        "installation_mean": mean - fleet,
+        **{f"installation_{k}": pick[k] - fleet for k in labels},
     }
-    out = pd.DataFrame({"aircraft": ac, "b_l": b[:n], "b_r": b[n:]})
+    out = pd.DataFrame({"aircraft": ac, **{k: b[i * n:(i + 1) * n] for i, k in enumerate(labels)}})
     for name, M in L.items():
         out[name] = M @ b
         out[f"std_{name}"] = (np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", M, covariance, M), 0.0))
                               if covariance is not None else np.nan)
     return out.set_index("aircraft")
+
+
+def apportion(biases_left: Mapping[str, float], biases_right: Mapping[str, float],
+              covariance: np.ndarray | None = None) -> pd.DataFrame:
+    """:func:`apportion_biases` of a left and a right vane (labels ``left``, ``right``): columns
+    ``left``, ``right``, ``mean_bias`` = (left + right)/2, ``fleet_mean``, ``installation_mean``,
+    ``installation_left``, ``installation_right`` and their ``std_*``."""
+    if set(biases_left) != set(biases_right) or not biases_left:
+        raise ValueError(f"apportion: left and right biases must name the same aircraft, got "
+                         f"{sorted(biases_left)} and {sorted(biases_right)}")
+    return apportion_biases({"left": biases_left, "right": biases_right}, covariance)
 
 
 # --------------------------------------------------------------------------------------- running
@@ -417,10 +421,15 @@ def _stage_findings(stages: Sequence[Stage]) -> list[Finding]:
     return out
 
 
-def vane_biases(problem: Problem, result: EstimationResult, names: tuple[str, str] = ("b_l", "b_r")
+def vane_biases(problem: Problem, result: EstimationResult, names: Sequence[str] | None = None
                 ) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
-    """Aircraft whose two vane biases were estimated (and determined) in an estimation, their values
-    (all left biases, then all right ones, rad) and covariance, Cramér-Rao and honest (coloured)."""
+    """Aircraft whose apportioned biases were all estimated (and determined) in an estimation, their
+    values (every aircraft's of the first family, then of the next, rad) and covariance,
+    Cramér-Rao and honest (coloured).
+
+    ``names``: the bias families; None: the model set's ``[workflow] apportion_biases``.
+    """
+    names = list(declarations_of(problem).apportion.values()) if names is None else list(names)
     ac = sorted({m.aircraft for m in problem.maneuvers})
     ok = []
     for a in ac:
@@ -429,7 +438,7 @@ def vane_biases(problem: Problem, result: EstimationResult, names: tuple[str, st
         if all(k in result.parameters and est[result.parameters.index(k)] and np.isfinite(result.std(k))
                for k in keys):
             ok.append(a)
-    keys = [f"{names[0]}[{a}]" for a in ok] + [f"{names[1]}[{a}]" for a in ok]
+    keys = [f"{n}[{a}]" for n in names for a in ok]
     vals = np.array([result.value(k) for k in keys])
     return ok, vals, result.covariance(keys), result.covariance(keys, colored=True)
 
@@ -449,8 +458,13 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     up = bins[bins["used"] & ~bins["gear_down"]]
     if up.empty:
         raise ValueError(no_bins_message(problem.source, bins, opt))
-    bl, br = opt.vane_biases
-    has_vanes = bl in problem.parameters.specs and br in problem.parameters.specs
+    decl = opt.declarations or declarations_of(problem)
+    ref_mach = opt.reference_mach if opt.reference_mach is not None else decl.reference_mach
+    families = dict(decl.apportion)  # label -> bias family
+    apportioned = bool(families) and all(f in problem.parameters.specs for f in families.values())
+    if apportioned and ref_mach is None:
+        raise ValueError(f"{problem.source}: apportioning {', '.join(families.values())} needs a reference "
+                         "Mach: declare [workflow] reference_mach in the model set or pass reference_mach")
     # ---- step 2
     _say(opt, "step 2: every aircraft together, vane biases free")
     first = tuple(_run(problem, g["id"].tolist(), "biases free", float(b), False, opt)
@@ -462,34 +476,38 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     first_ok = tuple(st for st in first if st.result.success)
     # ---- step 3
     vb_rows, inst = [], pd.DataFrame()
-    if has_vanes:
+    inst_keys = [*(f"installation_{k}" for k in families), "installation_mean"]
+    if apportioned:
         per_bin = {}
         for st in first_ok:
-            ac, vals, cov, cov_col = vane_biases(st.problem, st.result, opt.vane_biases)
+            ac, vals, cov, cov_col = vane_biases(st.problem, st.result, list(families.values()))
             if not ac:
                 continue
             n = len(ac)
-            left, right = dict(zip(ac, vals[:n], strict=True)), dict(zip(ac, vals[n:], strict=True))
-            ap = apportion(left, right, cov)
-            col = apportion(left, right, cov_col)
-            for k in ("installation_left", "installation_right", "installation_mean"):
+            per_family = {k: dict(zip(ac, vals[i * n:(i + 1) * n], strict=True))
+                          for i, k in enumerate(families)}
+            ap = apportion_biases(per_family, cov)
+            col = apportion_biases(per_family, cov_col)
+            for k in inst_keys:
                 ap[f"std_colored_{k}"] = col[f"std_{k}"]
             per_bin[st.mach] = ap
             for a, r in ap.iterrows():
-                vb_rows.append({"mach": st.mach, "aircraft": a, "b_l_deg": r["b_l"] * RAD2DEG,
-                                "b_r_deg": r["b_r"] * RAD2DEG, "mean_bias_deg": r["mean_bias"] * RAD2DEG,
+                vb_rows.append({"mach": st.mach, "aircraft": a,
+                                **{f"{fam}_deg": r[k] * RAD2DEG for k, fam in families.items()},
+                                "mean_bias_deg": r["mean_bias"] * RAD2DEG,
                                 "std_deg": r["std_mean_bias"] * RAD2DEG,
                                 "fleet_mean_deg": r["fleet_mean"] * RAD2DEG,
                                 "deviation_deg": r["installation_mean"] * RAD2DEG,
                                 "std_deviation_deg": r["std_installation_mean"] * RAD2DEG})
         if not per_bin and not failed:
-            raise ValueError(f"{problem.source}: no bin determines the vane biases {bl}, {br}")
-    if has_vanes and per_bin:
-        ref = min(per_bin, key=lambda m: (abs(m - opt.reference_mach), m))
-        if abs(ref - opt.reference_mach) > 1e-9:
-            why = ("its estimation failed" if any(abs(st.mach - opt.reference_mach) < 1e-9 for st in failed)
+            raise ValueError(f"{problem.source}: no bin determines the vane biases "
+                             f"{', '.join(families.values())}")
+    if apportioned and per_bin:
+        ref = min(per_bin, key=lambda m: (abs(m - ref_mach), m))
+        if abs(ref - ref_mach) > 1e-9:
+            why = ("its estimation failed" if any(abs(st.mach - ref_mach) < 1e-9 for st in failed)
                    else "there is none")
-            notes.append(f"no Mach {opt.reference_mach} bin to take the installation biases from ({why}): "
+            notes.append(f"no Mach {ref_mach} bin to take the installation biases from ({why}): "
                          f"taken at Mach {ref:.2f}")
         rows = []
         all_ac = sorted({m.aircraft for m in problem.maneuvers})
@@ -504,12 +522,9 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
                              f"biases are taken at Mach {m:.2f}")
             r = per_bin[m].loc[a]
             rows.append({"aircraft": a, "mach": m,
-                         **{f"{k}_deg": r[k] * RAD2DEG for k in ("installation_left", "installation_right",
-                                                                  "installation_mean")},
-                         **{f"std_{k}_deg": r[f"std_{k}"] * RAD2DEG
-                            for k in ("installation_left", "installation_right", "installation_mean")},
-                         **{f"std_colored_{k}_deg": r[f"std_colored_{k}"] * RAD2DEG
-                            for k in ("installation_left", "installation_right", "installation_mean")},
+                         **{f"{k}_deg": r[k] * RAD2DEG for k in inst_keys},
+                         **{f"std_{k}_deg": r[f"std_{k}"] * RAD2DEG for k in inst_keys},
+                         **{f"std_colored_{k}_deg": r[f"std_colored_{k}"] * RAD2DEG for k in inst_keys},
                          "n_aircraft_in_bin": len(per_bin[m])})
         inst = pd.DataFrame(rows).set_index("aircraft") if rows else pd.DataFrame()
         if len(all_ac) < 2:
@@ -518,17 +533,18 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     # ---- step 4
     fixed_bias: dict[str, float] = {}
     for a, r in inst.iterrows():
-        fixed_bias[f"{bl}[{a}]"] = r["installation_left_deg"] / RAD2DEG
-        fixed_bias[f"{br}[{a}]"] = r["installation_right_deg"] / RAD2DEG
-    free4 = {k: False for k in fixed_bias} | {t: True for t in opt.vane_tables
+        for k, fam in families.items():
+            fixed_bias[f"{fam}[{a}]"] = r[f"installation_{k}_deg"] / RAD2DEG
+    free4 = {k: False for k in fixed_bias} | {t: True for t in decl.apportion_tables
                                                if t in problem.parameters.specs}
+    ident = decl.identity_table
     _say(opt, "step 4: installation biases fixed, correction tables free")
     final = []
     for st in first_ok:
         start = dict(zip(st.result.parameters.keys, st.result.values, strict=True))
         fm = [r["fleet_mean_deg"] for r in vb_rows if r["mach"] == st.mach]
-        if fm and "f1" in problem.parameters.specs:  # start f1 where the fleet-mean bias puts it
-            for k in [k for k in start if k.startswith("f1[")]:
+        if fm and ident in problem.parameters.specs:  # start it where the fleet-mean bias puts it
+            for k in [k for k in start if k.startswith(f"{ident}[")]:
                 start[k] += fm[0] / RAD2DEG
         ids = [m.id for m in st.problem.maneuvers]
         final.append(_run(problem, ids, "installation biases fixed", st.mach, False, opt,
@@ -555,13 +571,15 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
         if not st.result.success:
             findings.append(_stage_failed(st, "Table 2 and the gear-down correction tables"))
     # ---- step 6: from the estimations that succeeded only
-    acc, growth, limit = _accuracy(tuple(final_ok), tuple(st for st in gear if st.result.success), opt)
+    acc, growth, limit = _accuracy(tuple(final_ok), tuple(st for st in gear if st.result.success), opt,
+                                   decl)
     vb = pd.DataFrame(vb_rows)
     findings += _stage_findings((*first, *final, *gear))
     return WorkflowResult(maneuvers=bins, first=first, final=final, gear_down=tuple(gear), vane_bias=vb,
-                          installation=inst, accuracy=acc, nose_probe_growth=growth,
-                          nose_probe_alpha_limit_deg=limit, notes=tuple(notes),
-                          elapsed_s=time.perf_counter() - t_start, findings=tuple(findings))
+                          installation=inst, accuracy=acc, alpha_limit_growth=growth,
+                          alpha_limit_deg=limit, notes=tuple(notes),
+                          elapsed_s=time.perf_counter() - t_start, findings=tuple(findings),
+                          declarations=decl, reference_mach=ref_mach)
 
 
 # --------------------------------------------------------------------------------------- accuracy
@@ -646,11 +664,11 @@ def alpha_limit(alpha_deg: np.ndarray, err_deg: np.ndarray, desired_deg: float, 
     return bands, limit
 
 
-def _accuracy(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOptions):
-    np_ch = opt.nose_probe_channel
+def _accuracy(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOptions, decl: Declarations):
+    lim_ch = decl.alpha_limit_channel
     growth, limit = pd.DataFrame(), None
-    req_np = opt.requirements.get(np_ch)
-    pooled = [st.residuals[np_ch] for st in final if np_ch in st.residuals]
+    req_np = decl.requirements.get(lim_ch) if lim_ch else None
+    pooled = [st.residuals[lim_ch] for st in final if lim_ch in st.residuals]
     if pooled and req_np is not None:
         a = np.concatenate([p.alpha_t_rad for p in pooled]) * RAD2DEG
         e = np.concatenate([p.e for p in pooled]) * RAD2DEG
@@ -658,7 +676,7 @@ def _accuracy(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOption
     rows = []
     for st in (*final, *gear):
         for name, r in st.residuals.items():
-            req = opt.requirements.get(name)
+            req = decl.requirements.get(name)
             if req is None:
                 continue
             e = r.e * RAD2DEG

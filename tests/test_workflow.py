@@ -81,3 +81,73 @@ def test_assign_bins_leaves_out_varying_mach_and_small_bins():
     assert not df.loc["m3", "used"] and "only 1" in df.loc["m3", "reason"]
     assert not df.loc["m4", "used"] and "gear-down" in df.loc["m4", "reason"]
     assert isinstance(df, pd.DataFrame)
+
+
+def test_apportionment_of_one_bias_family_is_the_fleet_mean_split():
+    # one vane per aircraft (a UAV fleet): the installation bias is the bias minus the fleet mean
+    from estimator.workflow import apportion_biases
+
+    b = {"A": 0.3, "B": 0.1, "C": 0.2}
+    ap = apportion_biases({"vane": b}, np.eye(3) * 0.01**2)
+    np.testing.assert_allclose(ap["fleet_mean"], 0.2)
+    np.testing.assert_allclose(ap["installation_vane"], [0.1, -0.1, 0.0], atol=1e-15)
+    np.testing.assert_allclose(ap["installation_mean"], ap["installation_vane"])
+    np.testing.assert_allclose(ap["std_fleet_mean"], 0.01 / np.sqrt(3))
+    # two families give what the left/right form gives
+    two = apportion_biases({"left": b, "right": {"A": 0.1, "B": 0.0, "C": 0.5}})
+    pair = apportion(b, {"A": 0.1, "B": 0.0, "C": 0.5})
+    pd.testing.assert_frame_equal(two, pair)
+
+
+def _tejas_raw():
+    import tomllib
+
+    from estimator.io.modelset import model_set_path
+
+    with open(model_set_path("tejas"), "rb") as fh:
+        return tomllib.load(fh)
+
+
+@pytest.mark.parametrize("edit, fragments", [
+    (lambda r: r["requirements"].update(alpha_zz=r["requirements"].pop("alpha_zr")),
+     ["[requirements]", "'alpha_zz' is not a channel", "did you mean 'alpha_zr'"]),
+    (lambda r: r["workflow"].update(reference_mac=r["workflow"].pop("reference_mach")),
+     ["[workflow]", "'reference_mac'", "did you mean 'reference_mach'"]),
+    (lambda r: r["workflow"].update(apportion_biases={"left": "f1"}),
+     ["apportion_biases left = 'f1'", "aircraft-scoped"]),
+    (lambda r: r["workflow"].update(apportion_tables=["f1", "f9"]),
+     ["apportion_tables", "'f9' is not a table", "f5"]),
+    (lambda r: r["workflow"].pop("alpha_limit_channel"),
+     ["low_alpha_only", "alpha_limit_channel"]),
+    (lambda r: r["initial_conditions"].update(alpha=["alpha_zl", "alpha_zbb"]),
+     ["[initial_conditions] alpha", "'alpha_zbb'", "did you mean 'alpha_zb'"]),
+    (lambda r: r["report"].update(time_history="theta"), ["[report] time_history", "list"]),
+    (lambda r: r.update(reqirements={}), ["unknown key 'reqirements'", "did you mean 'requirements'"]),
+])
+def test_model_set_declarations_name_what_is_wrong(edit, fragments):
+    from estimator.io.modelset import parse_model_set
+
+    raw = _tejas_raw()
+    edit(raw)
+    with pytest.raises(ValueError) as info:
+        parse_model_set(raw, "my_set.toml")
+    msg = str(info.value)
+    for frag in ["my_set.toml", *fragments]:
+        assert frag in msg, msg
+
+
+def test_tejas_declarations_reach_the_workflow_through_the_channels():
+    from estimator.io.modelset import declarations_of, load_model_set
+    from estimator.problem import ChannelSpec
+
+    channels, _ = load_model_set("tejas")
+    decl = declarations_of(channels)
+    assert decl.reference_mach == 0.5 and decl.apportion == {"left": "b_l", "right": "b_r"}
+    assert decl.requirements["beta_znp"].low_alpha_only and decl.alpha_limit_channel == "beta_znp"
+    assert decl.initial_conditions.alpha[0] == "alpha_zl"
+    # a channel built by hand declares nothing: no Table 2 rows, no apportionment
+    plain = ChannelSpec(channels[6].name, channels[6].column, channels[6].model, channels[6].sensor,
+                        channels[6].delay, channels[6].recorder, channels[6].unit,
+                        channels[6].display_scale, channels[6].display_unit, channels[6].measures)
+    assert declarations_of([plain]).requirements == {} and not declarations_of([plain]).apportion
+    assert declarations_of([plain, channels[6]]) is decl

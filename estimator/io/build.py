@@ -26,7 +26,8 @@ def select_channels(channels: Sequence[ChannelSpec], explicit: Sequence[str] | N
         return list(channels)
     by_name = {c.name: c for c in channels}
     if isinstance(explicit, str) or not all(isinstance(n, str) for n in explicit):
-        raise DataError(f"{where}: channels must be a list of channel names, e.g. [\"phi\", \"alpha_zl\"]")
+        example = ", ".join(f'"{c.name}"' for c in channels[:2])
+        raise DataError(f"{where}: channels must be a list of channel names, e.g. [{example}]")
     unknown = [n for n in explicit if n not in by_name]
     if unknown:
         raise DataError(f"{where}: channels {unknown} are not in the model set (it has {list(by_name)}); "

@@ -44,6 +44,33 @@ A model set (``estimator/models/tejas.toml`` is the default, the paper's Table 1
 
 Keys ending in ``_deg`` are degrees (for a "rad/s" parameter, deg/s) and are converted here;
 ``values_deg`` / ``values`` may give one value per instance (``{PV1 = 0.2}``).
+
+Everything else particular to the aircraft is declared beside them (:class:`Declarations`;
+optional, each name checked against the model set's channels and parameters)::
+
+    [requirements]                 # Table 2: a row per channel, its desired 3-sigma accuracy
+    alpha_zl = { sensor = "vane AOA left", desired_3sigma_deg = 0.5 }
+    beta_znp = { sensor = "nose-probe AOSS (low AOA)", desired_3sigma_deg = 0.5, low_alpha_only = true }
+
+    [workflow]                     # the fleet workflow (estimator.workflow)
+    reference_mach = 0.5           # the bin whose installation biases hold for every bin
+    apportion_biases = { left = "b_l", right = "b_r" }   # label = aircraft-scoped bias family
+    apportion_tables = ["f1", "f2"]    # re-estimated with the installation biases held
+    identity_table = "f1"          # starts at the identity; takes the fleet-mean bias
+    alpha_limit_channel = "beta_znp"   # its error growth sets the usable alpha (low_alpha_only)
+
+    [initial_conditions]           # the data the start values come from
+    tas = "tas"                    # and phi, theta, psi, h (default: those names)
+    alpha = ["alpha_zl", "alpha_zr"]   # the first a maneuver has (none: 0)
+    beta = ["beta_zsp"]
+
+    [report]                       # the channels of the report's figures
+    crossplots = ["alpha_zl"]      # measurement - model vs model (paper Fig. 5)
+    truth_crossplots = ["alpha_zl"]    # calibrated - true (synthetic data)
+    time_history = ["theta", "tas", "alpha_zl"]   # measured vs model (paper Fig. 3)
+
+The channels read from a model set carry these (:class:`DeclaredChannel`), so that a problem
+built from it tells the workflow and its report what to show (:func:`declarations_of`).
 """
 
 from __future__ import annotations
@@ -51,7 +78,7 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -73,9 +100,6 @@ MIN_DURATION_S = 5.0
 #: Initial-condition start values average the first this many samples (noise), see
 #: :func:`initial_condition_starts`.
 IC_AVERAGE_SAMPLES = 5
-#: Measured flow channels used (first one present) for the start values of w0 and v0.
-ALPHA_SOURCES = ("alpha_zl", "alpha_zr", "alpha_zb", "alpha_zsp")
-BETA_SOURCES = ("beta_zsp", "beta_znp", "beta_zbu", "beta_zbl")
 _PAIRED_KEYS = ("value", "bounds", "breakpoints", "values")
 #: Signals a channel model may use that refer to the channel itself: ``z`` its measurement,
 #: ``zhat`` its modelled measurement (see :mod:`estimator.problem`).
@@ -154,11 +178,227 @@ def parse_parameter(name: str, d: Mapping, where: str) -> ParameterSpec:
         raise ValueError(f"{where}: {exc}") from None
 
 
-def parse_model_set(raw: Mapping, source: str) -> tuple[list[ChannelSpec], list[ParameterSpec]]:
-    """The channels and parameter specs of a model set's TOML (``source`` names it in messages)."""
+# ------------------------------------------------------------------------------ declarations
+@dataclass(frozen=True)
+class Requirement:
+    """Desired 3-sigma accuracy of a calibrated channel (paper §4, Table 2): ``[requirements]``.
+
+    Attributes
+    ----------
+    sensor : how tables name it (Table 2's row).
+    desired_deg : desired 3-sigma accuracy, deg.
+    low_alpha_only : judged only below the usable angle of attack that the workflow finds from the
+        error growth of the ``alpha_limit_channel``.
+    """
+
+    sensor: str
+    desired_deg: float
+    low_alpha_only: bool = False
+
+
+@dataclass(frozen=True)
+class InitialConditionSources:
+    """The data the per-maneuver initial conditions start from: ``[initial_conditions]``.
+
+    Attributes
+    ----------
+    tas, phi, theta, psi, h : data columns of true airspeed (m/s), the Euler angles (rad) and the
+        altitude (m).
+    alpha, beta : flow-angle columns, rad: the first one a maneuver has gives the start values'
+        angle of attack / sideslip (none: 0).
+    """
+
+    tas: str = "tas"
+    phi: str = "phi"
+    theta: str = "theta"
+    psi: str = "psi"
+    h: str = "h"
+    alpha: tuple[str, ...] = ()
+    beta: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Declarations:
+    """Everything aircraft-specific a model set declares besides its channels and parameters.
+
+    The calibration workflow (:mod:`estimator.workflow`), its report and the initial conditions
+    read these, never a channel or parameter name of their own: another aircraft needs another
+    model set, not Python. The defaults (a model set without these tables) ask for nothing: no
+    Table 2 rows, no apportionment, no report figures by channel.
+
+    Attributes
+    ----------
+    source : the model set's file.
+    requirements : channel -> its Table 2 row and desired accuracy, in the model set's order.
+    reference_mach : ``[workflow]``: the Mach of the bin whose installation biases hold for every
+        bin (paper: 0.5); None without apportionment.
+    apportion : label -> bias family (aircraft-scoped) split per aircraft into the fleet mean and
+        installation biases (the labels name the result's columns, e.g. ``installation_left_deg``).
+    apportion_tables : the tables re-estimated with the installation biases held.
+    identity_table : the table that starts at the identity: it takes over the fleet-mean bias and
+        is reported as its update ``f(x) - x``; None: none.
+    alpha_limit_channel : the channel whose usable angle of attack is found from its error growth
+        (paper Fig. 7); None: none.
+    initial_conditions : where the start values come from.
+    crossplots : ``[report]``: channels of the measurement - model cross-plots (paper Fig. 5).
+    truth_crossplots : channels of the calibrated - true cross-plots (synthetic data only).
+    time_history : channels of the time-history figure (paper Fig. 3).
+    """
+
+    source: str = ""
+    requirements: Mapping[str, Requirement] = field(default_factory=dict)
+    reference_mach: float | None = None
+    apportion: Mapping[str, str] = field(default_factory=dict)
+    apportion_tables: tuple[str, ...] = ()
+    identity_table: str | None = None
+    alpha_limit_channel: str | None = None
+    initial_conditions: InitialConditionSources = field(default_factory=InitialConditionSources)
+    crossplots: tuple[str, ...] = ()
+    truth_crossplots: tuple[str, ...] = ()
+    time_history: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class DeclaredChannel(ChannelSpec):
+    """A channel read from a model set: it carries its model set's :class:`Declarations`, so that a
+    :class:`~estimator.problem.Problem` built from the model set tells the workflow, the report and
+    the initial conditions what the model set declares (:func:`declarations_of`)."""
+
+    declarations: Declarations | None = field(default=None, compare=False, repr=False)
+
+
+def declarations_of(problem_or_channels) -> Declarations:
+    """The declarations of the model set a problem's channels (or the channels given) come from.
+
+    Channels built by hand (plain :class:`ChannelSpec`) declare nothing: the defaults.
+    """
+    channels = getattr(problem_or_channels, "channels", problem_or_channels)
+    found = {id(d): d for c in channels if (d := getattr(c, "declarations", None)) is not None}
+    if len(found) > 1:
+        raise ValueError(f"the channels come from {len(found)} model sets "
+                         f"({sorted({d.source for d in found.values()})}); a problem has one")
+    return next(iter(found.values()), Declarations())
+
+
+_SECTIONS = {"channel", "parameter", "requirements", "workflow", "initial_conditions", "report"}
+_REQUIREMENT_KEYS = {"sensor", "desired_3sigma_deg", "low_alpha_only"}
+_WORKFLOW_KEYS = {"reference_mach", "apportion_biases", "apportion_tables", "identity_table",
+                  "alpha_limit_channel"}
+_IC_KEYS = {"tas", "phi", "theta", "psi", "h", "alpha", "beta"}
+_REPORT_KEYS = {"crossplots", "truth_crossplots", "time_history"}
+
+
+def _check_keys(d, valid: set[str], where: str) -> None:
+    if not isinstance(d, Mapping):
+        raise ValueError(f"{where}: must be a table of keys ({', '.join(sorted(valid))})")
+    for key in d:
+        if key not in valid:
+            close = close_match(key, valid)
+            raise ValueError(f"{where}: unknown key {key!r}"
+                             + (f" (did you mean {close!r}?)" if close else "")
+                             + f"; valid: {', '.join(sorted(valid))}")
+
+
+def _names(value, where: str, valid: Sequence[str], what: str) -> tuple[str, ...]:
+    """A list of names, each one of ``valid`` (a typo named with its close match)."""
+    if isinstance(value, str) or not isinstance(value, (list, tuple)) or not all(
+            isinstance(v, str) for v in value):
+        raise ValueError(f"{where}: must be a list of {what} names, e.g. [\"{next(iter(valid), 'x')}\"]")
+    for v in value:
+        if v not in valid:
+            close = close_match(v, valid)
+            raise ValueError(f"{where}: {v!r} is not a {what} of the model set"
+                             + (f" (did you mean {close!r}?)" if close else "")
+                             + f"; its {what}s: {' '.join(valid)}")
+    return tuple(value)
+
+
+def parse_declarations(raw: Mapping, channels: Sequence[ChannelSpec], params: Sequence[ParameterSpec],
+                       source: str) -> Declarations:
+    """The ``[requirements]``, ``[workflow]``, ``[initial_conditions]`` and ``[report]`` tables
+    (module docstring), checked against the model set's channels and parameters."""
+    names = [c.name for c in channels]
+    columns = list(dict.fromkeys([*names, *(c.column for c in channels)]))
+    specs = {s.name: s for s in params}
+    reqs = {}
+    req_raw = raw.get("requirements", {})
+    if not isinstance(req_raw, Mapping):
+        raise ValueError(f"{source}: [requirements] must be a table: CHANNEL = {{ sensor = ..., "
+                         "desired_3sigma_deg = ... }")
+    _names(list(req_raw), f"{source}: [requirements]", names, "channel")
+    for ch, r in req_raw.items():
+        where = f"{source}: [requirements] {ch}"
+        _check_keys(r, _REQUIREMENT_KEYS, where)
+        if not isinstance(r.get("sensor"), str) or not isinstance(r.get("desired_3sigma_deg"), (int, float)):
+            raise ValueError(f"{where}: needs sensor = \"its name in Table 2\" and desired_3sigma_deg = "
+                             "a number (deg)")
+        reqs[ch] = Requirement(r["sensor"], float(r["desired_3sigma_deg"]),
+                               bool(r.get("low_alpha_only", False)))
+
+    wf = raw.get("workflow", {})
+    where = f"{source}: [workflow]"
+    _check_keys(wf, _WORKFLOW_KEYS, where)
+    apportion = wf.get("apportion_biases", {})
+    if not isinstance(apportion, Mapping) or not all(isinstance(v, str) for v in apportion.values()):
+        raise ValueError(f"{where}: apportion_biases must be a table label = \"bias family\", "
+                         "e.g. { left = \"b_left\", right = \"b_right\" }")
+    for label, fam in apportion.items():
+        if fam not in specs or specs[fam].scope != "aircraft":
+            raise ValueError(f"{where}: apportion_biases {label} = {fam!r} is not an aircraft-scoped "
+                             f"parameter of the model set (its parameters: {' '.join(specs)})")
+    ref = wf.get("reference_mach")
+    if apportion and (isinstance(ref, bool) or not isinstance(ref, (int, float))):
+        raise ValueError(f"{where}: apportion_biases needs reference_mach = the Mach number of the bin "
+                         "whose installation biases hold for every bin (e.g. 0.5)")
+    tables = [s.name for s in params if s.kind == "table"]
+    app_tables = _names(wf.get("apportion_tables", []), f"{where} apportion_tables", tables, "table")
+    identity = wf.get("identity_table")
+    if identity is not None:
+        _names([identity], f"{where} identity_table", tables, "table")
+    limit_ch = wf.get("alpha_limit_channel")
+    if limit_ch is not None:
+        _names([limit_ch], f"{where} alpha_limit_channel", names, "channel")
+        if limit_ch not in reqs:
+            raise ValueError(f"{where}: alpha_limit_channel {limit_ch!r} needs a desired accuracy: "
+                             f"declare [requirements] {limit_ch} = {{ ... }}")
+    low = [c for c, r in reqs.items() if r.low_alpha_only]
+    if low and limit_ch is None:
+        raise ValueError(f"{source}: [requirements] {low[0]} has low_alpha_only = true, which needs "
+                         "[workflow] alpha_limit_channel (whose error growth sets the usable alpha)")
+
+    ic = raw.get("initial_conditions", {})
+    where = f"{source}: [initial_conditions]"
+    _check_keys(ic, _IC_KEYS, where)
+    scalars = {}
+    for key in ("tas", "phi", "theta", "psi", "h"):
+        if key in ic:
+            scalars[key] = _names([ic[key]], f"{where} {key}", columns, "channel")[0]
+    sources = InitialConditionSources(
+        **scalars, alpha=_names(ic.get("alpha", []), f"{where} alpha", columns, "channel"),
+        beta=_names(ic.get("beta", []), f"{where} beta", columns, "channel"))
+
+    rep = raw.get("report", {})
+    where = f"{source}: [report]"
+    _check_keys(rep, _REPORT_KEYS, where)
+    return Declarations(
+        source=source, requirements=reqs, reference_mach=None if ref is None else float(ref),
+        apportion=dict(apportion), apportion_tables=app_tables, identity_table=identity,
+        alpha_limit_channel=limit_ch, initial_conditions=sources,
+        **{k: _names(rep.get(k, []), f"{where} {k}", names, "channel") for k in sorted(_REPORT_KEYS)},
+    )
+
+
+def parse_model_set(raw: Mapping, source: str) -> tuple[list[DeclaredChannel], list[ParameterSpec]]:
+    """The channels and parameter specs of a model set's TOML (``source`` names it in messages).
+
+    Each channel carries the model set's :class:`Declarations` (:func:`declarations_of`).
+    """
+    _check_keys(raw, _SECTIONS, source)
     channels = [parse_channel(c, f"{source}: channel[{i}]") for i, c in enumerate(raw.get("channel", []))]
     params = [parse_parameter(n, p, f"{source}: parameter.{n}") for n, p in raw.get("parameter", {}).items()]
-    return channels, params
+    decl = parse_declarations(raw, channels, params, source)
+    init = [f.name for f in fields(ChannelSpec) if f.init]
+    return [DeclaredChannel(**{k: getattr(c, k) for k in init}, declarations=decl) for c in channels], params
 
 
 def model_set_path(name_or_path: str | Path, base_dir: Path | None = None) -> Path:
@@ -224,7 +464,7 @@ def merge_model_set(raw: Mapping, parameter_overrides: Mapping | None, extra_cha
         else:
             channels.append(dict(c))
     try:
-        chans, specs = parse_model_set({"channel": channels, "parameter": params},
+        chans, specs = parse_model_set({**raw, "channel": channels, "parameter": params},
                                        f"{where} (model set {source})")
     except DataError:
         raise
@@ -295,7 +535,7 @@ def finalize_parameters(specs: Sequence[ParameterSpec], user_declared: set[str],
             continue
         spec = _fix_instances_without_data(spec, channels, maneuvers)
         out.append(spec)
-    return _with_initial_conditions(out, maneuvers, where)
+    return _with_initial_conditions(out, maneuvers, where, declarations_of(channels).initial_conditions)
 
 
 def _fix_instances_without_data(spec: ParameterSpec, channels, maneuvers) -> ParameterSpec:
@@ -321,19 +561,28 @@ def _fix_instances_without_data(spec: ParameterSpec, channels, maneuvers) -> Par
     return replace(spec, free_instances={**dict(spec.free_instances), **fixed})
 
 
-def initial_condition_starts(m: ManeuverData, n_avg: int = IC_AVERAGE_SAMPLES) -> dict[str, float]:
+def initial_condition_starts(m: ManeuverData, n_avg: int = IC_AVERAGE_SAMPLES,
+                             sources: InitialConditionSources | None = None) -> dict[str, float]:
     """Start values of u0 v0 w0 phi0 theta0 psi0 h0 from the maneuver's first samples.
 
-    ``V`` from measured TAS, ``alpha``/``beta`` from the first measured flow channel of
-    :data:`ALPHA_SOURCES` / :data:`BETA_SOURCES` (0 if none), ``u = V cos(a) cos(b)``,
+    ``V`` from measured TAS, ``alpha``/``beta`` from the first flow channel of the model set's
+    ``[initial_conditions]`` lists that the maneuver has (0 if none), ``u = V cos(a) cos(b)``,
     ``v = V sin(b)``, ``w = V sin(a) cos(b)``; Euler angles and altitude as measured. Each is the
     mean of the first ``n_avg`` samples. These are approximate (flow-angle biases and upwash,
     time delays, wind), which is all a start value needs to be.
+
+    Parameters
+    ----------
+    m : the maneuver.
+    n_avg : samples averaged.
+    sources : the data columns to start from (:class:`InitialConditionSources`; default: the
+        state's own names and no flow angles).
 
     Returns
     -------
     The start values that the data allow (no ``u0``/``v0``/``w0`` without TAS).
     """
+    src = sources or InitialConditionSources()
     data = {**m.signals, **m.measurements}
     k = max(1, min(n_avg, m.n))
 
@@ -345,22 +594,23 @@ def initial_condition_starts(m: ManeuverData, n_avg: int = IC_AVERAGE_SAMPLES) -
         return float(np.mean(v[fin[fin < k]])) if np.any(fin < k) else float(v[fin[0]])
 
     out: dict[str, float] = {}
-    for name, key in (("phi", "phi0"), ("theta", "theta0"), ("psi", "psi0"), ("h", "h0")):
+    for name, key in ((src.phi, "phi0"), (src.theta, "theta0"), (src.psi, "psi0"), (src.h, "h0")):
         v = first(name)
         if v is not None:
             out[key] = v
-    tas = first("tas")
+    tas = first(src.tas)
     if tas is not None:
-        alpha = next((first(c) for c in ALPHA_SOURCES if c in data), 0.0)
-        beta = next((first(c) for c in BETA_SOURCES if c in data), 0.0)
+        alpha = next((first(c) for c in src.alpha if c in data), 0.0)
+        beta = next((first(c) for c in src.beta if c in data), 0.0)
         out["u0"] = tas * np.cos(alpha) * np.cos(beta)
         out["v0"] = tas * np.sin(beta)
         out["w0"] = tas * np.sin(alpha) * np.cos(beta)
     return out
 
 
-def _with_initial_conditions(specs: list[ParameterSpec], maneuvers, where: str) -> list[ParameterSpec]:
-    starts = {m.id: initial_condition_starts(m) for m in maneuvers}
+def _with_initial_conditions(specs: list[ParameterSpec], maneuvers, where: str,
+                             sources: InitialConditionSources) -> list[ParameterSpec]:
+    starts = {m.id: initial_condition_starts(m, sources=sources) for m in maneuvers}
     out = []
     for spec in specs:
         if spec.name in STATE_PARAMS[:7] and spec.scope == "maneuver":
@@ -370,8 +620,9 @@ def _with_initial_conditions(specs: list[ParameterSpec], maneuvers, where: str) 
             if lacking and spec.name in ("u0", "v0", "w0"):
                 m = lacking[0]
                 raise DataError(
-                    f"{m.source}: no true airspeed (tas) to start {spec.name} from; "
-                    f"map tas under [columns] or give [parameter.{spec.name}] values = {{{m.id} = ...}} (m/s)"
+                    f"{m.source}: no true airspeed ({sources.tas}) to start {spec.name} from; "
+                    f"map {sources.tas} under [columns] or give [parameter.{spec.name}] values = "
+                    f"{{{m.id} = ...}} (m/s)"
                 )
             spec = replace(spec, per_instance={**computed, **given})
         out.append(spec)
