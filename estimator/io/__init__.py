@@ -161,7 +161,11 @@ column, the time and data row (0-based, after the header) of the first bad sampl
   :data:`~estimator.io.timebase.STAMP_TOLERANCE` (10 %) of a step of a uniform grid — a recorder's
   clock resolution or jitter (1 ms stamps at 64 Hz, 1/1024 s ticks at 50 Hz) — are taken as that
   grid's samples, at its nominal rate (a common recorder rate or whole hertz when it fits, else
-  the fitted rate), with a :class:`DataWarning` giving the largest deviation. Other non-uniform
+  the fitted rate), with a :class:`DataWarning` giving the largest deviation. Stamps rounded to a
+  tick (time written with 2 decimals) that stay within half that tick of a uniform grid are taken
+  as that grid, the warning saying they were rounded; stamps straying further when half a tick
+  exceeds 10 % of a step give an error asking for more decimals (not ``resample_hz``, which would
+  interpolate from stamps that are themselves off). Other non-uniform
   sampling is an error naming the nominal rate, unless ``resample_hz`` is given, in which case
   the maneuver is linearly interpolated from its stamps onto ``t_start + k / resample_hz`` (no
   anti-aliasing filter; downsampling by more than 2 gives a warning);
@@ -171,7 +175,9 @@ column, the time and data row (0-based, after the header) of the first bad sampl
   outside 0.1 ms to 2 s, ...); true airspeed / Mach that is not a speed of sound; Euler angles
   that change 57 times faster or slower than the body rates say (a degree/radian mistake of
   that angle, or of the rates if all angles disagree alike). The message gives the observed
-  value and suggests the unit that fits the bulk of the data (:mod:`estimator.io.plausibility`,
+  value and suggests a unit only when the bulk of the data (without its 1 % extremes) is
+  implausible in the declared unit; otherwise the out-of-range samples are named as spikes
+  (:mod:`estimator.io.plausibility`,
   :mod:`estimator.io.consistency`);
 - spikes: samples (one, or a burst) that jump far outside the plausible range while the rest of
   the channel is plausible are named with their times and rows as spikes, never as a unit error
