@@ -72,6 +72,14 @@ def _fit_quality(wf: WorkflowResult) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
+def _figure_stage(final, reference_mach: float | None):
+    """The estimation the single-bin figures show: the bin nearest the reference Mach (the lower of
+    two as near), or without one the middle bin."""
+    if reference_mach is None:
+        return sorted(final, key=lambda s: s.mach)[(len(final) - 1) // 2]
+    return min(final, key=lambda s: (abs(s.mach - reference_mach), s.mach))
+
+
 def _has_truth(wf: WorkflowResult) -> bool:
     return all("dataset" in m.meta for st in wf.final for m in st.problem.maneuvers)
 
@@ -188,8 +196,8 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
                              "table_updates.csv why, with the honest deviations (std) and the Cramér-Rao "
                              "ones (std_crb).",
                              figures=figs, csv=csvs))
-    # Figs. 5 and 7: error cross-plots; Fig. 3: a time-history match
-    ref = min(final, key=lambda s: abs(s.mach - 0.5))
+    # Figs. 5 and 7: error cross-plots; Fig. 3: a time-history match, at the reference Mach
+    ref = _figure_stage(final, wf.reference_mach)
     res = ref.residuals
     reqs = decl.requirements
 
