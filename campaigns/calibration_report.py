@@ -236,17 +236,25 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: bool | No
     mid = next((m.id for m in ref.problem.maneuvers if m.meta.get("kind") in TIME_HISTORY_KINDS),
                ref.problem.maneuvers[0].id)
     units = {c.name: (c.display_scale, c.display_unit) for c in ref.problem.channels}
-    chans = {}
+    # channels fitted at different samples (a time-shifted channel loses its edges, an own-rate one
+    # has its own) go onto the maneuver's time base, NaN where a channel has no sample
+    t_all = next(m.t_s for m in ref.problem.maneuvers if m.id == mid)
+    at = {}
     for name in decl.time_history:
         r = res.get(name)
-        if r is None:
-            continue
-        sel = r.maneuver == mid
-        if sel.any():
+        if r is not None and (r.maneuver == mid).any():
+            at[name] = (r, r.maneuver == mid, np.searchsorted(t_all, r.t_s[r.maneuver == mid]))
+    chans = {}
+    if at:
+        lo = min(int(i[0]) for _, _, i in at.values())
+        hi = max(int(i[-1]) for _, _, i in at.values()) + 1
+        t = t_all[lo:hi]
+        for name, (r, sel, idx) in at.items():
             scale, unit = units[name]
-            chans[name] = (r.z[sel] * scale, r.y[sel] * scale, unit)
+            z, y = np.full(t.shape, np.nan), np.full(t.shape, np.nan)
+            z[idx - lo], y[idx - lo] = r.z[sel] * scale, r.y[sel] * scale
+            chans[name] = (z, y, unit)
     if chans:
-        t = res[next(iter(chans))].t_s[res[next(iter(chans))].maneuver == mid]
         sections.append(Section("Time-history match (paper Fig. 3)", f"Maneuver {mid}, Mach {ref.mach:.2f}",
                                 figures=[(f"Fig. 3: {mid}", figure_time_history(mid, t, chans))]))
     if truth and out["recovery"] is not None and len(out["recovery"]):

@@ -18,7 +18,7 @@ r"""The paper's calibration workflow over a fleet (Saraf & Kumaresan §3-4; SPEC
    biases average to zero: the only split the data allow). Standard deviations follow from the
    estimates' covariance. One family (a single vane) or more apportion the same way.
 4. **Installation biases fixed.** Each bin is estimated again with the biases held at the
-   installation biases and the model set's ``apportion_tables`` free (Tejas: ``f1``, now
+   installation biases and the model set's ``correction_model`` free (Tejas: ``f1``, now
    including ``f1(0)``, started where the fleet-mean bias puts it, and ``f2``): the
    correction-model update valid for the whole fleet; the other sensors' tables, biases and scale
    factors come out of the same estimation.
@@ -535,7 +535,7 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     for a, r in inst.iterrows():
         for k, fam in families.items():
             fixed_bias[f"{fam}[{a}]"] = r[f"installation_{k}_deg"] / RAD2DEG
-    free4 = {k: False for k in fixed_bias} | {t: True for t in decl.apportion_tables
+    free4 = {k: False for k in fixed_bias} | {t: True for t in decl.correction_model
                                                if t in problem.parameters.specs}
     ident = decl.identity_table
     _say(opt, "step 4: installation biases fixed, correction tables free")

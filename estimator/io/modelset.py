@@ -55,7 +55,7 @@ optional, each name checked against the model set's channels and parameters)::
     [workflow]                     # the fleet workflow (estimator.workflow)
     reference_mach = 0.5           # the bin whose installation biases hold for every bin
     apportion_biases = { left = "b_l", right = "b_r" }   # label = aircraft-scoped bias family
-    apportion_tables = ["f1", "f2"]    # re-estimated with the installation biases held
+    correction_model = ["f1", "f2"]    # global families re-estimated with those biases held
     identity_table = "f1"          # starts at the identity; takes the fleet-mean bias
     alpha_limit_channel = "beta_znp"   # its error growth sets the usable alpha (low_alpha_only)
 
@@ -234,7 +234,8 @@ class Declarations:
         bin (paper: 0.5); None without apportionment.
     apportion : label -> bias family (aircraft-scoped) split per aircraft into the fleet mean and
         installation biases (the labels name the result's columns, e.g. ``installation_left_deg``).
-    apportion_tables : the tables re-estimated with the installation biases held.
+    correction_model : the fleet's correction model: global families (tables or not) whose every
+        element is re-estimated with the installation biases held.
     identity_table : the table that starts at the identity: it takes over the fleet-mean bias and
         is reported as its update ``f(x) - x``; None: none.
     alpha_limit_channel : the channel whose usable angle of attack is found from its error growth
@@ -249,7 +250,7 @@ class Declarations:
     requirements: Mapping[str, Requirement] = field(default_factory=dict)
     reference_mach: float | None = None
     apportion: Mapping[str, str] = field(default_factory=dict)
-    apportion_tables: tuple[str, ...] = ()
+    correction_model: tuple[str, ...] = ()
     identity_table: str | None = None
     alpha_limit_channel: str | None = None
     initial_conditions: InitialConditionSources = field(default_factory=InitialConditionSources)
@@ -282,7 +283,7 @@ def declarations_of(problem_or_channels) -> Declarations:
 
 _SECTIONS = {"channel", "parameter", "requirements", "workflow", "initial_conditions", "report"}
 _REQUIREMENT_KEYS = {"sensor", "desired_3sigma_deg", "low_alpha_only"}
-_WORKFLOW_KEYS = {"reference_mach", "apportion_biases", "apportion_tables", "identity_table",
+_WORKFLOW_KEYS = {"reference_mach", "apportion_biases", "correction_model", "identity_table",
                   "alpha_limit_channel"}
 _IC_KEYS = {"tas", "phi", "theta", "psi", "h", "alpha", "beta"}
 _REPORT_KEYS = {"crossplots", "truth_crossplots", "time_history"}
@@ -314,9 +315,10 @@ def _names(value, where: str, valid: Sequence[str], what: str) -> tuple[str, ...
 
 
 def parse_declarations(raw: Mapping, channels: Sequence[ChannelSpec], params: Sequence[ParameterSpec],
-                       source: str) -> Declarations:
+                       source: str, origin: str | None = None) -> Declarations:
     """The ``[requirements]``, ``[workflow]``, ``[initial_conditions]`` and ``[report]`` tables
-    (module docstring), checked against the model set's channels and parameters."""
+    (module docstring), checked against the model set's channels and parameters; ``source`` names
+    them in messages, ``origin`` is the model set's file (default: ``source``)."""
     names = [c.name for c in channels]
     columns = list(dict.fromkeys([*names, *(c.column for c in channels)]))
     specs = {s.name: s for s in params}
@@ -351,7 +353,9 @@ def parse_declarations(raw: Mapping, channels: Sequence[ChannelSpec], params: Se
         raise ValueError(f"{where}: apportion_biases needs reference_mach = the Mach number of the bin "
                          "whose installation biases hold for every bin (e.g. 0.5)")
     tables = [s.name for s in params if s.kind == "table"]
-    app_tables = _names(wf.get("apportion_tables", []), f"{where} apportion_tables", tables, "table")
+    globals_ = [s.name for s in params if s.scope == "global"]
+    correction = _names(wf.get("correction_model", []), f"{where} correction_model", globals_,
+                        "global parameter")
     identity = wf.get("identity_table")
     if identity is not None:
         _names([identity], f"{where} identity_table", tables, "table")
@@ -381,22 +385,24 @@ def parse_declarations(raw: Mapping, channels: Sequence[ChannelSpec], params: Se
     where = f"{source}: [report]"
     _check_keys(rep, _REPORT_KEYS, where)
     return Declarations(
-        source=source, requirements=reqs, reference_mach=None if ref is None else float(ref),
-        apportion=dict(apportion), apportion_tables=app_tables, identity_table=identity,
+        source=origin or source, requirements=reqs, reference_mach=None if ref is None else float(ref),
+        apportion=dict(apportion), correction_model=correction, identity_table=identity,
         alpha_limit_channel=limit_ch, initial_conditions=sources,
         **{k: _names(rep.get(k, []), f"{where} {k}", names, "channel") for k in sorted(_REPORT_KEYS)},
     )
 
 
-def parse_model_set(raw: Mapping, source: str) -> tuple[list[DeclaredChannel], list[ParameterSpec]]:
+def parse_model_set(raw: Mapping, source: str, origin: str | None = None
+                    ) -> tuple[list[DeclaredChannel], list[ParameterSpec]]:
     """The channels and parameter specs of a model set's TOML (``source`` names it in messages).
 
-    Each channel carries the model set's :class:`Declarations` (:func:`declarations_of`).
+    Each channel carries the model set's :class:`Declarations` (:func:`declarations_of`), whose
+    ``source`` is ``origin`` (the model set's file; default: ``source``).
     """
     _check_keys(raw, _SECTIONS, source)
     channels = [parse_channel(c, f"{source}: channel[{i}]") for i, c in enumerate(raw.get("channel", []))]
     params = [parse_parameter(n, p, f"{source}: parameter.{n}") for n, p in raw.get("parameter", {}).items()]
-    decl = parse_declarations(raw, channels, params, source)
+    decl = parse_declarations(raw, channels, params, source, origin)
     init = [f.name for f in fields(ChannelSpec) if f.init]
     return [DeclaredChannel(**{k: getattr(c, k) for k in init}, declarations=decl) for c in channels], params
 
@@ -465,7 +471,7 @@ def merge_model_set(raw: Mapping, parameter_overrides: Mapping | None, extra_cha
             channels.append(dict(c))
     try:
         chans, specs = parse_model_set({**raw, "channel": channels, "parameter": params},
-                                       f"{where} (model set {source})")
+                                       f"{where} (model set {source})", origin=source)
     except DataError:
         raise
     except ValueError as exc:
