@@ -18,7 +18,7 @@ from estimator.io.fprdataset import (
     read_manifest,
     select_entries,
 )
-from estimator.io.modelset import merge_model_set, read_model_set
+from estimator.io.modelset import DEFAULT_MODEL_SET, merge_model_set, read_model_set
 from estimator.io.tables import numeric
 from estimator.problem import LEVER_ARMS, Problem
 
@@ -64,7 +64,7 @@ def load_dataset_maneuvers(path: str | Path, select: Mapping | None = None
 def problem_from_dataset(
     path: str | Path,
     select: Mapping | None = None,
-    model: str | Path = "tejas",
+    model: str | Path = DEFAULT_MODEL_SET,
     channels: Sequence[str] | None = None,
     overrides: Mapping[str, Mapping] | None = None,
     *,
@@ -80,7 +80,7 @@ def problem_from_dataset(
     path : the dataset directory (or its manifest.json).
     select : which maneuvers: ``kind``, ``configuration``, ``aircraft``, ``ids`` (value or list),
         ``mach_min``, ``mach_max`` (on the mean Mach), ``gear_down`` (bool). None: all.
-    model : model set, a shipped name or a TOML path.
+    model : model set, a shipped name (default: the paper's, ``tejas``) or a TOML path.
     channels : channel names to use; None: every channel of the model set with data.
     overrides : parameter name -> keys as in ``[parameter.NAME]`` (e.g. ``{"b_l": {"free": False}}``).
     extra_channels : channel tables as in ``[[channel]]``.

@@ -89,6 +89,8 @@ from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, Maneuver
 
 #: The shipped model sets: ``<name>.toml``.
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
+#: The model set a problem uses unless it names one: the paper's (``models/tejas.toml``).
+DEFAULT_MODEL_SET = "tejas"
 
 #: A maneuver needs at least this many samples per free per-maneuver parameter (initial
 #: conditions, IMU biases): those are estimated from that maneuver alone, and with fewer samples
@@ -435,7 +437,8 @@ def read_model_set(name_or_path: str | Path, base_dir: Path | None = None) -> tu
         raise DataError(f"{path}: not valid TOML: {exc}; fix the syntax there") from None
 
 
-def load_model_set(name_or_path: str | Path = "tejas") -> tuple[list[ChannelSpec], list[ParameterSpec]]:
+def load_model_set(name_or_path: str | Path = DEFAULT_MODEL_SET
+                   ) -> tuple[list[ChannelSpec], list[ParameterSpec]]:
     """The channels and parameter specs of a model set: a shipped name (``"tejas"``) or a TOML path."""
     raw, source = read_model_set(name_or_path)
     return parse_model_set(raw, source)
