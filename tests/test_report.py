@@ -127,6 +127,14 @@ def test_bias_vs_mach_lines_fleet_mean_and_truth(bias):
     assert labels[:2] == ["PV1", "PT2"] and "truth (open markers)" in labels
 
 
+def test_bias_vs_mach_names_the_model_sets_biases(bias):
+    # the label comes from the caller (the model set's apportioned families), not from this module
+    (ax,) = figure_bias_vs_mach(bias, bias_label="$b_{a}$").axes
+    assert ax.get_ylabel() == "$b_{a}$ [deg]" and "$b_{a}$" in ax.get_title()
+    (ax,) = figure_bias_vs_mach(bias).axes
+    assert ax.get_ylabel() == "mean bias [deg]"
+
+
 def test_bias_vs_mach_without_truth_and_with_missing_columns(bias):
     fig = figure_bias_vs_mach(bias.drop(columns="true_mean_bias_deg"))
     assert _open_marker_lines(fig.axes[0]) == []
