@@ -197,7 +197,7 @@ def _demo(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         problem = problem_from_dataset(out)
-    ns = argparse.Namespace(overwrite=True, max_mach_variation=0.05, reference_mach=0.5, max_iterations=40,
+    ns = argparse.Namespace(overwrite=True, max_mach_variation=0.05, reference_mach=None, max_iterations=40,
                             no_colored=False, verbose=False, robust=False, start="staged",
                             command="demo", source=out)
     code = _workflow(problem, report_dir, ns)
@@ -290,8 +290,9 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
                    "default), given (the problem's start values), or both (the better verdict kept)")
     p.add_argument("--max-mach-variation", type=float, default=0.05,
                    help="workflow: leave out maneuvers whose Mach varies by more (default 0.05)")
-    p.add_argument("--reference-mach", type=float, default=0.5,
-                   help="workflow: Mach of the installation biases (default 0.5)")
+    p.add_argument("--reference-mach", type=float, default=None,
+                   help="workflow: Mach of the installation biases (default: the model set's "
+                   "[workflow] reference_mach; Tejas 0.5)")
     g = p.add_argument_group("selecting maneuvers of a dataset")
     g.add_argument("--kind", nargs="+", help="maneuver kinds")
     g.add_argument("--config", nargs="+", help="configuration ids")

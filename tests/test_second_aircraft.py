@@ -259,9 +259,11 @@ def test_fpr_calibrate_runs_the_uav_problem_file(uav_problem_file, tmp_path, cap
     from campaigns.cli import EXIT_STATUS, main
 
     out = tmp_path / "cli"
-    code = main(["calibrate", str(uav_problem_file[0]), "--out", str(out), "--reference-mach", "0.4"])
+    # no --reference-mach: the model set's 0.4 is the default
+    code = main(["calibrate", str(uav_problem_file[0]), "--out", str(out)])
     text = capsys.readouterr().out
     assert code in (EXIT_STATUS["SUCCESS"], EXIT_STATUS["SUCCESS_WITH_WARNINGS"]), text
     assert "AOA vane" in text and "sideslip vane" in text, text
     t2 = pd.read_csv(out / "table2_model.csv")
     assert set(t2["sensor"]) == {"AOA vane", "sideslip vane"} and t2["passed"].all()
+    assert set(pd.read_csv(out / "installation_biases.csv")["mach"]) == {0.4}

@@ -82,7 +82,7 @@ z down) from the aircraft's reference point::
     ]
 
     [parameter.b_l]           # change any parameter of the model set; the keys are the model-set
-    free = true               # format's (estimator/modelfile.py) and merge into its declaration:
+    free = true               # format's (estimator/io/modelset.py) and merge into its declaration:
     bounds_deg = [-3.0, 3.0]  # value_deg replaces value, bounds replaces bounds_deg, ...
     [parameter.u0]
     values = { pd1 = 152.0 }  # start values of particular instances (here: maneuver pd1, m/s)

@@ -14,7 +14,7 @@ from estimator.io.assemble import DIMENSIONS, REQUIRED, ManeuverRequest, SourceT
 from estimator.io.build import build_problem
 from estimator.io.dataset_problem import load_dataset_maneuvers
 from estimator.io.errors import DataError, close_match
-from estimator.io.modelset import OWN_SIGNALS, merge_model_set, read_model_set
+from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
 from estimator.io.tables import check_data_path, infer_format, numeric, pick_column, read_table
 from estimator.parameters import ParameterSpec
 from estimator.problem import LEVER_ARMS, STATE_SIGNALS, ChannelSpec, Problem
@@ -271,7 +271,7 @@ def load_problem(path: str | Path) -> Problem:
     where = str(path)
     _keys(raw, TOP_KEYS, where)
     base = path.resolve().parent
-    raw_model, msource = read_model_set(raw.get("model", "tejas"), base)
+    raw_model, msource = read_model_set(raw.get("model", DEFAULT_MODEL_SET), base)
     chans, specs, declared = merge_model_set(raw_model, raw.get("parameter"), raw.get("channel"),
                                              msource, where)
     sensors = parse_positions(raw.get("sensors", {}), f"{where}: [sensors]")
