@@ -48,7 +48,7 @@ import sys
 import tomllib
 import traceback
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -74,7 +74,7 @@ from synth.flight import FlightError, fly_maneuver
 from synth.instrument import instrument
 from synth.local_flow import load_adc_baseline, load_local_flow_truth
 from synth.maneuvers import MANEUVER_KINDS, ManeuverSpec
-from synth.workers import init_pool_worker, pool_context, stop_pool
+from synth.workers import worker_pool
 
 CAMPAIGN_DIR = Path(__file__).resolve().parent.parent / "campaigns"
 _TOP_KEYS = {
@@ -255,11 +255,8 @@ _WORKER: dict = {}
 
 
 def _init_worker(fleet_source: str, out_dir: str, common_rate_hz: float, seed: int,
-                 local_flow_truth: str, adc_baseline: str, parent_pid: int | None = None) -> None:
-    """Load the worker state; in a pool worker (``parent_pid`` given) also tie the worker's life
-    to its parent's and leave Ctrl-C to the parent."""
-    if parent_pid is not None:
-        init_pool_worker(parent_pid)
+                 local_flow_truth: str, adc_baseline: str) -> None:
+    """Load the worker state (in this process, or in each pool worker: :func:`worker_pool`)."""
     _WORKER.update(
         fleet=load_fleet(fleet_source), out_dir=Path(out_dir), rate=common_rate_hz, seed=seed,
         truth_model=load_local_flow_truth(local_flow_truth), adc=load_adc_baseline(adc_baseline),
@@ -552,15 +549,11 @@ def fly_campaign(
             for job in todo:
                 _tick(_run_job(job))
         elif todo:
-            pool = ProcessPoolExecutor(max_workers=workers, mp_context=pool_context(),
-                                       initializer=_init_worker, initargs=(*init_args, os.getpid()))
-            try:
+            # the workers end with this process however it ends, and leave Ctrl-C to it: on an
+            # interrupt (or an error) they are stopped at once, their maneuvers left unwritten
+            with worker_pool(workers, _init_worker, init_args) as pool:
                 for fut in as_completed([pool.submit(_run_job, job) for job in todo]):
                     _tick(fut.result())
-            except BaseException:
-                stop_pool(pool)
-                raise
-            pool.shutdown(wait=True)
     except KeyboardInterrupt:
         if bar is not None:
             bar.close()

@@ -1,23 +1,16 @@
 """Worker processes that end with their parent, whatever ends it.
 
 A ``ProcessPoolExecutor`` worker outlives a parent killed by SIGTERM or SIGKILL: nothing tells it
-the parent is gone, and it goes on flying maneuvers (about 140 MB each) for minutes. Pass
-:func:`bind_to_parent` as the pool's initializer (or call it first in your own initializer)::
+the parent is gone, and it goes on flying maneuvers (about 140 MB each) for minutes. A pool made
+by :func:`worker_pool` ties each worker's life to the process that made the pool, leaves Ctrl-C to
+that process and, on any exception (Ctrl-C included), ends the workers at once::
 
-    ProcessPoolExecutor(initializer=bind_to_parent, initargs=(os.getpid(),))
+    with worker_pool(n, initializer=my_init, initargs=(...)) as pool:
+        for fut in as_completed([pool.submit(task, x) for x in xs]):
+            ...                   # write the results
 
-Two mechanisms, because neither alone is enough:
-
-- Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` — the kernel kills the worker the moment its parent
-  dies (any cause). It fires when the parent's *thread* that forked the worker ends, which for a
-  pool is the thread that submitted work: in this project always the main thread.
-- Everywhere: a daemon thread that checks every ``poll_s`` whether the parent is still the one
-  the worker was started by (``os.getppid()`` changes when the parent dies: the worker is
-  re-parented to init or a subreaper) and ends the worker with ``os._exit``.
-
-Ctrl-C needs neither: the terminal sends SIGINT to the whole foreground process group. A pool
-that wants a clean stop (no traceback from every worker) ignores SIGINT in its workers and ends
-them from the parent, as :func:`synth.campaign.fly_campaign` does; the public helpers for that::
+The pieces, for a pool built by hand: :func:`pool_context` (the start method),
+:func:`init_pool_worker` (the initializer, or the first call of your own) and :func:`stop_pool`::
 
     pool = ProcessPoolExecutor(max_workers=n, mp_context=pool_context(),
                                initializer=init_pool_worker, initargs=(os.getpid(),))
@@ -28,12 +21,29 @@ them from the parent, as :func:`synth.campaign.fly_campaign` does; the public he
         raise
     pool.shutdown(wait=True)
 
-A worker ended by :func:`stop_pool` receives SIGTERM first (a handler set in the initializer may
-clean up, e.g. remove scratch files, and exit), SIGKILL only if it has not ended after a timeout.
+:func:`bind_to_parent` (called by :func:`init_pool_worker`) watches the process that made the pool
+— its id given by that process, ``os.getpid()`` — whatever the start method: under ``fork`` and
+``spawn`` it is the worker's parent, under ``forkserver`` (Python 3.14's default on Linux) the
+server is. Two mechanisms:
+
+- Linux, when the pool's process is the worker's parent: ``prctl(PR_SET_PDEATHSIG, SIGKILL)``,
+  the kernel kills the worker the moment its parent dies (any cause). It fires when the parent's
+  *thread* that started the worker ends, which for a pool is the thread that submitted work: in
+  this project always the main thread.
+- Everywhere: a daemon thread that checks every ``poll_s`` that the pool's process still exists
+  and is the same process (on Linux its start time, read at bind time, tells a reused process id
+  apart, and a zombie counts as ended), and ends the worker with ``os._exit`` otherwise.
+
+Ctrl-C needs neither: the terminal sends SIGINT to the whole foreground process group. The workers
+ignore it (:func:`init_pool_worker`, so that no worker prints a traceback of its own) and the
+process that made the pool stops them (:func:`stop_pool`): SIGTERM first (a handler set in the
+initializer may clean up, e.g. remove scratch files, and exit), SIGKILL only if a worker has not
+ended after a timeout.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import multiprocessing
@@ -41,6 +51,7 @@ import os
 import signal
 import sys
 import threading
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 
 _PR_SET_PDEATHSIG = 1
@@ -49,27 +60,81 @@ _PR_SET_PDEATHSIG = 1
 ORPHAN_EXIT_STATUS = 137
 
 
+def _proc_stat(pid: int) -> list[str] | None:
+    """Fields 3 on of ``/proc/PID/stat`` (state, ppid, ...; ``[19]`` is the start time in clock
+    ticks since boot), None when there is no such process or no ``/proc``."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            text = fh.read().decode("ascii", "replace")
+    except OSError:
+        return None
+    return text[text.rindex(")") + 2:].split()  # after the name, which may hold spaces and ")"
+
+
+def _start_time(pid: int) -> int | None:
+    """The start time of process ``pid`` (clock ticks since boot; Linux), None when unknown."""
+    st = _proc_stat(pid)
+    try:
+        return int(st[19]) if st is not None else None
+    except (IndexError, ValueError):
+        return None
+
+
+def _parent_gone(parent_pid: int, start: int | None, direct: bool) -> bool:
+    """Whether the process ``parent_pid`` the worker was bound to has ended.
+
+    ``start`` : its start time taken at bind time (Linux; None elsewhere): a process of that id
+    started at another time is another process (the id was reused). ``direct`` : it was the
+    worker's parent at bind time, so ``os.getppid()`` changing says it ended (the worker was
+    re-parented), reuse-proof on any POSIX system.
+    """
+    if direct and os.getppid() != parent_pid:
+        return True
+    try:
+        os.kill(parent_pid, 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:  # the id now belongs to another user's process: ours has ended
+        return True
+    except OSError:  # no way to ask (not POSIX): rely on the other checks
+        pass
+    if start is not None:
+        st = _proc_stat(parent_pid)
+        # a zombie has ended (its own parent has not yet collected its status)
+        if st is None or st[0] in ("Z", "X") or _start_time(parent_pid) != start:
+            return True
+    return False
+
+
 def bind_to_parent(parent_pid: int, poll_s: float = 1.0) -> None:
-    """End this (worker) process when the process ``parent_pid`` ends.
+    """End this (worker) process when the process ``parent_pid`` ends, whatever the start method.
 
     Parameters
     ----------
-    parent_pid : the parent's process id, taken in the parent (``os.getpid()``) when the pool is
-        created — not ``os.getppid()`` in the worker, which may already be init.
+    parent_pid : the id of the process that makes the pool, taken there (``os.getpid()``) — not
+        ``os.getppid()`` in the worker, which is the fork server under ``forkserver``, or already
+        init if that process has died.
     poll_s : how often the watcher thread checks, s.
     """
-    if sys.platform.startswith("linux"):
+    direct = os.getppid() == parent_pid
+    if direct and sys.platform.startswith("linux"):
         try:
             libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
             libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
         except (OSError, AttributeError):  # no libc/prctl (e.g. musl without it): the thread remains
             pass
-    if os.getppid() != parent_pid:  # the parent died before the line above took effect
+    start = _start_time(parent_pid)
+    mine = _start_time(os.getpid())
+    # the process that made the pool started before this worker: a later start time means the id
+    # was already reused by another process when we looked (the pool's process had ended)
+    if start is not None and mine is not None and start > mine:
+        os._exit(ORPHAN_EXIT_STATUS)
+    if _parent_gone(parent_pid, start, direct):  # it ended before the lines above took effect
         os._exit(ORPHAN_EXIT_STATUS)
 
     def _watch() -> None:
         while not _stop.wait(poll_s):
-            if os.getppid() != parent_pid:
+            if _parent_gone(parent_pid, start, direct):
                 os._exit(ORPHAN_EXIT_STATUS)
 
     _stop = threading.Event()
@@ -77,17 +142,20 @@ def bind_to_parent(parent_pid: int, poll_s: float = 1.0) -> None:
 
 
 def pool_context():
-    """The multiprocessing context for a pool of :func:`bind_to_parent` workers: ``fork`` on Linux,
-    so that the workers are children of the process that creates the pool (under a forkserver, the
-    default from Python 3.14, the server would be their parent); None (the default) elsewhere."""
-    return multiprocessing.get_context("fork") if sys.platform.startswith("linux") else None
+    """The multiprocessing context of the project's pools: ``forkserver`` on Linux (the default
+    from Python 3.14 on, taken on every version: a worker forked from a fresh server, not from a
+    parent running pyarrow's and BLAS's threads, which ``fork`` copies in whatever state they
+    are — Python 3.12 and later warn of it); the platform's default (None) elsewhere. The pool's
+    tasks and initializer must be importable functions (they are pickled to the workers)."""
+    if sys.platform.startswith("linux") and "forkserver" in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("forkserver")
+    return None
 
 
 def init_pool_worker(parent_pid: int) -> None:
-    """A pool initializer: :func:`bind_to_parent`, SIGTERM at its default (end the worker), and SIGINT
-    ignored — the terminal sends Ctrl-C to
-    the whole process group, and the parent alone handles it (with :func:`stop_pool`), so no worker
-    prints a traceback of its own.
+    """A pool initializer: :func:`bind_to_parent`, SIGTERM at its default (end the worker), and
+    SIGINT ignored — the terminal sends Ctrl-C to the whole process group, and the pool's process
+    alone handles it (with :func:`stop_pool`), so no worker prints a traceback of its own.
 
     Parameters
     ----------
@@ -98,6 +166,39 @@ def init_pool_worker(parent_pid: int) -> None:
     # a forked worker inherits the parent's handlers: the CLI's SIGTERM handler would turn
     # stop_pool's SIGTERM into an exception inside the task instead of ending the worker
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _init_bound(parent_pid: int, initializer: Callable[..., object] | None, initargs: tuple) -> None:
+    """:func:`worker_pool`'s initializer: :func:`init_pool_worker`, then the caller's own."""
+    init_pool_worker(parent_pid)
+    if initializer is not None:
+        initializer(*initargs)
+
+
+@contextlib.contextmanager
+def worker_pool(max_workers: int, initializer: Callable[..., object] | None = None,
+                initargs: Sequence = ()) -> Iterator[ProcessPoolExecutor]:
+    """A process pool whose workers end with this process and leave Ctrl-C to it.
+
+    Its context is :func:`pool_context`; each worker runs :func:`init_pool_worker` and then
+    ``initializer(*initargs)`` (an importable function: it is pickled to the worker). On leaving
+    the block normally the pool is shut down after its tasks; on any exception (Ctrl-C, an error
+    writing a result) it is stopped at once (:func:`stop_pool`) and the exception goes on.
+
+    Parameters
+    ----------
+    max_workers : worker processes.
+    initializer, initargs : a per-worker initializer of the caller's, and its arguments.
+    """
+    pool = ProcessPoolExecutor(max_workers=max_workers, mp_context=pool_context(),
+                               initializer=_init_bound,
+                               initargs=(os.getpid(), initializer, tuple(initargs)))
+    try:
+        yield pool
+    except BaseException:
+        stop_pool(pool)
+        raise
+    pool.shutdown(wait=True)
 
 
 def stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 5.0) -> None:

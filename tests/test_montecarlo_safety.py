@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _processes import HAVE_PROC, alive, descendants, ignores
 from test_montecarlo import SCENARIO_TOML, _scenario
 
 from campaigns import montecarlo_cli
@@ -223,54 +224,36 @@ run_montecarlo(_scenario(), {out!r}, replications=40, workers=2)
 """
 
 
-def _children(pid: int) -> list[int]:
-    out = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid:
-            out.append(int(stat.parent.name))
-    return out
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"  # a zombie computes nothing; its new parent reaps it when it can
-
-
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.skipif(not HAVE_PROC, reason="reads /proc")
 def test_worker_processes_end_when_the_run_is_killed(tmp_path):
     out = tmp_path / "killed"
     child = subprocess.Popen([sys.executable, "-c", _RUN_IN_CHILD.format(tests=str(ROOT / "tests"),
                                                                        out=str(out))], cwd=ROOT)
     try:
         deadline = time.monotonic() + 120
-        workers: list[int] = []
+        workers: list[tuple[int, str]] = []
         # the workers are busy with replications once the first one is written
         while not (out / "replications").is_dir() or not any((out / "replications").glob("r*.parquet")):
             assert child.poll() is None, "the run ended before it could be killed"
             assert time.monotonic() < deadline, "no replication within 120 s"
             time.sleep(0.2)
-        workers = _children(child.pid)
+        # the workers (and under forkserver the server, their parent, and a resource tracker)
+        workers = descendants(child.pid)
         assert len(workers) >= 2, workers
         os.kill(child.pid, signal.SIGKILL)
         child.wait()
         end = time.monotonic() + 5.0
-        while any(_alive(w) for w in workers) and time.monotonic() < end:
+        while any(alive(w) for w in workers) and time.monotonic() < end:
             time.sleep(0.1)
-        alive = [w for w in workers if _alive(w)]
-        assert not alive, f"worker processes {alive} outlived their killed parent by 5 s"
+        left = [w for w in workers if alive(w)]
+        assert not left, f"worker processes {left} outlived their killed parent by 5 s"
     finally:
         if child.poll() is None:
             child.kill()
-        for w in _children(child.pid) + workers:
-            if _alive(w):
-                os.kill(w, signal.SIGKILL)
+            child.wait()
+        for w in workers:
+            if alive(w):
+                os.kill(w[0], signal.SIGKILL)
 
 
 # ---------------------------------------------------------------------------- the summary's files,
@@ -432,36 +415,28 @@ def test_a_file_with_a_result_name_the_run_did_not_write_is_refused(run3, tmp_pa
     assert f"{rep / 'r00003.parquet'}: replication 0 of scenario hash" in err and "not replication 3" in err
 
 
-def _ignores(pid: int, signum: int) -> bool:
-    """Whether process ``pid`` ignores signal ``signum`` (its SigIgn mask in /proc)."""
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("SigIgn:"):
-            return bool(int(line.split()[1], 16) >> (signum - 1) & 1)
-    raise AssertionError(f"no SigIgn in /proc/{pid}/status")
-
-
-_INTERRUPTED_IN_CHILD = """
-import sys, time
+#: installed in every Python process of the interrupted run (the run, a fork server, the workers,
+#: however they start) as its sitecustomize: replications other than 0 wait inside their scratch
+#: directory until the run is interrupted, so that the Ctrl-C comes while they run, whatever the
+#: machine's speed
+_HOLD_REPLICATIONS = """
+import time
 from pathlib import Path
 from campaigns.montecarlo import replication
 real = replication.write_scratch_dataset
 
 def held(scenario, draws, truths, models, directory):
-    # replications other than 0 wait here, inside their scratch directory, until the run is
-    # interrupted: the Ctrl-C comes while they run, whatever the machine's speed
     real(scenario, draws, truths, models, directory)
-    if not Path(directory).name.startswith("fpr-mc-r00000-"):
+    if "r00000-" not in Path(directory).name:
         (Path(directory) / "held").touch()
         while True:
             time.sleep(0.05)
 
 replication.write_scratch_dataset = held
-from campaigns.cli import main
-sys.exit(main(sys.argv[1:]))
 """
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.skipif(not HAVE_PROC, reason="reads /proc")
 def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp_path, capsys):
     toml, whole = run3
     out = tmp_path / "cut"
@@ -469,11 +444,15 @@ def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp
     scratch.mkdir()
     args = ["montecarlo", str(toml), "--out", str(out), "--workers", "2", "--replications", "3",
             "--no-summary"]
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(_HOLD_REPLICATIONS)
+    path = os.pathsep.join(p for p in (str(hook), os.environ.get("PYTHONPATH")) if p)
     # its own process group, as a terminal's foreground job: Ctrl-C goes to the run and its workers
-    child = subprocess.Popen([sys.executable, "-c", _INTERRUPTED_IN_CHILD, *args], cwd=ROOT,
-                             env=dict(os.environ, TMPDIR=str(scratch)), process_group=0,
+    child = subprocess.Popen([sys.executable, "-m", "campaigns.cli", *args], cwd=ROOT,
+                             env=dict(os.environ, TMPDIR=str(scratch), PYTHONPATH=path), process_group=0,
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    workers: list[int] = []
+    workers: list[tuple[int, str]] = []
     try:
         deadline = time.monotonic() + 120
         # replication 0 written, both workers held inside a replication (1 and 2)
@@ -482,23 +461,24 @@ def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp
             assert child.poll() is None, child.communicate()
             assert time.monotonic() < deadline, "the workers were not busy within 120 s"
             time.sleep(0.1)
-        workers = _children(child.pid)
-        assert len(workers) == 2, workers
+        # the workers (and under forkserver the server, their parent, and a resource tracker)
+        workers = descendants(child.pid)
+        assert len(workers) >= 2, workers
         for w in workers:  # the workers leave Ctrl-C to the run (no traceback from each)
-            assert _ignores(w, signal.SIGINT), f"worker {w} does not ignore SIGINT"
+            assert ignores(w[0], signal.SIGINT), f"worker {w} does not ignore SIGINT"
         os.killpg(child.pid, signal.SIGINT)
         stdout, stderr = child.communicate(timeout=60)
         end = time.monotonic() + 5.0
-        while any(_alive(w) for w in workers) and time.monotonic() < end:
+        while any(alive(w) for w in workers) and time.monotonic() < end:
             time.sleep(0.1)
-        assert not [w for w in workers if _alive(w)], "a worker outlived the interrupted run by 5 s"
+        assert not [w for w in workers if alive(w)], "a worker outlived the interrupted run by 5 s"
     finally:
         if child.poll() is None:
             child.kill()
             child.wait()
         for w in workers:
-            if _alive(w):
-                os.kill(w, signal.SIGKILL)
+            if alive(w):
+                os.kill(w[0], signal.SIGKILL)
     assert child.returncode == 130, stderr
     assert (f"fpr montecarlo: interrupted: 1 of 3 replications written to {out}; run the same "
             "command again to resume") in stderr, stderr

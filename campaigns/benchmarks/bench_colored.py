@@ -54,7 +54,6 @@ import shlex
 import subprocess
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -94,14 +93,11 @@ _FLIGHTS: dict = {}
 _LIMITS = []
 
 
-def _init_worker(parent_pid: int) -> None:
+def _init_worker() -> None:
     """One BLAS thread per worker process (two processes on two cores); the worker ends with its
-    parent (:func:`synth.workers.bind_to_parent`)."""
+    parent (:func:`synth.workers.worker_pool`)."""
     from threadpoolctl import threadpool_limits
 
-    from synth.workers import bind_to_parent
-
-    bind_to_parent(parent_pid)
     _LIMITS.append(threadpool_limits(1, "blas"))
 
 
@@ -312,7 +308,9 @@ def main() -> None:
             *machine(), f"code: {code}"]
     T, tc, to = MAIN
     noise = tcu.CorrelatedNoise(tc, to)
-    with ProcessPoolExecutor(a.workers, initializer=_init_worker, initargs=(os.getpid(),)) as pool:
+    from synth.workers import worker_pool
+
+    with worker_pool(a.workers, _init_worker) as pool:
         mc, wall_main, err_main = run_point(pool, MAIN, a.n, 100_000, a.workers)
         print(f"main: {a.n} replications in {wall_main:.0f} s", flush=True)
         sweep = []

@@ -61,7 +61,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -72,7 +72,7 @@ import pyarrow.parquet as pq
 from synth.campaign import software_versions
 from synth.flight import FlightError
 from synth.truth import TruthTrajectory
-from synth.workers import init_pool_worker, pool_context, stop_pool
+from synth.workers import worker_pool
 
 from .flight_cache import flight_bytes, flight_file, read_flight
 from .replication import (
@@ -651,20 +651,18 @@ def _on_worker_sigterm(signum, frame) -> None:
     os._exit(128 + signum)
 
 
-def _init_pool_worker(parent_pid: int) -> None:
-    """Pool initializer: the worker ends with the run's process, leaves Ctrl-C to it, and removes
-    its scratch data when the run stops it (SIGTERM; a forked worker would otherwise inherit the
-    parent's handler)."""
-    init_pool_worker(parent_pid)
+def _init_pool_worker() -> None:
+    """Pool initializer (after :func:`synth.workers.init_pool_worker`): the worker removes its
+    scratch data when the run stops it (SIGTERM)."""
     signal.signal(signal.SIGTERM, _on_worker_sigterm)
 
 
 def _run_processes(scenario, payload, out_dir, todo, workers, record) -> tuple[int, str]:
     cache = str(out_dir / _FLIGHTS)
-    # the workers end with this process, however it ends (a kill leaves no orphan computing on)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=pool_context(),
-                               initializer=_init_pool_worker, initargs=(os.getpid(),))
-    try:
+    # the workers end with this process, however it ends (a kill leaves no orphan computing on);
+    # on Ctrl-C or an error writing a file, what has not started is cancelled and the running
+    # workers are ended now (their replications are lost; every file written so far is whole)
+    with worker_pool(workers, _init_pool_worker) as pool:
         missing = _missing_flights(scenario, out_dir, todo)
         flown = _store_flights(scenario, out_dir,
                                pool.map(fly_task, [payload] * len(missing), missing))
@@ -673,12 +671,6 @@ def _run_processes(scenario, payload, out_dir, todo, workers, record) -> tuple[i
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
             for fut in finished:
                 record(fut.result())
-    except BaseException:
-        # Ctrl-C, or an error writing a file: cancel what has not started, end the running workers
-        # now (their replications are lost; every file written so far is whole)
-        stop_pool(pool)
-        raise
-    pool.shutdown(wait=True)
     return flown, f"processes({workers})"
 
 

@@ -86,7 +86,7 @@ import time
 import traceback
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from pathlib import Path
 from typing import Any
 
@@ -113,7 +113,7 @@ from estimator.problem import Problem
 from estimator.result import STATUS_TEXT, EstimationResult
 from estimator.solver import SolverOptions, estimate
 from synth.errors import ErrorConfig
-from synth.workers import bind_to_parent
+from synth.workers import worker_pool
 
 STUDY = "robustness"
 #: the master seed of every scale's scenario (replication r draws from (SEED, r))
@@ -477,8 +477,7 @@ def run_study(config: StudyConfig, out_dir: Path, replications: int, workers: in
             for s, k in todo:
                 write(pair_task(raws[s], s, k))
         elif todo:
-            with ProcessPoolExecutor(max_workers=workers, initializer=bind_to_parent,
-                                     initargs=(os.getpid(),)) as pool:
+            with worker_pool(workers) as pool:  # workers end with this process; Ctrl-C stops them
                 futures = [pool.submit(pair_task, raws[s], s, k) for s, k in todo]
                 for fut in as_completed(futures):
                     write(fut.result())

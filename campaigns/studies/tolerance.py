@@ -50,7 +50,7 @@ import tempfile
 import textwrap
 import time
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -66,7 +66,7 @@ from campaigns.truth import true_parameters
 from estimator.io import problem_from_dataset
 from estimator.modelfile import load_model_set
 from synth.errors import PROBE_SENSORS, VANE_SENSORS, ErrorConfig
-from synth.workers import bind_to_parent
+from synth.workers import worker_pool
 
 #: desired 3-sigma accuracy per requirement group, deg (paper Table 2)
 DESIRED_3SIGMA_DEG: Mapping[str, float] = {
@@ -351,8 +351,7 @@ def run_points(points: Sequence[Point], replications: int, workers: int,
         for d in order:
             done(*_run_point(unique[d], str(d), replications))
         return errors, ran[0]
-    with ProcessPoolExecutor(max_workers=workers, initializer=bind_to_parent,
-                             initargs=(os.getpid(),)) as pool:
+    with worker_pool(workers) as pool:  # workers end with this process; Ctrl-C stops them
         futures = [pool.submit(_run_point, unique[d], str(d), replications) for d in order]
         for fut in as_completed(futures):
             done(*fut.result())

@@ -1,0 +1,50 @@
+"""Finding a test's child processes and their descendants in ``/proc`` (Linux), with a guard
+against reused process ids: a process is (pid, start time), and one of that pid started at
+another time is another process."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+#: whether this system has the ``/proc`` these helpers read
+HAVE_PROC = Path("/proc/self/stat").exists()
+
+
+def proc_stat(pid: int) -> list[str] | None:
+    """Fields 3 on of ``/proc/PID/stat`` (``[0]`` state, ``[1]`` ppid, ``[19]`` start time),
+    None when there is no such process."""
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return text[text.rindex(")") + 2:].split()  # after the name, which may hold spaces
+
+
+def descendants(pid: int) -> list[tuple[int, str]]:
+    """(pid, start time) of every process below ``pid``: its children (pool workers under fork or
+    spawn, a fork server, a resource tracker) and theirs (workers under forkserver)."""
+    parent_of = {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit() and (st := proc_stat(int(d.name))) is not None:
+            parent_of[int(d.name)] = (int(st[1]), st[19])
+    found, frontier = [], [pid]
+    while frontier:
+        p = frontier.pop()
+        kids = [(c, start) for c, (pp, start) in parent_of.items() if pp == p]
+        found += kids
+        frontier += [c for c, _ in kids]
+    return found
+
+
+def alive(proc: tuple[int, str]) -> bool:
+    """Whether the process (pid, start time) still runs (a zombie computes nothing)."""
+    st = proc_stat(proc[0])
+    return st is not None and st[19] == proc[1] and st[0] not in "ZX"
+
+
+def ignores(pid: int, signum: int) -> bool:
+    """Whether process ``pid`` ignores signal ``signum`` (its SigIgn mask in /proc)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("SigIgn:"):
+            return bool(int(line.split()[1], 16) >> (signum - 1) & 1)
+    raise AssertionError(f"no SigIgn in /proc/{pid}/status")

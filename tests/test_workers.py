@@ -1,0 +1,123 @@
+"""Pool workers end with the process that made the pool, whatever the start method and however
+that process ends (issue 11): :mod:`synth.workers`."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from _processes import HAVE_PROC, alive, descendants, proc_stat
+
+from synth import workers
+from synth.workers import worker_pool
+
+TESTS = Path(__file__).resolve().parent
+ROOT = TESTS.parent
+
+linux_only = pytest.mark.skipif(not HAVE_PROC, reason="reads /proc")
+
+
+def _hold(directory: str) -> None:
+    """A pool task: say which worker runs it (a file named by its pid), then stay busy."""
+    Path(directory, str(os.getpid())).touch()
+    time.sleep(120)
+
+
+_PARENT = """\
+import os, sys, time
+sys.path.insert(0, {tests!r})
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+from synth.workers import init_pool_worker
+from test_workers import _hold
+
+if __name__ == "__main__":
+    pool = ProcessPoolExecutor(2, mp_context=multiprocessing.get_context({method!r}),
+                               initializer=init_pool_worker, initargs=(os.getpid(),))
+    for _ in range(2):
+        pool.submit(_hold, {held!r})
+    time.sleep(120)
+"""
+
+
+@linux_only
+@pytest.mark.parametrize("method", [m for m in ("fork", "spawn", "forkserver")
+                                    if m in multiprocessing.get_all_start_methods()])
+def test_workers_end_within_5_s_of_a_sigkill_of_the_pools_process(tmp_path, method):
+    held = tmp_path / "held"
+    held.mkdir()
+    script = tmp_path / "parent.py"
+    script.write_text(_PARENT.format(tests=str(TESTS), method=method, held=str(held)))
+    proc = subprocess.Popen([sys.executable, str(script)], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, start_new_session=True)
+    below: list[tuple[int, str]] = []
+    try:
+        deadline = time.monotonic() + 60.0
+        while len(list(held.iterdir())) < 2:  # both workers bound and busy
+            assert proc.poll() is None, proc.stderr.read().decode()
+            assert time.monotonic() < deadline, "the workers did not start within 60 s"
+            time.sleep(0.02)
+        below = descendants(proc.pid)
+        pids = {int(p.name) for p in held.iterdir()}
+        assert pids <= {p for p, _ in below}, (pids, below)
+        os.kill(proc.pid, signal.SIGKILL)  # the pool's process alone; nothing tells the workers
+        proc.wait(timeout=10)
+        end = time.monotonic() + 5.0
+        while any(alive(p) for p in below) and time.monotonic() < end:
+            time.sleep(0.05)
+        # the workers, and under forkserver/spawn the server and resource tracker too
+        assert not [p for p in below if alive(p)], f"{method}: processes outlived their parent by 5 s"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for p in below:
+            if alive(p):
+                os.kill(p[0], signal.SIGKILL)
+        proc.stderr.close()
+
+
+@linux_only
+def test_a_reused_pid_or_a_zombie_is_not_the_pools_process():
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        start = workers._start_time(child.pid)
+        assert start is not None
+        assert not workers._parent_gone(child.pid, start, direct=False)
+        # the same id started at another time is another process
+        assert workers._parent_gone(child.pid, start + 1, direct=False)
+        child.kill()
+        deadline = time.monotonic() + 10.0
+        while proc_stat(child.pid)[0] != "Z":  # killed, its status not collected yet: a zombie
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        assert workers._parent_gone(child.pid, start, direct=False)
+    finally:
+        child.kill()
+        child.wait()
+    assert workers._parent_gone(child.pid, start, direct=False)
+
+
+def _fail_on(x: int) -> int:
+    if x == 1:
+        raise ValueError("task 1 failed")
+    return x
+
+
+def test_worker_pool_runs_tasks_and_stops_its_workers_on_an_exception():
+    with worker_pool(2) as pool:
+        assert list(pool.map(_fail_on, [0, 2, 3])) == [0, 2, 3]
+    with pytest.raises(ValueError, match="task 1 failed"):
+        with worker_pool(2) as pool:
+            futures = [pool.submit(_fail_on, x) for x in range(3)]
+            procs = list(pool._processes.values())
+            for f in futures:
+                f.result()
+    for p in procs:
+        assert not p.is_alive()
