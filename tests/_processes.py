@@ -48,3 +48,13 @@ def ignores(pid: int, signum: int) -> bool:
         if line.startswith("SigIgn:"):
             return bool(int(line.split()[1], 16) >> (signum - 1) & 1)
     raise AssertionError(f"no SigIgn in /proc/{pid}/status")
+
+
+def sigint_default() -> None:
+    """A ``preexec_fn``: Ctrl-C (SIGINT) at its default in the child, as in a terminal. A child
+    inherits an ignored SIGINT (pytest started by nohup, in a script's background job, some CI),
+    and Python then installs no KeyboardInterrupt handler: a test sending SIGINT would test
+    nothing."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from _processes import HAVE_PROC, alive, descendants
+from _processes import HAVE_PROC, alive, descendants, sigint_default
 
 from campaigns.cli import main
 from estimator.io.errors import DataError
@@ -210,7 +210,7 @@ def test_a_killed_fly_leaves_no_worker_and_resumes_to_the_same_bytes(kill_campai
     with open(log_out, "w") as fo, open(log_err, "w") as fe:
         proc = subprocess.Popen(
             [sys.executable, "-m", "campaigns.cli", "fly", str(toml), "--out", str(out), "--workers", "2"],
-            stdout=fo, stderr=fe, cwd=REPO, start_new_session=True)
+            stdout=fo, stderr=fe, cwd=REPO, start_new_session=True, preexec_fn=sigint_default)
     try:
         # wait for the first maneuver file (bounded: a stuck start fails instead of hanging)
         deadline = time.monotonic() + 120.0

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _processes import HAVE_PROC, alive, descendants, ignores
+from _processes import HAVE_PROC, alive, descendants, ignores, sigint_default
 from test_montecarlo import SCENARIO_TOML, _scenario
 
 from campaigns import montecarlo_cli
@@ -451,7 +451,8 @@ def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp
     # its own process group, as a terminal's foreground job: Ctrl-C goes to the run and its workers
     child = subprocess.Popen([sys.executable, "-m", "campaigns.cli", *args], cwd=ROOT,
                              env=dict(os.environ, TMPDIR=str(scratch), PYTHONPATH=path), process_group=0,
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             preexec_fn=sigint_default, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True)
     workers: list[tuple[int, str]] = []
     try:
         deadline = time.monotonic() + 120
