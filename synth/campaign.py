@@ -60,8 +60,8 @@ from synth.dataset import (
     FORMAT_VERSION,
     _jsonable,
     dataset_status,
+    job_entries,
     prepare_directory,
-    read_maneuver_metadata,
     read_manifest_if_dataset,
     remove_temp_files,
     resume_command,
@@ -330,7 +330,8 @@ def _run_job(job: Job) -> JobResult:
 class FlyResult:
     """What `fly_campaign` did: the dataset directory, its manifest, failures and timing.
 
-    ``flown`` is the number of jobs flown by this call (less than the campaign's on a resume).
+    ``flown`` is the number of jobs flown by this call (less than the campaign's on a resume);
+    ``notes`` what the user should know (a damaged file of an interrupted dataset, flown again).
     """
 
     out_dir: Path
@@ -338,6 +339,7 @@ class FlyResult:
     failures: tuple[tuple[Job, str], ...]
     wall_s: float
     flown: int = 0
+    notes: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -440,6 +442,29 @@ def _check_same_campaign(out_dir: Path, stored: Mapping, header: dict) -> None:
             "new --out (or replace the dataset with --overwrite)")
 
 
+def _clear_damaged(out_dir: Path, damaged: Sequence[tuple[str, str]]) -> list[str]:
+    """Remove the damaged maneuver files of an interrupted dataset (:func:`synth.dataset.job_entries`:
+    files of the names fpr fly writes there, for jobs it has not finished), so that their jobs are
+    flown again and a failed flight leaves no damaged file behind; one note per file.
+
+    Raises
+    ------
+    FileExistsError
+        If one is a folder: not something fpr fly wrote, left alone.
+    """
+    folders = [rel for rel, _ in damaged if (out_dir / rel).is_dir() and not (out_dir / rel).is_symlink()]
+    if folders:
+        raise FileExistsError(
+            f"{out_dir}: {', '.join(folders)}: a folder where `fpr fly` writes a maneuver file; "
+            f"refusing to resume. Move it away and resume again: {resume_command(out_dir)}")
+    notes = []
+    for rel, why in damaged:
+        (out_dir / rel).unlink()
+        notes.append(f"{out_dir / rel}: damaged ({why}): removed, its maneuver is flown again "
+                     "(fpr fly wrote this name)")
+    return notes
+
+
 def campaign_of_dataset(out_dir: str | Path) -> Campaign:
     """The campaign a dataset (complete or interrupted) was flown from, as its manifest records it.
 
@@ -504,6 +529,7 @@ def fly_campaign(
     stored = read_manifest_if_dataset(out_dir) if resume and out_dir.is_dir() else None
     jobs = {j.index: j for j in campaign.jobs}
     done: dict[int, list[dict]] = {}
+    notes: list[str] = []
     if stored is not None:
         # the manifest's own source label stays: the same file may be named another way today
         header["campaign"]["source"] = stored.get("campaign", {}).get("source", campaign.source)
@@ -514,9 +540,9 @@ def fly_campaign(
             return FlyResult(out_dir, stored, failures, time.perf_counter() - t0, flown=0)
         remove_temp_files(out_dir)
         (out_dir / "maneuvers").mkdir(exist_ok=True)
-        for index in dataset_status(out_dir, stored).done:
-            # each file carries its manifest entry: the finished jobs need not be flown again
-            done[index] = [read_maneuver_metadata(out_dir / f) for f in _job_files(jobs[index])]
+        # each whole file carries its manifest entry: the finished jobs need not be flown again
+        done, damaged = job_entries(out_dir, stored)
+        notes = _clear_damaged(out_dir, damaged)
     else:
         out_dir = prepare_directory(out_dir, overwrite=overwrite)
         # first, before any maneuver: at every moment the directory says it is an incomplete dataset
@@ -533,6 +559,8 @@ def fly_campaign(
         bar = tqdm(total=len(campaign.jobs), initial=len(done), unit="maneuver",
                    desc=f"fly {campaign.name}", file=sys.stderr,
                    mininterval=0.5 if sys.stderr.isatty() else 10.0)
+        for note in notes:
+            bar.write(note, file=sys.stderr)
 
     def _tick(res: JobResult) -> None:
         results.append(res)
@@ -578,7 +606,8 @@ def fly_campaign(
     # no wall-clock time or timing in the manifest: two identical campaigns, or an interrupted
     # one and its resumption, give the same bytes
     write_manifest(out_dir, manifest)
-    return FlyResult(out_dir, _normalized(manifest), failures, time.perf_counter() - t0, flown=len(todo))
+    return FlyResult(out_dir, _normalized(manifest), failures, time.perf_counter() - t0, flown=len(todo),
+                     notes=tuple(notes))
 
 
 def summarize(manifest: Mapping) -> str:

@@ -40,7 +40,7 @@ import os
 import re
 import shlex
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -160,20 +160,78 @@ class DatasetStatus:
     ----------
     complete : the manifest says the run ended (``complete`` true or absent).
     n_jobs : planned jobs (for a manifest without ``jobs``: its maneuver entries).
-    done : indices of the jobs whose every file is present (a present file is whole: atomic writes).
+    done : indices of the jobs whose every file is there and whole (atomic writes: a file is
+        whole unless something else damaged it; its footer is read to make sure).
+    damaged : (file, what is wrong) of each planned file that is there but is not a whole maneuver
+        file of its job (unreadable, truncated, another job's, a link): its job is not done, and
+        ``fpr fly --resume`` flies it again (the tool wrote that name).
     """
 
     complete: bool
     n_jobs: int
     done: tuple[int, ...]
+    damaged: tuple[tuple[str, str], ...] = ()
 
     @property
     def n_done(self) -> int:
         return len(self.done)
 
 
+def _file_state(directory: Path, rel: str, job_index: int) -> tuple[dict | None, str | None]:
+    """(its manifest entry, None) when ``rel`` is a whole maneuver file of job ``job_index``;
+    (None, what is wrong) when it is there but damaged; (None, None) when it is not there."""
+    path = directory / rel
+    if path.is_symlink():
+        return None, "a link, not a file fpr fly wrote"
+    if not path.exists():
+        return None, None
+    if not path.is_file():
+        return None, "not a file"
+    try:
+        entry = read_maneuver_metadata(path)
+    except (OSError, ValueError, pa.ArrowException) as exc:  # truncated, overwritten, foreign
+        return None, str(exc).removeprefix(f"{path}: ").removesuffix("; the file is damaged")
+    if entry.get("job_index") != job_index or entry.get("file") != rel:
+        return None, (f"holds maneuver {entry.get('id')!r} of job {entry.get('job_index')}, "
+                      f"not job {job_index}'s")
+    return entry, None
+
+
+def job_entries(directory: str | Path, manifest: Mapping) -> tuple[dict[int, list[dict]],
+                                                                 list[tuple[str, str]]]:
+    """The finished jobs of a dataset with planned ``jobs`` (an incomplete one), read from their
+    files, and the damaged files.
+
+    Returns
+    -------
+    done : job index -> the manifest entries of its files (each file's own copy), for every job
+        whose every file is there and whole.
+    damaged : (file, what is wrong) of every planned file that is there but not whole
+        (:class:`DatasetStatus`).
+    """
+    directory = Path(directory)
+    done: dict[int, list[dict]] = {}
+    damaged: list[tuple[str, str]] = []
+    for job in manifest.get("jobs") or []:
+        index, files = int(job["job_index"]), job["files"]
+        entries = []
+        for rel in files:
+            if not MANEUVER_FILE_RE.fullmatch(rel):  # never a name outside the tool's own
+                break
+            entry, why = _file_state(directory, rel, index)
+            if why is not None:
+                damaged.append((rel, why))
+            if entry is None:
+                break
+            entries.append(entry)
+        else:
+            done[index] = entries
+    return done, damaged
+
+
 def dataset_status(directory: str | Path, manifest: Mapping | None = None) -> DatasetStatus:
-    """Whether the dataset at ``directory`` is complete, and which planned jobs are done."""
+    """Whether the dataset at ``directory`` is complete, which planned jobs are done and which of
+    their files are damaged (every present file's footer is read)."""
     directory = Path(directory)
     manifest = read_manifest_if_dataset(directory) if manifest is None else manifest
     if manifest is None:
@@ -185,26 +243,32 @@ def dataset_status(directory: str | Path, manifest: Mapping | None = None) -> Da
     if jobs is None:  # a manifest written before planned jobs were recorded: always a complete run
         return DatasetStatus(complete, len(manifest.get("maneuvers", [])),
                              tuple(range(len(manifest.get("maneuvers", [])))))
-    done = tuple(
-        int(job["job_index"]) for job in jobs
-        if all(MANEUVER_FILE_RE.fullmatch(f) and (directory / f).is_file() for f in job["files"])
-    )
-    return DatasetStatus(complete, len(jobs), done)
+    done, damaged = job_entries(directory, manifest)
+    return DatasetStatus(complete, len(jobs), tuple(done), tuple(damaged))
+
+
+def damaged_message(directory: str | Path, damaged: Sequence[tuple[str, str]]) -> str:
+    """The damaged files of an incomplete dataset, named, and what the resume does with them."""
+    shown = "; ".join(f"{Path(directory) / rel} ({why})" for rel, why in damaged[:_MAX_SHOWN])
+    more = f"; ... and {len(damaged) - _MAX_SHOWN} more" if len(damaged) > _MAX_SHOWN else ""
+    return (f"{len(damaged)} damaged maneuver file(s), not counted as written: {shown}{more}; "
+            "`fpr fly --resume` flies them again (fpr fly wrote these names: they are replaced)")
 
 
 def incomplete_message(directory: str | Path, status: DatasetStatus) -> str:
     """What an incomplete dataset is and how to complete it (for errors and `fpr show`)."""
     return (f"{directory}: incomplete dataset: {status.n_done} of {status.n_jobs} maneuvers written "
             "(`fpr fly` was interrupted, or is still running); complete it with: "
-            f"{resume_command(directory)}")
+            f"{resume_command(directory)}"
+            + (f". {damaged_message(directory, status.damaged)}" if status.damaged else ""))
 
 
 def written_entries(directory: str | Path, manifest: Mapping) -> list[dict]:
-    """The manifest entries of an incomplete dataset's finished jobs, read from their files."""
-    directory = Path(directory)
-    done = set(dataset_status(directory, manifest).done)
-    return [read_maneuver_metadata(directory / f) for job in manifest.get("jobs", [])
-            if job["job_index"] in done for f in job["files"]]
+    """The manifest entries of an incomplete dataset's finished jobs, read from their files (a
+    damaged file's job is not finished: :func:`job_entries`)."""
+    done, _ = job_entries(directory, manifest)
+    return [e for job in manifest.get("jobs", []) if int(job["job_index"]) in done
+            for e in done[int(job["job_index"])]]
 
 
 def _listing(names: list[str]) -> str:
@@ -397,8 +461,25 @@ def load_dataset(path: str | Path) -> Dataset:
 
 
 def read_maneuver_metadata(path: str | Path) -> dict:
-    """The manifest entry stored inside one maneuver's Parquet file."""
-    meta = pq.read_schema(path).metadata or {}
+    """The manifest entry stored inside one maneuver's Parquet file.
+
+    Raises
+    ------
+    ValueError
+        Naming the file, when it is not a readable Parquet file (truncated, overwritten) or holds
+        no entry of fpr's.
+    """
+    try:
+        meta = pq.read_schema(path).metadata or {}
+    except pa.ArrowException as exc:  # pyarrow's message does not name the file
+        raise ValueError(f"{path}: not a readable Parquet file ({exc}); the file is damaged") from None
     if METADATA_KEY not in meta:
         raise ValueError(f"{path}: no fpr.maneuver metadata; not written by fpr")
-    return json.loads(meta[METADATA_KEY])
+    try:
+        entry = json.loads(meta[METADATA_KEY])
+    except ValueError as exc:
+        raise ValueError(f"{path}: its fpr.maneuver metadata is not valid JSON ({exc}); the file "
+                         "is damaged") from None
+    if not isinstance(entry, dict):
+        raise ValueError(f"{path}: its fpr.maneuver metadata is not an entry; the file is damaged")
+    return entry

@@ -189,6 +189,31 @@ def test_resume_refuses_another_campaign_and_completes_its_own(tmp_path, capsys)
     assert _files(out) == reference
 
 
+def test_a_damaged_maneuver_file_is_named_and_flown_again_on_resume(tmp_path, capsys):
+    out = tmp_path / "ds"
+    _fly_tiny(out)
+    reference = _files(out)
+    _interrupt(out)
+    damaged = out / "maneuvers" / "m0000.parquet"
+    damaged.write_bytes(damaged.read_bytes()[:-100])  # truncated: the footer is gone
+    assert main(["show", str(out)]) == 1
+    shown = capsys.readouterr().out
+    assert "0 of 2 maneuvers written" in shown and f"{damaged} (" in shown and "damaged" in shown
+    assert "`fpr fly --resume` flies them again" in shown and "Traceback" not in shown
+    assert main(["fly", "--resume", "--out", str(out), "--workers", "1"]) == 0
+    err = capsys.readouterr().err
+    assert f"{damaged}: damaged (" in err and "its maneuver is flown again" in err
+    assert _files(out) == reference
+    # a folder at a maneuver file's name is not the tool's: refused, left alone
+    _interrupt(out)
+    damaged.unlink()
+    (damaged / "mine").mkdir(parents=True)
+    assert main(["fly", "--resume", "--out", str(out), "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "maneuvers/m0000.parquet: a folder where `fpr fly` writes a maneuver file" in err
+    assert (damaged / "mine").is_dir()
+
+
 # ---------------------------------------------------------- killed runs: resume, no orphans
 @pytest.fixture(scope="module")
 def kill_campaign(tmp_path_factory):
