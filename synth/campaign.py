@@ -538,8 +538,16 @@ def fly_campaign(
             failures = tuple((jobs[f["job_index"]], f["error"]) for f in stored.get("failures", [])
                              if f.get("job_index") in jobs)
             return FlyResult(out_dir, stored, failures, time.perf_counter() - t0, flown=0)
+        maneuvers = out_dir / "maneuvers"
+        if maneuvers.is_symlink() or (maneuvers.exists() and not maneuvers.is_dir()):
+            # through a link the resume would read and write outside the dataset
+            raise FileExistsError(
+                f"{maneuvers}: {'a link' if maneuvers.is_symlink() else 'not a folder'}, not the "
+                "maneuvers/ folder `fpr fly` made; refusing to resume (nothing is read or written "
+                f"through it). Put the dataset's own maneuvers/ folder back, or fly the campaign "
+                "into a new --out")
         remove_temp_files(out_dir)
-        (out_dir / "maneuvers").mkdir(exist_ok=True)
+        maneuvers.mkdir(exist_ok=True)
         # each whole file carries its manifest entry: the finished jobs need not be flown again
         done, damaged = job_entries(out_dir, stored)
         notes = _clear_damaged(out_dir, damaged)

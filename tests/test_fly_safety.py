@@ -214,6 +214,26 @@ def test_a_damaged_maneuver_file_is_named_and_flown_again_on_resume(tmp_path, ca
     assert (damaged / "mine").is_dir()
 
 
+def test_resume_refuses_a_maneuvers_folder_that_is_a_link_or_a_file(tmp_path, capsys):
+    out = tmp_path / "ds"
+    _fly_tiny(out)
+    _interrupt(out)
+    elsewhere = tmp_path / "elsewhere"
+    (out / "maneuvers").rename(elsewhere)
+    (out / "maneuvers").symlink_to(elsewhere)
+    before = _files(elsewhere)
+    assert main(["fly", "--resume", "--out", str(out), "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert f"{out / 'maneuvers'}: a link, not the maneuvers/ folder `fpr fly` made" in err
+    assert "Traceback" not in err
+    assert _files(elsewhere) == before  # nothing written through the link
+    (out / "maneuvers").unlink()
+    (out / "maneuvers").write_text("mine")
+    assert main(["fly", "--resume", "--out", str(out), "--workers", "1"]) == 2
+    assert f"{out / 'maneuvers'}: not a folder" in capsys.readouterr().err
+    assert (out / "maneuvers").read_text() == "mine"
+
+
 # ---------------------------------------------------------- killed runs: resume, no orphans
 @pytest.fixture(scope="module")
 def kill_campaign(tmp_path_factory):
