@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from types import MappingProxyType
 
 import numpy as np
 
@@ -60,6 +61,27 @@ class ParameterSpec:
     display_unit: str = ""
 
     def __post_init__(self) -> None:
+        # immutable like the rest of the dataclass: sequences become tuples, mappings read-only
+        # views of copies (a caller's list or dict changed later changes nothing here)
+        def frozen(v, what: str):
+            try:
+                return float(v) if np.ndim(v) == 0 else tuple(float(x) for x in np.ravel(v))
+            except (TypeError, ValueError):
+                raise ValueError(f"parameter {self.name}: {what} {v!r} is not a number or a list of "
+                                 f"numbers") from None
+
+        object.__setattr__(self, "value", frozen(self.value, "value"))
+        bounds = frozen(self.bounds, "bounds")
+        if not isinstance(bounds, tuple) or len(bounds) != 2:
+            raise ValueError(f"parameter {self.name}: bounds {self.bounds!r} must be (low, high)")
+        object.__setattr__(self, "bounds", bounds)
+        if self.breakpoints is not None:
+            object.__setattr__(self, "breakpoints", tuple(frozen(self.breakpoints, "breakpoints")))
+        object.__setattr__(self, "fixed_elements", tuple(int(k) for k in self.fixed_elements))
+        object.__setattr__(self, "per_instance", MappingProxyType(
+            {k: frozen(v, f"value of {k}") for k, v in dict(self.per_instance).items()}))
+        object.__setattr__(self, "free_instances",
+                           MappingProxyType({k: bool(v) for k, v in dict(self.free_instances).items()}))
         if self.scope not in SCOPES:
             raise ValueError(f"parameter {self.name}: scope {self.scope!r} is not one of {SCOPES}")
         if self.kind not in KINDS:
@@ -133,6 +155,8 @@ class ParameterSet:
         if len(set(keys)) != len(keys):
             dup = sorted({k for k in keys if keys.count(k) > 1})
             raise ValueError(f"duplicate parameter keys {dup[:5]}")
+        object.__setattr__(self, "parameters", tuple(self.parameters))
+        object.__setattr__(self, "specs", MappingProxyType(dict(self.specs)))
         object.__setattr__(self, "_index", {k: i for i, k in enumerate(keys)})
 
     @classmethod

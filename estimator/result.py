@@ -3,8 +3,11 @@
 ``EstimationResult.to_pandas()`` gives one row per parameter (SI and display units, and what the
 estimator did with it: estimated, on a bound, held and why, or fixed); ``residuals_table()`` one
 row per maneuver and channel; ``findings_table()`` the findings behind the verdict;
-``diagnostics`` the fit-quality table; ``to_json`` / ``to_csv`` write them. A result is immutable:
-its arrays are read-only copies, its mappings read-only views.
+``diagnostics`` the fit-quality table; ``to_json`` / ``to_csv`` write them and
+``EstimationResult.from_json`` reads ``result.json`` back. A result is immutable, however it was
+made: its arrays are read-only copies, its mappings read-only views, its sequences tuples, its
+fit-quality table a :class:`ReadOnlyTable` (``result.R["alpha_zl"] = 0`` raises ``TypeError``,
+``result.std_crb[0] = 0`` ``ValueError``, ``result.status = ...`` ``FrozenInstanceError``).
 
 ``status`` is the solver's (:class:`~estimator.verdict.Status`: positive = converged);
 ``verdict`` (:class:`~estimator.verdict.Verdict`) is what to act on: a converged fit can still be
@@ -14,22 +17,63 @@ a failure (a wrong minimum, a stuck vane).
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
 import pandas as pd
 
-from estimator.parameters import ParameterSet
+from estimator.parameters import Parameter, ParameterSet, ParameterSpec
 from estimator.problem import Problem
 from estimator.verdict import Finding, Severity, Status, Verdict, findings_frame, judge, reasons
 
 #: Short text of each solver status code (for tables that store the code).
-STATUS_TEXT = {s.value: s.name.lower().replace("_", " ") for s in Status}
+STATUS_TEXT = {s.value: s.label for s in Status}
 #: What the estimator did with a parameter (:attr:`EstimationResult.state`).
 STATES = ("estimated", "on_bound", "held", "unidentifiable", "fixed", "not estimated")
+#: What :meth:`EstimationResult.to_json` writes (``format``); :meth:`EstimationResult.from_json`
+#: also reads the files written before it was named (everything but the exact parameter set).
+JSON_FORMAT = "fpr-estimation-result/2"
+
+
+def _read_only(a, dtype=float) -> np.ndarray | None:
+    """A read-only copy of ``a`` (None stays None; an array already read-only and owning its
+    memory — one made here — is kept, so copying a result does not copy its matrices again)."""
+    if a is None:
+        return None
+    if isinstance(a, np.ndarray) and not a.flags.writeable and a.base is None and a.flags.owndata:
+        return a
+    a = np.array(a, dtype=dtype, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class ReadOnlyTable:
+    """A table that cannot be changed in place: named read-only columns.
+
+    ``to_pandas()`` gives a DataFrame (a new one each time, the caller's to change).
+    """
+
+    columns: tuple[str, ...]
+    data: tuple[np.ndarray, ...] = field(repr=False)
+
+    @classmethod
+    def of(cls, table: pd.DataFrame | ReadOnlyTable) -> ReadOnlyTable:
+        if isinstance(table, ReadOnlyTable):
+            return table
+        return cls(tuple(str(c) for c in table.columns),
+                   tuple(_read_only(table[c].to_numpy(copy=True), dtype=None) for c in table.columns))
+
+    def __len__(self) -> int:
+        return len(self.data[0]) if self.data else 0
+
+    def to_pandas(self) -> pd.DataFrame:
+        return pd.DataFrame({c: np.array(v, copy=True) for c, v in zip(self.columns, self.data, strict=True)},
+                            columns=list(self.columns))
 
 
 @dataclass(frozen=True)
@@ -78,7 +122,8 @@ class EstimationResult:
     findings : what the fit-quality and identifiability checks found (the verdict's reasons).
     verdict : success, success with warnings, or failure.
     fit_quality : the fit-quality table of the diagnostics, one row per maneuver and channel (None if
-        not run); read it through :attr:`diagnostics` (a copy).
+        not run), read-only (given as a DataFrame, stored as a :class:`ReadOnlyTable`); read it
+        as a DataFrame through :attr:`diagnostics`.
     outliers : (maneuver, channel) -> times (s) of the residual outliers the diagnostics found.
     std_imu_noise : (P,) the share of ``std_colored`` that the IMU's noise, integrated as process
         noise, contributes (``std_colored^2 = max(Morelli-Klein, Cramér-Rao)^2 + std_imu_noise^2``).
@@ -101,37 +146,45 @@ class EstimationResult:
     elapsed_s: float = 0.0
     g_mps2: float = 9.80665
     source: str = ""
-    channel_display: dict[str, tuple[float, str]] = field(default_factory=dict, repr=False)
+    channel_display: Mapping[str, tuple[float, str]] = field(default_factory=dict, repr=False)
     free_estimated: np.ndarray | None = field(default=None, repr=False)
     correlation_colored: np.ndarray | None = field(default=None, repr=False)
     state: tuple[str, ...] = field(default=(), repr=False)
     state_reason: tuple[str, ...] = field(default=(), repr=False)
     findings: tuple[Finding, ...] = field(default=(), repr=False)
     verdict: Verdict = Verdict.FAILURE
-    fit_quality: pd.DataFrame | None = field(default=None, repr=False)
+    fit_quality: ReadOnlyTable | None = field(default=None, repr=False)
     outliers: Mapping[tuple[str, str], np.ndarray] = field(default_factory=dict, repr=False)
     std_imu_noise: np.ndarray | None = field(default=None, repr=False)
     imu_noise_psd: Mapping[str, np.ndarray] | None = field(default=None, repr=False)
 
+    def __post_init__(self) -> None:
+        # every way of making a result (build, replace, the constructor, from_json) freezes it:
+        # arrays read-only copies, mappings read-only views of copies, sequences tuples
+        def put(name, value):
+            object.__setattr__(self, name, value)
+
+        put("status", Status(self.status))
+        for a in ("std_crb", "std_colored", "correlation", "std_imu_noise", "correlation_colored"):
+            put(a, _read_only(getattr(self, a)))
+        put("free_estimated", _read_only(self.free_estimated, dtype=bool))
+        for a in ("correlation_keys", "residuals", "confounding", "state", "state_reason", "findings"):
+            put(a, tuple(getattr(self, a)))
+        put("cost_history", tuple(float(c) for c in self.cost_history))
+        put("R", MappingProxyType({str(k): float(v) for k, v in dict(self.R).items()}))
+        put("channel_display", MappingProxyType(
+            {str(k): (float(v[0]), str(v[1])) for k, v in dict(self.channel_display).items()}))
+        put("outliers", MappingProxyType({tuple(k): _read_only(v) for k, v in dict(self.outliers).items()}))
+        if self.imu_noise_psd is not None:
+            psd = {k: _read_only(v) for k, v in dict(self.imu_noise_psd).items()}
+            put("imu_noise_psd", MappingProxyType(psd))
+        if self.fit_quality is not None:
+            put("fit_quality", ReadOnlyTable.of(self.fit_quality))
+
     @classmethod
     def build(cls, problem: Problem, values: np.ndarray, **kw) -> EstimationResult:
-        """The result of an estimation of ``problem`` ending at ``values``; every array is copied
-        and made read-only, every mapping wrapped read-only (the caller's own are untouched)."""
-        def frozen(a):
-            a = np.array(a, copy=True)
-            a.setflags(write=False)
-            return a
-
-        for a in ("std_crb", "std_colored", "correlation", "std_imu_noise", "free_estimated",
-                  "correlation_colored"):
-            if kw.get(a) is not None:
-                kw[a] = frozen(kw[a])
-        kw["R"] = MappingProxyType(dict(kw.get("R", {})))
-        kw["outliers"] = MappingProxyType({k: frozen(v) for k, v in dict(kw.get("outliers", {})).items()})
-        if kw.get("imu_noise_psd") is not None:
-            kw["imu_noise_psd"] = MappingProxyType({k: frozen(v) for k, v in kw["imu_noise_psd"].items()})
-        if kw.get("fit_quality") is not None:
-            kw["fit_quality"] = kw["fit_quality"].copy()
+        """The result of an estimation of ``problem`` ending at ``values`` (the caller's arrays
+        and mappings are copied, never frozen in place)."""
         return cls(
             parameters=problem.parameters.with_values(values), g_mps2=problem.g_mps2,
             source=problem.source,
@@ -141,8 +194,8 @@ class EstimationResult:
 
     @property
     def diagnostics(self) -> pd.DataFrame | None:
-        """The fit-quality table (a copy: the result stays as it was)."""
-        return None if self.fit_quality is None else self.fit_quality.copy()
+        """The fit-quality table (a new DataFrame each time: the result stays as it was)."""
+        return None if self.fit_quality is None else self.fit_quality.to_pandas()
 
     @property
     def success(self) -> bool:
@@ -274,37 +327,149 @@ class EstimationResult:
         return "\n".join(lines)
 
     def to_json(self, path: str | Path) -> None:
-        """Everything, with the verdict and its findings at the top. Strict JSON: a value that is
-        not a finite number (a deviation of a held parameter) is ``null``."""
-        def clean(v):
-            if isinstance(v, Mapping):
-                return {str(k): clean(x) for k, x in v.items()}
-            if isinstance(v, (list, tuple, np.ndarray)):
-                return [clean(x) for x in v]
-            if isinstance(v, np.generic):
-                v = v.item()
-            if isinstance(v, float) and not np.isfinite(v):
-                return None
-            if v is None or isinstance(v, (str, int, float, bool)):
-                return v
-            return str(v)
+        """Everything, with the verdict and its findings at the top; :meth:`from_json` reads it
+        back. Strict JSON: a value that is not a finite number (a deviation of a held parameter)
+        is ``null`` (an infinite bound too: ``[null, null]`` is unbounded)."""
+        records = self.to_pandas().reset_index().to_dict(orient="records")
+        for row, p in zip(records, self.parameters, strict=True):
+            row["element"] = p.element  # an int, not the float of a column that also holds None
+            row["bounds"] = list(p.bounds)
+            row["display_scale"] = p.display_scale
         doc = {
             "verdict": self.verdict.name, "verdict_code": self.verdict.code,
             "verdict_text": self.verdict.text,
-            "findings": [f.to_dict() for f in sorted(self.findings, key=lambda f: -int(f.severity))],
+            # most severe first; "index" is the finding's place in the result (the data's findings
+            # before the parameters' within a severity), which from_json restores
+            "findings": [{**f.to_dict(), "index": i} for i, f in
+                         sorted(enumerate(self.findings), key=lambda x: -int(x[1].severity))],
             "status": int(self.status), "status_text": STATUS_TEXT.get(int(self.status)),
             "message": self.message, "iterations": self.iterations, "elapsed_s": self.elapsed_s,
             "g_mps2": self.g_mps2, "source": self.source, "cost_history": list(self.cost_history),
             "R": dict(self.R),
             "imu_noise_psd": None if self.imu_noise_psd is None else dict(self.imu_noise_psd),
-            "parameters": self.to_pandas().reset_index().to_dict(orient="records"),
+            "parameters": records,
             "confounding": [c.__dict__ for c in self.confounding],
             "correlation": {"keys": list(self.correlation_keys), "matrix": self.correlation},
             "correlation_colored": self.correlation_colored,
             "residuals": [r.__dict__ for r in self.residuals],
-            "fit_quality": ([] if self.fit_quality is None else self.fit_quality.to_dict(orient="records")),
+            "fit_quality": ([] if self.fit_quality is None else self.diagnostics.to_dict(orient="records")),
+            # what from_json needs beyond the tables above to give back this very result
+            "format": JSON_FORMAT,
+            "fit_quality_columns": None if self.fit_quality is None else list(self.fit_quality.columns),
+            "state": list(self.state), "state_reason": list(self.state_reason),
+            "free_estimated": self.free_estimated, "std_imu_noise": self.std_imu_noise,
+            "channel_display": {k: list(v) for k, v in self.channel_display.items()},
+            "outliers": [{"maneuver": m, "channel": c, "t_s": t} for (m, c), t in self.outliers.items()],
+            "parameter_specs": [{f.name: getattr(sp, f.name) for f in fields(sp)}
+                                for sp in self.parameters.specs.values()],
         }
-        Path(path).write_text(json.dumps(clean(doc), indent=1, allow_nan=False))
+        Path(path).write_text(json.dumps(_json_clean(doc), indent=1, allow_nan=False))
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> EstimationResult:
+        """The result that :meth:`to_json` wrote to ``path``.
+
+        Values, deviations, correlations, the verdict, its findings, the status, each parameter's
+        state and reason, residuals, the fit-quality table and the outliers come back as they
+        were, except that a number JSON cannot hold (NaN, infinity) comes back as NaN (infinite
+        bounds come back infinite). A file written before the format was named (no ``format``
+        key) reads too, without what it lacks: the parameter families (``parameters.specs``
+        empty), bounds (none), the outliers and the channels' display units.
+
+        Raises
+        ------
+        ValueError
+            The file is not JSON, or not an estimation result (naming what is missing).
+        """
+        path = Path(path)
+        try:
+            doc = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}: not JSON ({exc}); expected a result.json written by "
+                             f"EstimationResult.to_json (fpr calibrate --single)") from None
+        need = ("status", "verdict", "parameters", "correlation", "residuals")
+        missing = [k for k in need if not isinstance(doc, dict) or k not in doc]
+        if missing:
+            raise ValueError(f"{path}: not an estimation result (no {', '.join(missing)}); expected a "
+                             f"result.json written by EstimationResult.to_json (fpr calibrate --single)")
+        fmt = doc.get("format")
+        if fmt is not None and fmt != JSON_FORMAT:
+            raise ValueError(f"{path}: format {fmt!r}, this version reads {JSON_FORMAT!r}; read it "
+                             f"with the version that wrote it")
+        try:
+            return cls._from_doc(doc, exact=fmt is not None)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{path}: not a readable estimation result "
+                             f"({type(exc).__name__}: {exc})") from None
+
+    @classmethod
+    def _from_doc(cls, doc: Mapping, exact: bool) -> EstimationResult:
+        rows = doc["parameters"]
+        params, display = [], {}
+        for r in rows:
+            value = _num(r["value"])
+            if exact:
+                scale = float(r["display_scale"])
+            else:  # older files: the display scale from a number shown both ways, or the units
+                pairs = [(value, r.get("value_display")), (r.get("std_crb"), r.get("std_crb_display")),
+                         (r.get("std_colored"), r.get("std_colored_display"))]
+                units = 180.0 / math.pi if (r["unit"].startswith("rad")
+                                            and r["display_unit"].startswith("deg")) else 1.0
+                scale = next((_num(b) / _num(a) for a, b in pairs
+                              if a not in (None, 0) and b is not None), units)
+            params.append(Parameter(
+                key=r["key"], name=r["name"], instance=r["instance"] or "",
+                element=None if r["element"] is None else int(r["element"]), unit=r["unit"],
+                value=value, free=bool(r["free"]), scope=r["scope"],
+                bounds=_bounds(r.get("bounds")), kind=r["kind"], display_scale=scale,
+                display_unit=r["display_unit"]))
+        specs = {d["name"]: _spec(d) for d in doc.get("parameter_specs", ())}
+        n = len(rows)
+        col = {k: np.array([_num(r[k]) for r in rows], dtype=float).reshape(n)
+               for k in ("std_crb", "std_colored", "std_imu_noise")}
+        if exact:
+            state, reason = tuple(doc["state"]), tuple(doc["state_reason"])
+            free_est = doc["free_estimated"]
+            std_imu = None if doc["std_imu_noise"] is None else _array(doc["std_imu_noise"])
+            display = {k: (float(v[0]), str(v[1])) for k, v in doc["channel_display"].items()}
+            outliers = {(o["maneuver"], o["channel"]): _array(o["t_s"]) for o in doc["outliers"]}
+        else:
+            state, reason = tuple(r["state"] for r in rows), tuple(r["reason"] or "" for r in rows)
+            free_est = [bool(r["estimated"]) for r in rows]
+            std_imu = None if np.all(np.isnan(col["std_imu_noise"])) else col["std_imu_noise"]
+            outliers = {}
+        fq_cols = doc.get("fit_quality_columns")
+        fq_rows = doc.get("fit_quality") or []
+        if fq_cols is None and fq_rows:
+            fq_cols = list(fq_rows[0])
+        fit_quality = None if fq_cols is None else _frame(fq_rows, fq_cols)
+        corr = doc["correlation"]
+        keys = tuple(corr["keys"])
+        psd = doc.get("imu_noise_psd")
+        return cls(
+            parameters=ParameterSet(tuple(params), specs),
+            std_crb=col["std_crb"], std_colored=col["std_colored"], correlation_keys=keys,
+            correlation=_array(corr["matrix"]).reshape(len(keys), len(keys)),
+            R={k: _num(v) for k, v in doc["R"].items()},
+            residuals=tuple(ResidualStats(maneuver=r["maneuver"], channel=r["channel"], n=int(r["n"]),
+                                          mean=_num(r["mean"]), std=_num(r["std"]), rms=_num(r["rms"]))
+                            for r in doc["residuals"]),
+            iterations=int(doc["iterations"]), cost_history=tuple(_num(c) for c in doc["cost_history"]),
+            status=Status(int(doc["status"])), message=doc["message"],
+            confounding=tuple(Confounding(tuple(c["parameters"]), c["kind"], c["detail"])
+                              for c in doc["confounding"]),
+            elapsed_s=float(doc["elapsed_s"]), g_mps2=float(doc["g_mps2"]), source=doc["source"],
+            channel_display=display,
+            free_estimated=None if free_est is None else np.array(free_est, dtype=bool),
+            correlation_colored=(None if doc.get("correlation_colored") is None
+                                 else _array(doc["correlation_colored"]).reshape(len(keys), len(keys))),
+            state=state, state_reason=reason,
+            findings=tuple(Finding.from_dict(f) for f in
+                           sorted(doc["findings"], key=lambda f: f.get("index", 0))),
+            verdict=Verdict[doc["verdict"]], fit_quality=fit_quality, outliers=outliers,
+            std_imu_noise=std_imu,
+            imu_noise_psd=None if psd is None else {k: _array(v) for k, v in psd.items()},
+        )
 
     def to_csv(self, directory: str | Path, record: Callable[[Path], object] | None = None) -> None:
         """parameters.csv, residuals.csv, correlation.csv, findings.csv and fit_quality.csv.
@@ -325,4 +490,57 @@ class EstimationResult:
         self.correlation_frame().to_csv(at("correlation.csv"))
         self.findings_table().to_csv(at("findings.csv"), index=False)
         if self.fit_quality is not None:
-            self.fit_quality.to_csv(at("fit_quality.csv"), index=False)
+            self.diagnostics.to_csv(at("fit_quality.csv"), index=False)
+
+
+# ------------------------------------------------------------------------------ JSON helpers
+def _json_clean(v):
+    """Plain JSON values: mappings with string keys, lists, finite numbers or None."""
+    if isinstance(v, Mapping):
+        return {str(k): _json_clean(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [_json_clean(x) for x in v]
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, float) and not np.isfinite(v):
+        return None
+    if v is None or isinstance(v, (str, int, float, bool)):
+        return v
+    return str(v)
+
+
+def _num(v) -> float:
+    """A JSON number back as a float (``null``: NaN)."""
+    return math.nan if v is None else float(v)
+
+
+def _array(v) -> np.ndarray:
+    """A JSON list (of lists) of numbers back as a float array (``null``: NaN)."""
+    return np.array(v, dtype=float)
+
+
+def _bounds(v) -> tuple[float, float]:
+    """``[low, high]`` back (``null``: unbounded on that side; absent: unbounded)."""
+    lo, hi = v if v is not None else (None, None)
+    return (-math.inf if lo is None else float(lo), math.inf if hi is None else float(hi))
+
+
+def _spec(d: Mapping) -> ParameterSpec:
+    """A parameter family as :meth:`EstimationResult.to_json` wrote it."""
+    d = dict(d)
+    d["bounds"] = _bounds(d.get("bounds"))
+    if d.get("breakpoints") is not None:
+        d["breakpoints"] = tuple(d["breakpoints"])
+    d["fixed_elements"] = tuple(d.get("fixed_elements", ()))
+    return ParameterSpec(**d)
+
+
+def _frame(rows: Sequence[Mapping], columns: Sequence[str]) -> pd.DataFrame:
+    """Records back as a table: a column of numbers and nulls is a float column (NaN)."""
+    df = pd.DataFrame.from_records(list(rows), columns=list(columns))
+    for c in df.columns:
+        vals = df[c].tolist()
+        if all(v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)) for v in vals) and any(
+                v is None for v in vals):
+            df[c] = np.array([_num(v) for v in vals], dtype=float)
+    return df

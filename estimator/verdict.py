@@ -27,9 +27,18 @@ import pandas as pd
 
 
 class Status(enum.IntEnum):
-    """How the Gauss-Newton iteration ended (scipy's convention: positive = converged).
+    """How the Gauss-Newton iteration ended; each member carries its message (``.message``).
 
-    Each member carries a short text (``.text``); the result's message adds the numbers.
+    scipy's rule: a positive status is a success (the iteration converged), zero or negative is
+    not (``ITERATION_LIMIT`` is 0, as scipy's "maximum number of evaluations"); ``.success`` says
+    which. The integer values are written to files (``result.json``, the Monte Carlo
+    replications, the studies' tables) and never change meaning. The result's message adds the
+    numbers to the member's.
+
+    >>> Status.CONVERGED_DECREASE.success, Status.STALLED.success
+    (True, False)
+    >>> Status(-2).message
+    'not converged: no step decreases the cost, yet the Gauss-Newton step is not negligible'
     """
 
     CONVERGED_STEP = 1, "converged: the undamped Gauss-Newton step is negligible against every deviation"
@@ -39,15 +48,28 @@ class Status(enum.IntEnum):
     MODEL_ERROR = -3, "failed: the model cannot be evaluated at these parameter values"
     UNDETERMINED = -4, "failed: no free parameter is determined by the data"
 
-    def __new__(cls, value: int, text: str):
+    message: str
+
+    def __new__(cls, value: int, message: str):
         obj = int.__new__(cls, value)
         obj._value_ = value
-        obj.text = text
+        obj.message = message
         return obj
 
     @property
-    def converged(self) -> bool:
+    def success(self) -> bool:
+        """The iteration converged (the status is positive)."""
         return self.value > 0
+
+    @property
+    def converged(self) -> bool:
+        """The same as :attr:`success` (the solver's own word for it)."""
+        return self.success
+
+    @property
+    def label(self) -> str:
+        """The member's name in words (``"converged step"``), for tables that store the code."""
+        return self.name.lower().replace("_", " ")
 
 
 class Severity(enum.IntEnum):
@@ -68,6 +90,11 @@ class Verdict(enum.Enum):
     def __init__(self, code: int, text: str):
         self.code = code
         self.text = text
+
+    @property
+    def message(self) -> str:
+        """What the verdict means (the same as ``.text``; :class:`Status` names it so too)."""
+        return self.text
 
     @property
     def success(self) -> bool:
@@ -107,6 +134,12 @@ class Finding:
     parameters: tuple[str, ...] = ()
     value: float | None = None
 
+    def __post_init__(self) -> None:
+        # frozen all the way down: whatever sequences the caller passed become tuples
+        object.__setattr__(self, "severity", Severity(self.severity))
+        object.__setattr__(self, "t_s", tuple(float(t) for t in self.t_s))
+        object.__setattr__(self, "parameters", tuple(self.parameters))
+
     def text(self) -> str:
         """One line: severity, message and advice."""
         out = f"{self.severity.name.lower()}: {self.message}"
@@ -116,6 +149,14 @@ class Finding:
         return {"code": self.code, "severity": self.severity.name, "channel": self.channel,
                 "maneuver": self.maneuver, "t_s": list(self.t_s), "parameters": list(self.parameters),
                 "value": self.value, "message": self.message, "advice": self.advice}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Finding:
+        """The finding :meth:`to_dict` gave (severity by name; a ``null`` value is None)."""
+        return cls(code=d["code"], severity=Severity[d["severity"]], message=d["message"],
+                   advice=d.get("advice", ""), channel=d.get("channel"), maneuver=d.get("maneuver"),
+                   t_s=tuple(d.get("t_s", ())), parameters=tuple(d.get("parameters", ())),
+                   value=None if d.get("value") is None else float(d["value"]))
 
 
 def judge(status: Status, findings: Iterable[Finding]) -> Verdict:
