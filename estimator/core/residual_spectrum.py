@@ -84,23 +84,6 @@ class ARModel:
         return u
 
 
-def fit_ar(e: np.ndarray, max_order: int = AR_MAX_ORDER, stride: int = 1) -> ARModel:
-    """Levinson-Durbin fit of an autoregressive model to a series, its order by Akaike's criterion.
-
-    Parameters
-    ----------
-    e : (n,) a residual series on its own (uniform) samples, SI.
-    max_order : the longest model tried (capped at ``n / AR_SAMPLES_PER_ORDER``).
-    stride : its sample spacing on the maneuver's grid.
-    """
-    e = np.asarray(e, dtype=float)
-    n = e.size
-    nfft = 1 << int(np.ceil(np.log2(max(2 * n, 2))))
-    E = np.fft.rfft(e, nfft)
-    r = np.fft.irfft(E * np.conj(E), nfft)[:max_order + 1] / max(n, 1)
-    return ar_from_autocovariance(r, n, max_order, stride)
-
-
 def ar_from_autocovariance(r: np.ndarray, n: int, max_order: int = AR_MAX_ORDER, stride: int = 1) -> ARModel:
     """Levinson-Durbin fit of an autoregressive model to an autocovariance, its order by Akaike's
     criterion ``n ln var(u_p) + 2 p``.

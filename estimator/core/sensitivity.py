@@ -53,10 +53,11 @@ from estimator.core.kinematics import midpoints
 
 #: Lever-arm formulations (see the module docstring); the first is the estimator's default.
 LEVER_ARMS = ("imu_point", "differentiated")
-N_STATE = 7
-N_SENS = 13  # x0 (7), accelerometer biases (3), gyro biases (3)
+#: The parameters of the sensitivities ``S = dX/dp``, in their order: x0 (7), accelerometer
+#: biases (3), gyro biases (3).
 SENS_NAMES = ("u0", "v0", "w0", "phi0", "theta0", "psi0", "h0",
               "dax", "day", "daz", "dp", "dq", "dr")
+N_SENS = len(SENS_NAMES)
 
 
 @njit(cache=True, fastmath=False)
@@ -127,42 +128,6 @@ def _rhs(x, S, a_m, om_m, omd, r, rh, da, dw, g, xd, Sd):
     Sd[6, 10] += rh[1] * n2 - rh[2] * n1
     Sd[6, 11] += rh[2] * n0 - rh[0] * n2
     Sd[6, 12] += rh[0] * n1 - rh[1] * n0
-
-
-def integrate_sensitivities(t_s, x0, a_m, om_m, omd, r_imu_cg, da, dw, g, midpoint="cubic",
-                            lever_arm="differentiated"):
-    """RK4 of the states and their sensitivities.
-
-    Parameters
-    ----------
-    t_s : (N,) sample times, s.
-    x0 : (7,) initial state.
-    a_m : (N, 3) measured specific force at the IMU, body, m/s^2.
-    om_m : (N, 3) measured body rates, rad/s.
-    omd : (N, 3) angular acceleration (smoothed derivative of om_m), rad/s^2.
-    r_imu_cg : (3,) IMU position minus CG position, body, m.
-    da, dw : (3,) accelerometer (m/s^2) and gyro (rad/s) biases, subtracted from the measurements.
-    g : gravity, m/s^2.
-    midpoint : half-step input interpolation, "cubic" or "linear" (see ``midpoints``).
-    lever_arm : "differentiated" (states: the CG's velocity) or "imu_point" (states: the IMU
-        point's velocity; ``omd`` unused), see :data:`LEVER_ARMS`. ``x0[:3]`` is the CG's
-        velocity either way.
-
-    Returns
-    -------
-    X : (N, 7) states; S : (N, 7, 13) sensitivities dX/d[x0, da, dw].
-    """
-    f64 = np.float64
-    a_m, om_m, omd = (np.ascontiguousarray(v, dtype=f64) for v in (a_m, om_m, omd))
-    n = a_m.shape[0]
-    inputs = Inputs(
-        np.array([0, n], dtype=np.int64), np.ascontiguousarray(t_s, dtype=f64), a_m, om_m, omd,
-        *(_padded_midpoints(v, midpoint) for v in (a_m, om_m, omd)),
-        np.ascontiguousarray(r_imu_cg, dtype=f64).reshape(1, 3), lever_arm=lever_arm,
-    )
-    params = np.concatenate([np.asarray(x0, dtype=f64), np.asarray(da, dtype=f64),
-                             np.asarray(dw, dtype=f64)]).reshape(1, N_SENS)
-    return integrate_many(inputs, params, float(g), sensitivities=True)
 
 
 class Inputs:
