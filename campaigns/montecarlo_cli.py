@@ -32,8 +32,9 @@ rNNNNN.failed.json with its error instead. Interrupted? Run the same command aga
 replications are skipped, and the files end the same, byte for byte, as an uninterrupted run's
 (wall times go to OUT/timings.csv). Nothing in OUT is ever unpickled or executed (an old
 flights/*.pkl cache is ignored and the flight flown again), and the run removes nothing but its
-own temporary files: anything else in OUT (notes, plots, subfolders) is left alone and not taken
-for a result. Ctrl-C stops the workers and says how many replications are written (exit 130);
+own temporary files and its replications' scratch datasets (OUT/.scratch/, gone at the end; a
+killed run's are removed by the next): anything else in OUT (notes, plots, subfolders) is left
+alone and not taken for a result. Ctrl-C stops the workers and says how many replications are written (exit 130);
 the same command resumes.
 
 At the end: summary.txt, summary_parameters.csv, summary_families.csv, summary_channels.csv and

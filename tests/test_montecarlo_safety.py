@@ -38,7 +38,7 @@ from _processes import HAVE_PROC, alive, descendants, ignores, sigint_default
 from test_montecarlo import SCENARIO_TOML, _scenario
 
 from campaigns import montecarlo_cli
-from campaigns.montecarlo import ReplicationResult, run_montecarlo, runner, summarize
+from campaigns.montecarlo import ReplicationResult, replication, run_montecarlo, runner, summarize
 from campaigns.montecarlo import summary as summary_module
 from campaigns.montecarlo.flight_cache import flight_bytes, flight_file, read_flight
 from campaigns.montecarlo.summary import load_results
@@ -227,8 +227,11 @@ run_montecarlo(_scenario(), {out!r}, replications=40, workers=2)
 @pytest.mark.skipif(not HAVE_PROC, reason="reads /proc")
 def test_worker_processes_end_when_the_run_is_killed(tmp_path):
     out = tmp_path / "killed"
+    tmp = tmp_path / "tmp"  # the system's temporary folder, for the run: nothing may leak there
+    tmp.mkdir()
     child = subprocess.Popen([sys.executable, "-c", _RUN_IN_CHILD.format(tests=str(ROOT / "tests"),
-                                                                       out=str(out))], cwd=ROOT)
+                                                                       out=str(out))], cwd=ROOT,
+                             env=dict(os.environ, TMPDIR=str(tmp)))
     try:
         deadline = time.monotonic() + 120
         workers: list[tuple[int, str]] = []
@@ -254,6 +257,16 @@ def test_worker_processes_end_when_the_run_is_killed(tmp_path):
         for w in workers:
             if alive(w):
                 os.kill(w[0], signal.SIGKILL)
+    # the killed workers' scratch datasets are in the run folder, not the system's temporary one
+    # (where only multiprocessing's own pymp-* folder of the fork server's socket may be left)
+    assert list(tmp.glob("fpr-mc-*")) == []
+    scratch = out / ".scratch"
+    assert all(replication.SCRATCH_NAME.fullmatch(p.name) for p in scratch.iterdir())
+    # the next run removes them (and nothing else there)
+    (scratch / "r00003-abcd_123" / "maneuvers").mkdir(parents=True)  # one more, for certain
+    (scratch / "r00007-mine").mkdir()
+    run_montecarlo(_scenario(), out, replications=40, indices=[], workers=1)
+    assert [p.name for p in scratch.iterdir()] == ["r00007-mine"]
 
 
 # ---------------------------------------------------------------------------- the summary's files,
@@ -458,7 +471,7 @@ def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp
         deadline = time.monotonic() + 120
         # replication 0 written, both workers held inside a replication (1 and 2)
         while not ((out / "replications" / "r00000.parquet").exists()
-                   and len(list(scratch.glob("fpr-mc-r*/held"))) == 2):
+                   and len(list((out / ".scratch").glob("r*/held"))) == 2):
             assert child.poll() is None, child.communicate()
             assert time.monotonic() < deadline, "the workers were not busy within 120 s"
             time.sleep(0.1)
@@ -485,7 +498,8 @@ def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp
             "command again to resume") in stderr, stderr
     assert "Traceback" not in stderr + stdout and "KeyboardInterrupt" not in stderr, stderr
     assert sorted(p.name for p in (out / "replications").iterdir()) == ["r00000.parquet"]
-    assert list(scratch.iterdir()) == []  # the stopped workers removed their scratch datasets
+    # the stopped workers' scratch datasets are gone (and none was in the system's temporary folder)
+    assert list(scratch.iterdir()) == [] and not (out / ".scratch").exists()
     # the same command again completes it, to the bytes of an uninterrupted run
     assert montecarlo_cli.main(args) == 0
     assert "2 replications run now, 1 already done, 3 requested" in capsys.readouterr().out

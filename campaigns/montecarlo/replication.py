@@ -55,11 +55,17 @@ COLUMNS = ("replication", "record", "name", "family", "kind", "unit", "estimate"
            "std_crb", "std_colored", "z_crb", "z_colored", "mean", "std", "three_sigma", "n")
 #: the estimator's verdict codes (:class:`estimator.verdict.Verdict`) -> their names, for tables
 VERDICT_NAMES = {v.code: v.name.lower().replace("_", " ") for v in Verdict}
-#: a replication's scratch dataset directory (its name differs per run; kept out of the messages)
-_SCRATCH = re.compile(r"[^\s'\"]*fpr-mc-r\d{5}-[a-z0-9_]{8}")
+#: a replication's scratch dataset directory, in the run folder's ``.scratch/`` or (a Dask worker)
+#: the system's temporary folder (its name differs per run; kept out of the messages)
+_SCRATCH = re.compile(r"[^\s'\"]*(?:fpr-mc-|\.scratch/)r\d{5}-[a-z0-9_]{8}")
+#: the name of a scratch directory in a ``.scratch/`` folder (:func:`scratch_in`)
+SCRATCH_NAME = re.compile(r"r\d{5}-[a-z0-9_]{8}")
 #: the scratch directories of the replications running in this process (a worker stopped by the
 #: run removes them on its way out: :func:`remove_scratch_directories`)
 _OPEN_SCRATCH: set[str] = set()
+#: where this process puts its replications' scratch directories (None: the system's temporary
+#: folder); :func:`scratch_in`
+_SCRATCH_ROOT: list[str | None] = [None]
 #: maneuver keys: one per (job, segment), as synth.campaign numbers them (so the noise of a
 #: maneuver does not depend on which other maneuvers are flown)
 _SEGMENTS_PER_JOB = 64
@@ -419,11 +425,33 @@ def _scrubbed(result: ReplicationResult) -> ReplicationResult:
                    findings=tuple((sev, code, scrub(msg)) for sev, code, msg in result.findings))
 
 
+def set_scratch_root(folder: str | Path | None) -> str | None:
+    """Put this process's replication scratch datasets in ``folder`` (an existing folder; None:
+    the system's temporary folder); returns the previous setting. The runner sets the run folder's
+    ``.scratch/`` for its own process and in each pool worker, so that a killed run's scratch data
+    stay inside the run folder, where the next run removes them."""
+    previous, _SCRATCH_ROOT[0] = _SCRATCH_ROOT[0], None if folder is None else str(folder)
+    return previous
+
+
+@contextlib.contextmanager
+def scratch_in(folder: str | Path | None) -> Iterator[None]:
+    """:func:`set_scratch_root` for the duration of a block."""
+    previous = set_scratch_root(folder)
+    try:
+        yield
+    finally:
+        set_scratch_root(previous)
+
+
 @contextlib.contextmanager
 def _scratch_directory(index: int) -> Iterator[str]:
-    """A temporary directory for replication ``index``'s scratch dataset, known to
-    :func:`remove_scratch_directories` while it exists."""
-    with tempfile.TemporaryDirectory(prefix=f"fpr-mc-r{index:05d}-") as tmp:
+    """A temporary directory for replication ``index``'s scratch dataset (``rNNNNN-XXXXXXXX`` in
+    the folder :func:`set_scratch_root` set, else ``fpr-mc-rNNNNN-XXXXXXXX`` in the system's
+    temporary folder), known to :func:`remove_scratch_directories` while it exists."""
+    root = _SCRATCH_ROOT[0]
+    prefix = f"r{index:05d}-" if root is not None else f"fpr-mc-r{index:05d}-"
+    with tempfile.TemporaryDirectory(prefix=prefix, dir=root) as tmp:
         _OPEN_SCRATCH.add(tmp)
         try:
             yield tmp

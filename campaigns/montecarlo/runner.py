@@ -12,6 +12,9 @@ Layout of the output directory::
     OUT/timings.csv                one line per replication run: its wall time in the worker, when
                                    and where it finished (appended; the only file that differs
                                    between two runs of the same replications)
+    OUT/.scratch/r00042-XXXXXXXX/  while replication 42 runs (local processes): its scratch
+                                   dataset; removed at the end of the run, or, after a kill, at the
+                                   start of the next (a Dask worker uses its own temporary folder)
 
 Every file is written to a temporary name and renamed into place, by the one process that runs
 the campaign (workers return results; they never write), so an interrupted run leaves whole files
@@ -26,8 +29,9 @@ those, start a new directory rather than resume, or the run mixes results of bot
 
 Nothing in the directory is ever unpickled, eval'd or exec'd: a run folder may come from anyone.
 A flight cache of an older version (``flights/j0007.pkl``) is ignored, said so, and flown again.
-The run removes only what it wrote itself: its own temporary files left by a killed run, and the
-failure record of a replication that now succeeded; anything else in the folder is left alone
+The run removes only what it wrote itself: its own temporary files and scratch datasets
+(``.scratch/rNNNNN-XXXXXXXX/``) left by a killed run, and the failure record of a replication that
+now succeeded; anything else in the folder is left alone
 (there is no overwrite mode: a new run goes to a new or empty directory).
 
 Ctrl-C (or SIGTERM, through ``fpr montecarlo``) stops the run: the worker processes ignore SIGINT
@@ -49,12 +53,14 @@ depend on the executor: everything it draws derives from ``(seed, k)``.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import fcntl
 import io
 import json
 import os
 import re
+import shutil
 import signal
 import socket
 import sys
@@ -76,12 +82,15 @@ from synth.workers import worker_pool
 
 from .flight_cache import flight_bytes, flight_file, read_flight
 from .replication import (
+    SCRATCH_NAME,
     Models,
     ReplicationResult,
     failure_record,
     fly,
     remove_scratch_directories,
     run_replication_safely,
+    scratch_in,
+    set_scratch_root,
 )
 from .scenario import Scenario, ScenarioError, parse_scenario, scenario_hash, with_replications
 
@@ -93,6 +102,9 @@ TIMINGS_FILE = "timings.csv"
 TIMINGS_COLUMNS = ("replication", "ok", "elapsed_s", "finished_utc", "host", "executor")
 _REP = "replications"
 _FLIGHTS = "flights"
+#: the replications' scratch datasets while they run (removed at the end of a run, and a killed
+#: run's at the start of the next)
+SCRATCH_DIR = ".scratch"
 #: the files this module writes (the temporary names of a killed run are ``.NAME.XXXXXXXX.tmp``)
 _OWN_NAMES = {_REP: re.compile(r"r(\d{5})\.(parquet|failed\.json)"),
               _FLIGHTS: re.compile(r"j(\d{4})\.npz"),
@@ -337,6 +349,12 @@ def prepare_output(scenario: Scenario, out_dir: Path) -> Path:
                 "results of two scenarios must not mix. Choose another --out, delete the directory to "
                 f"start over, or resume it with the scenario it was made from ({out_dir / 'scenario.toml'})")
         _refuse_foreign(out_dir, scenario)  # before anything is written
+        scratch = out_dir / SCRATCH_DIR
+        if scratch.is_symlink() or (scratch.exists() and not scratch.is_dir()):
+            raise ScenarioError(
+                f"{scratch}: {'a link' if scratch.is_symlink() else 'not a folder'}, not the scratch "
+                "folder `fpr montecarlo` makes there for its replications' data; nothing is written "
+                "through it. Move it out of the folder and run the same command again")
     (out_dir / _REP).mkdir(parents=True, exist_ok=True)
     (out_dir / _FLIGHTS).mkdir(parents=True, exist_ok=True)
     for p in own_temporary_files(out_dir):  # leftovers of a run killed while writing
@@ -574,6 +592,7 @@ def run_montecarlo(
             elif callable(progress):
                 progress(done[0], len(todo))
 
+        clear_scratch(out_dir)  # a killed run's scratch data (nothing else runs here: the lock)
         try:
             if scheduler is not None:
                 flown, executor = _run_dask(scenario, payload, out_dir, todo, scheduler, record)
@@ -590,11 +609,33 @@ def run_montecarlo(
         finally:
             if bar is not None:
                 bar.close()
+            clear_scratch(out_dir)  # the workers have ended: what is left there is abandoned
         final = finished_replications(out_dir)
     return RunReport(out_dir=out_dir, requested=n, ran=tuple(todo), skipped=len(wanted) - len(todo),
                      failed=tuple(k for k in range(n) if final.get(k) == "failed"),
                      flights_flown=flown, wall_s=time.perf_counter() - t0, executor=executor,
                      notes=notes)
+
+
+def _scratch_folder(out_dir: Path) -> Path:
+    """``OUT/.scratch/``, created: where the local replications write their scratch datasets."""
+    folder = Path(out_dir) / SCRATCH_DIR
+    folder.mkdir(exist_ok=True)
+    return folder
+
+
+def clear_scratch(out_dir: Path) -> None:
+    """Remove the replications' scratch datasets from ``OUT/.scratch/`` (a killed run's, or this
+    run's at its end): only folders of the names :mod:`.replication` makes there
+    (``rNNNNN-XXXXXXXX``), never a link; ``.scratch/`` itself when nothing else is left in it."""
+    folder = Path(out_dir) / SCRATCH_DIR
+    if folder.is_symlink() or not folder.is_dir():
+        return
+    for p in folder.iterdir():
+        if SCRATCH_NAME.fullmatch(p.name) and p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+    with contextlib.suppress(OSError):  # not empty: something of someone else's, left alone
+        folder.rmdir()
 
 
 def _missing_flights(scenario: Scenario, out_dir: Path, todo: Sequence[int]) -> list[int]:
@@ -640,8 +681,9 @@ def _run_in_process(scenario, out_dir, todo, record) -> tuple[int, str]:
     flown = _store_flights(scenario, out_dir, (fly_task(payload, j)
                                                for j in _missing_flights(scenario, out_dir, todo)))
     cache = str(out_dir / _FLIGHTS)
-    for k in todo:
-        record(replication_task(payload, k, cache))
+    with scratch_in(_scratch_folder(out_dir)):
+        for k in todo:
+            record(replication_task(payload, k, cache))
     return flown, "in-process"
 
 
@@ -651,9 +693,11 @@ def _on_worker_sigterm(signum, frame) -> None:
     os._exit(128 + signum)
 
 
-def _init_pool_worker() -> None:
-    """Pool initializer (after :func:`synth.workers.init_pool_worker`): the worker removes its
-    scratch data when the run stops it (SIGTERM)."""
+def _init_pool_worker(scratch: str) -> None:
+    """Pool initializer (after :func:`synth.workers.init_pool_worker`): the worker puts its scratch
+    datasets in the run folder's ``scratch`` folder and removes them when the run stops it
+    (SIGTERM)."""
+    set_scratch_root(scratch)
     signal.signal(signal.SIGTERM, _on_worker_sigterm)
 
 
@@ -662,7 +706,7 @@ def _run_processes(scenario, payload, out_dir, todo, workers, record) -> tuple[i
     # the workers end with this process, however it ends (a kill leaves no orphan computing on);
     # on Ctrl-C or an error writing a file, what has not started is cancelled and the running
     # workers are ended now (their replications are lost; every file written so far is whole)
-    with worker_pool(workers, _init_pool_worker) as pool:
+    with worker_pool(workers, _init_pool_worker, (str(_scratch_folder(out_dir)),)) as pool:
         missing = _missing_flights(scenario, out_dir, todo)
         flown = _store_flights(scenario, out_dir,
                                pool.map(fly_task, [payload] * len(missing), missing))
