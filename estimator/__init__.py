@@ -1,0 +1,81 @@
+"""Flow-angle sensor calibration by flight path reconstruction and the output-error method.
+
+What a notebook imports, from the package itself::
+
+    from estimator import load_problem, estimate, SolverOptions, EstimationResult
+
+    problem = load_problem("flight421.toml")            # your files, described by a problem file
+    result = estimate(problem, SolverOptions())         # one estimation over all maneuvers
+    print(result.summary())                             # the verdict first, then the estimates
+    result.to_pandas()                                  # one row per parameter
+    result.to_json("result.json")
+    EstimationResult.from_json("result.json")           # the same result, read back
+
+    from estimator import run_workflow, WorkflowOptions
+    wf = run_workflow(problem, WorkflowOptions())       # the Mach-bin workflow of fpr calibrate
+
+Every name of ``__all__`` is loaded on first use (a module ``__getattr__``): ``import estimator``
+itself loads neither NumPy nor the compiled kernels. The rest of the package — the model, the
+normal equations, the kernels of :mod:`estimator.core`, the readers of :mod:`estimator.io` — is
+internal: import it from its module when you need it, knowing that it may change.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+#: The public API: name -> the module that defines it.
+_API = {
+    # reading flight data into a problem
+    "load_problem": "estimator.io",
+    "problem_from_dataset": "estimator.io",
+    "load_model_set": "estimator.io.modelset",
+    "DataError": "estimator.io",
+    "DataWarning": "estimator.io",
+    "Problem": "estimator.problem",
+    # one estimation
+    "estimate": "estimator.solver",
+    "SolverOptions": "estimator.solver",
+    "EstimationResult": "estimator.result",
+    # what to make of it
+    "Status": "estimator.verdict",
+    "Verdict": "estimator.verdict",
+    "Finding": "estimator.verdict",
+    "Severity": "estimator.verdict",
+    # the Mach-bin workflow
+    "run_workflow": "estimator.workflow",
+    "WorkflowOptions": "estimator.workflow",
+    "WorkflowResult": "estimator.workflow",
+    # calibrate(problem, options) -> Calibration (the workflow and its report, as fpr calibrate
+    # does it) joins here when it exists: "calibrate": "estimator.<its module>"
+}
+
+__all__ = [  # = the keys of _API (a literal, so that linters see what is exported)
+    "DataError", "DataWarning", "EstimationResult", "Finding", "Problem", "Severity", "SolverOptions",
+    "Status", "Verdict", "WorkflowOptions", "WorkflowResult", "estimate", "load_model_set",
+    "load_problem", "problem_from_dataset", "run_workflow",
+]
+
+if TYPE_CHECKING:  # what type checkers and editors see; at run time __getattr__ loads them
+    from estimator.io import DataError, DataWarning, load_problem, problem_from_dataset
+    from estimator.io.modelset import load_model_set
+    from estimator.problem import Problem
+    from estimator.result import EstimationResult
+    from estimator.solver import SolverOptions, estimate
+    from estimator.verdict import Finding, Severity, Status, Verdict
+    from estimator.workflow import WorkflowOptions, WorkflowResult, run_workflow
+
+
+def __getattr__(name: str):
+    module = _API.get(name)
+    if module is None:
+        raise AttributeError(f"module 'estimator' has no attribute {name!r}; the public API is "
+                             f"{', '.join(__all__)} (the rest: import it from its module)")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # loaded once
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -8,6 +8,8 @@ the public API of ``import estimator``.
   written again, the file is byte-identical. A file written before the format was named reads too.
 - A result cannot be changed in place, however it was made (``build``, ``replace``, the
   constructor, ``from_json``).
+- ``from estimator import ...`` gives the public API, loaded on first use: ``import estimator``
+  loads neither NumPy, pandas, SciPy, numba nor the solver.
 
 The estimation is test_identifiability's ``bounded`` case (analytic flight, white noise): a
 parameter on its bound, held ones, an unidentifiable set, warnings — every state a result can hold.
@@ -18,6 +20,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import subprocess
+import sys
 from dataclasses import replace
 
 import numpy as np
@@ -26,6 +30,7 @@ import pytest
 from test_estimator import DEG, Flight, _truth_values
 from test_identifiability import NOISE, _with_bounds
 
+import estimator
 from estimator.modelfile import load_model_set
 from estimator.parameters import ParameterSet, ParameterSpec
 from estimator.result import JSON_FORMAT, STATUS_TEXT, EstimationResult, ReadOnlyTable
@@ -243,3 +248,25 @@ def test_a_parameter_spec_is_immutable_and_names_a_bad_value():
     assert s.per_instance["PV1"] == (0.0, 1.0) and s.value == (0.0, 0.0) and s.breakpoints == (0.0, 1.0)
     with pytest.raises(ValueError, match="parameter f9: value 'abc' is not a number"):
         ParameterSpec("f9", "rad", value="abc")
+
+
+# ------------------------------------------------------------------------------------ the public API
+def test_the_public_api_is_importable_from_the_package():
+    assert sorted(estimator.__all__) == sorted(estimator._API)
+    for name in estimator.__all__:
+        assert getattr(estimator, name) is not None, name
+    from estimator.io import load_problem
+    from estimator.workflow import run_workflow
+    assert estimator.load_problem is load_problem and estimator.run_workflow is run_workflow
+    assert estimator.EstimationResult is EstimationResult and estimator.Status is Status
+    with pytest.raises(AttributeError, match="no attribute 'nothing_here'"):
+        estimator.nothing_here  # noqa: B018
+    assert set(estimator.__all__) <= set(dir(estimator))
+
+
+def test_import_estimator_is_light():
+    # the names load on first use: importing the package loads neither numba nor the solver
+    code = ("import sys, estimator; print([m for m in ('numpy', 'numba', 'scipy', 'pandas', "
+            "'estimator.solver') if m in sys.modules])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr
