@@ -101,13 +101,8 @@ _FLY_CAMPAIGN_FLAGS = {"config": "all", "mach": [0.5], "maneuver": "all", "altit
                        "turbulence": "none", "wind_ned_mps": [0.0, 0.0, 0.0], "rate_hz": 40.0}
 
 
-class _Terminated(KeyboardInterrupt):
-    """SIGTERM, turned into an interrupt so `fpr fly` stops its workers and says how to resume."""
-
-
 def _fly(args: argparse.Namespace) -> int:
-    import signal
-
+    from campaigns._signals import interrupt_status, sigterm_as_interrupt
     from synth.campaign import (
         FlyInterrupted,
         campaign_of_dataset,
@@ -136,26 +131,16 @@ def _fly(args: argparse.Namespace) -> int:
     print(f"campaign {campaign.name!r}: {len(campaign.jobs)} maneuvers -> {args.out}"
           + (" (resuming)" if args.resume else ""))
 
-    def _on_sigterm(signum, frame):
-        raise _Terminated()
-
-    try:  # only the main thread may set a handler; elsewhere SIGTERM keeps its default
-        previous = signal.signal(signal.SIGTERM, _on_sigterm)
-    except ValueError:
-        previous = None
-    try:
-        result = fly_campaign(campaign, args.out, workers=args.workers, overwrite=args.overwrite,
-                              resume=args.resume, progress=True)
+    try:  # SIGTERM takes Ctrl-C's path: the workers are stopped, the resume command said
+        with sigterm_as_interrupt():
+            result = fly_campaign(campaign, args.out, workers=args.workers, overwrite=args.overwrite,
+                                  resume=args.resume, progress=True)
     except KeyboardInterrupt as exc:
-        cause = exc.__context__ if isinstance(exc, FlyInterrupted) else exc
         print(f"fpr fly: {exc if isinstance(exc, FlyInterrupted) else 'interrupted'}", file=sys.stderr)
-        return 143 if isinstance(cause, _Terminated) else 130
+        return interrupt_status(exc)
     except (IsADirectoryError, NotADirectoryError, PermissionError) as exc:
         print(f"fpr fly: error: {exc}", file=sys.stderr)
         return 2
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
     print(summarize(result.manifest))
     if args.resume and result.flown == 0:
         print(f"{args.out}: the dataset was already complete; nothing to fly")

@@ -34,8 +34,8 @@ replications are skipped, and the files end the same, byte for byte, as an unint
 flights/*.pkl cache is ignored and the flight flown again), and the run removes nothing but its
 own temporary files and its replications' scratch datasets (OUT/.scratch/, gone at the end; a
 killed run's are removed by the next): anything else in OUT (notes, plots, subfolders) is left
-alone and not taken for a result. Ctrl-C stops the workers and says how many replications are written (exit 130);
-the same command resumes.
+alone and not taken for a result. Ctrl-C stops the workers and says how many replications are
+written (exit 130); the same command resumes.
 
 At the end: summary.txt, summary_parameters.csv, summary_families.csv, summary_channels.csv and
 summary.png in OUT (or --summary-dir), listed in .fpr-summary.json there: a later summary replaces
@@ -100,19 +100,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     s.set_defaults(mc_command="montecarlo-summary")
 
 
-class _Terminated(KeyboardInterrupt):
-    """SIGTERM, turned into an interrupt so that the run stops its workers and says how to resume."""
-
-
-def _on_sigterm(signum, frame) -> None:
-    raise _Terminated()
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand parsed by :func:`add_parser`; returns the exit status (0 ok, 1 some
     replications failed or the run is incomplete, 130 interrupted by Ctrl-C, 143 by SIGTERM)."""
-    import signal
-
+    from campaigns._signals import interrupt_status, sigterm_as_interrupt
     from campaigns.montecarlo import MonteCarloInterrupted, load_scenario, run_montecarlo
     from campaigns.montecarlo.runner import finished_replications, read_state
     from campaigns.montecarlo.summary import check_summary_files, write_summary
@@ -137,21 +128,16 @@ def run(args: argparse.Namespace) -> int:
     print(f"scenario {scenario.name!r} ({scenario.source}): {len(scenario.campaign.jobs)} maneuvers, "
           f"{len(scenario.fixed_jobs)} flown once and re-instrumented, {n} replications, "
           f"{len(scenario.distributions)} drawn error/wind values -> {args.out} on {where}")
-    try:  # only the main thread may set a handler; elsewhere SIGTERM keeps its default
-        previous = signal.signal(signal.SIGTERM, _on_sigterm)
-    except ValueError:
-        previous = None
-    try:
-        report = run_montecarlo(scenario, args.out, replications=args.replications, workers=args.workers,
-                                scheduler=args.scheduler, retry_failed=args.retry_failed, progress=True)
+    try:  # SIGTERM takes Ctrl-C's path: the workers are stopped, how far it got is said
+        with sigterm_as_interrupt():
+            report = run_montecarlo(scenario, args.out, replications=args.replications,
+                                    workers=args.workers, scheduler=args.scheduler,
+                                    retry_failed=args.retry_failed, progress=True)
     except KeyboardInterrupt as exc:  # MonteCarloInterrupted, or an interrupt before the replications
         stopped = isinstance(exc, MonteCarloInterrupted)
         print(f"fpr montecarlo: {exc if stopped else 'interrupted; run the same command again to resume'}",
               file=sys.stderr)
-        return 143 if isinstance(exc.__context__ if stopped else exc, _Terminated) else 130
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        return interrupt_status(exc)
     print(report.text())
     if not args.no_summary:
         print()

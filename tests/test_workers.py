@@ -121,3 +121,24 @@ def test_worker_pool_runs_tasks_and_stops_its_workers_on_an_exception():
                 f.result()
     for p in procs:
         assert not p.is_alive()
+
+
+def test_sigterm_takes_ctrl_cs_path_in_the_commands():
+    from campaigns._signals import Terminated, interrupt_status, sigterm_as_interrupt
+
+    before = signal.getsignal(signal.SIGTERM)
+    with pytest.raises(Terminated) as caught:
+        with sigterm_as_interrupt():
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5)  # the handler raises at the next bytecode; never reached
+    assert signal.getsignal(signal.SIGTERM) is before  # restored
+    assert interrupt_status(caught.value) == 143
+    # an interrupt raised while handling it (FlyInterrupted, MonteCarloInterrupted) carries it
+    try:
+        try:
+            raise Terminated()
+        except KeyboardInterrupt:
+            raise KeyboardInterrupt("interrupted: 1 of 3 written") from None
+    except KeyboardInterrupt as exc:
+        assert interrupt_status(exc) == 143
+    assert interrupt_status(KeyboardInterrupt()) == 130
