@@ -59,6 +59,7 @@ from synth.dataset import (
     FORMAT,
     FORMAT_VERSION,
     _jsonable,
+    damaged_manifest,
     dataset_status,
     job_entries,
     prepare_directory,
@@ -434,6 +435,14 @@ def _check_same_campaign(out_dir: Path, stored: Mapping, header: dict) -> None:
             diffs.append(f"{key}: {', '.join(sub)}")
         else:
             diffs.append(key)
+    if diffs and _normalized(stored.get("campaign", {}).get("definition")) == fresh["campaign"]["definition"]:
+        # the dataset's own campaign: resuming it again with the same command cannot help
+        raise CampaignError(
+            f"{out_dir}: cannot resume: the manifest differs from its own campaign as it reads today "
+            f"in {'; '.join(diffs)}: the fleet or model files, or the software, changed since the "
+            "dataset was started, or the manifest was edited. Resuming would mix the two: restore "
+            f"what changed (or the manifest), or move {out_dir} aside and fly the campaign again "
+            "into a new --out")
     if diffs:
         raise CampaignError(
             f"{out_dir}: cannot resume: the dataset was started with another campaign or software; "
@@ -474,6 +483,9 @@ def campaign_of_dataset(out_dir: str | Path) -> Campaign:
         If ``out_dir`` holds no dataset manifest.
     """
     out_dir = Path(out_dir)
+    damage = damaged_manifest(out_dir)
+    if damage is not None:
+        raise CampaignError(f"cannot resume: {damage}")
     stored = read_manifest_if_dataset(out_dir)
     if stored is None or "definition" not in stored.get("campaign", {}):
         raise FileNotFoundError(
@@ -527,6 +539,8 @@ def fly_campaign(
     out_dir = Path(out_dir)
     header = _manifest_header(campaign)
     stored = read_manifest_if_dataset(out_dir) if resume and out_dir.is_dir() else None
+    if resume and (damage := damaged_manifest(out_dir)) is not None:
+        raise CampaignError(f"cannot resume: {damage}")
     jobs = {j.index: j for j in campaign.jobs}
     done: dict[int, list[dict]] = {}
     notes: list[str] = []

@@ -197,6 +197,53 @@ def _file_state(directory: Path, rel: str, job_index: int) -> tuple[dict | None,
     return entry, None
 
 
+def _edited(directory: Path, what: str) -> str:
+    return (f"{directory / MANIFEST}: {what}: the manifest is not as `fpr fly` wrote it (edited or "
+            f"damaged). Restore it, or move {directory} aside and fly the campaign again into a new "
+            "--out")
+
+
+def planned_jobs(directory: str | Path, manifest: Mapping) -> list[tuple[int, list[str]]]:
+    """(job index, files) of every job an incomplete dataset's manifest plans.
+
+    Raises
+    ------
+    ValueError
+        Naming the manifest and the job, when one is not as `fpr fly` writes it (no ``files``
+        list, no ``job_index``): a hand-edited or damaged manifest.
+    """
+    directory = Path(directory)
+    jobs = manifest.get("jobs")
+    if not isinstance(jobs, list):
+        raise ValueError(_edited(directory, "its planned \"jobs\" are not a list"))
+    out = []
+    for k, job in enumerate(jobs):
+        job = job if isinstance(job, Mapping) else {}
+        index, files = job.get("job_index"), job.get("files")
+        if not isinstance(index, int) or isinstance(index, bool):
+            raise ValueError(_edited(directory, f"planned job {k} has no job_index"))
+        if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
+            raise ValueError(_edited(directory, f"planned job {k} (job_index {index}) has no list of "
+                                                "\"files\""))
+        out.append((index, files))
+    return out
+
+
+def damaged_manifest(directory: str | Path) -> str | None:
+    """What is wrong with ``directory``'s ``manifest.json`` when it is there but cannot be read
+    (truncated, not JSON), and what to do; None when it reads (or is not there)."""
+    path = Path(directory) / MANIFEST
+    if not path.is_file():
+        return None
+    try:
+        json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        return (f"{path}: cannot be read ({exc}): the manifest is damaged, and the dataset's "
+                f"campaign and progress are in it. Restore it (from a backup), or move {directory} "
+                "aside and fly the campaign again into a new --out")
+    return None
+
+
 def job_entries(directory: str | Path, manifest: Mapping) -> tuple[dict[int, list[dict]],
                                                                  list[tuple[str, str]]]:
     """The finished jobs of a dataset with planned ``jobs`` (an incomplete one), read from their
@@ -212,8 +259,7 @@ def job_entries(directory: str | Path, manifest: Mapping) -> tuple[dict[int, lis
     directory = Path(directory)
     done: dict[int, list[dict]] = {}
     damaged: list[tuple[str, str]] = []
-    for job in manifest.get("jobs") or []:
-        index, files = int(job["job_index"]), job["files"]
+    for index, files in planned_jobs(directory, manifest):
         entries = []
         for rel in files:
             if not MANEUVER_FILE_RE.fullmatch(rel):  # never a name outside the tool's own
@@ -267,8 +313,7 @@ def written_entries(directory: str | Path, manifest: Mapping) -> list[dict]:
     """The manifest entries of an incomplete dataset's finished jobs, read from their files (a
     damaged file's job is not finished: :func:`job_entries`)."""
     done, _ = job_entries(directory, manifest)
-    return [e for job in manifest.get("jobs", []) if int(job["job_index"]) in done
-            for e in done[int(job["job_index"])]]
+    return [e for index, _ in planned_jobs(directory, manifest) if index in done for e in done[index]]
 
 
 def _listing(names: list[str]) -> str:
@@ -440,7 +485,9 @@ def load_dataset(path: str | Path) -> Dataset:
     try:
         manifest = json.loads(mpath.read_text())
     except ValueError as exc:
-        raise ValueError(f"{mpath}: not valid JSON ({exc}); the dataset is damaged") from None
+        raise ValueError(f"{mpath}: not valid JSON ({exc}); the manifest is damaged. Restore it (from a "
+                         f"backup), or move {path} aside and fly the campaign again into a new --out"
+                         ) from None
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         got = manifest.get("format") if isinstance(manifest, dict) else type(manifest).__name__
         raise ValueError(f"{mpath}: format is {got!r}, expected {FORMAT!r}")

@@ -170,10 +170,37 @@ def test_readers_refuse_an_incomplete_dataset_and_say_how_to_resume(tmp_path):
     _interrupt(out)
     with pytest.raises(IncompleteDatasetError, match=r"1 of 2 maneuvers.*fpr fly --resume --out"):
         load_dataset(out)
-    with pytest.raises(DataError, match=r"1 of 2 maneuvers.*fpr fly --resume --out"):
+    with pytest.raises(DataError, match=r"incomplete dataset.*fpr fly --resume --out"):
         read_manifest(out)
     with pytest.raises(FileExistsError, match="incomplete.*--resume"):
         prepare_directory(out)
+
+
+def test_an_edited_or_damaged_manifest_is_named_with_what_to_do(tmp_path, capsys):
+    out = tmp_path / "ds"
+    _fly_tiny(out)
+    _interrupt(out)
+    manifest = json.loads((out / MANIFEST).read_text())
+    del manifest["jobs"][0]["files"]  # edited by hand
+    write_manifest(out, manifest)
+    assert main(["show", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f'{out / MANIFEST}: planned job 0 (job_index 0) has no list of "files"' in err
+    assert "Restore it, or move" in err and "Traceback" not in err
+    # the estimator's reader: the manifest says incomplete, and that is all it needs to know
+    with pytest.raises(DataError, match=r"incomplete dataset.*fpr fly --resume --out"):
+        read_manifest(out)
+    # the resume reads the campaign from this manifest: it cannot advise itself
+    assert main(["fly", "--resume", "--out", str(out), "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "differs from its own campaign" in err and "in jobs" in err and "--resume" not in err
+    (out / MANIFEST).write_text((out / MANIFEST).read_text()[:300])  # truncated
+    assert main(["show", str(out)]) == 2
+    assert "the manifest is damaged" in capsys.readouterr().err
+    assert main(["fly", "--resume", "--out", str(out), "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert f"{out / MANIFEST}: cannot be read" in err and f"move {out} aside" in err
+    assert "--resume" not in err and "Traceback" not in err
 
 
 def test_resume_refuses_another_campaign_and_completes_its_own(tmp_path, capsys):

@@ -65,14 +65,13 @@ def read_manifest(path: str | Path) -> tuple[Path, dict]:
         got = manifest.get("format") if isinstance(manifest, dict) else type(manifest).__name__
         raise DataError(f"{mpath}: format is {got!r}, expected {FORMAT!r}")
     if manifest.get("complete", True) is False:
-        # `fpr fly` writes the manifest first, "complete": false, and its planned jobs with their
-        # files; a file present is a whole one (written to a temporary name, then renamed)
-        jobs = manifest.get("jobs") or []
-        done = sum(1 for j in jobs if all((path / f).is_file() for f in j.get("files", [])))
+        # `fpr fly` writes the manifest first, "complete": false, and says "complete": true when
+        # the last maneuver is in; how far it got is fpr's to judge (`fpr show`), not the reader's
+        where = shlex.quote(str(path))
         raise DataError(
-            f"{path}: incomplete dataset: {done} of {len(jobs)} maneuvers written (`fpr fly` was "
-            f"interrupted, or is still running); complete it with: fpr fly --resume --out "
-            f"{shlex.quote(str(path))}")
+            f"{path}: incomplete dataset: its manifest says \"complete\": false (`fpr fly` was "
+            f"interrupted, or is still running); complete it with: fpr fly --resume --out {where} "
+            f"(`fpr show {where}` says how far it got)")
     if not manifest.get("maneuvers"):
         raise DataError(f"{mpath}: the manifest lists no maneuvers")
     return path, manifest
