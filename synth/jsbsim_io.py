@@ -46,7 +46,6 @@ SLUG_TO_KG = LBF_TO_N / FT_TO_M  # 1 slug = 1 lbf s^2 / ft
 PSF_TO_PA = LBF_TO_N / FT_TO_M**2
 RANKINE_TO_K = 5.0 / 9.0
 SLUGFT3_TO_KGM3 = SLUG_TO_KG / FT_TO_M**3
-KT_TO_MPS = 1852.0 / 3600.0
 DEG_TO_RAD = math.pi / 180.0
 
 #: Version of the model patches below; bump it whenever a patch changes so caches are rebuilt.
