@@ -92,13 +92,9 @@ def _add_fly(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--wind-ned-mps", nargs=3, type=float, default=[0.0, 0.0, 0.0],
                    metavar=("N", "E", "D"), help="steady wind, NED, m/s")
     g.add_argument("--rate-hz", type=float, default=40.0, help="common time base, Hz")
-
-
-#: Flags that describe a campaign, and their defaults (a resume without a campaign file uses
-#: the dataset's own campaign unless one of these was given).
-_FLY_CAMPAIGN_FLAGS = {"config": "all", "mach": [0.5], "maneuver": "all", "altitude_m": 6000.0,
-                       "gear_down": False, "seed": 0, "errors": "typical", "planet": "flat",
-                       "turbulence": "none", "wind_ned_mps": [0.0, 0.0, 0.0], "rate_hz": 40.0}
+    # the flags that describe a campaign and their defaults, as the parser has them: a resume
+    # without a campaign file uses the dataset's own campaign unless one of them was changed
+    p.set_defaults(campaign_flag_defaults={a.dest: a.default for a in g._group_actions})
 
 
 def _fly(args: argparse.Namespace) -> int:
@@ -113,7 +109,7 @@ def _fly(args: argparse.Namespace) -> int:
         summarize,
     )
 
-    flags_given = any(getattr(args, k) != v for k, v in _FLY_CAMPAIGN_FLAGS.items())
+    flags_given = any(getattr(args, k) != v for k, v in args.campaign_flag_defaults.items())
     if args.campaign:
         campaign = load_campaign(args.campaign)
     elif args.resume and not flags_given:
@@ -483,10 +479,19 @@ def main(argv: list[str] | None = None) -> int:
     handlers = {"fly": _fly, "demo": _demo, "show": _show, "calibrate": _calibrate,
                 **dict.fromkeys(montecarlo_cli.COMMANDS, montecarlo_cli.run)}
     try:
-        return handlers[args.command](args)
+        code = handlers[args.command](args)
+        sys.stdout.flush()  # a reader that has gone is found here, not at exit
+        return code
     except (FileNotFoundError, FileExistsError, ValueError, KeyError) as exc:
         print(f"fpr {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # the reader of the output has gone (`fpr show DIR | head`): stop quietly, as `cat` does;
+        # stdout now leads nowhere, so that the flush at exit does not fail again
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE
 
 
 if __name__ == "__main__":

@@ -156,6 +156,23 @@ def test_fly_and_show_help_point_only_at_things_that_exist(capsys):
     assert "incomplete" in capsys.readouterr().out
 
 
+def test_show_into_a_closed_pipe_ends_quietly(tmp_path):
+    out = tmp_path / "ds"
+    _fly_tiny(out)
+    for dataset in (out, tmp_path / "missing"):  # output, or an error message (to stderr)
+        read, write = os.pipe()
+        os.close(read)  # `fpr show DIR | head` after head has gone: every write fails
+        try:
+            proc = subprocess.run([sys.executable, "-m", "campaigns.cli", "show", str(dataset)], cwd=REPO,
+                                  stdout=write, stderr=subprocess.PIPE, text=True, timeout=120)
+        finally:
+            os.close(write)
+        if dataset == out:
+            assert proc.returncode == 141 and proc.stderr == "", proc.stderr
+        else:
+            assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+
+
 # ------------------------------------------------------------------------ incomplete datasets
 def _interrupt(out: Path) -> None:
     """What a run killed after its first maneuver leaves: the first manifest, some files."""
