@@ -299,7 +299,9 @@ def test_a_killed_fly_leaves_no_worker_and_resumes_to_the_same_bytes(kill_campai
     with open(log_out, "w") as fo, open(log_err, "w") as fe:
         proc = subprocess.Popen(
             [sys.executable, "-m", "campaigns.cli", "fly", str(toml), "--out", str(out), "--workers", "2"],
-            stdout=fo, stderr=fe, cwd=REPO, start_new_session=True, preexec_fn=sigint_default)
+            stdout=fo, stderr=fe, cwd=REPO, start_new_session=True, preexec_fn=sigint_default,
+            # multiprocessing's own folder (the fork server's socket), which a killed parent leaves
+            env=dict(os.environ, TMPDIR=str(tmp_path)))
     try:
         # wait for the first maneuver file (bounded: a stuck start fails instead of hanging)
         deadline = time.monotonic() + 120.0

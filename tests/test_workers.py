@@ -54,8 +54,10 @@ def test_workers_end_within_5_s_of_a_sigkill_of_the_pools_process(tmp_path, meth
     held.mkdir()
     script = tmp_path / "parent.py"
     script.write_text(_PARENT.format(tests=str(TESTS), method=method, held=str(held)))
+    # TMPDIR: multiprocessing's own folder (the fork server's socket), which a killed parent leaves
     proc = subprocess.Popen([sys.executable, str(script)], cwd=ROOT, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, start_new_session=True)
+                            stderr=subprocess.PIPE, start_new_session=True,
+                            env=dict(os.environ, TMPDIR=str(tmp_path)))
     below: list[tuple[int, str]] = []
     try:
         deadline = time.monotonic() + 60.0
