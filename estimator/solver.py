@@ -34,6 +34,10 @@ held too, and the estimation iterates again. Each held parameter keeps its reaso
 Standard deviations: Cramér-Rao, ``sqrt(diag(M^-1))``, with the correlations; and the honest ones
 (:mod:`estimator.uncertainty`): coloured and cross-correlated residuals with a modelled spectrum,
 and the IMU's noise as process noise.
+
+Where each part lives: this module orchestrates (starts, screening rounds, robust pass, result);
+the iterations are :mod:`estimator.iteration`, the identifiability screen, covariance and parameter
+states :mod:`estimator.identifiability`, the deviations :mod:`estimator.uncertainty`.
 """
 
 from __future__ import annotations
@@ -44,23 +48,19 @@ from dataclasses import dataclass, replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from estimator.model import Evaluation, Model, ModelEvaluationError
-from estimator.normal_equations import (
-    NormalEquations,
-    Structure,
-    bounded_solve,
-    build_normal,
-    channel_variances,
-    full_step,
-    lm_solve,
-    ml_cost,
-    residual_sums,
-    sym_inverse,
+from estimator.identifiability import (
+    _covariance,
+    _high_correlations,
+    _parameter_findings,
+    _parameter_states,
+    _screen,
 )
+from estimator.iteration import _evaluate, _gauss_newton, _staged_start
+from estimator.model import Evaluation, Model, ModelEvaluationError
+from estimator.normal_equations import Structure, build_normal, channel_variances, ml_cost, residual_sums
 from estimator.problem import STATE_PARAMS, Problem
-from estimator.result import Confounding, EstimationResult, ResidualStats
-from estimator.start import staged_plan
-from estimator.uncertainty import honest_std, imu_noise_psd
+from estimator.result import EstimationResult, ResidualStats
+from estimator.uncertainty import _std_of, honest_std, imu_noise_psd
 from estimator.verdict import Finding, Severity, Status, judge
 
 #: Start strategies: the staged, data-driven start (:mod:`estimator.start`) or the problem's values.
@@ -141,272 +141,6 @@ class SolverOptions:
                              f"{self.colored_spectrum!r}")
         if self.max_iterations < 1:
             raise ValueError(f"SolverOptions: max_iterations must be >= 1, got {self.max_iterations}")
-
-
-
-def _confounded_sets(null: np.ndarray, idx: np.ndarray, problem: Problem, where: str
-                     ) -> list[tuple[Confounding, int]]:
-    """Each null direction as a confounded set, with the one member to hold so the rank returns.
-
-    The member held is one that takes a large part in the direction (at least half the largest
-    component), a table value before a bias or scale (a free table offset beside free biases:
-    anchoring the table keeps the biases, which carry the installation, free), then the largest.
-    The outputs are the same whichever member is held: only how the set shares the combination.
-    """
-    ps = problem.parameters
-    out = []
-    chosen: set[int] = set()
-    for j in range(null.shape[1]):
-        v = np.abs(null[:, j])
-        order = np.argsort(-v)
-        members = [int(idx[i]) for i in order if v[i] > 0.15 * v.max()]
-        cands = [int(idx[i]) for i in order if v[i] >= 0.5 * v.max() and int(idx[i]) not in chosen]
-        cands = cands or [m for m in members if m not in chosen] or members
-        hold = min(cands, key=lambda i: (ps.parameters[i].kind != "table", cands.index(i)))
-        chosen.add(hold)
-        names = [ps.parameters[i].key for i in members]
-        out.append((Confounding(
-            parameters=tuple(names),
-            kind="unidentifiable",
-            detail=(f"{where}: the data cannot tell {', '.join(names[:8])}"
-                    f"{' ...' if len(names) > 8 else ''} apart (a combination of "
-                    f"them leaves every output unchanged); {ps.parameters[hold].key} is held at its "
-                    "start value to anchor the others, whose estimates are relative to it. Fix one "
-                    "of them yourself, or fly maneuvers that excite them differently"),
-        ), hold))
-    return out
-
-
-@dataclass(frozen=True)
-class _Hold:
-    """Parameters held at their start values by the identifiability screen, and why."""
-
-    params: tuple[int, ...]
-    kind: str  # "no_data", "unidentifiable" or "undetermined"
-    confounding: Confounding
-
-
-def _screen(problem: Problem, st: Structure, evals: Evaluation, R: np.ndarray, opt: SolverOptions,
-            loose: bool) -> tuple[Structure, list[_Hold]]:
-    """Hold the parameters the data do not determine; returns the new structure and the holds.
-
-    Parameters no sample depends on (a table breakpoint beyond the flown range, a bias of a sensor
-    an aircraft does not carry) and combinations the data cannot separate (one member per null
-    direction) are held. With ``loose``, so is a parameter whose Cramér-Rao deviation exceeds half
-    its allowed range (a pressure-altitude scale in level flight). Judged away from the solution,
-    where ``R`` holds the residuals of a wrong trajectory, the deviations are inflated: the
-    estimation therefore judges every requested parameter again at its solution.
-    """
-    ps = problem.parameters
-    keys = ps.keys
-    holds: list[_Hold] = []
-    for _ in range(12):
-        if not st.free.any():
-            break
-        N = build_normal(st, evals, R)
-        no_data = st.free & ~_has_data(N, st, opt.min_support_samples)
-        if no_data.any():
-            held = tuple(int(i) for i in np.nonzero(no_data)[0])
-            holds.append(_Hold(held, "no_data", Confounding(
-                parameters=tuple(keys[i] for i in held), kind="no_data",
-                detail=(f"fewer than {opt.min_support_samples} samples depend on these parameters "
-                        "(e.g. a table breakpoint outside the flown range, or a sensor this aircraft "
-                        "does not carry); held at their start values"))))
-            st = Structure(problem, st.free & ~no_data)
-            continue
-        cov_G, cov_L, unident, _ = _covariance(N, st, problem, opt)
-        if unident:
-            free = st.free.copy()
-            for conf, hold in unident:
-                free[hold] = False
-                holds.append(_Hold((hold,), "unidentifiable", conf))
-            st = Structure(problem, free)
-            continue
-        if loose:
-            std = _std_of(st, cov_G, cov_L, len(keys))
-            width = st.hi - st.lo
-            bad = st.free & np.isfinite(width) & (std > 0.5 * width)
-            if bad.any():
-                held = tuple(int(i) for i in np.nonzero(bad)[0])
-                holds.append(_Hold(held, "undetermined", Confounding(
-                    parameters=tuple(keys[i] for i in held), kind="undetermined",
-                    detail=("the data barely depend on these parameters: at the solution their "
-                            "Cramér-Rao deviation exceeds half their allowed range (bounds); held at "
-                            "their start values"))))
-                st = Structure(problem, st.free & ~bad)
-                continue
-        break
-    return st, holds
-
-
-def _has_data(N: NormalEquations, st: Structure, min_support: int) -> np.ndarray:
-    """(P,) the free parameters some information and at least ``min_support`` samples depend on."""
-    info = np.zeros(st.free.size)
-    info[st.glob] = np.diag(N.HGG)
-    for k, idx in enumerate(st.local_of_arr):
-        info[idx] = np.diag(N.HLL[k])
-    return st.free & (info > 0.0) & (N.support >= min_support)
-
-
-def _std_of(st: Structure, cov_G: np.ndarray, cov_L: list[np.ndarray], n: int) -> np.ndarray:
-    std = np.full(n, np.nan)
-    std[st.glob] = np.sqrt(np.maximum(np.diag(cov_G), 0.0))
-    for k, idx in enumerate(st.local_of_arr):
-        if idx.size:
-            std[idx] = np.sqrt(np.maximum(np.diag(cov_L[k]), 0.0))
-    return std
-
-
-@dataclass
-class _Iterated:
-    """What a Gauss-Newton run left: the iterate, its evaluation and how it ended."""
-
-    theta: np.ndarray
-    evals: Evaluation
-    sse: np.ndarray
-    cnt: np.ndarray
-    status: Status
-    message: str
-    iterations: int
-    history: list[float]
-    step_sigma: float  # the last undamped Gauss-Newton step, in deviations (largest)
-    poor: tuple[str, ...] = ()  # where that step exceeded a deviation at convergence (poor model)
-
-
-def _evaluate(model: Model, theta: np.ndarray, jacobian: bool) -> Evaluation:
-    # the iterations need each block's normal-equation terms, not the Jacobian itself: fresh
-    # memory for it each time costs more (page by page from the operating system) than
-    # evaluating the last iterate once more for the Morelli-Klein deviations
-    return model.evaluate_all(theta, jacobian=jacobian, keep_jacobian=False)
-
-
-def _gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOptions,
-                  evals: Evaluation | None = None, label: str = "") -> _Iterated:
-    """Levenberg-Marquardt-safeguarded Gauss-Newton iterations with relaxation of ``R`` (module
-    docstring) until the undamped step is negligible."""
-    nch = len(model.problem.channels)
-    keys = model.problem.parameters.keys
-    theta = theta.copy()
-    if evals is None:
-        evals = _evaluate(model, theta, True)
-    sse, cnt = residual_sums(evals, nch)
-    lam = opt.lm_lambda0
-    history: list[float] = []
-    status, message = Status.ITERATION_LIMIT, ""
-    moved_max = np.inf
-    poor: tuple[str, ...] = ()
-    it = 0
-    order = np.concatenate([st.glob] + [v for v in st.local_of_arr if v.size]).astype(int)
-    for it in range(1, opt.max_iterations + 1):
-        R = channel_variances(sse, cnt)
-        cost0 = ml_cost(sse, cnt, R)
-        history.append(cost0)
-        N = build_normal(st, evals, R)
-        # the undamped Gauss-Newton step judges convergence: a damped one shrinks with the damping
-        gn, _, _, Sinv, Ainv, _ = bounded_solve(N, st, theta, 0.0, opt.rank_rtol)
-        sig = np.zeros(theta.size)
-        sig[st.glob] = np.diag(Sinv)
-        for k, idx in enumerate(st.local_of_arr):
-            if idx.size:
-                sig[idx] = np.diag(Ainv[k])
-        sig = np.sqrt(np.maximum(sig, 1e-300))
-        moved = np.abs(gn[order]) / sig[order]
-        moved_max = float(moved.max()) if moved.size else 0.0
-        predicted = 0.5 * float(gn @ full_step(st, N.gG, N.gL, theta.size))
-        if moved_max < opt.step_tol_sigma:
-            status = Status.CONVERGED_STEP
-            message = (f"converged: the undamped Gauss-Newton step is {moved_max:.1e} deviations at "
-                       f"most (< {opt.step_tol_sigma})")
-            break
-        if predicted < opt.decrease_tol:
-            status = Status.CONVERGED_DECREASE
-            message = (f"converged: the Gauss-Newton model predicts a further cost decrease of "
-                       f"{max(predicted, 0.0):.1e} (< {opt.decrease_tol}); largest step "
-                       f"{moved_max:.1e} deviations")
-            break
-        best = None  # (decrease, iterate, its evaluation, sse, cnt, evaluated with the Jacobian)
-        evaluated = 0  # trial points the model could be evaluated at
-        for attempt in range(12):
-            step = bounded_solve(N, st, theta, lam, opt.rank_rtol)[0]
-            trial = np.clip(theta + step, st.lo, st.hi)
-            try:
-                # the first trial is usually accepted and is then the next iterate: evaluate it
-                # with the Jacobian right away (the values are the same either way)
-                trial_ev = _evaluate(model, trial, attempt == 0)
-            except ModelEvaluationError:
-                # the step left the model's domain (e.g. a table steeper than 1:1 in an implicit
-                # model): a rejected step, damped further
-                lam = max(lam, 1e-6) * 10.0
-                continue
-            evaluated += 1
-            sse_t, cnt_t = residual_sums(trial_ev, nch)
-            cost_t = ml_cost(sse_t, cnt_t, R)
-            if np.isfinite(cost_t) and cost_t < cost0:
-                best = (cost0 - cost_t, trial, trial_ev, sse_t, cnt_t, attempt == 0)
-                break
-            lam = max(lam, 1e-6) * 10.0
-        if best is None or best[0] < max(opt.decrease_tol, 0.1 * predicted):
-            # the damped steps achieve (next to) nothing: search along the undamped Gauss-Newton
-            # direction itself, whose quadratic model can be poor along a parameter the data barely
-            # determine (one that enters the outputs only to second order, like v0 without a
-            # sideslip channel). What no step achieves, the minimum does not offer either.
-            for t in 10.0 ** -np.arange(0, 9):
-                trial = np.clip(theta + t * gn, st.lo, st.hi)
-                try:
-                    trial_ev = _evaluate(model, trial, False)
-                except ModelEvaluationError:
-                    continue
-                evaluated += 1
-                sse_t, cnt_t = residual_sums(trial_ev, nch)
-                cost_t = ml_cost(sse_t, cnt_t, R)
-                if np.isfinite(cost_t) and cost0 - cost_t > (best[0] if best else 0.0):
-                    best = (cost0 - cost_t, trial, trial_ev, sse_t, cnt_t, False)
-        if not evaluated:
-            status = Status.STALLED
-            message = ("stalled: the model cannot be evaluated at any step from here (each leaves its "
-                       f"domain; e.g. an implicit model that does not converge); the undamped "
-                       f"Gauss-Newton step is {moved_max:.2g} deviations")
-            break
-        if best is None or best[0] < opt.decrease_tol:
-            if best is not None:  # take the little there is
-                theta, sse, cnt = best[1], best[3], best[4]
-                evals = _evaluate(model, theta, True)
-            achieved = best[0] if best is not None else 0.0
-            poor = tuple(keys[order[i]] for i in np.argsort(-moved) if moved[i] >= 1.0)
-            if moved_max < 10.0 * opt.step_tol_sigma:
-                # within a tenth of a deviation of the minimum, where round-off (or a kink of an
-                # interpolated delay or table) keeps the cost from decreasing any further
-                status = Status.CONVERGED_STEP
-                message = (f"converged: the undamped Gauss-Newton step is {moved_max:.1e} deviations "
-                           f"at most; no step decreases the cost by more than {achieved:.1e} (round-off)")
-            elif best is None:
-                # not even a tiny step along the gradient lowers the cost: the gradient does not
-                # describe the cost here (a kink, a model or Jacobian fault), so this is no minimum
-                status = Status.STALLED
-                message = (f"stalled: no step decreases the cost at all (damping grew to {lam:.1e}, and "
-                           "along the undamped direction too), yet the Gauss-Newton model predicts "
-                           f"{predicted:.3g} with a step of {moved_max:.2g} deviations "
-                           f"({keys[order[int(np.argmax(moved))]]}): the gradient does not describe "
-                           "the cost here")
-            else:
-                status = Status.CONVERGED_DECREASE
-                message = (f"converged: no step decreases the cost by more than {achieved:.1e} "
-                           f"(< {opt.decrease_tol}), although the Gauss-Newton model predicts "
-                           f"{predicted:.3g} with a step of {moved_max:.2g} deviations "
-                           f"({', '.join(poor[:4]) or keys[order[int(np.argmax(moved))]]}): the "
-                           "quadratic model is poor there")
-            break
-        decrease, theta, trial_ev, sse, cnt, with_jac = best
-        lam = max(lam * 0.1, 1e-9)
-        evals = trial_ev if with_jac else _evaluate(model, theta, True)
-        if opt.verbose:
-            rel = decrease / max(abs(cost0), 1e-300)
-            print(f"{label}iteration {it:3d}: cost {cost0: .6e}, rel. decrease {rel:.2e}, undamped step "
-                  f"{moved_max:.2e} sigma ({keys[order[int(np.argmax(moved))]]}), lambda {lam:.1e}")
-    else:
-        message = (f"not converged: iteration limit ({opt.max_iterations}) reached; the undamped "
-                   f"Gauss-Newton step is still {moved_max:.2g} deviations")
-    return _Iterated(theta, evals, sse, cnt, status, message, it, history, moved_max, poor)
 
 
 def estimate(problem: Problem, options: SolverOptions | None = None) -> EstimationResult:
@@ -508,34 +242,6 @@ def _without_samples(problem: Problem, samples: dict[tuple[str, str], np.ndarray
             meas[col[ch]] = v
         mans.append(replace(m, measurements=meas))
     return replace(problem, maneuvers=tuple(mans))
-
-
-def _staged_start(problem: Problem, theta: np.ndarray, free: np.ndarray, opt: SolverOptions
-                  ) -> tuple[np.ndarray, list[str]]:
-    """Run the stages of :func:`estimator.start.staged_plan` from ``theta``; returns the last
-    stage's estimate and one line per stage."""
-    notes = []
-    for stage in staged_plan(problem, free):
-        sub = replace(problem, channels=tuple(problem.channels[i] for i in stage.channels))
-        model = Model(sub)
-        try:
-            ev = _evaluate(model, theta, True)
-        except ModelEvaluationError as exc:
-            notes.append(f"start stage {stage.name}: skipped ({exc})")
-            continue
-        st = Structure(sub, stage.free)
-        # a stage frees only what its channels depend on; the rest waits for a later stage
-        N = build_normal(st, ev, np.ones(len(sub.channels)))
-        st = Structure(sub, stage.free & _has_data(N, st, opt.min_support_samples))
-        if not st.free.any():
-            continue
-        it = _gauss_newton(model, theta, st, opt, ev, label=f"start ({stage.name}) ")
-        theta = it.theta
-        notes.append(f"start stage {stage.name}: {len(stage.channels)} channels, {int(st.free.sum())} "
-                     f"free, {it.iterations} iterations, {it.status.name.lower()}")
-        if opt.verbose:
-            print(notes[-1])
-    return theta, notes
 
 
 def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
@@ -649,7 +355,6 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     """Covariances, diagnostics, findings and verdict at the estimate."""
     ps = problem.parameters
     keys = ps.keys
-    requested = ps.free_mask
     R = channel_variances(it.sse, it.cnt)
     history = history + [ml_cost(it.sse, it.cnt, R)]
     N = build_normal(st, evals, R)
@@ -690,36 +395,7 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         dh = np.sqrt(np.maximum(np.diag(cov_hon), 1e-300))
         corr_honest = cov_hon / np.outer(dh, dh)
     # what each parameter is: estimated, on a bound, held (why) or fixed
-    state, reason = [], []
-    why = {i: h for h in holds for i in h.params}
-    tiny = 1e-9 * np.maximum(1.0, np.abs(theta))
-    for i, p in enumerate(ps):
-        if not requested[i]:
-            state.append("fixed")
-            reason.append("fixed in the problem (model set or problem file)")
-        elif not st.free[i]:
-            h = why.get(i)
-            state.append("held")
-            reason.append({"no_data": f"no data: fewer than {opt.min_support_samples} samples depend on it",
-                           "undetermined": "undetermined: its Cramér-Rao deviation exceeds half its "
-                                           "allowed range",
-                           "unidentifiable": "unidentifiable: " + (h.confounding.detail if h else "")
-                           }.get(h.kind if h else "", "held")
-                          + ("" if theta[i] == start[i] else "; held where the estimation left it, not at "
-                             "its start value (the model cannot be evaluated there)"))
-        elif unresolved[i]:
-            state.append("unidentifiable")
-            reason.append("unidentifiable at the solution: " + next(c.detail for c, _ in unident
-                                                                   if p.key in c.parameters))
-        elif theta[i] <= st.lo[i] + tiny[i] or theta[i] >= st.hi[i] - tiny[i]:
-            state.append("on_bound")
-            side = "lower" if theta[i] <= st.lo[i] + tiny[i] else "upper"
-            unit = "" if p.unit in ("", "1") else f" {p.unit}"  # "0.5", not "0.5 1"
-            reason.append(f"on its {side} bound {theta[i]:.6g}{unit}: the data push it beyond; the "
-                          "estimate is the bound")
-        else:
-            state.append("estimated")
-            reason.append("")
+    state, reason = _parameter_states(problem, theta, start, st, holds, unresolved, unident, opt)
     # which maneuvers inform each global parameter (its coupling block with their locals)
     informs = {keys[g]: {problem.maneuvers[k].id for k in range(len(problem.maneuvers))
                          if N.HGL[k].shape[1] and np.any(N.HGL[k][j] != 0.0)}
@@ -818,100 +494,6 @@ def _beside_bounds(f: Finding, on_bound: dict[str, list[str]]) -> Finding:
         f"pattern too); if it stays: {f.advice}")
 
 
-def _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs) -> list[Finding]:
-    """Findings of the identifiability checks: held parameters (INFO when the data simply do not
-    reach them, WARNING when a confounded set was anchored), parameters on a bound (WARNING),
-    highly correlated pairs (INFO: their deviations already say it)."""
-    ps = problem.parameters
-    out = []
-    # the screen holds one member of a confounded set at a time: overlapping sets are one finding
-    groups: list[tuple[set[str], list[str]]] = []
-    for h in holds:
-        if h.kind != "unidentifiable":
-            continue
-        members = set(h.confounding.parameters)
-        held = [ps.parameters[i].key for i in h.params]
-        for g in groups:
-            if g[0] & members:
-                g[0].update(members)
-                g[1].extend(held)
-                break
-        else:
-            groups.append((members, held))
-    for members, held in groups:
-        names = sorted(members, key=ps.index)
-        out.append(Finding(
-            "unidentifiable", Severity.WARNING,
-            f"the data cannot tell {', '.join(names[:10])}{' ...' if len(names) > 10 else ''} apart "
-            f"(combinations of them leave every output unchanged): {', '.join(held)} "
-            f"{'is' if len(held) == 1 else 'are'} held at the start value(s), the fewest that make the "
-            "rest determined, whose estimates are then relative to them",
-            "fix the one you know in the problem file, or fly maneuvers that excite them differently",
-            parameters=tuple(names)))
-    for h in holds:
-        names = ", ".join(h.confounding.parameters[:12]) + (" ..." if len(h.params) > 12 else "")
-        if h.kind == "unidentifiable":
-            continue
-        elif h.kind == "no_data":
-            out.append(Finding("held", Severity.INFO, f"held at their start values, no data: {names} "
-                               f"({h.confounding.detail.split(';')[0]})",
-                               parameters=h.confounding.parameters))
-        else:
-            out.append(Finding("held", Severity.INFO, f"held at their start values, undetermined: {names} "
-                               "(their Cramér-Rao deviation exceeds half their allowed range)",
-                               "fly maneuvers that excite them, or fix them at known values",
-                               parameters=h.confounding.parameters))
-    for conf, _ in unident:
-        out.append(Finding("unidentifiable", Severity.WARNING, conf.detail,
-                           "fix one of them in the problem file", parameters=conf.parameters))
-    for i, s in enumerate(state):
-        if s == "on_bound":
-            p = ps.parameters[i]
-            # a calibration result (a table value, a bias, a delay, an IMU bias) on its bound is not a
-            # measurement; a maneuver's nuisance scale or offset (k_h in level flight) is only noted
-            nuisance = p.scope == "maneuver" and p.kind in ("scale", "bias")
-            out.append(Finding("on_bound", Severity.INFO if nuisance else Severity.WARNING,
-                               f"{p.key} is {reason[i]}",
-                               "the data want it outside its physical range: check the data of the "
-                               "channels it enters (units, signs, a fault) before widening the bounds",
-                               parameters=(p.key,)))
-    # a calibration parameter that trades against the initial conditions of every maneuver that
-    # informs it is the confounding an engineer must not miss (a sideslip bias against the initial
-    # sideslip): no maneuver separates the two but through weak kinematic couplings, and any
-    # error of those goes into it
-    calib = {p.key for p in ps if p.kind in ("bias", "scale", "table") and p.scope != "maneuver"}
-    ics = {p.key for p in ps if p.kind == "initial_condition"}
-    against: dict[str, list[str]] = {}
-    for c in correlated:
-        a, b = c.parameters
-        if a in ics and b in calib:
-            against.setdefault(b, []).append(a)
-        elif b in ics and a in calib:
-            against.setdefault(a, []).append(b)
-        else:
-            out.append(Finding("correlated", Severity.INFO, f"{' and '.join(c.parameters)}: {c.detail}",
-                               parameters=c.parameters))
-    man_of = {p.key: p.instance for p in ps if p.scope == "maneuver"}
-    for key, partners in against.items():
-        if not informs.get(key) or not informs[key] <= {man_of[k] for k in partners}:
-            for k in partners:
-                out.append(Finding("correlated", Severity.INFO, f"{k} and {key}: correlation above "
-                                   f"{opt.correlation_warn}; the data barely separate them in that "
-                                   "maneuver (other maneuvers do)", parameters=(k, key)))
-            continue
-        out.append(Finding(
-            "confounded", Severity.WARNING,
-            f"{key} is confounded with the initial condition(s) {', '.join(partners[:6])}"
-            f"{' ...' if len(partners) > 6 else ''} of every maneuver that informs it (|correlation| > "
-            f"{opt.correlation_warn}): the data separate the offset it adds to the flow angle from the "
-            "maneuvers' own initial flow angle only through weak kinematic couplings, and any error "
-            "there goes into it",
-            "fly maneuvers that vary that flow angle (a steady-heading sideslip for a sideslip bias, "
-            "a pull-up for an angle-of-attack bias), or fix it at a known value",
-            parameters=(key, *partners)))
-    return out
-
-
 def _fit_traces(problem: Problem, ev: Evaluation, st: Structure):
     """The diagnostics' inputs: every channel of every maneuver at the estimate, and each
     maneuver's IMU inputs and reconstructed states."""
@@ -950,67 +532,6 @@ def _fit_traces(problem: Problem, ev: Evaluation, st: Structure):
         inputs.append(ManeuverInputs(maneuver=m.id, t_s=m.t_s, accel_imu_mps2=m.accel_imu_mps2,
                                      omega_rps=m.omega_rps, states=X, euler_measured_rad=eul))
     return fits, inputs
-
-
-
-def _covariance(N: NormalEquations, st: Structure, problem: Problem, opt: SolverOptions):
-    """Undamped Cramér-Rao covariance of the global block and of each local block.
-
-    Returns
-    -------
-    (S^-1, [cov_L_k], unidentifiable sets with the member to hold, correlated global-local pairs)
-    """
-    keys = problem.parameters.keys
-    extra: dict = {}
-    _, _, Sinv, Ainv = lm_solve(N, 0.0, opt.rank_rtol, extra)
-    # rank checks: the Schur complement (globals) and each local block (undamped: lambda = 0)
-    _, null = sym_inverse(extra["S"], opt.rank_rtol)
-    unident = _confounded_sets(null, st.glob, problem, "global parameters")
-    cov_L = []
-    for k, Ai in enumerate(Ainv):
-        idx = st.local_of_arr[k]
-        if not idx.size:
-            cov_L.append(np.zeros((0, 0)))
-            continue
-        unident += _confounded_sets(extra["null_L"][k], idx, problem, f"maneuver {problem.maneuvers[k].id}")
-        B = Ai @ N.HGL[k].T
-        cov_L.append(Ai + B @ Sinv @ B.T)
-    # correlations across the blocks: Cov(local_k, global) = -A_k^-1 M_LkG S^-1. A per-maneuver
-    # initial condition that trades against a fleet-wide bias is exactly the confounding an
-    # engineer must see (SPEC §5), and it lives in these blocks, not in the global one
-    thr = opt.correlation_warn
-    sd_g = np.sqrt(np.maximum(np.diag(Sinv), 1e-300))
-    gkeys = [keys[i] for i in st.glob]
-    correlated = []
-    for k, Ai in enumerate(Ainv):
-        idx = st.local_of_arr[k]
-        if not idx.size or not sd_g.size:
-            continue
-        cross = -(Ai @ N.HGL[k].T) @ Sinv
-        sd_l = np.sqrt(np.maximum(np.diag(cov_L[k]), 1e-300))
-        corr = cross / sd_l[:, None] / sd_g[None, :]
-        for a, b in zip(*np.nonzero(np.abs(corr) > thr), strict=True):
-            correlated.append(Confounding(
-                parameters=(keys[idx[a]], gkeys[b]), kind="correlated",
-                detail=(f"correlation {corr[a, b]:+.4f}: the data barely separate {keys[idx[a]]} "
-                        f"from {gkeys[b]}; their individual values are uncertain"),
-            ))
-    return Sinv, cov_L, unident, correlated
-
-
-def _high_correlations(corr: np.ndarray, keys: list[str], thr: float) -> list[Confounding]:
-    out = []
-    n = corr.shape[0]
-    iu = np.triu_indices(n, 1)
-    vals = corr[iu]
-    for a, b, r in zip(iu[0], iu[1], vals, strict=True):
-        if np.isfinite(r) and abs(r) > thr:
-            out.append(Confounding(
-                parameters=(keys[a], keys[b]), kind="correlated",
-                detail=(f"correlation {r:+.4f}: the data barely separate {keys[a]} from {keys[b]}; "
-                        "their individual values are uncertain even if their deviations look small"),
-            ))
-    return out
 
 
 def _stats(problem: Problem, ev: Evaluation) -> tuple[ResidualStats, ...]:

@@ -371,3 +371,14 @@ def sandwich_std(N: NormalEquations, st: Structure, C: NormalEquations, Sinv: np
         cov = Ai @ CLL @ Ai - cross_k - cross_k.T + Bk @ covG @ Bk.T
         std[st.local_of_arr[k]] = np.sqrt(np.maximum(np.diag(cov), 0.0))
     return std, covG
+
+
+def _std_of(st: Structure, cov_G: np.ndarray, cov_L: list[np.ndarray], n: int) -> np.ndarray:
+    """(n,) the Cramér-Rao deviations ``sqrt(diag(cov))`` of the free parameters (global block and each
+    local block); NaN for the others."""
+    std = np.full(n, np.nan)
+    std[st.glob] = np.sqrt(np.maximum(np.diag(cov_G), 0.0))
+    for k, idx in enumerate(st.local_of_arr):
+        if idx.size:
+            std[idx] = np.sqrt(np.maximum(np.diag(cov_L[k]), 0.0))
+    return std

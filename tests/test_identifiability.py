@@ -20,11 +20,13 @@ import pandas as pd
 import pytest
 from test_estimator import DEG, Flight, _truth_values
 
+from estimator.identifiability import _screen
+from estimator.iteration import _evaluate
 from estimator.model import Model
 from estimator.modelfile import load_model_set
 from estimator.normal_equations import Structure, channel_variances, residual_sums
 from estimator.parameters import ParameterSet
-from estimator.solver import SolverOptions, _evaluate, _screen, estimate
+from estimator.solver import SolverOptions, estimate
 from estimator.verdict import Severity, Verdict
 
 NOISE = {"phi": 0.03 * DEG, "theta": 0.03 * DEG, "psi": 0.03 * DEG, "tas": 0.3, "h": 1.0,

@@ -1,0 +1,326 @@
+"""Identifiability: which free parameters the data determine, and what to do with the rest.
+
+:func:`_screen` holds, at their start values, the parameters no sample depends on (a table
+breakpoint beyond the flown range), one member of each combination the data cannot separate (a
+free table offset beside free biases) and, judged loosely, those whose Cramér-Rao deviation exceeds
+half their allowed range (bounds). :func:`_covariance` is the undamped Cramér-Rao covariance with
+its rank checks and the correlated global-local pairs; :func:`_parameter_states` says what each
+parameter ended as (estimated, on a bound, held and why, fixed) and :func:`_parameter_findings`
+turns the holds, bounds and correlations into findings. Used by :mod:`estimator.solver` before the
+iterations and at the solution.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from estimator.model import Evaluation
+from estimator.normal_equations import NormalEquations, Structure, build_normal, lm_solve, sym_inverse
+from estimator.problem import Problem
+from estimator.result import Confounding
+from estimator.uncertainty import _std_of
+from estimator.verdict import Finding, Severity
+
+if TYPE_CHECKING:
+    from estimator.solver import SolverOptions
+
+
+def _confounded_sets(null: np.ndarray, idx: np.ndarray, problem: Problem, where: str
+                     ) -> list[tuple[Confounding, int]]:
+    """Each null direction as a confounded set, with the one member to hold so the rank returns.
+
+    The member held is one that takes a large part in the direction (at least half the largest
+    component), a table value before a bias or scale (a free table offset beside free biases:
+    anchoring the table keeps the biases, which carry the installation, free), then the largest.
+    The outputs are the same whichever member is held: only how the set shares the combination.
+    """
+    ps = problem.parameters
+    out = []
+    chosen: set[int] = set()
+    for j in range(null.shape[1]):
+        v = np.abs(null[:, j])
+        order = np.argsort(-v)
+        members = [int(idx[i]) for i in order if v[i] > 0.15 * v.max()]
+        cands = [int(idx[i]) for i in order if v[i] >= 0.5 * v.max() and int(idx[i]) not in chosen]
+        cands = cands or [m for m in members if m not in chosen] or members
+        hold = min(cands, key=lambda i: (ps.parameters[i].kind != "table", cands.index(i)))
+        chosen.add(hold)
+        names = [ps.parameters[i].key for i in members]
+        out.append((Confounding(
+            parameters=tuple(names),
+            kind="unidentifiable",
+            detail=(f"{where}: the data cannot tell {', '.join(names[:8])}"
+                    f"{' ...' if len(names) > 8 else ''} apart (a combination of "
+                    f"them leaves every output unchanged); {ps.parameters[hold].key} is held at its "
+                    "start value to anchor the others, whose estimates are relative to it. Fix one "
+                    "of them yourself, or fly maneuvers that excite them differently"),
+        ), hold))
+    return out
+
+
+@dataclass(frozen=True)
+class _Hold:
+    """Parameters held at their start values by the identifiability screen, and why."""
+
+    params: tuple[int, ...]
+    kind: str  # "no_data", "unidentifiable" or "undetermined"
+    confounding: Confounding
+
+
+def _screen(problem: Problem, st: Structure, evals: Evaluation, R: np.ndarray, opt: SolverOptions,
+            loose: bool) -> tuple[Structure, list[_Hold]]:
+    """Hold the parameters the data do not determine; returns the new structure and the holds.
+
+    Parameters no sample depends on (a table breakpoint beyond the flown range, a bias of a sensor
+    an aircraft does not carry) and combinations the data cannot separate (one member per null
+    direction) are held. With ``loose``, so is a parameter whose Cramér-Rao deviation exceeds half
+    its allowed range (a pressure-altitude scale in level flight). Judged away from the solution,
+    where ``R`` holds the residuals of a wrong trajectory, the deviations are inflated: the
+    estimation therefore judges every requested parameter again at its solution.
+    """
+    ps = problem.parameters
+    keys = ps.keys
+    holds: list[_Hold] = []
+    for _ in range(12):
+        if not st.free.any():
+            break
+        N = build_normal(st, evals, R)
+        no_data = st.free & ~_has_data(N, st, opt.min_support_samples)
+        if no_data.any():
+            held = tuple(int(i) for i in np.nonzero(no_data)[0])
+            holds.append(_Hold(held, "no_data", Confounding(
+                parameters=tuple(keys[i] for i in held), kind="no_data",
+                detail=(f"fewer than {opt.min_support_samples} samples depend on these parameters "
+                        "(e.g. a table breakpoint outside the flown range, or a sensor this aircraft "
+                        "does not carry); held at their start values"))))
+            st = Structure(problem, st.free & ~no_data)
+            continue
+        cov_G, cov_L, unident, _ = _covariance(N, st, problem, opt)
+        if unident:
+            free = st.free.copy()
+            for conf, hold in unident:
+                free[hold] = False
+                holds.append(_Hold((hold,), "unidentifiable", conf))
+            st = Structure(problem, free)
+            continue
+        if loose:
+            std = _std_of(st, cov_G, cov_L, len(keys))
+            width = st.hi - st.lo
+            bad = st.free & np.isfinite(width) & (std > 0.5 * width)
+            if bad.any():
+                held = tuple(int(i) for i in np.nonzero(bad)[0])
+                holds.append(_Hold(held, "undetermined", Confounding(
+                    parameters=tuple(keys[i] for i in held), kind="undetermined",
+                    detail=("the data barely depend on these parameters: at the solution their "
+                            "Cramér-Rao deviation exceeds half their allowed range (bounds); held at "
+                            "their start values"))))
+                st = Structure(problem, st.free & ~bad)
+                continue
+        break
+    return st, holds
+
+
+def _has_data(N: NormalEquations, st: Structure, min_support: int) -> np.ndarray:
+    """(P,) the free parameters some information and at least ``min_support`` samples depend on."""
+    info = np.zeros(st.free.size)
+    info[st.glob] = np.diag(N.HGG)
+    for k, idx in enumerate(st.local_of_arr):
+        info[idx] = np.diag(N.HLL[k])
+    return st.free & (info > 0.0) & (N.support >= min_support)
+
+
+def _covariance(N: NormalEquations, st: Structure, problem: Problem, opt: SolverOptions):
+    """Undamped Cramér-Rao covariance of the global block and of each local block.
+
+    Returns
+    -------
+    (S^-1, [cov_L_k], unidentifiable sets with the member to hold, correlated global-local pairs)
+    """
+    keys = problem.parameters.keys
+    extra: dict = {}
+    _, _, Sinv, Ainv = lm_solve(N, 0.0, opt.rank_rtol, extra)
+    # rank checks: the Schur complement (globals) and each local block (undamped: lambda = 0)
+    _, null = sym_inverse(extra["S"], opt.rank_rtol)
+    unident = _confounded_sets(null, st.glob, problem, "global parameters")
+    cov_L = []
+    for k, Ai in enumerate(Ainv):
+        idx = st.local_of_arr[k]
+        if not idx.size:
+            cov_L.append(np.zeros((0, 0)))
+            continue
+        unident += _confounded_sets(extra["null_L"][k], idx, problem, f"maneuver {problem.maneuvers[k].id}")
+        B = Ai @ N.HGL[k].T
+        cov_L.append(Ai + B @ Sinv @ B.T)
+    # correlations across the blocks: Cov(local_k, global) = -A_k^-1 M_LkG S^-1. A per-maneuver
+    # initial condition that trades against a fleet-wide bias is exactly the confounding an
+    # engineer must see (SPEC §5), and it lives in these blocks, not in the global one
+    thr = opt.correlation_warn
+    sd_g = np.sqrt(np.maximum(np.diag(Sinv), 1e-300))
+    gkeys = [keys[i] for i in st.glob]
+    correlated = []
+    for k, Ai in enumerate(Ainv):
+        idx = st.local_of_arr[k]
+        if not idx.size or not sd_g.size:
+            continue
+        cross = -(Ai @ N.HGL[k].T) @ Sinv
+        sd_l = np.sqrt(np.maximum(np.diag(cov_L[k]), 1e-300))
+        corr = cross / sd_l[:, None] / sd_g[None, :]
+        for a, b in zip(*np.nonzero(np.abs(corr) > thr), strict=True):
+            correlated.append(Confounding(
+                parameters=(keys[idx[a]], gkeys[b]), kind="correlated",
+                detail=(f"correlation {corr[a, b]:+.4f}: the data barely separate {keys[idx[a]]} "
+                        f"from {gkeys[b]}; their individual values are uncertain"),
+            ))
+    return Sinv, cov_L, unident, correlated
+
+
+def _high_correlations(corr: np.ndarray, keys: list[str], thr: float) -> list[Confounding]:
+    out = []
+    n = corr.shape[0]
+    iu = np.triu_indices(n, 1)
+    vals = corr[iu]
+    for a, b, r in zip(iu[0], iu[1], vals, strict=True):
+        if np.isfinite(r) and abs(r) > thr:
+            out.append(Confounding(
+                parameters=(keys[a], keys[b]), kind="correlated",
+                detail=(f"correlation {r:+.4f}: the data barely separate {keys[a]} from {keys[b]}; "
+                        "their individual values are uncertain even if their deviations look small"),
+            ))
+    return out
+
+
+def _parameter_states(problem: Problem, theta: np.ndarray, start: np.ndarray, st: Structure,
+                      holds: list[_Hold], unresolved: np.ndarray, unident: list, opt: SolverOptions
+                      ) -> tuple[list[str], list[str]]:
+    """What each parameter is at the estimate: "fixed", "held" (why), "unidentifiable", "on_bound"
+    or "estimated"; returns the states and their reasons, one per parameter."""
+    ps = problem.parameters
+    requested = ps.free_mask
+    state, reason = [], []
+    why = {i: h for h in holds for i in h.params}
+    tiny = 1e-9 * np.maximum(1.0, np.abs(theta))
+    for i, p in enumerate(ps):
+        if not requested[i]:
+            state.append("fixed")
+            reason.append("fixed in the problem (model set or problem file)")
+        elif not st.free[i]:
+            h = why.get(i)
+            state.append("held")
+            reason.append({"no_data": f"no data: fewer than {opt.min_support_samples} samples depend on it",
+                           "undetermined": "undetermined: its Cramér-Rao deviation exceeds half its "
+                                           "allowed range",
+                           "unidentifiable": "unidentifiable: " + (h.confounding.detail if h else "")
+                           }.get(h.kind if h else "", "held")
+                          + ("" if theta[i] == start[i] else "; held where the estimation left it, not at "
+                             "its start value (the model cannot be evaluated there)"))
+        elif unresolved[i]:
+            state.append("unidentifiable")
+            reason.append("unidentifiable at the solution: " + next(c.detail for c, _ in unident
+                                                                   if p.key in c.parameters))
+        elif theta[i] <= st.lo[i] + tiny[i] or theta[i] >= st.hi[i] - tiny[i]:
+            state.append("on_bound")
+            side = "lower" if theta[i] <= st.lo[i] + tiny[i] else "upper"
+            unit = "" if p.unit in ("", "1") else f" {p.unit}"  # "0.5", not "0.5 1"
+            reason.append(f"on its {side} bound {theta[i]:.6g}{unit}: the data push it beyond; the "
+                          "estimate is the bound")
+        else:
+            state.append("estimated")
+            reason.append("")
+    return state, reason
+
+
+def _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs) -> list[Finding]:
+    """Findings of the identifiability checks: held parameters (INFO when the data simply do not
+    reach them, WARNING when a confounded set was anchored), parameters on a bound (WARNING),
+    highly correlated pairs (INFO: their deviations already say it)."""
+    ps = problem.parameters
+    out = []
+    # the screen holds one member of a confounded set at a time: overlapping sets are one finding
+    groups: list[tuple[set[str], list[str]]] = []
+    for h in holds:
+        if h.kind != "unidentifiable":
+            continue
+        members = set(h.confounding.parameters)
+        held = [ps.parameters[i].key for i in h.params]
+        for g in groups:
+            if g[0] & members:
+                g[0].update(members)
+                g[1].extend(held)
+                break
+        else:
+            groups.append((members, held))
+    for members, held in groups:
+        names = sorted(members, key=ps.index)
+        out.append(Finding(
+            "unidentifiable", Severity.WARNING,
+            f"the data cannot tell {', '.join(names[:10])}{' ...' if len(names) > 10 else ''} apart "
+            f"(combinations of them leave every output unchanged): {', '.join(held)} "
+            f"{'is' if len(held) == 1 else 'are'} held at the start value(s), the fewest that make the "
+            "rest determined, whose estimates are then relative to them",
+            "fix the one you know in the problem file, or fly maneuvers that excite them differently",
+            parameters=tuple(names)))
+    for h in holds:
+        names = ", ".join(h.confounding.parameters[:12]) + (" ..." if len(h.params) > 12 else "")
+        if h.kind == "unidentifiable":
+            continue
+        elif h.kind == "no_data":
+            out.append(Finding("held", Severity.INFO, f"held at their start values, no data: {names} "
+                               f"({h.confounding.detail.split(';')[0]})",
+                               parameters=h.confounding.parameters))
+        else:
+            out.append(Finding("held", Severity.INFO, f"held at their start values, undetermined: {names} "
+                               "(their Cramér-Rao deviation exceeds half their allowed range)",
+                               "fly maneuvers that excite them, or fix them at known values",
+                               parameters=h.confounding.parameters))
+    for conf, _ in unident:
+        out.append(Finding("unidentifiable", Severity.WARNING, conf.detail,
+                           "fix one of them in the problem file", parameters=conf.parameters))
+    for i, s in enumerate(state):
+        if s == "on_bound":
+            p = ps.parameters[i]
+            # a calibration result (a table value, a bias, a delay, an IMU bias) on its bound is not a
+            # measurement; a maneuver's nuisance scale or offset (k_h in level flight) is only noted
+            nuisance = p.scope == "maneuver" and p.kind in ("scale", "bias")
+            out.append(Finding("on_bound", Severity.INFO if nuisance else Severity.WARNING,
+                               f"{p.key} is {reason[i]}",
+                               "the data want it outside its physical range: check the data of the "
+                               "channels it enters (units, signs, a fault) before widening the bounds",
+                               parameters=(p.key,)))
+    # a calibration parameter that trades against the initial conditions of every maneuver that
+    # informs it is the confounding an engineer must not miss (a sideslip bias against the initial
+    # sideslip): no maneuver separates the two but through weak kinematic couplings, and any
+    # error of those goes into it
+    calib = {p.key for p in ps if p.kind in ("bias", "scale", "table") and p.scope != "maneuver"}
+    ics = {p.key for p in ps if p.kind == "initial_condition"}
+    against: dict[str, list[str]] = {}
+    for c in correlated:
+        a, b = c.parameters
+        if a in ics and b in calib:
+            against.setdefault(b, []).append(a)
+        elif b in ics and a in calib:
+            against.setdefault(a, []).append(b)
+        else:
+            out.append(Finding("correlated", Severity.INFO, f"{' and '.join(c.parameters)}: {c.detail}",
+                               parameters=c.parameters))
+    man_of = {p.key: p.instance for p in ps if p.scope == "maneuver"}
+    for key, partners in against.items():
+        if not informs.get(key) or not informs[key] <= {man_of[k] for k in partners}:
+            for k in partners:
+                out.append(Finding("correlated", Severity.INFO, f"{k} and {key}: correlation above "
+                                   f"{opt.correlation_warn}; the data barely separate them in that "
+                                   "maneuver (other maneuvers do)", parameters=(k, key)))
+            continue
+        out.append(Finding(
+            "confounded", Severity.WARNING,
+            f"{key} is confounded with the initial condition(s) {', '.join(partners[:6])}"
+            f"{' ...' if len(partners) > 6 else ''} of every maneuver that informs it (|correlation| > "
+            f"{opt.correlation_warn}): the data separate the offset it adds to the flow angle from the "
+            "maneuvers' own initial flow angle only through weak kinematic couplings, and any error "
+            "there goes into it",
+            "fly maneuvers that vary that flow angle (a steady-heading sideslip for a sideslip bias, "
+            "a pull-up for an angle-of-attack bias), or fix it at a known value",
+            parameters=(key, *partners)))
+    return out
