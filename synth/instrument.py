@@ -300,27 +300,103 @@ def instrument(
         common base whose stamps are common-base times (DGPS at 10 Hz on 40 Hz) keeps its own
         samples: its columns are NaN between them (listed in ``own_rate_columns``); faster or
         unaligned streams are interpolated linearly in their stamps.
+
+    Notes
+    -----
+    The stages, in order (module docstring): :func:`_flow_at_sensors` (flow and local-flow truth
+    at each sensor), :func:`_continuous_signals` (what the other raw channels see),
+    :func:`_plan_recorders` (stamps, lags, common time base), :func:`_record_dru` (IMU, airdata,
+    gear and flow-sensor transducers), :func:`_air_data_computer` (the ADC on the DRU's samples),
+    :func:`_clean_channels` (the noise-free calibrated channels), :func:`_record_ins_dgps`,
+    :func:`_to_common_base` (preprocessing), :func:`_truth_columns` and :func:`_injected`. Every
+    random channel draws from its own generator (``channel_rng``), so the stages' order does not
+    change a draw.
     """
     _check_truth(truth, common_rate_hz)
     truth_model, sensing, adc = _models(errors, truth_model, adc_baseline)
     sensors = configuration.sensors
-    aircraft = configuration.aircraft
-    t = truth.t_s
-    r_cg = truth.r_cg_body_m
-    mach = truth.mach
-    gear = truth.gear_pos_norm
-    qc_true = impact_pressure_pa(mach, truth.p_static_pa)
-    tt_true = total_temperature_k(truth.t_static_k, mach)
     euler = truth.euler_rad.copy()
     euler[:, 2] = np.unwrap(euler[:, 2])
-    seeds = errors.seeds
+    qc_true = impact_pressure_pa(truth.mach, truth.p_static_pa)
 
-    # ---- truth-rate signals: flow at each sensor, what it senses ------------------------------
+    flow = _flow_at_sensors(truth, airframe, configuration, errors, truth_model, sensing)
+    direct, f_imu, v_ned = _continuous_signals(truth, airframe, euler, qc_true)
+    rec = _plan_recorders(truth.t_s, sensors, errors, direct, common_rate_hz)
+
+    def rng(seed: int, name: str) -> np.random.Generator:
+        return channel_rng(seed, maneuver_key, _RNG_INDEX[name])
+
+    dru = _record_dru(truth, sensors, errors, direct, flow, sensing, qc_true, rec, rng)
+    _air_data_computer(dru, truth, sensors, errors, adc, qc_true, rec, rng)
+    clean_cols = _clean_channels(truth, sensors, errors, flow, sensing, adc, qc_true)
+    ins, dgps = _record_ins_dgps(truth, errors, direct, rec, rng)
+
+    streams = {"dru": dru, "ins": ins, "dgps": dgps}
+    common, own_rate = _to_common_base(streams, rec, common_rate_hz)
+    columns: dict[str, np.ndarray] = {"t_s": rec.t_common_s}
+    columns.update({c: common[c] for c in _MEASURED_ORDER if c in common})
+    tr = _truth_columns(truth, euler, qc_true, f_imu, v_ned, flow, clean_cols)
+    for c, v in tr.items():
+        columns[c] = sample_at(truth.t_s, v, rec.t_common_s)
+    data = pd.DataFrame(columns)
+
+    injected = _injected(errors, maneuver_key, common_rate_hz, sensors, flow.bias_rad, rec, columns)
+    units = {c: _units(c) for c in columns}
+    stream_frames = {r: pd.DataFrame({"t_s": rec.stamps[r], **cols}) for r, cols in streams.items()}
+    return InstrumentedManeuver(data=data, injected=injected, channel_units=units,
+                                streams=stream_frames, own_rate_columns=tuple(own_rate))
+
+
+# ------------------------------------------------------------------ the stages of instrument()
+
+#: The measured columns of :func:`instrument`'s data, in order (those present).
+_MEASURED_ORDER = (
+    "ax_imu_mps2", "ay_imu_mps2", "az_imu_mps2", "p_rps", "q_rps", "r_rps",
+    "phi_rad", "theta_rad", "psi_rad", "vn_mps", "ve_mps", "vd_mps",
+    "tas_mps", "h_baro_m", "mach", "h_dgps_m", "gear_down",
+    "alpha_zl_rad", "alpha_zr_rad", "alpha_zsp_rad", "beta_zsp_rad", "beta_znp_rad",
+    "alpha_zb_rad", "beta_zbu_rad", "beta_zbl_rad",
+    "alpha_lm_rad", "alpha_rm_rad", "alpha_lsp_rad", "alpha_rsp_rad",
+    "dp_alpha_lsp_pa", "dp_alpha_rsp_pa", "dp_beta_np_pa", "flank_np_rad",
+    "qc_pa", "ps_pa", "tt_k",
+)
+
+
+@dataclass(frozen=True)
+class _SensorFlow:
+    """The flow at each fitted sensor, at the truth rate (angles in rad).
+
+    Attributes
+    ----------
+    sensed : sensor -> the angle it physically senses (local flow, irregularity, installation bias).
+    free : sensor -> its free-stream (alpha, beta, flank) from the rigid-body air velocity there.
+    bias_rad : sensor -> the installation bias injected (0 with the switch off).
+    truth_cols : ``true_{alpha,beta,flank}_<sensor>_rad`` and ``true_local_*_<sensor>_rad``.
+    alpha_sp_rad, beta_sp_rad : free-stream alpha and beta at the side probes' mean position.
+    """
+
+    sensed: dict[str, np.ndarray]
+    free: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]
+    bias_rad: dict[str, float]
+    truth_cols: dict[str, np.ndarray]
+    alpha_sp_rad: np.ndarray
+    beta_sp_rad: np.ndarray
+
+
+def _flow_at_sensors(truth: TruthTrajectory, airframe: Airframe, configuration: Configuration,
+                     errors: ErrorConfig, truth_model: LocalFlowModel, sensing: LocalFlowModel
+                     ) -> _SensorFlow:
+    """Stages 1-2: the free-stream flow at each sensor and the angle it senses (local-flow truth,
+    nose-probe irregularity, installation bias), at the truth rate, rad.
+
+    Raises ValueError when the flow at a sensor comes from behind.
+    """
+    t, r_cg, mach, gear = truth.t_s, truth.r_cg_body_m, truth.mach, truth.gear_pos_norm
     truth_cols: dict[str, np.ndarray] = {}
     sensed: dict[str, np.ndarray] = {}
     free: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
     bias_rad: dict[str, float] = {}
-    for s in sensors:
+    for s in configuration.sensors:
         v_s = air_velocity_at_sensor_body_mps(truth.v_air_body_mps, truth.omega_body_rps,
                                               airframe.position(s), r_cg)
         reverse = np.flatnonzero(v_s[:, 0] <= 0.0)
@@ -334,9 +410,10 @@ def instrument(
         loc = _sensed_local_rad(s, sensing, sign, a, b, f, mach, gear)
         if s == "nose_probe" and errors.nose_probe_irregularity:
             irr = irregularity_rad(a, b, truth_model.nose_probe_irregularity,
-                                   seeds.nose_probe_irregularity)
+                                   errors.seeds.nose_probe_irregularity)
             loc = {"sensed": loc["sensed"] + irr, "local_flank": loc["local_flank"] + irr}
-        bias_rad[s] = float(aircraft.installation_bias_rad[s]) if errors.installation_biases else 0.0
+        bias_rad[s] = (float(configuration.aircraft.installation_bias_rad[s])
+                       if errors.installation_biases else 0.0)
         sensed[s] = loc.pop("sensed") + bias_rad[s]
         truth_cols[f"true_alpha_{s}_rad"] = a
         truth_cols[f"true_beta_{s}_rad"] = b
@@ -346,22 +423,76 @@ def instrument(
     r_sp = 0.5 * (airframe.position("side_probe_left") + airframe.position("side_probe_right"))
     a_sp, b_sp, _ = flow_angles_rad(air_velocity_at_sensor_body_mps(
         truth.v_air_body_mps, truth.omega_body_rps, r_sp, r_cg))
-    r_imu_cg = airframe.position("imu") - r_cg
+    return _SensorFlow(sensed, free, bias_rad, truth_cols, a_sp, b_sp)
+
+
+def _continuous_signals(truth: TruthTrajectory, airframe: Airframe, euler: np.ndarray,
+                        qc_true: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """The continuous signal behind each non-flow raw channel, at the truth rate.
+
+    Returns ``(direct, f_imu, v_ned)``: raw column -> its true signal (SI, the column's unit);
+    the specific force at the IMU, m/s^2 (n, 3); the NED velocity, m/s (n, 3). ``euler`` in rad
+    with psi unwrapped, ``qc_true`` in Pa.
+    """
+    r_imu_cg = airframe.position("imu") - truth.r_cg_body_m
     f_imu = imu_specific_force_body_mps2(truth.specific_force_cg_body_mps2, truth.omega_body_rps,
                                          truth.omega_dot_body_rps2, r_imu_cg)
     v_ned = ned_velocity_mps(truth.v_body_mps, euler)
-    direct = {  # continuous signal behind each non-flow raw channel
+    tt_true = total_temperature_k(truth.t_static_k, truth.mach)
+    direct = {
         "ax_imu_mps2": f_imu[:, 0], "ay_imu_mps2": f_imu[:, 1], "az_imu_mps2": f_imu[:, 2],
         "p_rps": truth.omega_body_rps[:, 0], "q_rps": truth.omega_body_rps[:, 1],
         "r_rps": truth.omega_body_rps[:, 2],
-        "qc_pa": qc_true, "ps_pa": truth.p_static_pa, "tt_k": tt_true, "gear_down": gear,
+        "qc_pa": qc_true, "ps_pa": truth.p_static_pa, "tt_k": tt_true, "gear_down": truth.gear_pos_norm,
         "phi_rad": euler[:, 0], "theta_rad": euler[:, 1], "psi_rad": euler[:, 2],
         "vn_mps": v_ned[:, 0], "ve_mps": v_ned[:, 1], "vd_mps": v_ned[:, 2],
         "h_dgps_m": truth.h_m,
     }
+    return direct, f_imu, v_ned
 
-    # ---- recorder plan: recorder -> {raw channel (column name, or sensor name for a flow sensor):
-    #      its lag behind true time on that recorder's clock (latency + group/sensor/channel delay)}
+
+@dataclass(frozen=True)
+class _RecorderPlan:
+    """When each recorder samples each channel (times in s).
+
+    Attributes
+    ----------
+    t_s : the truth's time, s.
+    recorders : recorder -> its settings (rate, latency, clock offset).
+    lag_s : recorder -> {raw channel (column name, or sensor name for a flow sensor): its lag
+        behind true time on that recorder's clock (latency + group/sensor/channel delay)}.
+    stamps : recorder -> its sample stamps (the common base for an ideal recorder).
+    t_common_s : the common time base (the overlap of all streams).
+    imu_window_s : the interval an IMU sample averages (0: an ideal recorder samples).
+    """
+
+    t_s: np.ndarray
+    recorders: Mapping
+    lag_s: dict[str, dict[str, float]]
+    stamps: dict[str, np.ndarray]
+    t_common_s: np.ndarray
+    imu_window_s: float
+
+    def at(self, r: str, channel: str, signal: np.ndarray) -> np.ndarray:
+        """``signal`` (truth rate) as recorder ``r`` samples ``channel``."""
+        return sample_at(self.t_s, signal,
+                         self.stamps[r] - self.recorders[r].clock_offset_s - self.lag_s[r][channel])
+
+    def imu_at(self, channel: str, signal: np.ndarray) -> np.ndarray:
+        """An IMU channel: interval means (strapdown increments) over the DRU's sample interval."""
+        if self.imu_window_s == 0.0:
+            return self.at("dru", channel, signal)
+        return average_at(self.t_s, signal,
+                          self.stamps["dru"] - self.recorders["dru"].clock_offset_s
+                          - self.lag_s["dru"][channel], self.imu_window_s)
+
+
+def _plan_recorders(t: np.ndarray, sensors, errors: ErrorConfig, direct: dict[str, np.ndarray],
+                    common_rate_hz: float) -> _RecorderPlan:
+    """Stage 3: each recorder's lags per channel, its stamps and the common time base (s).
+
+    Raises ValueError when a recorder records fewer than 2 samples or the streams barely overlap.
+    """
     rec = errors.recorders
     chd = errors.channel_delays_s
     group_delay = {**{c: errors.imu.delay_s for c in _IMU_COLUMNS},
@@ -397,30 +528,25 @@ def instrument(
         raise ValueError(f"instrument: the recorders' streams overlap on [{lo:.3f}, {hi:.3f}] s only; "
                          "reduce delays/clock offsets or fly a longer maneuver")
     stamps = {r: (v[0] if v[0] is not None else t_common) for r, v in intervals.items()}
-
-    def at(r: str, channel: str, signal: np.ndarray) -> np.ndarray:
-        return sample_at(t, signal, stamps[r] - rec[r].clock_offset_s - plan[r][channel])
-
     # a real IMU outputs interval means (strapdown increments) over its own sample interval; an
     # ideal recorder (no rate) samples the true signal
     imu_window_s = 1.0 / rec["dru"].rate_hz if rec["dru"].rate_hz is not None else 0.0
+    return _RecorderPlan(t, rec, plan, stamps, t_common, imu_window_s)
 
-    def imu_at(channel: str, signal: np.ndarray) -> np.ndarray:
-        if imu_window_s == 0.0:
-            return at("dru", channel, signal)
-        return average_at(t, signal, stamps["dru"] - rec["dru"].clock_offset_s - plan["dru"][channel],
-                          imu_window_s)
 
-    def rng(seed: int, name: str) -> np.random.Generator:
-        return channel_rng(seed, maneuver_key, _RNG_INDEX[name])
-
-    # ---- DRU: IMU, airdata, gear, flow sensors, ADC -------------------------------------------
+def _record_dru(truth: TruthTrajectory, sensors, errors: ErrorConfig, direct: dict[str, np.ndarray],
+                flow: _SensorFlow, sensing: LocalFlowModel, qc_true: np.ndarray, rec: _RecorderPlan,
+                rng) -> dict[str, np.ndarray]:
+    """Stage 4 on the DRU: the IMU, airdata (qc, ps in Pa, tt in K; Mach, TAS in m/s, pressure
+    altitude in m from them), gear flag and flow-sensor transducers (vanes: rad; probes: Pa), at
+    the DRU's stamps. Returns column -> samples, in the stream's column order."""
+    seeds = errors.seeds
     dru: dict[str, np.ndarray] = {}
     imu = errors.imu
     for i, c in enumerate(_IMU_COLUMNS):
         accel = i < 3
         dru[c] = transduce(
-            imu_at(c, direct[c]),
+            rec.imu_at(c, direct[c]),
             bias=(imu.accel_bias_mps2 if accel else imu.gyro_bias_rps)[i % 3],
             noise_std=imu.accel_noise_mps2 if accel else imu.gyro_noise_rps,
             quant_step=imu.accel_quant_mps2 if accel else imu.gyro_quant_rps,
@@ -429,33 +555,44 @@ def instrument(
     for c, bias, noise, quant in (("qc_pa", ad.qc_bias_pa, ad.qc_noise_pa, ad.qc_quant_pa),
                                   ("ps_pa", ad.ps_bias_pa, ad.ps_noise_pa, ad.ps_quant_pa),
                                   ("tt_k", ad.tt_bias_k, ad.tt_noise_k, 0.0)):
-        dru[c] = transduce(at("dru", c, direct[c]), bias=bias, noise_std=noise, quant_step=quant,
+        dru[c] = transduce(rec.at("dru", c, direct[c]), bias=bias, noise_std=noise, quant_step=quant,
                            rng=rng(seeds.airdata_noise, c))
     mach_m = mach_from_pressures(dru["qc_pa"], dru["ps_pa"])
     dru["mach"] = mach_m
     dru["tas_mps"] = tas_from_mach_mps(mach_m, dru["tt_k"])
     dru["h_baro_m"] = pressure_altitude_m(dru["ps_pa"])
-    flag = (at("dru", "gear_down", gear) >= 0.5)
-    dru["gear_down"] = flag
-    gear_m = flag.astype(float)
+    dru["gear_down"] = (rec.at("dru", "gear_down", truth.gear_pos_norm) >= 0.5)
 
     for s in sensors:
         e = errors.sensors[s]
         raw = SENSOR_RAW_CHANNEL[s]
-        theta = at("dru", s, sensed[s])
+        theta = rec.at("dru", s, flow.sensed[s])
         if s not in PROBE_SENSORS:
             dru[raw] = transduce(theta, scale=e.scale, noise_std=e.noise_rad,
                                  quant_step=e.quant_rad, rng=rng(seeds.vane_noise, s))
             continue
-        qc_s, m_s = at("dru", s, qc_true), at("dru", s, mach)
+        qc_s, m_s = rec.at("dru", s, qc_true), rec.at("dru", s, truth.mach)
         law = sensing.side_probe_pressure if s != "nose_probe" else sensing.nose_probe_pressure
         if s == "nose_probe" and e.high_alpha_noise_rad_per_rad > 0.0:
-            alpha_s = at("dru", s, free[s][0])
+            alpha_s = rec.at("dru", s, flow.free[s][0])
             std = e.high_alpha_noise_rad_per_rad * np.maximum(alpha_s - e.high_alpha_onset_rad, 0.0)
             theta = theta + std * rng(seeds.probe_noise, "nose_probe_high_alpha").standard_normal(
                 theta.shape)
         dru[raw] = transduce(law.dp_pa(theta, qc_s, m_s), scale=e.scale, noise_std=e.noise_pa,
                              quant_step=e.quant_pa, rng=rng(seeds.probe_noise, s))
+    return dru
+
+
+def _air_data_computer(dru: dict[str, np.ndarray], truth: TruthTrajectory, sensors,
+                       errors: ErrorConfig, adc: AirdataComputer, qc_true: np.ndarray,
+                       rec: _RecorderPlan, rng) -> None:
+    """Stage 5: the airdata computer on the DRU's samples (paper Eq. 2); adds the calibrated flow
+    channels (rad) and the probes' angles to ``dru`` in place."""
+    seeds = errors.seeds
+    ad = errors.airdata
+    mach_m = dru["mach"]
+    gear_m = dru["gear_down"].astype(float)
+
     # A probe's angle is dp / qc: the impact pressure it is normalised by must lag as the probe's
     # differential pressure does, or the probe's delay is no delay of its channel (SPEC §2, §6:
     # y(t - tau)) but an error alpha * (d ln qc / dt) * (tau_probe - tau_qc) -- 0.004 deg in a
@@ -464,15 +601,15 @@ def instrument(
     # (the same transducers: same bias and noise realisation as qc_pa, ps_pa), as when the probe's
     # pressures and its normalising pressure share one pneumatic path and transducer frame.
     def probe_airdata(s: str) -> tuple[np.ndarray, np.ndarray]:
-        qc_s = transduce(at("dru", s, qc_true), bias=ad.qc_bias_pa, noise_std=ad.qc_noise_pa,
+        qc_s = transduce(rec.at("dru", s, qc_true), bias=ad.qc_bias_pa, noise_std=ad.qc_noise_pa,
                          quant_step=ad.qc_quant_pa, rng=rng(seeds.airdata_noise, "qc_pa"))
-        ps_s = transduce(at("dru", s, truth.p_static_pa), bias=ad.ps_bias_pa,
+        ps_s = transduce(rec.at("dru", s, truth.p_static_pa), bias=ad.ps_bias_pa,
                          noise_std=ad.ps_noise_pa, quant_step=ad.ps_quant_pa,
                          rng=rng(seeds.airdata_noise, "ps_pa"))
         return qc_s, mach_from_pressures(qc_s, ps_s)
 
-    # the airdata computer on the DRU's samples (paper Eq. 2); the vanes' Mach argument stays the
-    # ADC's own (a lag mismatch there costs only df_v/dM * dM/dt * dtau)
+    # the vanes' Mach argument stays the ADC's own (a lag mismatch there costs only
+    # df_v/dM * dM/dt * dtau)
     dru["alpha_zl_rad"] = adc.f_v(dru["alpha_lm_rad"], mach_m, gear_m)
     dru["alpha_zr_rad"] = adc.f_v(dru["alpha_rm_rad"], mach_m, gear_m)
     qc_l, mach_l = probe_airdata("side_probe_left")
@@ -487,20 +624,28 @@ def instrument(
         dru["beta_znp_rad"] = adc.f_np(dru["flank_np_rad"], dru["alpha_zl_rad"],
                                        dru["alpha_zr_rad"], mach_n)
 
-    # ---- the clean channels: every deterministic error (local flow, installation bias, scale,
-    #      the ADC's tables), no noise, no quantization, no delay, true Mach and impact pressure.
-    #      What an ideal recorder of this airdata system would show: the truth a calibration model
-    #      is fitted to, without the noise it must average out.
+
+def _clean_channels(truth: TruthTrajectory, sensors, errors: ErrorConfig, flow: _SensorFlow,
+                    sensing: LocalFlowModel, adc: AirdataComputer, qc_true: np.ndarray
+                    ) -> dict[str, np.ndarray]:
+    """The clean calibrated channels at the truth rate, rad: ``true_clean_<channel>`` -> values.
+
+    Every deterministic error (local flow, installation bias, scale, the ADC's tables), no noise,
+    no quantization, no delay, true Mach and impact pressure: what an ideal recorder of this
+    airdata system would show, the truth a calibration model is fitted to without the noise it
+    must average out.
+    """
+    mach, gear = truth.mach, truth.gear_pos_norm
     clean: dict[str, np.ndarray] = {}
     gear_t = (gear >= 0.5).astype(float)
     for s in sensors:
         e = errors.sensors[s]
         raw = SENSOR_RAW_CHANNEL[s]
         if s not in PROBE_SENSORS:
-            clean[raw] = transduce(sensed[s], scale=e.scale)
+            clean[raw] = transduce(flow.sensed[s], scale=e.scale)
             continue
         law = sensing.side_probe_pressure if s != "nose_probe" else sensing.nose_probe_pressure
-        clean[raw] = transduce(law.dp_pa(sensed[s], qc_true, mach), scale=e.scale)
+        clean[raw] = transduce(law.dp_pa(flow.sensed[s], qc_true, mach), scale=e.scale)
     clean["alpha_zl_rad"] = adc.f_v(clean["alpha_lm_rad"], mach, gear_t)
     clean["alpha_zr_rad"] = adc.f_v(clean["alpha_rm_rad"], mach, gear_t)
     a_l = adc.side_probe_angle_rad(clean["dp_alpha_lsp_pa"], qc_true, mach)
@@ -509,29 +654,39 @@ def instrument(
     if "nose_probe" in sensors:
         flank_np = adc.nose_probe_flank_rad(clean["dp_beta_np_pa"], qc_true, mach)
         clean["beta_znp_rad"] = adc.f_np(flank_np, clean["alpha_zl_rad"], clean["alpha_zr_rad"], mach)
-    clean_cols = {f"true_clean_{c}": v for c, v in clean.items() if c.startswith(("alpha_z", "beta_z"))}
+    return {f"true_clean_{c}": v for c, v in clean.items() if c.startswith(("alpha_z", "beta_z"))}
 
-    # ---- INS, DGPS ------------------------------------------------------------------------------
+
+def _record_ins_dgps(truth: TruthTrajectory, errors: ErrorConfig, direct: dict[str, np.ndarray],
+                     rec: _RecorderPlan, rng) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Stage 4 on the INS (Euler angles, rad; NED velocity, m/s) and the DGPS (height, m), at
+    their recorders' stamps; returns the two streams, column -> samples."""
+    seeds = errors.seeds
     ins_e = errors.ins
     ins: dict[str, np.ndarray] = {}
     for i, c in enumerate(_INS_COLUMNS):
         euler_ch = i < 3
-        ins[c] = transduce(at("ins", c, direct[c]),
+        ins[c] = transduce(rec.at("ins", c, direct[c]),
                            bias=(ins_e.euler_bias_rad if euler_ch else ins_e.velocity_bias_mps)[i % 3],
                            noise_std=ins_e.euler_noise_rad if euler_ch else ins_e.velocity_noise_mps,
                            rng=rng(seeds.ins_noise, c))
-    dgps = {"h_dgps_m": transduce(at("dgps", "h_dgps_m", truth.h_m), bias=errors.dgps.h_bias_m,
+    dgps = {"h_dgps_m": transduce(rec.at("dgps", "h_dgps_m", truth.h_m), bias=errors.dgps.h_bias_m,
                                   noise_std=errors.dgps.h_noise_m, rng=rng(seeds.dgps_noise, "h_dgps_m"))}
+    return ins, dgps
 
-    # ---- preprocessing onto the common time base ------------------------------------------------
-    streams = {"dru": dru, "ins": ins, "dgps": dgps}
+
+def _to_common_base(streams: dict[str, dict[str, np.ndarray]], rec: _RecorderPlan,
+                    common_rate_hz: float) -> tuple[dict[str, np.ndarray], list[str]]:
+    """Stage 6: every recorder's stream onto the common time base by its own stamps; returns
+    column -> samples on ``rec.t_common_s`` and the columns kept at their own, slower samples."""
+    t_common = rec.t_common_s
     common: dict[str, np.ndarray] = {}
     own_rate: list[str] = []
     for r, cols in streams.items():
-        on_grid = _stamps_on_grid(stamps[r], t_common, common_rate_hz)
+        on_grid = _stamps_on_grid(rec.stamps[r], t_common, common_rate_hz)
         for c, v in cols.items():
             if v.dtype == bool:
-                common[c] = resample_hold(stamps[r], v, t_common)
+                common[c] = resample_hold(rec.stamps[r], v, t_common)
             elif on_grid is not None:
                 # a slow stream whose stamps are common-base times stays at its own samples:
                 # interpolating it between them would low-pass it, which an estimator reads as
@@ -540,25 +695,19 @@ def instrument(
                 common[c][on_grid[1]] = v[on_grid[0]]
                 own_rate.append(c)
             else:
-                common[c] = resample_linear(stamps[r], v, t_common)
+                common[c] = resample_linear(rec.stamps[r], v, t_common)
+    return common, own_rate
 
-    measured_order = (
-        "ax_imu_mps2", "ay_imu_mps2", "az_imu_mps2", "p_rps", "q_rps", "r_rps",
-        "phi_rad", "theta_rad", "psi_rad", "vn_mps", "ve_mps", "vd_mps",
-        "tas_mps", "h_baro_m", "mach", "h_dgps_m", "gear_down",
-        "alpha_zl_rad", "alpha_zr_rad", "alpha_zsp_rad", "beta_zsp_rad", "beta_znp_rad",
-        "alpha_zb_rad", "beta_zbu_rad", "beta_zbl_rad",
-        "alpha_lm_rad", "alpha_rm_rad", "alpha_lsp_rad", "alpha_rsp_rad",
-        "dp_alpha_lsp_pa", "dp_alpha_rsp_pa", "dp_beta_np_pa", "flank_np_rad",
-        "qc_pa", "ps_pa", "tt_k",
-    )
-    columns: dict[str, np.ndarray] = {"t_s": t_common}
-    columns.update({c: common[c] for c in measured_order if c in common})
 
-    # ---- truth beside it, at true time = t_common, no delay -------------------------------------
-    tr = {
+def _truth_columns(truth: TruthTrajectory, euler: np.ndarray, qc_true: np.ndarray, f_imu: np.ndarray,
+                   v_ned: np.ndarray, flow: _SensorFlow, clean_cols: dict[str, np.ndarray]
+                   ) -> dict[str, np.ndarray]:
+    """The ``true_*`` columns at the truth rate (SI, units in their names), to be sampled at true
+    time = the common base, no delay."""
+    r_cg = truth.r_cg_body_m
+    return {
         "true_alpha_cg_rad": truth.alpha_rad, "true_beta_cg_rad": truth.beta_rad,
-        "true_tas_mps": truth.tas_mps, "true_mach": mach,
+        "true_tas_mps": truth.tas_mps, "true_mach": truth.mach,
         "true_u_air_mps": truth.v_air_body_mps[:, 0], "true_v_air_mps": truth.v_air_body_mps[:, 1],
         "true_w_air_mps": truth.v_air_body_mps[:, 2],
         "true_u_mps": truth.v_body_mps[:, 0], "true_v_mps": truth.v_body_mps[:, 1],
@@ -579,29 +728,32 @@ def instrument(
         "true_ax_imu_mps2": f_imu[:, 0], "true_ay_imu_mps2": f_imu[:, 1],
         "true_az_imu_mps2": f_imu[:, 2],
         "true_r_cg_x_m": r_cg[:, 0], "true_r_cg_y_m": r_cg[:, 1], "true_r_cg_z_m": r_cg[:, 2],
-        "true_mass_kg": truth.mass_kg, "true_gear_pos_norm": gear,
+        "true_mass_kg": truth.mass_kg, "true_gear_pos_norm": truth.gear_pos_norm,
         "true_p_static_pa": truth.p_static_pa, "true_t_static_k": truth.t_static_k,
         "true_rho_kgpm3": truth.rho_kgpm3, "true_qbar_pa": truth.qbar_pa, "true_qc_pa": qc_true,
-        "true_alpha_sp_rad": a_sp, "true_beta_sp_rad": b_sp,
-        **truth_cols,
+        "true_alpha_sp_rad": flow.alpha_sp_rad, "true_beta_sp_rad": flow.beta_sp_rad,
+        **flow.truth_cols,
         **clean_cols,
     }
-    for c, v in tr.items():
-        columns[c] = sample_at(t, v, t_common)
-    data = pd.DataFrame(columns)
 
-    # ---- what was injected ---------------------------------------------------------------------
+
+def _injected(errors: ErrorConfig, maneuver_key: int, common_rate_hz: float, sensors,
+              bias_rad: dict[str, float], rec: _RecorderPlan, columns: Mapping[str, np.ndarray]
+              ) -> dict[str, float | list]:
+    """What was injected, flat names, SI: the errors, the recorders' rates (Hz), the installation
+    biases (rad) and each measured column's total lag behind the truth (``time_shift_s.<column>``)."""
+    recs = rec.recorders
     injected: dict[str, float | list] = dict(errors.flat())
     injected["maneuver_key"] = float(maneuver_key)
     injected["common_rate_hz"] = float(common_rate_hz)
     for r in RECORDERS:
-        injected[f"{r}.rate_hz"] = float(rec[r].rate_hz if rec[r].rate_hz is not None
+        injected[f"{r}.rate_hz"] = float(recs[r].rate_hz if recs[r].rate_hz is not None
                                          else common_rate_hz)
     for s in sensors:
         injected[f"{s}.installation_bias_rad"] = bias_rad[s]
-    shift = {c: rec[r].clock_offset_s + lag for r in RECORDERS for c, lag in plan[r].items()}
+    shift = {c: recs[r].clock_offset_s + lag for r in RECORDERS for c, lag in rec.lag_s[r].items()}
     for c in _IMU_COLUMNS:  # an interval mean lags by half its interval
-        shift[c] += 0.5 * imu_window_s
+        shift[c] += 0.5 * rec.imu_window_s
     sources = {"alpha_zl_rad": "vane_left", "alpha_zr_rad": "vane_right",
                "alpha_lsp_rad": "side_probe_left", "alpha_rsp_rad": "side_probe_right",
                "beta_znp_rad": "nose_probe", "flank_np_rad": "nose_probe",
@@ -616,10 +768,7 @@ def instrument(
         for c in ("alpha_zsp_rad", "beta_zsp_rad"):
             injected[f"time_shift_s.{c}"] = 0.5 * (shift["side_probe_left"]
                                                    + shift["side_probe_right"])
-    units = {c: _units(c) for c in columns}
-    stream_frames = {r: pd.DataFrame({"t_s": stamps[r], **cols}) for r, cols in streams.items()}
-    return InstrumentedManeuver(data=data, injected=injected, channel_units=units,
-                                streams=stream_frames, own_rate_columns=tuple(own_rate))
+    return injected
 
 
 def _stamps_on_grid(stamps_s: np.ndarray, t_common_s: np.ndarray, common_rate_hz: float
