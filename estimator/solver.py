@@ -55,12 +55,12 @@ from estimator.identifiability import (
     _parameter_states,
     _screen,
 )
-from estimator.iteration import _evaluate, _gauss_newton, _staged_start
+from estimator.iteration import _evaluate, _gauss_newton, _Iterated, _staged_start
 from estimator.model import Evaluation, Model, ModelEvaluationError
 from estimator.normal_equations import Structure, build_normal, channel_variances, ml_cost, residual_sums
 from estimator.problem import STATE_PARAMS, Problem
 from estimator.result import EstimationResult, ResidualStats
-from estimator.uncertainty import _std_of, honest_std, imu_noise_psd
+from estimator.uncertainty import _deviations, _imu_noise_note, _imu_noise_unknown
 from estimator.verdict import Finding, Severity, Status, judge
 
 #: Start strategies: the staged, data-driven start (:mod:`estimator.start`) or the problem's values.
@@ -359,66 +359,43 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     history = history + [ml_cost(it.sse, it.cnt, R)]
     N = build_normal(st, evals, R)
     cov_G, cov_L, unident, correlated = _covariance(N, st, problem, opt)
-    std = _std_of(st, cov_G, cov_L, len(keys))
-    confounding = [h.confounding for h in holds]
-    # a set still unidentifiable here (the screen's rounds ran out): no deviation means anything
-    unresolved = np.zeros(len(keys), dtype=bool)
-    for conf, _ in unident:
-        confounding.append(conf)
-        unresolved[[ps.index(k) for k in conf.parameters]] = True
-    std[unresolved] = np.nan
-    dg = np.sqrt(np.maximum(np.diag(cov_G), 1e-300))
-    corr_G = cov_G / np.outer(dg, dg)
-    correlated = correlated + _high_correlations(corr_G, [keys[i] for i in st.glob], opt.correlation_warn)
-    confounding += correlated
-    std_col = np.full(len(keys), np.nan)
-    std_imu = np.full(len(keys), np.nan)
-    corr_honest = np.full_like(corr_G, np.nan)
-    imu_psd = imu_noise_psd(problem, opt.imu_noise) if opt.colored else None
-    unread = sorted(a for a, v in (imu_psd or {}).items() if not np.all(np.isfinite(v)))
-    if unread:
-        findings_pre = [Finding(
-            "imu_noise_unknown", Severity.WARNING,
-            f"the IMU noise level could not be read off the data of {', '.join(unread)} (every maneuver "
-            "shorter than 64 samples): the honest deviations leave the IMU noise out, and the IMU "
-            "biases' and initial conditions' deviations may be several times too small",
-            "give the IMU's noise densities (SolverOptions.imu_noise: datasheet random walks, squared, SI)")]
-    else:
-        findings_pre = []
-    if opt.colored:
-        std_col, std_imu, cov_hon = honest_std(model, theta, N, st, R, std, imu_psd,
-                                               rank_rtol=opt.rank_rtol,
-                                               cross_channel=opt.colored_cross_channel,
-                                               spectrum=opt.colored_spectrum)
-        std_col[unresolved] = np.nan
-        std_imu[unresolved] = np.nan
-        dh = np.sqrt(np.maximum(np.diag(cov_hon), 1e-300))
-        corr_honest = cov_hon / np.outer(dh, dh)
+    dev = _deviations(model, theta, N, st, R, cov_G, cov_L, unident, opt)
+    correlated = correlated + _high_correlations(dev.correlation, [keys[i] for i in st.glob],
+                                                 opt.correlation_warn)
+    # a set still unidentifiable here (the screen's rounds ran out) is reported with the holds
+    confounding = [h.confounding for h in holds] + [conf for conf, _ in unident] + correlated
     # what each parameter is: estimated, on a bound, held (why) or fixed
-    state, reason = _parameter_states(problem, theta, start, st, holds, unresolved, unident, opt)
+    state, reason = _parameter_states(problem, theta, start, st, holds, dev.unresolved, unident, opt)
     # which maneuvers inform each global parameter (its coupling block with their locals)
     informs = {keys[g]: {problem.maneuvers[k].id for k in range(len(problem.maneuvers))
                          if N.HGL[k].shape[1] and np.any(N.HGL[k][j] != 0.0)}
                for j, g in enumerate(st.glob)}
-    findings = findings_pre + _parameter_findings(problem, holds, unident, correlated, state, reason, opt,
-                                                  informs)
-    if imu_psd is not None and np.isfinite(std_imu).any():
-        inflation = np.where(st.free, np.sqrt(1.0 + (std_imu / np.where(std > 0, std, np.nan)) ** 2), np.nan)
-        worst = int(np.nanargmax(inflation)) if np.isfinite(inflation).any() else -1
-        levels = "; ".join(
-            f"{a}: accelerometers {np.nan_to_num(np.sqrt(v[:3])).max():.2g} m/s/sqrt(s), gyros "
-            f"{np.degrees(np.nan_to_num(np.sqrt(v[3:]))).max() * 60.0:.2g} deg/sqrt(h)"
-            for a, v in imu_psd.items())
-        source = "from the data" if opt.imu_noise == "estimate" else "as given"
-        most = (f", most to {keys[worst]} ({inflation[worst]:.2g} x its Cramér-Rao deviation)"
-                if worst >= 0 else "")
-        findings.append(Finding(
-            "imu_noise", Severity.INFO,
-            f"IMU noise integrated as process noise ({source}: {levels}) adds to the coloured "
-            f"deviations{most}",
-            "give the IMU's datasheet random walks (SolverOptions.imu_noise) if the data's own level, "
-            "which counts vibration as noise, is too pessimistic"))
-    findings += [Finding("start", Severity.INFO, "; ".join(stage_notes))] if stage_notes else []
+    findings = (_imu_noise_unknown(dev.imu_psd)
+                + _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs)
+                + _imu_noise_note(dev, st, keys, opt) + _iteration_findings(it, stage_notes))
+    diagnosis_table, outliers = None, {}
+    if opt.diagnose:
+        findings, diagnosis_table, outliers = _diagnosed(problem, evals, st, state, findings)
+    verdict = judge(it.status, findings)
+    message = it.message
+    return EstimationResult.build(
+        std_imu_noise=dev.std_imu, imu_noise_psd=dev.imu_psd,
+        problem=problem, values=theta, std_crb=dev.std_crb, std_colored=dev.std_colored,
+        correlation_keys=tuple(keys[i] for i in st.glob), correlation=dev.correlation,
+        correlation_colored=dev.correlation_colored,
+        R=dict(zip((c.name for c in problem.channels), R, strict=True)),
+        residuals=_stats(problem, evals), iterations=iterations, cost_history=tuple(history),
+        status=it.status, message=message, confounding=tuple(confounding),
+        elapsed_s=time.perf_counter() - t0, free_estimated=st.free.copy(), state=tuple(state),
+        state_reason=tuple(reason), findings=tuple(findings), verdict=verdict,
+        fit_quality=diagnosis_table, outliers=outliers,
+    )
+
+
+def _iteration_findings(it: _Iterated, stage_notes: list[str]) -> list[Finding]:
+    """Findings of the start stages and the iterations: the start's notes, a poor quadratic model
+    at the estimate, no convergence."""
+    findings = [Finding("start", Severity.INFO, "; ".join(stage_notes))] if stage_notes else []
     if it.poor:
         findings.append(Finding(
             "poor_model", Severity.WARNING,
@@ -432,39 +409,31 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
             "not_converged", Severity.FAILURE, it.message,
             "raise --max-iterations if the step was still shrinking; otherwise read the other findings: "
             "a fault in the data or a wrong minimum stops the iteration too"))
-    diagnosis_table, outliers = None, {}
-    if opt.diagnose:
-        from estimator.diagnostics import DiagnosticOptions, diagnose
+    return findings
 
-        diagnosis = diagnose(*_fit_traces(problem, evals, st), DiagnosticOptions(g_mps2=problem.g_mps2))
-        # the data's findings first: a fault in the data explains the parameters' findings, not the
-        # other way round (findings are shown by severity, in this order within one)
-        # parameters on a bound that can cause a residual finding rather than follow from it: a
-        # channel's time delays, and the state equations' (IMU biases, initial conditions) of the
-        # finding's maneuver. Not tables or scales: gusts push those onto their bounds themselves.
-        on_bound: dict[str, list[str]] = {}
-        for i, s in enumerate(state):
-            p = ps.parameters[i]
-            if s == "on_bound" and p.name in STATE_PARAMS:
-                on_bound.setdefault(p.instance, []).append(p.key)
-            elif s == "on_bound" and p.kind == "time_delay":
-                on_bound.setdefault("*", []).append(p.key)
-        findings = [_beside_bounds(f, on_bound) for f in diagnosis.findings] + findings
-        diagnosis_table, outliers = diagnosis.table, dict(diagnosis.outliers)
-    verdict = judge(it.status, findings)
-    message = it.message
-    return EstimationResult.build(
-        std_imu_noise=std_imu, imu_noise_psd=imu_psd,
-        problem=problem, values=theta, std_crb=std, std_colored=std_col,
-        correlation_keys=tuple(keys[i] for i in st.glob), correlation=corr_G,
-        correlation_colored=corr_honest,
-        R=dict(zip((c.name for c in problem.channels), R, strict=True)),
-        residuals=_stats(problem, evals), iterations=iterations, cost_history=tuple(history),
-        status=it.status, message=message, confounding=tuple(confounding),
-        elapsed_s=time.perf_counter() - t0, free_estimated=st.free.copy(), state=tuple(state),
-        state_reason=tuple(reason), findings=tuple(findings), verdict=verdict,
-        fit_quality=diagnosis_table, outliers=outliers,
-    )
+
+def _diagnosed(problem: Problem, evals: Evaluation, st: Structure, state: list[str], findings: list[Finding]
+               ) -> tuple[list[Finding], object, dict]:
+    """The fit-quality diagnostics at the estimate: their findings before ``findings``, the table
+    and the outliers found."""
+    from estimator.diagnostics import DiagnosticOptions, diagnose
+
+    ps = problem.parameters
+    diagnosis = diagnose(*_fit_traces(problem, evals, st), DiagnosticOptions(g_mps2=problem.g_mps2))
+    # the data's findings first: a fault in the data explains the parameters' findings, not the
+    # other way round (findings are shown by severity, in this order within one)
+    # parameters on a bound that can cause a residual finding rather than follow from it: a
+    # channel's time delays, and the state equations' (IMU biases, initial conditions) of the
+    # finding's maneuver. Not tables or scales: gusts push those onto their bounds themselves.
+    on_bound: dict[str, list[str]] = {}
+    for i, s in enumerate(state):
+        p = ps.parameters[i]
+        if s == "on_bound" and p.name in STATE_PARAMS:
+            on_bound.setdefault(p.instance, []).append(p.key)
+        elif s == "on_bound" and p.kind == "time_delay":
+            on_bound.setdefault("*", []).append(p.key)
+    findings = [_beside_bounds(f, on_bound) for f in diagnosis.findings] + findings
+    return findings, diagnosis.table, dict(diagnosis.outliers)
 
 
 #: Residual patterns a parameter stopped at its bound produces as well as the data's own faults.

@@ -19,6 +19,8 @@ the Cramér-Rao bound. Entry point: :func:`honest_std`.
 from __future__ import annotations
 
 import threading
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import fft as sfft
@@ -33,6 +35,10 @@ from estimator.core.residual_spectrum import (
 from estimator.model import Model
 from estimator.normal_equations import NormalEquations, Structure, lm_solve
 from estimator.problem import Problem
+from estimator.verdict import Finding, Severity
+
+if TYPE_CHECKING:
+    from estimator.solver import SolverOptions
 
 
 def _one_sided_weights(L: int) -> np.ndarray:
@@ -382,3 +388,93 @@ def _std_of(st: Structure, cov_G: np.ndarray, cov_L: list[np.ndarray], n: int) -
         if idx.size:
             std[idx] = np.sqrt(np.maximum(np.diag(cov_L[k]), 0.0))
     return std
+
+
+@dataclass(frozen=True)
+class _Deviations:
+    """The deviations at the estimate (:func:`_deviations`), one per parameter (NaN: not estimated).
+
+    Attributes
+    ----------
+    std_crb : Cramér-Rao deviations.
+    std_colored : coloured-residual (honest) deviations, IMU noise included; NaN without ``colored``.
+    std_imu : the IMU noise's part of them.
+    correlation, correlation_colored : the global parameters' correlations, Cramér-Rao and honest.
+    unresolved : parameters of a set still unidentifiable at the solution (their deviations NaN).
+    imu_psd : the IMU noise densities used, per aircraft (None without ``colored``).
+    """
+
+    std_crb: np.ndarray
+    std_colored: np.ndarray
+    std_imu: np.ndarray
+    correlation: np.ndarray
+    correlation_colored: np.ndarray
+    unresolved: np.ndarray
+    imu_psd: dict[str, np.ndarray] | None
+
+
+def _deviations(model: Model, theta: np.ndarray, N: NormalEquations, st: Structure, R: np.ndarray,
+                cov_G: np.ndarray, cov_L: list[np.ndarray], unident: list, opt: SolverOptions
+                ) -> _Deviations:
+    """Cramér-Rao and honest deviations and correlations at the estimate, from the undamped
+    covariance (``cov_G``, ``cov_L``) and the still-unidentifiable sets ``unident``."""
+    problem = model.problem
+    ps = problem.parameters
+    n = len(ps.keys)
+    std = _std_of(st, cov_G, cov_L, n)
+    # a set still unidentifiable here (the screen's rounds ran out): no deviation means anything
+    unresolved = np.zeros(n, dtype=bool)
+    for conf, _ in unident:
+        unresolved[[ps.index(k) for k in conf.parameters]] = True
+    std[unresolved] = np.nan
+    dg = np.sqrt(np.maximum(np.diag(cov_G), 1e-300))
+    corr_G = cov_G / np.outer(dg, dg)
+    std_col = np.full(n, np.nan)
+    std_imu = np.full(n, np.nan)
+    corr_honest = np.full_like(corr_G, np.nan)
+    imu_psd = imu_noise_psd(problem, opt.imu_noise) if opt.colored else None
+    if opt.colored:
+        std_col, std_imu, cov_hon = honest_std(model, theta, N, st, R, std, imu_psd,
+                                               rank_rtol=opt.rank_rtol,
+                                               cross_channel=opt.colored_cross_channel,
+                                               spectrum=opt.colored_spectrum)
+        std_col[unresolved] = np.nan
+        std_imu[unresolved] = np.nan
+        dh = np.sqrt(np.maximum(np.diag(cov_hon), 1e-300))
+        corr_honest = cov_hon / np.outer(dh, dh)
+    return _Deviations(std, std_col, std_imu, corr_G, corr_honest, unresolved, imu_psd)
+
+
+def _imu_noise_unknown(imu_psd: dict[str, np.ndarray] | None) -> list[Finding]:
+    """A warning when the IMU noise could not be read off an aircraft's data (nothing otherwise)."""
+    unread = sorted(a for a, v in (imu_psd or {}).items() if not np.all(np.isfinite(v)))
+    if not unread:
+        return []
+    return [Finding(
+        "imu_noise_unknown", Severity.WARNING,
+        f"the IMU noise level could not be read off the data of {', '.join(unread)} (every maneuver "
+        "shorter than 64 samples): the honest deviations leave the IMU noise out, and the IMU "
+        "biases' and initial conditions' deviations may be several times too small",
+        "give the IMU's noise densities (SolverOptions.imu_noise: datasheet random walks, squared, SI)")]
+
+
+def _imu_noise_note(dev: _Deviations, st: Structure, keys: list[str], opt: SolverOptions) -> list[Finding]:
+    """A note of the IMU noise integrated as process noise and how much it adds (nothing without)."""
+    imu_psd, std, std_imu = dev.imu_psd, dev.std_crb, dev.std_imu
+    if imu_psd is None or not np.isfinite(std_imu).any():
+        return []
+    inflation = np.where(st.free, np.sqrt(1.0 + (std_imu / np.where(std > 0, std, np.nan)) ** 2), np.nan)
+    worst = int(np.nanargmax(inflation)) if np.isfinite(inflation).any() else -1
+    levels = "; ".join(
+        f"{a}: accelerometers {np.nan_to_num(np.sqrt(v[:3])).max():.2g} m/s/sqrt(s), gyros "
+        f"{np.degrees(np.nan_to_num(np.sqrt(v[3:]))).max() * 60.0:.2g} deg/sqrt(h)"
+        for a, v in imu_psd.items())
+    source = "from the data" if opt.imu_noise == "estimate" else "as given"
+    most = (f", most to {keys[worst]} ({inflation[worst]:.2g} x its Cramér-Rao deviation)"
+            if worst >= 0 else "")
+    return [Finding(
+        "imu_noise", Severity.INFO,
+        f"IMU noise integrated as process noise ({source}: {levels}) adds to the coloured "
+        f"deviations{most}",
+        "give the IMU's datasheet random walks (SolverOptions.imu_noise) if the data's own level, "
+        "which counts vibration as noise, is too pessimistic")]
