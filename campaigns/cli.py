@@ -178,10 +178,8 @@ def _demo(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         problem = problem_from_dataset(out)
-    ns = argparse.Namespace(overwrite=True, max_mach_variation=0.05, reference_mach=None, max_iterations=40,
-                            no_colored=False, verbose=False, robust=False, start="staged",
-                            command="demo", source=out)
-    code = _workflow(problem, report_dir, ns)
+    # the workflow's defaults (the model set's reference Mach), as `fpr calibrate DATASET` runs it
+    code = _workflow(problem, report_dir, {}, overwrite=True, tool="fpr demo", source=out)
     print(f"fpr demo: {time.perf_counter() - t0:.0f} s in all")
     return code
 
@@ -316,7 +314,7 @@ def _calibrate(args: argparse.Namespace) -> int:
         print(f"warning: {w.message}", file=sys.stderr)
     out = args.out or Path("fpr-out") / f"calibrate-{src.stem or src.name}"
     if not args.single:
-        return _workflow(problem, out, args)
+        return _workflow(problem, out, _calibration_options(args), overwrite=args.overwrite, source=src)
     tool, protect = "fpr calibrate --single", _inputs(problem, src)
     _prepare_out(out, args.overwrite, tool, protect, check_only=True)
     n_samples = sum(m.n for m in problem.maneuvers)
@@ -390,31 +388,34 @@ def _fmt_table2(acc, title: str) -> str:
     return f"{title} (deg; desired = +- 3-sigma target): {verdict}\n{t.to_string()}"
 
 
-def _workflow(problem, out: Path, args: argparse.Namespace) -> int:
-    """The Mach-bin calibration workflow and its report (issue 4)."""
-    from campaigns.calibration_report import build_report
-    from estimator.solver import SolverOptions
+def _calibration_options(args: argparse.Namespace) -> dict:
+    """``fpr calibrate``'s flags as calibration option names (:meth:`CalibrationOptions.from_mapping`)."""
+    return {"max_mach_variation": args.max_mach_variation, "reference_mach": args.reference_mach,
+            "max_iterations": args.max_iterations, "colored": not args.no_colored,
+            "verbose": args.verbose, "robust": args.robust, "start": args.start,
+            "plots": not args.no_plots}
+
+
+def _workflow(problem, out: Path, options: dict, *, overwrite: bool, tool: str = "fpr calibrate",
+              source: Path | None = None) -> int:
+    """The Mach-bin calibration workflow and its report (issue 4): :func:`estimator.calibrate`, then
+    :meth:`~estimator.calibration.Calibration.write` with the truth sections of a synthetic dataset."""
+    from campaigns.truth_report import truth_sections
+    from estimator.calibration import CalibrationOptions, calibrate
     from estimator.verdict import verdict_text
-    from estimator.workflow import WorkflowOptions, run_workflow
 
     # refused at once if --out holds anything but an earlier run's files (or those without
     # --overwrite); the earlier files are removed only when the new report is ready to be written
-    tool = f"fpr {getattr(args, 'command', None) or 'calibrate'}"
-    protect = _inputs(problem, *([args.source] if getattr(args, "source", None) else []))
-    _prepare_out(out, args.overwrite, tool, protect, check_only=True)
+    protect = _inputs(problem, *([source] if source is not None else []))
+    _prepare_out(out, overwrite, tool, protect, check_only=True)
     n_samples = sum(m.n for m in problem.maneuvers)
     print(f"{len(problem.maneuvers)} maneuvers, {n_samples} samples, {len(problem.channels)} channels: "
           "Mach-bin calibration workflow (paper §4)")
-    opt = WorkflowOptions(max_mach_variation=args.max_mach_variation, reference_mach=args.reference_mach,
-                          solver=SolverOptions(max_iterations=args.max_iterations,
-                                               colored=not args.no_colored, verbose=args.verbose,
-                                               robust=args.robust, start=_starts(args.start)),
-                          progress=print)
-    wf = run_workflow(problem, opt)
+    cal = calibrate(problem, CalibrationOptions.from_mapping(options), progress=print)
+    wf = cal.workflow
     print("\n".join(wf.notes))
     print(f"workflow done in {wf.elapsed_s:.0f} s; writing the report")
-    with _prepare_out(out, args.overwrite, tool, protect) as folder:
-        tables = build_report(wf, out, f"Flow-angle calibration: {problem.source}", record=folder.record)
+    tables = cal.write(out, overwrite=overwrite, truth=truth_sections, protect=protect, tool=tool)
     if not wf.final:
         print()
         print(verdict_text(wf.verdict, wf.findings))

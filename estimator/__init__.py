@@ -11,8 +11,10 @@ What a notebook imports, from the package itself::
     result.to_json("result.json")
     EstimationResult.from_json("result.json")           # the same result, read back
 
-    from estimator import run_workflow, WorkflowOptions
-    wf = run_workflow(problem, WorkflowOptions())       # the Mach-bin workflow of fpr calibrate
+    from estimator import calibrate
+    cal = calibrate(problem)                            # the Mach-bin workflow of fpr calibrate
+    cal.to_pandas("table2")                             # Table 2, as table2_model.csv
+    cal.write("results/flight421")                      # report.html and its CSVs, as fpr calibrate
 
 Every name of ``__all__`` is loaded on first use (a module ``__getattr__``): ``import estimator``
 itself loads neither NumPy nor the compiled kernels. The rest of the package — the model, the
@@ -47,17 +49,20 @@ _API = {
     "run_workflow": "estimator.workflow",
     "WorkflowOptions": "estimator.workflow",
     "WorkflowResult": "estimator.workflow",
-    # calibrate(problem, options) -> Calibration (the workflow and its report, as fpr calibrate
-    # does it) joins here when it exists: "calibrate": "estimator.<its module>"
+    # the workflow and its report, as fpr calibrate does it
+    "calibrate": "estimator.calibration",
+    "Calibration": "estimator.calibration",
+    "CalibrationOptions": "estimator.calibration",
 }
 
 __all__ = [  # = the keys of _API (a literal, so that linters see what is exported)
-    "DataError", "DataWarning", "EstimationResult", "Finding", "Problem", "Severity", "SolverOptions",
-    "Status", "Verdict", "WorkflowOptions", "WorkflowResult", "estimate", "load_model_set",
-    "load_problem", "problem_from_dataset", "run_workflow",
+    "Calibration", "CalibrationOptions", "DataError", "DataWarning", "EstimationResult", "Finding",
+    "Problem", "Severity", "SolverOptions", "Status", "Verdict", "WorkflowOptions", "WorkflowResult",
+    "calibrate", "estimate", "load_model_set", "load_problem", "problem_from_dataset", "run_workflow",
 ]
 
 if TYPE_CHECKING:  # what type checkers and editors see; at run time __getattr__ loads them
+    from estimator.calibration import Calibration, CalibrationOptions, calibrate
     from estimator.io import DataError, DataWarning, load_problem, problem_from_dataset
     from estimator.io.modelset import load_model_set
     from estimator.problem import Problem

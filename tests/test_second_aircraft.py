@@ -238,9 +238,9 @@ def test_the_workflow_apportions_the_uav_vane_and_names_its_sensors(workflow):
 
 @pytest.mark.slow
 def test_the_report_shows_the_uav_channels_at_its_reference_mach(workflow, tmp_path):
-    from campaigns.calibration_report import build_report
+    from estimator.calibration import build_report
 
-    out = build_report(workflow, tmp_path / "report", "UAV fleet", truth=False)
+    out = build_report(workflow, tmp_path / "report", "UAV fleet")
     page = out["report"].read_text()
     for frag in ("AOA vane", "sideslip vane", "Fig. 5: alpha_v measurement - model vs model at Mach 0.40",
                  "Fig. 5: beta_v measurement - model vs model at Mach 0.40", "average vane bias b_a",
