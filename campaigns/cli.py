@@ -228,8 +228,8 @@ as held or on a bound, with why. Exit status: 0 success, 3 success with warnings
 With --single, writes to --out: result.json (everything, the verdict first), parameters.csv
 (estimates, Cramer-Rao and coloured-residual standard deviations, state: estimated / held /
 on_bound / fixed and why), findings.csv (the verdict's reasons), fit_quality.csv (per maneuver and
-channel), residuals.csv, correlation.csv, time_history_match.png, residual_crossplots.png, and for
-synthetic datasets recovery.csv.
+channel), residuals.csv, correlation.csv, time_history_match.png (paper Fig. 3),
+residual_crossplot_<channel>.png per flow-angle channel, and for synthetic datasets recovery.csv.
 
 examples:
   fpr calibrate my_flight.toml --out results/flight421

@@ -1,24 +1,24 @@
-"""Figures of an estimation: time-history matches (paper Fig. 3) and residual cross-plots.
+"""Figures of one estimation as PNG files, drawn by the report's figure family (:mod:`estimator.report`).
 
-Each function returns a matplotlib Figure (Agg backend; nothing is shown) so callers choose where
-it goes: a PNG file, an HTML report, a notebook.
+``fpr calibrate --single`` writes them: the time-history match of one maneuver (paper Fig. 3, as the
+workflow report's) and a measurement-minus-model cross-plot per flow-angle channel (paper Fig. 5).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
+from estimator.model import Model
+from estimator.problem import Problem
+from estimator.report import figure_crossplot, figure_time_history, save_png
+from estimator.result import EstimationResult
 
-from estimator.model import Model  # noqa: E402
-from estimator.problem import Problem  # noqa: E402
-from estimator.result import EstimationResult  # noqa: E402
+#: The time-history figure shows a maneuver of these kinds if there is one (the paper's Fig. 3).
+TIME_HISTORY_KINDS = ("pitch_doublet", "3211")
 
 
 def time_histories(problem: Problem, values: np.ndarray) -> pd.DataFrame:
@@ -47,105 +47,51 @@ def time_histories(problem: Problem, values: np.ndarray) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
-def plot_time_history_match(
-    histories: pd.DataFrame,
-    channels: Sequence[str] | None = None,
-    maneuvers: Sequence[str] | None = None,
-    max_maneuvers: int = 18,
-    title: str = "",
-):
-    """Measured vs model for several maneuvers laid end to end (paper Fig. 3).
-
-    Parameters
-    ----------
-    histories : from :func:`time_histories`.
-    channels : channels to show (default: all present).
-    maneuvers : maneuvers to show (default: the first ``max_maneuvers``).
-    """
-    h = histories
-    chans = list(channels) if channels else list(dict.fromkeys(h["channel"]))
-    mans = list(maneuvers) if maneuvers else list(dict.fromkeys(h["maneuver"]))[:max_maneuvers]
-    h = h[h["maneuver"].isin(mans) & h["channel"].isin(chans)]
-    fig, axes = plt.subplots(len(chans), 1, figsize=(12, 1.6 * len(chans) + 0.8), sharex=True,
-                             squeeze=False)
-    # lay maneuvers end to end on a running time axis, as the paper's figure does
-    offsets, t0 = {}, 0.0
-    for mid in mans:
-        span = h.loc[h["maneuver"] == mid, "t_s"]
-        if span.empty:
-            continue
-        offsets[mid] = t0 - span.min()
-        t0 += span.max() - span.min() + 2.0
-    for ax, ch in zip(axes[:, 0], chans, strict=True):
-        d = h[h["channel"] == ch]
-        if d.empty:
-            ax.set_visible(False)
-            continue
-        s = d["display_scale"].iloc[0]
-        for mid, g in d.groupby("maneuver", sort=False):
-            t = g["t_s"] + offsets.get(mid, 0.0)
-            ax.plot(t, g["measured"] * s, color="0.55", lw=0.8)
-            ax.plot(t, g["model"] * s, color="tab:red", lw=0.8)
-        ax.set_ylabel(f"{ch}\n[{d['display_unit'].iloc[0]}]", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.grid(alpha=0.3)
-    axes[0, 0].legend(["measured", "model"], loc="upper right", fontsize=7, ncol=2)
-    axes[-1, 0].set_xlabel("time, maneuvers end to end [s]")
-    fig.suptitle(title or f"time-history match, {len(offsets)} maneuvers", fontsize=10)
-    fig.tight_layout()
-    return fig
-
-
-def plot_residual_crossplot(histories: pd.DataFrame, channels: Sequence[str], title: str = ""):
-    """Measurement minus model against the model output (paper Figs. 5, 7), with 3-sigma lines."""
-    fig, axes = plt.subplots(1, len(channels), figsize=(4.2 * len(channels), 3.6), squeeze=False)
-    for ax, ch in zip(axes[0], channels, strict=True):
-        d = histories[histories["channel"] == ch]
-        if d.empty:
-            ax.set_visible(False)
-            continue
-        s = d["display_scale"].iloc[0]
-        err = (d["measured"] - d["model"]) * s
-        ax.plot(d["model"] * s, err, ".", ms=1.0, alpha=0.4, color="tab:blue")
-        three = 3.0 * err.std()
-        for y in (-three, three):
-            ax.axhline(y, color="tab:red", lw=0.8, ls="--")
-        unit = d["display_unit"].iloc[0]
-        ax.set_xlabel(f"{ch} model [{unit}]", fontsize=8)
-        ax.set_ylabel(f"measured - model [{unit}]", fontsize=8)
-        ax.set_title(f"{ch}: 3 sigma = {three:.3f} {unit}", fontsize=9)
-        ax.grid(alpha=0.3)
-        ax.tick_params(labelsize=7)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    return fig
+def _time_history_channels(problem: Problem, hist: pd.DataFrame):
+    """The shown maneuver, its time base and ``channel -> (measured, model, unit)`` on it (NaN where a
+    channel has no sample: a time-shifted channel loses its edges, an own-rate one has its own)."""
+    mid = next((m.id for m in problem.maneuvers if m.meta.get("kind") in TIME_HISTORY_KINDS),
+               problem.maneuvers[0].id)
+    t_all = next(m.t_s for m in problem.maneuvers if m.id == mid)
+    h = hist[hist["maneuver"] == mid]
+    chans = {}
+    for name, g in h.groupby("channel", sort=False):
+        idx = np.searchsorted(t_all, g["t_s"].to_numpy())
+        z, y = np.full(t_all.shape, np.nan), np.full(t_all.shape, np.nan)
+        s = float(g["display_scale"].iloc[0])
+        z[idx], y[idx] = g["measured"].to_numpy() * s, g["model"].to_numpy() * s
+        chans[name] = (z, y, str(g["display_unit"].iloc[0]))
+    return mid, t_all, chans
 
 
 def save_standard_figures(problem: Problem, result: EstimationResult, directory,
                           record: Callable[[Path], object] | None = None) -> list[str]:
-    """Write the time-history match and cross-plots of a result as PNG files; returns the paths.
+    """Write the time-history match and the flow channels' cross-plots of a result; return the paths.
 
-    ``record`` is called with each file's path before it is written (e.g.
+    ``time_history_match.png`` (one maneuver, a pitch doublet or 3211 if there is one) and
+    ``residual_crossplot_<channel>.png`` for each channel that measures a flow angle. ``record`` is
+    called with each file's path before it is written (e.g.
     :meth:`estimator.io.outdir.OutputFolder.record`, so the output folder lists what it holds).
     """
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     hist = time_histories(problem, result.values)
+    figures = []
+    mid, t, chans = _time_history_channels(problem, hist)
+    if chans:
+        figures.append(("time_history_match.png", figure_time_history(mid, t, chans)))
+    for ch in problem.channels:
+        g = hist[hist["channel"] == ch.name]
+        if ch.measures is None or g.empty:
+            continue
+        s, unit = float(ch.display_scale), ch.display_unit
+        figures.append((f"residual_crossplot_{ch.name}.png", figure_crossplot(
+            g["model"].to_numpy() * s, (g["measured"] - g["model"]).to_numpy() * s,
+            f"{ch.name}: measurement - model", f"model ({unit})", f"measurement - model ({unit})")))
     paths = []
-    fig = plot_time_history_match(hist, title=f"time-history match — {problem.source}")
-    p = d / "time_history_match.png"
-    if record is not None:
-        record(p)
-    fig.savefig(p, dpi=110)
-    plt.close(fig)
-    paths.append(str(p))
-    flow = [c for c in dict.fromkeys(hist["channel"]) if c.startswith(("alpha_", "beta_"))]
-    if flow:
-        fig = plot_residual_crossplot(hist, flow, title="measurement minus model")
-        p = d / "residual_crossplots.png"
+    for name, fig in figures:
+        p = d / name
         if record is not None:
             record(p)
-        fig.savefig(p, dpi=110)
-        plt.close(fig)
-        paths.append(str(p))
+        paths.append(str(save_png(fig, p, close=True)))
     return paths
