@@ -288,8 +288,8 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
 def _calibrate(args: argparse.Namespace) -> int:
     import warnings
 
+    from estimator.calibration import write_estimation
     from estimator.io import DataWarning, load_problem, problem_from_dataset
-    from estimator.plots import save_standard_figures
     from estimator.solver import SolverOptions, estimate
     from estimator.verdict import verdict_text
 
@@ -324,22 +324,20 @@ def _calibrate(args: argparse.Namespace) -> int:
                                              verbose=args.verbose, robust=args.robust,
                                              start=_starts(args.start)))
     print(result.summary())
-    with _prepare_out(out, args.overwrite, tool, protect) as folder:
-        result.to_json(folder.record(out / "result.json"))
-        result.to_csv(out, record=folder.record)
-        if any("dataset" in m.meta for m in problem.maneuvers):
-            from campaigns.truth import recovery_table, true_parameters
+    truth = rec = None
+    if any("dataset" in m.meta for m in problem.maneuvers):
+        from campaigns.truth import recovery_table, true_parameters
 
-            truth = true_parameters(problem, result.free_estimated)
-            rec = recovery_table(result, truth)
-            rec.to_csv(folder.record(out / "recovery.csv"))
-            shown = rec[rec["kind"].isin(["time_delay", "bias", "scale", "table"])]
-            print("\nrecovery against the injected truth (calibration parameters; all in recovery.csv):")
-            print(shown.to_string(float_format=lambda v: f"{v: .4g}"))
-            print("model-structure error (rms of the best possible fit to the clean channels): " + ", ".join(
-                f"{c} {v * 57.29578:.4f} deg" for c, v in truth.structure_rms.items()))
-        if not args.no_plots:
-            save_standard_figures(problem, result, out, record=folder.record)
+        truth = true_parameters(problem, result.free_estimated)
+        rec = recovery_table(result, truth)
+    write_estimation(problem, result, out, overwrite=args.overwrite, plots=not args.no_plots,
+                     extra_csv=None if rec is None else {"recovery.csv": rec}, protect=protect, tool=tool)
+    if rec is not None:
+        shown = rec[rec["kind"].isin(["time_delay", "bias", "scale", "table"])]
+        print("\nrecovery against the injected truth (calibration parameters; all in recovery.csv):")
+        print(shown.to_string(float_format=lambda v: f"{v: .4g}"))
+        print("model-structure error (rms of the best possible fit to the clean channels): " + ", ".join(
+            f"{c} {v * 57.29578:.4f} deg" for c, v in truth.structure_rms.items()))
     print(f"\nresults in {out}")
     print(verdict_text(result.verdict, result.findings, max_lines=0))
     return exit_status(result.verdict)

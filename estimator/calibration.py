@@ -493,3 +493,30 @@ def calibrate(problem: Problem, options: CalibrationOptions | Mapping[str, Any] 
         options = CalibrationOptions.from_mapping(options)
     wf = run_workflow(problem, dataclasses.replace(options.workflow, progress=progress))
     return Calibration(problem=problem, options=options, workflow=wf)
+
+
+def write_estimation(problem: Problem, result, out_dir: str | os.PathLike, *, overwrite: bool = False,
+                     plots: bool = True, extra_csv: Mapping[str, pd.DataFrame] | None = None,
+                     protect: Iterable[str | os.PathLike] = (), tool: str = "estimator.estimate") -> Path:
+    """Write one estimation's files into ``out_dir``, as ``fpr calibrate --single`` does.
+
+    result.json (everything, the verdict first), parameters.csv, findings.csv, fit_quality.csv,
+    residuals.csv, correlation.csv (:meth:`~estimator.result.EstimationResult.to_csv`), the figures
+    (:func:`estimator.plots.save_standard_figures`) unless ``plots`` is false, and ``extra_csv``
+    (file name -> table, e.g. a synthetic dataset's recovery.csv). The output folder is prepared
+    and listed as :meth:`Calibration.write`'s. Returns ``out_dir``.
+    """
+    from estimator.io.outdir import input_paths, prepare_output
+
+    out = Path(out_dir)
+    protect = [*protect, *input_paths(problem)]
+    with prepare_output(out, overwrite=overwrite, tool=tool, protect=protect) as folder:
+        result.to_json(folder.record(out / "result.json"))
+        result.to_csv(out, record=folder.record)
+        for name, frame in (extra_csv or {}).items():
+            frame.to_csv(folder.record(out / name))
+        if plots:
+            from estimator.plots import save_standard_figures
+
+            save_standard_figures(problem, result, out, record=folder.record)
+    return out
