@@ -288,9 +288,9 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
 def _calibrate(args: argparse.Namespace) -> int:
     import warnings
 
-    from estimator.calibration import write_estimation
+    from estimator.calibration import CalibrationOptions, write_estimation
     from estimator.io import DataWarning, load_problem, problem_from_dataset
-    from estimator.solver import SolverOptions, estimate
+    from estimator.solver import estimate
     from estimator.verdict import verdict_text
 
     src = args.source
@@ -320,9 +320,8 @@ def _calibrate(args: argparse.Namespace) -> int:
     n_samples = sum(m.n for m in problem.maneuvers)
     print(f"{len(problem.maneuvers)} maneuvers, {n_samples} samples, {len(problem.channels)} "
           f"channels, {int(problem.parameters.free_mask.sum())} free parameters")
-    result = estimate(problem, SolverOptions(max_iterations=args.max_iterations, colored=not args.no_colored,
-                                             verbose=args.verbose, robust=args.robust,
-                                             start=_starts(args.start)))
+    # the same mapping of the flags as the workflow's
+    result = estimate(problem, CalibrationOptions.from_mapping(_calibration_options(args)).workflow.solver)
     print(result.summary())
     truth = rec = None
     if any("dataset" in m.meta for m in problem.maneuvers):
@@ -341,10 +340,6 @@ def _calibrate(args: argparse.Namespace) -> int:
     print(f"\nresults in {out}")
     print(verdict_text(result.verdict, result.findings, max_lines=0))
     return exit_status(result.verdict)
-
-
-def _starts(choice: str) -> str | tuple[str, ...]:
-    return ("staged", "given") if choice == "both" else choice
 
 
 def _prepare_out(out: Path, overwrite: bool, tool: str, protect: list[Path], check_only: bool = False):

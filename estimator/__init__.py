@@ -53,16 +53,18 @@ _API = {
     "calibrate": "estimator.calibration",
     "Calibration": "estimator.calibration",
     "CalibrationOptions": "estimator.calibration",
+    "write_estimation": "estimator.calibration",
 }
 
 __all__ = [  # = the keys of _API (a literal, so that linters see what is exported)
     "Calibration", "CalibrationOptions", "DataError", "DataWarning", "EstimationResult", "Finding",
     "Problem", "Severity", "SolverOptions", "Status", "Verdict", "WorkflowOptions", "WorkflowResult",
     "calibrate", "estimate", "load_model_set", "load_problem", "problem_from_dataset", "run_workflow",
+    "write_estimation",
 ]
 
 if TYPE_CHECKING:  # what type checkers and editors see; at run time __getattr__ loads them
-    from estimator.calibration import Calibration, CalibrationOptions, calibrate
+    from estimator.calibration import Calibration, CalibrationOptions, calibrate, write_estimation
     from estimator.io import DataError, DataWarning, load_problem, problem_from_dataset
     from estimator.io.modelset import load_model_set
     from estimator.problem import Problem
