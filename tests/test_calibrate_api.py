@@ -102,3 +102,22 @@ def test_options_from_one_flat_mapping():
         CalibrationOptions.from_mapping({"max_iteration": 3})
     with pytest.raises(dataclasses.FrozenInstanceError):
         opt.plots = True
+
+
+def test_one_estimation_writes_what_the_single_command_writes(tiny_dataset, tmp_path):
+    from campaigns.cli import main
+    from campaigns.truth import recovery_table, true_parameters
+    from estimator import estimate, write_estimation
+
+    cli_out, lib_out = tmp_path / "cli", tmp_path / "lib"
+    assert main(["calibrate", str(tiny_dataset), "--single", "--no-plots", "--out", str(cli_out)]) in (0, 3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        problem = problem_from_dataset(tiny_dataset)
+    result = estimate(problem, CalibrationOptions().workflow.solver)
+    rec = recovery_table(result, true_parameters(problem, result.free_estimated))
+    write_estimation(problem, result, lib_out, plots=False, extra_csv={"recovery.csv": rec})
+    names = sorted(p.name for p in cli_out.glob("*.csv"))
+    assert "recovery.csv" in names and names == sorted(p.name for p in lib_out.glob("*.csv"))
+    for name in names:
+        assert (cli_out / name).read_bytes() == (lib_out / name).read_bytes(), name
