@@ -57,6 +57,14 @@ def _field_names(cls) -> list[str]:
     return [f.name for f in dataclasses.fields(cls)]
 
 
+def option_tables() -> dict[str, tuple[str, ...]]:
+    """The option names by the TOML table that holds them (a problem file's, a scenario's):
+    ``workflow`` (:class:`~estimator.workflow.WorkflowOptions`), ``solver``
+    (:class:`~estimator.solver.SolverOptions`) and ``report`` (``plots``)."""
+    return {"workflow": tuple(n for n in _field_names(WorkflowOptions) if n not in _NOT_FLAT),
+            "solver": tuple(_field_names(SolverOptions)), "report": ("plots",)}
+
+
 @dataclass(frozen=True)
 class CalibrationOptions:
     """Settings of :func:`calibrate`: the workflow's (its ``solver`` inside) and the report's.
@@ -481,8 +489,10 @@ def calibrate(problem: Problem, options: CalibrationOptions | Mapping[str, Any] 
     Parameters
     ----------
     problem : the flight data and models (:func:`estimator.io.load_problem`).
-    options : :class:`CalibrationOptions`, or a flat mapping of option names
-        (:meth:`CalibrationOptions.from_mapping`); None: the defaults.
+    options : :class:`CalibrationOptions` (used as given), or a flat mapping of option names
+        (:meth:`CalibrationOptions.from_mapping`) that overrides the problem's own (its file's
+        ``[workflow]``/``[solver]``/``[report]`` tables, ``problem.options``); None: the problem's
+        own options, the defaults for the rest -- as ``fpr calibrate`` without flags.
     progress : called with a line of text as the workflow proceeds (e.g. ``print``).
 
     Returns
@@ -490,7 +500,7 @@ def calibrate(problem: Problem, options: CalibrationOptions | Mapping[str, Any] 
     Calibration : :meth:`Calibration.write` writes the report.
     """
     if options is None or isinstance(options, Mapping):
-        options = CalibrationOptions.from_mapping(options)
+        options = CalibrationOptions.from_mapping({**problem.options, **(options or {})})
     wf = run_workflow(problem, dataclasses.replace(options.workflow, progress=progress))
     return Calibration(problem=problem, options=options, workflow=wf)
 

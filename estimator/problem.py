@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -139,6 +140,26 @@ class ManeuverData:
         return float((self.t_s[-1] - self.t_s[0]) / (len(self.t_s) - 1))
 
 
+class ReadOnlyOptions(Mapping):
+    """A read-only mapping of option names (picklable, unlike ``MappingProxyType``: problems go to
+    worker processes)."""
+
+    def __init__(self, options: Mapping[str, Any] = ()) -> None:
+        self._d = dict(options)
+
+    def __getitem__(self, key: str) -> Any:
+        return self._d[key]
+
+    def __iter__(self):
+        return iter(self._d)
+
+    def __len__(self) -> int:
+        return len(self._d)
+
+    def __repr__(self) -> str:
+        return f"ReadOnlyOptions({self._d!r})"
+
+
 @dataclass(frozen=True)
 class Problem:
     """An estimation problem.
@@ -156,6 +177,9 @@ class Problem:
         "imu_point" (default) integrates the IMU point's velocity, exact, no angular acceleration
         needed; "differentiated" removes the lever arm with angular accelerations from smoothed
         differentiation of the rates, the SPEC's method (:mod:`estimator.core.sensitivity`).
+    options : the problem file's ``[workflow]``, ``[solver]`` and ``[report]`` options as one flat,
+        read-only mapping of option names (:meth:`estimator.calibration.CalibrationOptions.from_mapping`);
+        :func:`estimator.calibrate` uses them unless given others.
     """
 
     maneuvers: tuple[ManeuverData, ...]
@@ -166,8 +190,11 @@ class Problem:
     g_mps2: float = 9.80665
     source: str = ""
     lever_arm: str = "imu_point"
+    options: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        # read-only: the options are the file's, and a Problem is shared by the workflow's stages
+        object.__setattr__(self, "options", ReadOnlyOptions(self.options))
         if self.lever_arm not in LEVER_ARMS:
             raise ValueError(f"{self.source}: lever_arm must be one of {LEVER_ARMS}, got {self.lever_arm!r}")
         ids = [m.id for m in self.maneuvers]

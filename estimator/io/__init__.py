@@ -97,6 +97,15 @@ z down) from the aircraft's reference point::
     kind = "bias"
     scope = "aircraft"
 
+    [solver]                  # options of the calibration (optional), by the names fpr calibrate's
+    max_iterations = 60       # flags set: estimator.solver.SolverOptions ...
+    start = "staged"          # "staged", "given" or "both"
+    [workflow]                # ... estimator.workflow.WorkflowOptions ...
+    max_mach_variation = 0.05
+    reference_mach = 0.5
+    [report]                  # ... and the report's
+    plots = true
+
 Instead of ``[[files]]``, ``[columns]`` and ``[aircraft]``, a dataset written by ``fpr fly``::
 
     [data]
@@ -110,6 +119,15 @@ add or replace some), each maneuver's CG from its ``r_cg_body_m_mean``, aircraft
 configuration from its entry. The truth (``true_*`` columns) is not part of the problem; each
 maneuver's ``meta`` keeps its manifest entry and the dataset path, and :func:`load_truth` reads
 the truth for the comparison afterwards.
+
+The ``[solver]``, ``[workflow]`` and ``[report]`` tables each take only their own options (a
+misspelt or misplaced one is refused with the close match);
+:meth:`estimator.calibration.CalibrationOptions.from_mapping` maps them, the one mapping
+``fpr calibrate``'s flags and a Monte Carlo scenario's ``[estimator]`` go through too. They are
+kept in ``problem.options`` and :func:`estimator.calibrate` uses them unless given others.
+Precedence, lowest first: the defaults; the model set's declarations (its own ``[workflow]
+reference_mach`` declares the aircraft's reference Mach); the problem file's options; the flags
+given to ``fpr calibrate`` (or the mapping passed to :func:`estimator.calibrate`).
 
 Canonical names. ``t``, ``ax``, ``ay``, ``az``, ``p``, ``q``, ``r`` are required. A name that is
 the ``column`` of a model-set channel (tejas: ``phi theta psi tas h h_dgps alpha_zl alpha_zr

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import codecs
+import dataclasses
 import re
 import tomllib
 from collections.abc import Mapping, Sequence
@@ -20,7 +21,7 @@ from estimator.parameters import ParameterSpec
 from estimator.problem import LEVER_ARMS, STATE_SIGNALS, ChannelSpec, Problem
 
 TOP_KEYS = ("title", "g_mps2", "lever_arm", "model", "channels", "resample_hz", "sensors", "aircraft",
-            "columns", "files", "data", "parameter", "channel")
+            "columns", "files", "data", "parameter", "channel", "workflow", "solver", "report")
 FILE_KEYS = ("path", "format", "header", "delimiter", "decimal", "skip_rows", "encoding", "aircraft",
              "configuration",
              "maneuvers", "resample_hz", "columns", "r_cg_body_m", "r_cg_body_in", "r_cg_body_ft")
@@ -247,6 +248,39 @@ def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[s
     return pairs
 
 
+def parse_options(raw: Mapping, where: str) -> dict:
+    """The ``[workflow]``, ``[solver]`` and ``[report]`` tables as one flat mapping of option names.
+
+    Each table holds only its own options (``[solver]``: the fields of
+    :class:`~estimator.solver.SolverOptions`; ``[workflow]``: those of
+    :class:`~estimator.workflow.WorkflowOptions`; ``[report]``: ``plots``), checked here and then
+    by :meth:`~estimator.calibration.CalibrationOptions.from_mapping`, the one mapping the CLI uses too.
+    """
+    from estimator.calibration import CalibrationOptions, option_tables
+
+    tables = option_tables()
+    flat: dict = {}
+    for name, valid in tables.items():
+        table = raw.get(name, {})
+        if not isinstance(table, Mapping):
+            raise DataError(f"{where}: [{name}] must be a table of option = value, got {table!r}")
+        for key in table:
+            if key not in valid:
+                other = next((t for t, v in tables.items() if key in v), None)
+                m = close_match(key, valid)
+                raise DataError(
+                    f"{where}: [{name}] {key!r} is not a {name} option"
+                    + (f" (it belongs under [{other}])" if other else "")
+                    + (f" (did you mean {m!r}?)" if m and not other else "")
+                    + f"; valid: {', '.join(valid)}")
+        flat.update(table)
+    try:
+        CalibrationOptions.from_mapping(flat)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"{where}: [workflow]/[solver]/[report]: {exc}") from None
+    return flat
+
+
 def load_problem(path: str | Path) -> Problem:
     """Read a problem file (TOML; schema in :mod:`estimator.io`) and the data it points at.
 
@@ -270,6 +304,7 @@ def load_problem(path: str | Path) -> Problem:
                         "fpr calibrate directly") from None
     where = str(path)
     _keys(raw, TOP_KEYS, where)
+    options = parse_options(raw, where)
     base = path.resolve().parent
     raw_model, msource = read_model_set(raw.get("model", DEFAULT_MODEL_SET), base)
     chans, specs, declared = merge_model_set(raw_model, raw.get("parameter"), raw.get("channel"),
@@ -295,6 +330,8 @@ def load_problem(path: str | Path) -> Problem:
     g = raw.get("g_mps2", 9.80665)
     if isinstance(g, bool) or not isinstance(g, (int, float)):
         raise DataError(f"{where}: g_mps2 must be a number (m/s^2), got {g!r}")
-    return build_problem(pairs, chans, specs, user_declared=declared, explicit_channels=raw.get("channels"),
-                         sensors=sensors, imu_position_body_m=sensors["imu"], g_mps2=float(g), source=where,
-                         lever_arm=raw.get("lever_arm", LEVER_ARMS[0]))
+    problem = build_problem(pairs, chans, specs, user_declared=declared,
+                            explicit_channels=raw.get("channels"), sensors=sensors,
+                            imu_position_body_m=sensors["imu"], g_mps2=float(g), source=where,
+                            lever_arm=raw.get("lever_arm", LEVER_ARMS[0]))
+    return dataclasses.replace(problem, options=options) if options else problem
