@@ -254,7 +254,10 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="replace the results of an earlier run in --out (only the files fpr wrote "
                    "there, as listed in its .fpr-written.json; a folder holding anything else is refused)")
-    p.add_argument("--max-iterations", type=int, default=40)
+    # the option flags default to None (not given): the problem file's [solver]/[workflow]/[report]
+    # options then hold, and the library's defaults under them (the same as these flags' defaults)
+    p.add_argument("--max-iterations", type=int, default=None,
+                   help="Gauss-Newton iterations per estimation (default: the problem file's, else 40)")
     p.add_argument("--no-colored", action="store_true",
                    help="skip the coloured-residual (Morelli-Klein) standard deviations")
     p.add_argument("--no-plots", action="store_true", help="do not draw figures")
@@ -264,14 +267,15 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--robust", action="store_true",
                    help="exclude the residual outliers the diagnostics find and estimate again (each "
                    "excluded sample is reported)")
-    p.add_argument("--start", choices=["staged", "given", "both"], default="staged",
+    p.add_argument("--start", choices=["staged", "given", "both"], default=None,
                    help="start: staged (attitude, then speed and height, then flow channels; the "
                    "default), given (the problem's start values), or both (the better verdict kept)")
-    p.add_argument("--max-mach-variation", type=float, default=0.05,
-                   help="workflow: leave out maneuvers whose Mach varies by more (default 0.05)")
+    p.add_argument("--max-mach-variation", type=float, default=None,
+                   help="workflow: leave out maneuvers whose Mach varies by more (default: the problem "
+                   "file's, else 0.05)")
     p.add_argument("--reference-mach", type=float, default=None,
-                   help="workflow: Mach of the installation biases (default: the model set's "
-                   "[workflow] reference_mach; Tejas 0.5)")
+                   help="workflow: Mach of the installation biases (default: the problem file's "
+                   "[workflow] reference_mach, else the model set's; Tejas 0.5)")
     g = p.add_argument_group("selecting maneuvers of a dataset")
     g.add_argument("--kind", nargs="+", help="maneuver kinds")
     g.add_argument("--config", nargs="+", help="configuration ids")
@@ -313,15 +317,18 @@ def _calibrate(args: argparse.Namespace) -> int:
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
     out = args.out or Path("fpr-out") / f"calibrate-{src.stem or src.name}"
+    # the problem file's [solver]/[workflow]/[report] options, the flags given overriding them
+    options = {**problem.options, **_calibration_options(args)}
     if not args.single:
-        return _workflow(problem, out, _calibration_options(args), overwrite=args.overwrite, source=src)
+        return _workflow(problem, out, options, overwrite=args.overwrite, source=src)
     tool, protect = "fpr calibrate --single", _inputs(problem, src)
     _prepare_out(out, args.overwrite, tool, protect, check_only=True)
     n_samples = sum(m.n for m in problem.maneuvers)
     print(f"{len(problem.maneuvers)} maneuvers, {n_samples} samples, {len(problem.channels)} "
           f"channels, {int(problem.parameters.free_mask.sum())} free parameters")
     # the same mapping of the flags as the workflow's
-    result = estimate(problem, CalibrationOptions.from_mapping(_calibration_options(args)).workflow.solver)
+    chosen = CalibrationOptions.from_mapping(options)
+    result = estimate(problem, chosen.workflow.solver)
     print(result.summary())
     truth = rec = None
     if any("dataset" in m.meta for m in problem.maneuvers):
@@ -329,7 +336,7 @@ def _calibrate(args: argparse.Namespace) -> int:
 
         truth = true_parameters(problem, result.free_estimated)
         rec = recovery_table(result, truth)
-    write_estimation(problem, result, out, overwrite=args.overwrite, plots=not args.no_plots,
+    write_estimation(problem, result, out, overwrite=args.overwrite, plots=chosen.plots,
                      extra_csv=None if rec is None else {"recovery.csv": rec}, protect=protect, tool=tool)
     if rec is not None:
         shown = rec[rec["kind"].isin(["time_delay", "bias", "scale", "table"])]
@@ -382,11 +389,14 @@ def _fmt_table2(acc, title: str) -> str:
 
 
 def _calibration_options(args: argparse.Namespace) -> dict:
-    """``fpr calibrate``'s flags as calibration option names (:meth:`CalibrationOptions.from_mapping`)."""
-    return {"max_mach_variation": args.max_mach_variation, "reference_mach": args.reference_mach,
-            "max_iterations": args.max_iterations, "colored": not args.no_colored,
-            "verbose": args.verbose, "robust": args.robust, "start": args.start,
-            "plots": not args.no_plots}
+    """The ``fpr calibrate`` flags the user gave, as calibration option names
+    (:meth:`CalibrationOptions.from_mapping`); a flag not given is left out, so that the problem
+    file's option (or the default) holds."""
+    given = {"max_mach_variation": args.max_mach_variation, "reference_mach": args.reference_mach,
+             "max_iterations": args.max_iterations, "start": args.start,
+             "colored": False if args.no_colored else None, "verbose": True if args.verbose else None,
+             "robust": True if args.robust else None, "plots": False if args.no_plots else None}
+    return {k: v for k, v in given.items() if v is not None}
 
 
 def _workflow(problem, out: Path, options: dict, *, overwrite: bool, tool: str = "fpr calibrate",
