@@ -24,8 +24,11 @@ a campaign does not have::
     channels = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr"]   # optional
     select = { kind = ["pitch_doublet", "3211"] }   # optional: the maneuvers to estimate from
     lever_arm = "imu_point"
-    max_iterations = 40
-    colored = true                  # Morelli-Klein coloured-residual deviations
+    max_iterations = 40             # kept here for old scenario files: solver options, as under
+    colored = true                  # [estimator.solver] (Morelli-Klein coloured-residual deviations)
+    [estimator.solver]              # estimator.solver.SolverOptions by name, as a problem file's
+    start = "staged"                # [solver] and fpr calibrate's flags (one mapping:
+    robust = false                  # estimator.calibration.CalibrationOptions.from_mapping)
     [estimator.parameters]          # which parameters are free: [parameter.NAME] of a problem file
     h0 = { free = true }
     f2 = { free = false }
@@ -64,6 +67,9 @@ from typing import Any
 
 import numpy as np
 
+from estimator.calibration import CalibrationOptions, option_tables
+from estimator.io.errors import close_match
+from estimator.solver import SolverOptions
 from synth.campaign import CAMPAIGN_DIR, Campaign, Job, parse_campaign
 from synth.environment import Environment
 from synth.errors import ErrorConfig
@@ -73,7 +79,9 @@ _MC_KEYS = {"replications", "draw", "estimator"}
 _DRAW_KEYS = {"turbulence", "errors", "environment"}
 _DIST_KEYS = {"dist", "mean", "std", "low", "high", "half_width", "scope"}
 _ESTIMATOR_KEYS = {"model", "channels", "select", "lever_arm", "max_iterations", "colored",
-                   "parameters", "g_mps2"}
+                   "parameters", "g_mps2", "solver"}
+#: solver options an [estimator] table may give directly (older scenario files), not under [estimator.solver]
+_FLAT_SOLVER_KEYS = ("max_iterations", "colored")
 SCOPES = ("replication", "aircraft", "maneuver")
 #: edge-unit suffix of a drawn error path -> (SI suffix, factor to SI); the table of synth.errors
 _EDGE_UNITS = (("_deg_per_deg", "_rad_per_rad", 1.0), ("_deg_s", "_rps", math.pi / 180.0),
@@ -209,6 +217,9 @@ class EstimatorSettings:
     colored: bool = True
     parameters: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     g_mps2: float = 9.80665
+    #: the solver's options (``[estimator.solver]`` and the flat ``max_iterations``/``colored``,
+    #: mapped by :meth:`estimator.calibration.CalibrationOptions.from_mapping`)
+    solver: SolverOptions = field(default_factory=SolverOptions)
 
 
 @dataclass(frozen=True)
@@ -338,6 +349,28 @@ def scenario_hash(raw: Mapping) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def _solver_options(est: Mapping, where: str) -> SolverOptions:
+    """``[estimator.solver]`` and the flat ``max_iterations``/``colored`` through the one mapping
+    of option names (:meth:`estimator.calibration.CalibrationOptions.from_mapping`)."""
+    table = est.get("solver", {})
+    if not isinstance(table, Mapping):
+        raise ScenarioError(f"{where}.solver must be a table of option = value, got {table!r}")
+    valid = option_tables()["solver"]
+    for key in table:
+        if key not in valid:
+            m = close_match(key, valid)
+            raise ScenarioError(f"{where}.solver: {key!r} is not a solver option"
+                                + (f" (did you mean {m!r}?)" if m else "") + f"; valid: {', '.join(valid)}")
+    twice = [k for k in _FLAT_SOLVER_KEYS if k in est and k in table]
+    if twice:
+        raise ScenarioError(f"{where}: {twice} given both in [estimator] and [estimator.solver]; keep one")
+    options = {**{k: est[k] for k in _FLAT_SOLVER_KEYS if k in est}, **table}
+    try:
+        return CalibrationOptions.from_mapping(options).workflow.solver
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
+
+
 def parse_scenario(raw: Mapping, source: str = "<dict>") -> Scenario:
     """Validate a scenario mapping (as read from TOML); errors name the file and the key."""
     raw = copy.deepcopy(dict(raw))
@@ -381,15 +414,17 @@ def parse_scenario(raw: Mapping, source: str = "<dict>") -> Scenario:
         raise ScenarioError(f"{source}: [estimator]: unknown keys {sorted(unknown)}; "
                             f"valid: {sorted(_ESTIMATOR_KEYS)}")
     channels = est.get("channels")
+    solver = _solver_options(est, f"{source}: [estimator]")
     settings = EstimatorSettings(
         model=str(est.get("model", "tejas")),
         channels=None if channels is None else tuple(str(c) for c in channels),
         select=est.get("select"),
         lever_arm=str(est.get("lever_arm", "imu_point")),
-        max_iterations=int(est.get("max_iterations", 40)),
-        colored=bool(est.get("colored", True)),
+        max_iterations=solver.max_iterations,
+        colored=solver.colored,
         parameters={str(k): dict(v) for k, v in dict(est.get("parameters", {})).items()},
         g_mps2=float(est.get("g_mps2", 9.80665)),
+        solver=solver,
     )
     scenario = Scenario(name=str(raw.get("name", Path(source).stem)),
                         description=str(raw.get("description", "")), campaign=campaign,
