@@ -37,7 +37,7 @@ from campaigns.workflow_truth import calibrated_errors
 from estimator.io import problem_from_dataset
 from estimator.problem import Problem
 from estimator.result import STATUS_TEXT, EstimationResult
-from estimator.solver import SolverOptions, estimate
+from estimator.solver import estimate
 from estimator.verdict import Verdict
 from estimator.workflow import RAD2DEG, apportion, stage_residuals, three_sigma, vane_biases
 from synth.campaign import software_versions
@@ -484,8 +484,8 @@ def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequen
             problem = problem_from_dataset(
                 tmp, select=est.select, model=est.model, channels=est.channels,
                 overrides=est.parameters or None, lever_arm=est.lever_arm, g_mps2=est.g_mps2)
-            result = estimate(problem, SolverOptions(max_iterations=est.max_iterations,
-                                                     colored=est.colored))
+            # every [estimator.solver] option (the shipped scenarios: max_iterations 40, colored)
+            result = estimate(problem, est.solver)
             truth = _truth_of(problem, result) if result.success else None
         notes = tuple(dict.fromkeys(str(w.message) for w in caught))  # scrubbed by run_replication
         status = int(result.status)
