@@ -47,8 +47,8 @@ from scipy.signal import lfilter
 from test_estimator import DEG, RATE_HZ, Flight, _truth_values
 from threadpoolctl import threadpool_limits
 
+from estimator.io.modelset import load_model_set
 from estimator.model import Model
-from estimator.modelfile import load_model_set
 from estimator.solver import SolverOptions, estimate
 
 DT_S = 1.0 / RATE_HZ

@@ -21,8 +21,8 @@ from _analytic_fpr import G, analytic
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from estimator.io.modelset import load_model_set
 from estimator.model import Model
-from estimator.modelfile import load_model_set
 from estimator.problem import ManeuverData, Problem, expand_parameters
 from estimator.solver import SolverOptions, estimate
 

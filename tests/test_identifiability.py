@@ -21,9 +21,9 @@ import pytest
 from test_estimator import DEG, Flight, _truth_values
 
 from estimator.identifiability import _screen
+from estimator.io.modelset import load_model_set
 from estimator.iteration import _evaluate
 from estimator.model import Model
-from estimator.modelfile import load_model_set
 from estimator.normal_equations import Structure, channel_variances, residual_sums
 from estimator.parameters import ParameterSet
 from estimator.solver import SolverOptions, estimate

@@ -31,7 +31,7 @@ from test_estimator import DEG, Flight, _truth_values
 from test_identifiability import NOISE, _with_bounds
 
 import estimator
-from estimator.modelfile import load_model_set
+from estimator.io.modelset import load_model_set
 from estimator.parameters import ParameterSet, ParameterSpec
 from estimator.result import JSON_FORMAT, STATUS_TEXT, EstimationResult, ReadOnlyTable
 from estimator.solver import SolverOptions, estimate

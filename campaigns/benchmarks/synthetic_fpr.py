@@ -23,8 +23,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.integrate import cumulative_simpson
 
-from estimator.io.modelset import finalize_parameters
-from estimator.modelfile import load_model_set
+from estimator.io.modelset import finalize_parameters, load_model_set
 from estimator.problem import ManeuverData, Problem, expand_parameters
 
 G = 9.80665

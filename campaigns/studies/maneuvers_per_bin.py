@@ -63,7 +63,7 @@ from campaigns.studies.shss_segments import (
     paragraph,
     run_scenarios,
 )
-from estimator.modelfile import load_model_set
+from estimator.io.modelset import load_model_set
 
 STUDY = "maneuvers_per_bin"
 #: the desired vane AOA accuracy, deg 3-sigma (paper Table 2, SPEC §8), and the margin asked for:

@@ -64,7 +64,7 @@ from campaigns.montecarlo.summary import CALIBRATION_KINDS, load_results, summar
 from campaigns.studies.invocations import Invocation, invocations_text, machine_text
 from campaigns.truth import true_parameters
 from estimator.io import problem_from_dataset
-from estimator.modelfile import load_model_set
+from estimator.io.modelset import load_model_set
 from synth.errors import PROBE_SENSORS, VANE_SENSORS, ErrorConfig
 from synth.workers import worker_pool
 
