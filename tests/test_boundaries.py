@@ -48,10 +48,7 @@ RULES = (
     Rule(("estimator", "synth"), TEST_ONLY,
          "estimator/ and synth/ never import the tests, their helpers or test-only packages"),
     Rule(("campaigns", "aircraft_models"), TEST_ONLY,
-         "shipped code never imports the tests, their helpers or test-only packages",
-         # the colored-noise benchmark borrows the test's problem and sandwich through sys.path
-         # (issue 12: one analytic flight for tests and benchmarks removes it)
-         known=frozenset({("campaigns.benchmarks.bench_colored", "test_colored_uncertainty")})),
+         "shipped code never imports the tests, their helpers or test-only packages"),
 )
 
 

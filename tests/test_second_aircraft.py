@@ -7,7 +7,7 @@ to apportion, the reference Mach, the initial conditions' sources, the figures' 
 Python names its channels.
 
 The data are made here as a user's would come: CSV files (angles in deg, rates in deg/s) and a
-problem file naming the model set. The flight is the analytic one of ``tests/_analytic_fpr.py``
+problem file naming the model set. The flight is the analytic one of ``campaigns/analytic_flight.py``
 (states and IMU inputs that satisfy the state equations exactly): three aircraft, four maneuvers
 each, two at 500 m (Mach 0.44: the Mach 0.4 bin) and two at 8000 m (Mach 0.49: the 0.5 bin); each
 vane reads its model with the injected installation biases, fleet offset, scale factors and time
@@ -31,8 +31,8 @@ import warnings
 import numpy as np
 import pandas as pd
 import pytest
-from _analytic_fpr import analytic
 
+from campaigns.analytic_flight import analytic
 from estimator.io import load_problem
 from estimator.io.modelset import declarations_of
 

@@ -3,12 +3,13 @@
     python campaigns/benchmarks/bench_colored.py [--n 1200] [--n-sweep 200] [--workers 2]
                                                  [--out campaigns/benchmarks/results/colored_mc.txt]
 
-The analytic problem of ``tests/test_colored_uncertainty.py`` (built on the estimator tests'
-analytic flight: two maneuvers whose data satisfy the state equations exactly, ten channels, the
-paper's channel models, 52 parameters estimated) with coloured, cross-correlated noise: AR(1)
-processes, a common component shared by the three angle-of-attack channels and another by the two
-sideslip channels plus independent parts (zero-lag correlation coefficients 0.6 and 0.5), each
-replication with fresh noise from an explicit seed, estimated from the truth
+The analytic problem of ``colored_mc.py`` (built on the estimator tests' analytic flight,
+``campaigns/analytic_flight.py``: two maneuvers whose data satisfy the state equations exactly,
+ten channels, the paper's channel models, 52 parameters estimated) with coloured,
+cross-correlated noise: AR(1) processes, a common component shared by the three angle-of-attack
+channels and another by the two sideslip channels plus independent parts (zero-lag correlation
+coefficients 0.6 and 0.5), each replication with fresh noise from an explicit seed, estimated
+from the truth
 (``start="given"``, no fit diagnostics, no IMU noise term: the analytic flight's IMU is exact).
 Per parameter, the scatter of the estimates (sample standard deviation over the replications) is
 divided by the mean reported deviation of
@@ -31,8 +32,8 @@ and, as a reference that is not the estimator's output,
 
 The three coloured forms are the solver's (three estimations of the same data per replication);
 on the first replications of every point the all-lags forms (cross- and per-channel) and the
-Cramér-Rao deviations are checked against the test module's independent FFT evaluation of the
-sandwich.
+Cramér-Rao deviations are checked against ``colored_mc.py``'s independent FFT evaluation of the
+sandwich (itself checked against the sandwich's definition by ``tests/test_colored_uncertainty.py``).
 
 Precision: the sample standard deviation of N Gaussian estimates has relative standard error
 1/sqrt(2N); the ratios' standard errors quoted are from a bootstrap over the replications (pooled
@@ -60,10 +61,9 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT))  # this checkout's code, whose commit code_version() reports
 
-import test_colored_uncertainty as tcu  # noqa: E402  (the problem, the noise, the sandwich)
+from campaigns.benchmarks import colored_mc as cmc  # noqa: E402  (the problem, the noise, the sandwich)
 
 #: Sweep points: (maneuver length s, common tau s, own tau s).
 SWEEP = ((30.0, 0.0, 0.0), (30.0, 0.1, 0.05), (30.0, 1.0, 0.4), (20.0, 0.5, 0.2), (40.0, 0.5, 0.2))
@@ -105,12 +105,12 @@ def _work(task) -> list[dict]:
     """One chunk of replications of one point, in a worker process."""
     T, tc, to, seeds, check_seeds = task
     if T not in _FLIGHTS:
-        _FLIGHTS[T] = tcu.make_flight(T)
-    noise = tcu.CorrelatedNoise(tc, to)
+        _FLIGHTS[T] = cmc.make_flight(T)
+    noise = cmc.CorrelatedNoise(tc, to)
     out = []
     for s in seeds:
         try:
-            out.append(tcu.replicate(_FLIGHTS[T], noise, s, per_channel="solver", periodogram=True,
+            out.append(cmc.replicate(_FLIGHTS[T], noise, s, per_channel="solver", periodogram=True,
                                      check=s in check_seeds))
         except Exception as exc:  # noqa: BLE001  (a failed replication is counted, not fatal)
             out.append({"seed": s, "error": f"{type(exc).__name__}: {exc}"})
@@ -126,14 +126,14 @@ def run_point(pool, point, n, seed0, workers) -> tuple[dict, float, list]:
     reps = [r for part in pool.map(_work, chunks) for r in part]
     reps.sort(key=lambda r: r["seed"])
     errors = [(r["seed"], r["error"]) for r in reps if "error" in r]
-    return tcu.collect([r for r in reps if "error" not in r]), time.perf_counter() - t0, errors
+    return cmc.collect([r for r in reps if "error" not in r]), time.perf_counter() - t0, errors
 
 
 def analyse(point, mc) -> dict:
     T, tc, to = point
-    flight = tcu.make_flight(T)
-    noise = tcu.CorrelatedNoise(tc, to)
-    orc = tcu.oracle(flight, noise, mc["free"])
+    flight = cmc.make_flight(T)
+    noise = cmc.CorrelatedNoise(tc, to)
+    orc = cmc.oracle(flight, noise, mc["free"])
     ps = flight.problem().parameters
     keys = [ps.keys[i] for i in mc["free"]]
     kinds = np.array([ps.parameters[i].kind for i in mc["free"]])
@@ -147,7 +147,7 @@ def analyse(point, mc) -> dict:
                 # the reported cross deviation as an RMS over the replications (sqrt of the mean
                 # variance) instead of the mean
                 "cross_rms": np.sqrt((rep["cross"] ** 2).mean(axis=0))}
-    rt = tcu.ratios(mc["values"], reported, groups, n_boot=400, seed=1)
+    rt = cmc.ratios(mc["values"], reported, groups, n_boot=400, seed=1)
     # mean deviation against the RMS one (sqrt of the mean variance): how much "mean" matters
     jensen = float(np.max(np.abs(np.sqrt((rep["cross"] ** 2).mean(0)) / rep["cross"].mean(0) - 1)))
     # how much the estimator's deviation scatters over the replications (coefficient of variation)
@@ -190,9 +190,9 @@ def pooled_table(a, groups=None) -> list[str]:
 
 def noise_check(noise, n=1201, m=400, seed=11) -> list[str]:
     """Empirical auto/cross-correlation coefficients of the generator against the intended ones."""
-    v = noise.draw(np.random.default_rng(seed), list(tcu.SIGMA), n, m)
+    v = noise.draw(np.random.default_rng(seed), list(cmc.SIGMA), n, m)
     lags_s = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0)
-    lags = [round(x / tcu.DT_S) for x in lags_s]
+    lags = [round(x / cmc.DT_S) for x in lags_s]
     lines = [f"{'pair':<24}" + "".join(f"{f'lag {x:g}s':>18}" for x in lags_s),
              f"{'':<24}" + "".join(f"{'intended  empir.':>18}" for _ in lags_s)]
     worst = 0.0
@@ -208,7 +208,7 @@ def noise_check(noise, n=1201, m=400, seed=11) -> list[str]:
             cells += f"{want:>9.3f}{got:>9.3f}"
         lines.append(f"{c + ' x ' + d:<24}{cells}")
     lines.append(f"({m} records of {n} samples; largest |empirical - intended| {worst:.3f}, standard error "
-                 f"about {np.sqrt(2 * max(noise.tau_common_s, tcu.DT_S) / tcu.DT_S / (m * n)):.3f})")
+                 f"about {np.sqrt(2 * max(noise.tau_common_s, cmc.DT_S) / cmc.DT_S / (m * n)):.3f})")
     return lines
 
 
@@ -222,7 +222,7 @@ def location_model(n=1200, N=3000, seed=5) -> tuple[list[str], list[float]]:
     valid = np.r_[np.ones(n, bool), False, np.ones(n - 1, bool)]
     got = []
     for tau in (0.0, 0.1, 0.5, 1.0):
-        v = tcu.CorrelatedNoise.ar1(rng, tau, n, N)
+        v = cmc.CorrelatedNoise.ar1(rng, tau, n, N)
         b = v.mean(axis=1)
         e = v - b[:, None]
         E = np.fft.rfft(e, L, axis=1)
@@ -249,8 +249,8 @@ def code_version() -> str:
 
     try:
         commit = git("rev-parse", "--short", "HEAD").strip() or "?"
-        paths = ["estimator", "tests/test_colored_uncertainty.py", "tests/test_estimator.py",
-                 "tests/_analytic_fpr.py", "campaigns/benchmarks/bench_colored.py", "campaigns/machine.py"]
+        paths = ["estimator", "campaigns/analytic_flight.py", "campaigns/benchmarks/colored_mc.py",
+                 "campaigns/benchmarks/bench_colored.py", "campaigns/machine.py"]
         ran = [x[3:] for x in git("status", "--porcelain", "--", *paths).splitlines() if x.strip()]
         other = [x for x in git("status", "--porcelain", "--untracked-files=no").splitlines() if x.strip()]
     except OSError:
@@ -307,7 +307,7 @@ def main() -> None:
                 shlex.quote(x) for x in [str(Path(sys.argv[0]).resolve().relative_to(ROOT)), *sys.argv[1:]]),
             *machine(), f"code: {code}"]
     T, tc, to = MAIN
-    noise = tcu.CorrelatedNoise(tc, to)
+    noise = cmc.CorrelatedNoise(tc, to)
     from synth.workers import worker_pool
 
     with worker_pool(a.workers, _init_worker) as pool:
@@ -323,9 +323,10 @@ def main() -> None:
     rt = main_a["rt"]
     lines = [
         "",
-        "PROBLEM: tests/test_colored_uncertainty.py on the analytic flight of tests/test_estimator.py: 2 "
-        f"maneuvers of {T:g} s at 40 Hz, channels phi theta psi tas h alpha_zl alpha_zr alpha_zsp beta_zsp "
-        f"beta_znp (tejas models), {mc['free'].size} parameters estimated (per maneuver: initial "
+        "PROBLEM: campaigns/benchmarks/colored_mc.py on the analytic flight of "
+        f"campaigns/analytic_flight.py: 2 maneuvers of {T:g} s at 40 Hz, channels phi theta psi tas h "
+        f"alpha_zl alpha_zr alpha_zsp beta_zsp beta_znp (tejas models), {mc['free'].size} parameters "
+        "estimated (per maneuver: initial "
         "conditions, IMU biases, k_h; global: time delays, table values, vane/probe biases, k_spr; the "
         "others held by the estimator for lack of data, the same in every replication), started at the "
         "truth, SolverOptions(start='given', diagnose=False, imu_noise='none'); per replication three "

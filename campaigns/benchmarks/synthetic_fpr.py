@@ -13,7 +13,8 @@ measures the solver, not a model mismatch.
 
 A fleet of five aircraft: three with the nose probe, two with the flight-test boom (paper §3),
 each with its own CG and installation biases. Data are generated in memory in about a second for
-70 maneuvers, independently of the estimator's code (as in ``tests/test_estimator.py``).
+70 maneuvers, independently of the estimator's code: the kinematics, the lever arms and the channel
+models are those of :mod:`campaigns.analytic_flight`, the estimator tests' analytic flight.
 """
 
 from __future__ import annotations
@@ -23,21 +24,21 @@ from dataclasses import replace
 import numpy as np
 from scipy.integrate import cumulative_simpson
 
+from campaigns.analytic_flight import (
+    DEG,
+    SENSORS,
+    TABLES,
+    G,
+    Sinus,
+    imu_inputs,
+    kinematic_flight,
+    local_flow,
+    tejas_channels,
+    truth_tables,
+)
 from estimator.io.modelset import finalize_parameters, load_model_set
 from estimator.problem import ManeuverData, Problem, expand_parameters
 
-G = 9.80665
-DEG = np.pi / 180.0
-SENSORS = {
-    "imu": np.array([1.80, 0.10, 0.20]),
-    "vane_left": np.array([6.20, -0.45, 0.25]),
-    "vane_right": np.array([6.20, 0.45, 0.25]),
-    "side_probe": np.array([6.60, 0.0, 0.05]),
-    "nose_probe": np.array([8.30, 0.0, 0.22]),
-    "boom_alpha_vane": np.array([9.40, 0.0, 0.22]),
-    "boom_beta_upper_vane": np.array([9.55, 0.0, 0.12]),
-    "boom_beta_lower_vane": np.array([9.55, 0.0, 0.32]),
-}
 #: aircraft id -> carries the boom (else the nose probe)
 FLEET = {"PV1": False, "PV2": False, "PV3": False, "PT1": True, "PT2": True}
 NOISE = {"phi": 0.03 * DEG, "theta": 0.03 * DEG, "psi": 0.03 * DEG, "tas": 0.3, "h": 1.0, "h_dgps": 0.5,
@@ -50,19 +51,6 @@ TAUS = {"tau_phi": 0.02, "tau_theta": 0.02, "tau_psi": 0.02, "tau_tas": 0.0, "ta
 SCALES = {"k_ba": 0.02, "k_bu": -0.03, "k_bl": 0.025}
 
 
-class _Sinus:
-    """``f(t) = bias + slope t + sum A sin(w t + phase)`` and its derivative."""
-
-    def __init__(self, bias, terms, slope=0.0):
-        self.bias, self.terms, self.slope = bias, terms, slope
-
-    def __call__(self, t):
-        return self.bias + self.slope * t + sum(a * np.sin(w * t + p) for a, w, p in self.terms)
-
-    def d(self, t):
-        return self.slope + sum(a * w * np.cos(w * t + p) for a, w, p in self.terms)
-
-
 def _trajectory(rng: np.random.Generator):
     """A random analytic flight: (inputs(t) -> (a_cg, omega), states(t) -> (N, 6) without h)."""
     def terms(n, amp, wlo=0.3, whi=2.5):
@@ -71,44 +59,19 @@ def _trajectory(rng: np.random.Generator):
 
     speed = rng.uniform(110.0, 230.0)
     alpha0 = rng.uniform(-1.0, 16.0) * DEG
-    u = _Sinus(speed * np.cos(alpha0), terms(2, 0.05 * speed, 0.1, 0.6))
-    v = _Sinus(0.0, terms(2, 0.05 * speed))
-    w = _Sinus(speed * np.sin(alpha0), terms(2, 0.06 * speed))
-    phi = _Sinus(rng.uniform(-0.3, 0.3), terms(2, 0.6))
-    th = _Sinus(alpha0 + rng.uniform(-0.05, 0.1), terms(2, 0.15))
-    psi = _Sinus(rng.uniform(-np.pi, np.pi), terms(1, 0.1, 0.1, 0.5), slope=rng.uniform(-0.05, 0.05))
-
-    def inputs(t):
-        ph, tt = phi(t), th(t)
-        phd, thd, psd = phi.d(t), th.d(t), psi.d(t)
-        p = phd - psd * np.sin(tt)
-        q = thd * np.cos(ph) + psd * np.cos(tt) * np.sin(ph)
-        r = -thd * np.sin(ph) + psd * np.cos(tt) * np.cos(ph)
-        uu, vv, ww = u(t), v(t), w(t)
-        ax = u.d(t) - (r * vv - q * ww - G * np.sin(tt))
-        ay = v.d(t) - (p * ww - r * uu + G * np.cos(tt) * np.sin(ph))
-        az = w.d(t) - (q * uu - p * vv + G * np.cos(tt) * np.cos(ph))
-        return np.stack([ax, ay, az], -1), np.stack([p, q, r], -1)
-
-    def states(t):
-        return np.stack([u(t), v(t), w(t), phi(t), th(t), psi(t)], -1)
-
-    return inputs, states
+    u = Sinus(speed * np.cos(alpha0), terms(2, 0.05 * speed, 0.1, 0.6))
+    v = Sinus(0.0, terms(2, 0.05 * speed))
+    w = Sinus(speed * np.sin(alpha0), terms(2, 0.06 * speed))
+    phi = Sinus(rng.uniform(-0.3, 0.3), terms(2, 0.6))
+    th = Sinus(alpha0 + rng.uniform(-0.05, 0.1), terms(2, 0.15))
+    psi = Sinus(rng.uniform(-np.pi, np.pi), terms(1, 0.1, 0.1, 0.5), slope=rng.uniform(-0.05, 0.05))
+    return kinematic_flight(u, v, w, phi, th, psi)
 
 
 def _tables(specs: dict, rng: np.random.Generator) -> dict[str, np.ndarray]:
     """Truth correction tables near the model set's start values (f1(0) = f3(0) = 0 as held)."""
-    bp = {n: np.asarray(specs[n].breakpoints) for n in ("f1", "f2", "f3", "f4", "f5")}
-    out = {
-        "f1": bp["f1"] * (1.0 + 0.03 * rng.normal(size=bp["f1"].size)),
-        "f2": 0.1 + 0.05 * rng.normal(size=bp["f2"].size),
-        "f3": 0.3 * DEG * rng.normal(size=bp["f3"].size),
-        "f4": 0.05 * rng.normal(size=bp["f4"].size),
-        "f5": 1.0 + 0.05 * rng.normal(size=bp["f5"].size),
-    }
-    out["f1"][np.argmin(np.abs(bp["f1"]))] = 0.0
-    out["f3"][np.argmin(np.abs(bp["f3"]))] = 0.0
-    return out
+    return truth_tables({n: np.asarray(specs[n].breakpoints) for n in TABLES},
+                        {n: rng.normal(size=len(specs[n].breakpoints)) for n in TABLES})
 
 
 def _maneuver(mid: str, aircraft: str, duration_s: float, rate_hz: float, truth: dict,
@@ -117,11 +80,7 @@ def _maneuver(mid: str, aircraft: str, duration_s: float, rate_hz: float, truth:
     boom = FLEET[aircraft]
     r_cg = np.array([0.33, 0.0, 0.13]) + rng.normal(0.0, [0.05, 0.005, 0.01])
     t = np.arange(int(round(duration_s * rate_hz)) + 1) / rate_hz
-    a_cg, om = inputs(t)
-    eps = 1e-5
-    omd = (inputs(t + eps)[1] - inputs(t - eps)[1]) / (2 * eps)
-    r_imu = SENSORS["imu"] - r_cg
-    a_imu = a_cg + np.cross(omd, r_imu) + np.cross(om, np.cross(om, r_imu))
+    a_imu, om = imu_inputs(inputs, t, SENSORS["imu"] - r_cg)
     da = rng.normal(0.0, 0.1, 3)
     dw = rng.normal(0.0, 0.2 * DEG, 3)
     # altitude: quadrature of h' on a grid 16x finer than the samples (Simpson, error ~1e-9 m)
@@ -136,34 +95,17 @@ def _maneuver(mid: str, aircraft: str, duration_s: float, rate_hz: float, truth:
         return np.column_stack([states(ts), np.interp(ts, t_fine, h_fine)])
 
     def flow(ts, sensor):
-        xs = states_at(ts)
-        vel = xs[:, :3] + (np.cross(inputs(ts)[1], SENSORS[sensor] - r_cg) if sensor else 0.0)
-        alpha = np.arctan2(vel[:, 2], vel[:, 0])
-        beta = np.arcsin(vel[:, 1] / np.linalg.norm(vel, axis=1))
-        flank = np.arctan2(vel[:, 1], vel[:, 0])
-        return alpha, beta, flank, np.linalg.norm(vel, axis=1)
+        return local_flow(states_at(ts), inputs(ts)[1], SENSORS[sensor] - r_cg)
 
-    tb, bp, ac = truth["tables"], truth["breakpoints"], truth["aircraft"][aircraft]
-
-    def tab(name, arg):
-        return np.interp(arg, bp[name], tb[name])
-
-    meas = {}
-    for name, idx in (("phi", 3), ("theta", 4), ("psi", 5), ("h", 6)):
-        meas[name] = states_at(t - TAUS[f"tau_{name}"])[:, idx]
-    # DGPS height: geometric (pressure altitude here is geometric too: k_h = 0), its own offset
-    meas["h_dgps"] = states_at(t - TAUS["tau_dgps"])[:, 6] + rng.uniform(-30.0, 30.0)
-    meas["tas"] = flow(t - TAUS["tau_tas"], None)[3]
-    for ch, sensor, sign in (("alpha_zl", "vane_left", -1.0), ("alpha_zr", "vane_right", 1.0)):
-        ts = t - TAUS[f"tau_{ch}"]
-        a_s, b_s, _, _ = flow(ts, sensor)
-        meas[ch] = tab("f1", a_s) + sign * tab("f2", flow(ts, None)[0]) * b_s + ac[f"b_{ch[-1]}"]
-    a_s, b_s, _, _ = flow(t - TAUS["tau_sp"], "side_probe")
-    z = a_s.copy()
-    for _ in range(60):  # alpha_zsp = alpha_s + f3(alpha_zsp) + b_sa: a contraction
-        z = a_s + tab("f3", z) + ac["b_sa"]
-    meas["alpha_zsp"] = z
-    meas["beta_zsp"] = (b_s + ac["b_sb"]) / (1.0 - tab("f4", z))
+    ac = truth["aircraft"][aircraft]
+    meas = tejas_channels(t, states_at, inputs, SENSORS, r_cg, TAUS, ac, truth["tables"],
+                          truth["breakpoints"], nose_probe=not boom)
+    # DGPS height: geometric (pressure altitude here is geometric too: k_h = 0), its own offset;
+    # listed after h (the noise below is drawn in this order)
+    dgps = states_at(t - TAUS["tau_dgps"])[:, 6] + rng.uniform(-30.0, 30.0)
+    items = list(meas.items())
+    after_h = list(meas).index("h") + 1
+    meas = dict(items[:after_h] + [("h_dgps", dgps)] + items[after_h:])
     if boom:
         ts = t - TAUS["tau_ba"]
         meas["alpha_zb"] = (1.0 + SCALES["k_ba"]) * flow(ts, "boom_alpha_vane")[0] + ac["b_ba"]
@@ -171,10 +113,6 @@ def _maneuver(mid: str, aircraft: str, duration_s: float, rate_hz: float, truth:
                               ("beta_zbl", "boom_beta_lower_vane", "bl")):
             fl = flow(t - TAUS[f"tau_{k}"], sensor)[2]
             meas[ch] = (1.0 + SCALES[f"k_{k}"]) * fl + ac[f"b_{k}"]
-    else:
-        ts = t - TAUS["tau_np"]
-        _, b_s, _, _ = flow(ts, "nose_probe")
-        meas["beta_znp"] = tab("f5", flow(ts, None)[0]) * (b_s + ac["b_n"])
     for c in meas:
         meas[c] = meas[c] + rng.normal(0.0, NOISE[c], t.size)
     return ManeuverData(
@@ -208,7 +146,7 @@ def synthetic_problem(n_maneuvers: int, seed: int = 1, rate_hz: float = 32.0,
     spec_map = {s.name: s for s in specs}
     truth = {
         "tables": _tables(spec_map, rng),
-        "breakpoints": {n: np.asarray(spec_map[n].breakpoints) for n in ("f1", "f2", "f3", "f4", "f5")},
+        "breakpoints": {n: np.asarray(spec_map[n].breakpoints) for n in TABLES},
         "aircraft": {a: {n: rng.uniform(-0.5, 0.5) * DEG for n in
                          ("b_l", "b_r", "b_sa", "b_sb", "b_n", "b_ba", "b_bu", "b_bl")} for a in FLEET},
     }

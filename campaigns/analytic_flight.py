@@ -1,0 +1,300 @@
+"""Analytic flights: states, IMU inputs and air-data channels that satisfy SPEC §3 exactly.
+
+u, v, w and the Euler angles are sums of sinusoids (:class:`Sinus`); the body rates follow from
+the Euler-angle kinematics and the specific force from the velocity equations
+(:func:`kinematic_flight`), so the flat-earth state equations hold exactly and only numerical
+errors of the code under test remain. The measured channels are the paper's Table 1 models
+(``estimator/models/tejas.toml``) applied by hand to the exact flow at each sensor,
+``V + omega x (r_s - r_cg)`` at ``t - tau`` (:func:`tejas_channels`), independently of the
+estimator's model code.
+
+Two users build on these pieces:
+
+- :class:`Flight`: the estimator tests' two-maneuver flight with fixed trajectories
+  (:func:`analytic`) and injected truth (:func:`truth_values`), as an estimation problem; also the
+  problem of the coloured-noise benchmark (``campaigns/benchmarks/bench_colored.py``);
+- ``campaigns/benchmarks/synthetic_fpr.py``: random trajectories, a fleet, a boom and noise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from estimator.io.modelset import load_model_set
+from estimator.problem import ManeuverData, Problem, expand_parameters
+
+G = 9.80665
+DEG = np.pi / 180.0
+#: Sensor positions, body axes, m (the nose-probe aircraft's and the flight-test boom's).
+SENSORS = {
+    "imu": np.array([1.80, 0.10, 0.20]),
+    "vane_left": np.array([6.20, -0.45, 0.25]),
+    "vane_right": np.array([6.20, 0.45, 0.25]),
+    "side_probe": np.array([6.60, 0.0, 0.05]),
+    "nose_probe": np.array([8.30, 0.0, 0.22]),
+    "boom_alpha_vane": np.array([9.40, 0.0, 0.22]),
+    "boom_beta_upper_vane": np.array([9.55, 0.0, 0.12]),
+    "boom_beta_lower_vane": np.array([9.55, 0.0, 0.32]),
+}
+TABLES = ("f1", "f2", "f3", "f4", "f5")
+
+#: A trajectory: inputs(t) -> (specific force at the CG, body rates), states(t) -> (N, 6 or 7).
+Inputs = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+States = Callable[[np.ndarray], np.ndarray]
+
+
+class Sinus:
+    """``f(t) = bias + slope t + sum A sin(w t + phase)``, with its derivative.
+
+    ``terms``: ``(A, w, phase)`` triples, w in rad/s.
+    """
+
+    def __init__(self, bias: float, terms=(), slope: float = 0.0):
+        self.bias, self.terms, self.slope = bias, terms, slope
+
+    def __call__(self, t):
+        return self.bias + self.slope * t + sum(a * np.sin(w * t + ph) for a, w, ph in self.terms)
+
+    def d(self, t):
+        return self.slope + sum(a * w * np.cos(w * t + ph) for a, w, ph in self.terms)
+
+
+def kinematic_flight(u: Sinus, v: Sinus, w: Sinus, phi: Sinus, theta: Sinus, psi: Sinus
+                     ) -> tuple[Inputs, States]:
+    """The inputs and states (u, v, w m/s; phi, theta, psi rad; no altitude) of the trajectory.
+
+    Returns
+    -------
+    inputs : t_s -> ((N, 3) specific force at the CG m/s^2, (N, 3) body rates rad/s), from the
+        Euler-angle kinematics and the flat-earth velocity equations, exact.
+    states : t_s -> (N, 6) states.
+    """
+    def inputs(t):
+        ph, tt = phi(t), theta(t)
+        phd, thd, psd = phi.d(t), theta.d(t), psi.d(t)
+        p = phd - psd * np.sin(tt)
+        q = thd * np.cos(ph) + psd * np.cos(tt) * np.sin(ph)
+        r = -thd * np.sin(ph) + psd * np.cos(tt) * np.cos(ph)
+        uu, vv, ww = u(t), v(t), w(t)
+        ax = u.d(t) - (r * vv - q * ww - G * np.sin(tt))
+        ay = v.d(t) - (p * ww - r * uu + G * np.cos(tt) * np.sin(ph))
+        az = w.d(t) - (q * uu - p * vv + G * np.cos(tt) * np.cos(ph))
+        return np.stack([ax, ay, az], -1), np.stack([p, q, r], -1)
+
+    def states(t):
+        return np.stack([u(t), v(t), w(t), phi(t), theta(t), psi(t)], -1)
+
+    return inputs, states
+
+
+def analytic(params: dict | None = None) -> tuple[Inputs, States]:
+    """The estimator tests' fixed trajectory (150 m/s, amplitudes ``params`` may change).
+
+    ``states(t, h0=3000.0)`` adds the altitude, m, by integrating ``h'`` (tolerance 1e-10 m).
+    """
+    p = params or {}
+    u = Sinus(150.0, ((p.get("au", 5.0), 0.4, 0.0),))
+    v = Sinus(0.0, ((p.get("av", 3.0), 0.9, 0.2),))
+    w = Sinus(10.0, ((p.get("aw", 4.0), 0.6, 1.0),))
+    phi = Sinus(0.0, ((p.get("aphi", 0.5), 0.7, 0.0),))
+    th = Sinus(0.1, ((p.get("ath", 0.2), 0.5, 0.3),))
+    psi = Sinus(0.4, ((0.1, 0.3, 0.0),), slope=0.05)
+    inputs, six = kinematic_flight(u, v, w, phi, th, psi)
+
+    def states(t, h0=3000.0):
+        def hdot(tt, h):
+            return [u(tt) * np.sin(th(tt)) - v(tt) * np.cos(th(tt)) * np.sin(phi(tt))
+                    - w(tt) * np.cos(th(tt)) * np.cos(phi(tt))]
+        if t.size == 1:
+            h = np.array([h0])
+        else:
+            h = solve_ivp(hdot, (t[0], t[-1]), [h0], t_eval=t, rtol=1e-12, atol=1e-10).y[0]
+        return np.column_stack([six(t), h])
+
+    return inputs, states
+
+
+def imu_inputs(inputs: Inputs, t_s: np.ndarray, r_imu_from_cg_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exact specific force at the IMU (lever arm ``r_imu_from_cg_m``, m) and body rates at ``t_s``.
+
+    The angular acceleration is a central difference (step 1e-5 s: error ~1e-10 rad/s^2).
+    """
+    a_cg, om = inputs(t_s)
+    eps = 1e-5
+    omd = (inputs(t_s + eps)[1] - inputs(t_s - eps)[1]) / (2 * eps)
+    r = r_imu_from_cg_m
+    return a_cg + np.cross(omd, r) + np.cross(om, np.cross(om, r)), om
+
+
+def local_flow(x: np.ndarray, omega_rps: np.ndarray, r_from_cg_m: np.ndarray | None):
+    """Flow at a sensor ``r_from_cg_m`` (m; None: the CG) from states ``x`` (N, >= 3) and rates.
+
+    Returns alpha, beta, flank angle ``atan2(v, u)`` (rad) and airspeed (m/s), each (N,).
+    """
+    vel = x[:, :3] + (np.cross(omega_rps, r_from_cg_m) if r_from_cg_m is not None else 0.0)
+    speed = np.linalg.norm(vel, axis=1)
+    return (np.arctan2(vel[:, 2], vel[:, 0]), np.arcsin(vel[:, 1] / speed),
+            np.arctan2(vel[:, 1], vel[:, 0]), speed)
+
+
+def truth_tables(breakpoints: dict[str, np.ndarray], z: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Truth correction tables near the model set's start values from standard normal draws ``z``
+    (one per breakpoint); f1(0) = f3(0) = 0 as the model set holds them."""
+    out = {
+        "f1": breakpoints["f1"] * (1.0 + 0.03 * z["f1"]),
+        "f2": 0.1 + 0.05 * z["f2"],
+        "f3": 0.3 * DEG * z["f3"],
+        "f4": 0.05 * z["f4"],
+        "f5": 1.0 + 0.05 * z["f5"],
+    }
+    out["f1"][np.argmin(np.abs(breakpoints["f1"]))] = 0.0
+    out["f3"][np.argmin(np.abs(breakpoints["f3"]))] = 0.0
+    return out
+
+
+def tejas_channels(t_s: np.ndarray, states_at: States, inputs: Inputs, sensors: dict[str, np.ndarray],
+                   r_cg_m: np.ndarray, taus: dict[str, float], biases: dict[str, float],
+                   tables: dict[str, np.ndarray], breakpoints: dict[str, np.ndarray],
+                   nose_probe: bool = True) -> dict[str, np.ndarray]:
+    """Noise-free channels of the ``tejas`` model set at ``t_s`` (SI), applied by hand.
+
+    ``states_at(t)``: (N, 7) states with altitude; ``taus``: the time delays by parameter name
+    (``tau_phi``, ..., ``tau_alpha_zl``, ``tau_sp``, ``tau_np``); ``biases``: ``b_l``, ``b_r``,
+    ``b_sa``, ``b_sb`` (and ``b_n`` with ``nose_probe``). Attitude, altitude and airspeed; the two
+    vanes; the side probe (its angle-of-attack model is implicit: a fixed point, a contraction);
+    with ``nose_probe``, its sideslip.
+    """
+    def flow(ts, sensor):
+        return local_flow(states_at(ts), inputs(ts)[1], sensors[sensor] - r_cg_m if sensor else None)
+
+    def tab(name, arg):
+        return np.interp(arg, breakpoints[name], tables[name])
+
+    meas = {}
+    for name, idx in (("phi", 3), ("theta", 4), ("psi", 5), ("h", 6)):
+        meas[name] = states_at(t_s - taus[f"tau_{name}"])[:, idx]
+    meas["tas"] = flow(t_s - taus["tau_tas"], None)[3]
+    for ch, sensor, sign in (("alpha_zl", "vane_left", -1.0), ("alpha_zr", "vane_right", 1.0)):
+        ts = t_s - taus[f"tau_{ch}"]
+        a_s, b_s, _, _ = flow(ts, sensor)
+        meas[ch] = tab("f1", a_s) + sign * tab("f2", flow(ts, None)[0]) * b_s + biases[f"b_{ch[-1]}"]
+    a_s, b_s, _, _ = flow(t_s - taus["tau_sp"], "side_probe")
+    z = a_s.copy()
+    # alpha_zsp = alpha_s + f3(alpha_zsp) + b_sa: a contraction (|f3'| << 1); on these flights it
+    # reaches its fixed point to the last bit in fewer than 30 iterations
+    for _ in range(60):
+        z = a_s + tab("f3", z) + biases["b_sa"]
+    meas["alpha_zsp"] = z
+    meas["beta_zsp"] = (b_s + biases["b_sb"]) / (1.0 - tab("f4", z))
+    if nose_probe:
+        ts = t_s - taus["tau_np"]
+        _, b_s, _, _ = flow(ts, "nose_probe")
+        meas["beta_znp"] = tab("f5", flow(ts, None)[0]) * (b_s + biases["b_n"])
+    return meas
+
+
+# ----------------------------------------------------------------------------- the tests' flight
+R_CG = np.array([0.33, 0.0, 0.13])
+CHANNELS = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr", "alpha_zsp", "beta_zsp", "beta_znp"]
+RATE_HZ = 40.0
+#: The sensors of :class:`Flight` (no boom).
+FLIGHT_SENSORS = {k: SENSORS[k] for k in ("imu", "vane_left", "vane_right", "side_probe", "nose_probe")}
+
+
+def truth_values(rng: np.random.Generator) -> dict:
+    """Injected parameter values of :class:`Flight` (SI); the tables from ``_table_noise``."""
+    return {
+        "dax": 0.08, "day": -0.05, "daz": 0.12, "dp": 0.2 * DEG, "dq": -0.3 * DEG, "dr": 0.15 * DEG,
+        "tau_phi": 0.02, "tau_theta": 0.02, "tau_psi": 0.02, "tau_tas": 0.0, "tau_h": 0.0,
+        "tau_alpha_zl": 0.03, "tau_alpha_zr": 0.045, "tau_sp": 0.08, "tau_np": 0.06, "k_h": 0.0, "k_spr": 0.0,
+        "b_l": 0.3 * DEG, "b_r": -0.2 * DEG, "b_sa": 0.25 * DEG, "b_sb": -0.15 * DEG, "b_n": 0.1 * DEG,
+        "f1": None, "f2": None, "f3": None, "f4": None, "f5": None,
+        "_table_noise": rng.normal(size=40),
+    }
+
+
+class Flight:
+    """Two maneuvers of analytic flight (:func:`analytic`) with the channels generated by hand.
+
+    Parameters
+    ----------
+    truth : :func:`truth_values`.
+    specs : the ``tejas`` model set's parameter specifications (their table breakpoints).
+    T : maneuver length, s.
+    tau_override : time delays replacing the truth's.
+    """
+
+    def __init__(self, truth: dict, specs, T: float = 25.0, tau_override: dict | None = None):
+        self.specs = {s.name: s for s in specs}
+        tn = truth["_table_noise"]
+        self.bp = {n: np.asarray(self.specs[n].breakpoints) for n in TABLES}
+        # slices of one draw: the tables keep their values when a breakpoint count changes elsewhere
+        start = {"f1": 0, "f2": 10, "f3": 20, "f4": 25, "f5": 30}
+        self.tables = truth_tables(self.bp, {n: tn[start[n]:start[n] + self.bp[n].size] for n in TABLES})
+        self.truth = dict(truth, **(tau_override or {}))
+        self.maneuvers = [self._maneuver(f"m{k}", T, params) for k, params in
+                          enumerate([dict(au=8.0, aphi=0.4, ath=0.15), dict(av=6.0, aw=6.0, aphi=0.8)])]
+
+    def _maneuver(self, mid: str, T: float, params: dict) -> ManeuverData:
+        tr = self.truth
+        inputs, states = analytic(params)
+        t = np.arange(0.0, T + 1e-9, 1.0 / RATE_HZ)
+        a_imu, om = imu_inputs(inputs, t, FLIGHT_SENSORS["imu"] - R_CG)
+        da = np.array([tr["dax"], tr["day"], tr["daz"]])
+        dw = np.array([tr["dp"], tr["dq"], tr["dr"]])
+        # h comes from an ODE: integrate it once on a fine grid, interpolate (error ~1e-9 m)
+        t_fine = np.arange(-1.0, T + 1.0, 1e-3)
+        h_fine = states(t_fine)[:, 6]
+
+        def states_at(ts):
+            x = states(ts)
+            x[:, 6] = np.interp(ts, t_fine, h_fine)
+            return x
+
+        meas = tejas_channels(t, states_at, inputs, FLIGHT_SENSORS, R_CG, tr, tr, self.tables, self.bp)
+        x0 = states_at(t[:1])[0]
+        self_ic = dict(zip(("u0", "v0", "w0", "phi0", "theta0", "psi0", "h0"), x0, strict=True))
+        return ManeuverData(
+            id=mid, t_s=t, accel_imu_mps2=a_imu + da, omega_rps=om + dw, measurements=meas,
+            r_cg_body_m=R_CG, aircraft="AC1", configuration="AC1", meta={"ic": self_ic},
+        )
+
+    def problem(self, free=None, start="truth", noise=None, rng=None) -> Problem:
+        """The estimation problem; parameters at the truth, or perturbed, free as asked.
+
+        ``free``: names of the free parameters (None: the model set's); ``start``: "truth" or a
+        function of the parameter set giving start values by key; ``noise``: channel -> white
+        noise standard deviation (SI), drawn from ``rng``.
+        """
+        tr = self.truth
+        mans = self.maneuvers
+        if noise:
+            mans = [replace(m, measurements={
+                c: v + rng.normal(0.0, noise[c], v.size) for c, v in m.measurements.items()})
+                for m in mans]
+        channels, specs = load_model_set("tejas")
+        channels = [c for c in channels if c.name in CHANNELS]
+        out = []
+        used = {"u0", "v0", "w0", "phi0", "theta0", "psi0", "h0", "dax", "day", "daz", "dp", "dq", "dr"}
+        for c in channels:
+            used |= c.expression.names | c.expression.tables | ({c.delay} if c.delay else set())
+        for s in specs:
+            if s.name not in used:
+                continue
+            if s.kind == "initial_condition":
+                s = replace(s, per_instance={m.id: m.meta["ic"][s.name] for m in mans})
+            elif s.name in self.tables:
+                s = replace(s, value=tuple(self.tables[s.name]))
+            else:
+                s = replace(s, value=tr[s.name])
+            if free is not None:
+                s = replace(s, free=s.name in free)
+            out.append(s)
+        ps = expand_parameters(out, mans, channels)
+        if start != "truth":
+            ps = ps.with_values(start(ps))
+        return Problem(tuple(mans), tuple(channels), FLIGHT_SENSORS, FLIGHT_SENSORS["imu"], ps, G, "analytic")
