@@ -224,6 +224,24 @@ run_montecarlo(_scenario(), {out!r}, replications=40, workers=2)
 """
 
 
+def _left_after(workers: list[tuple[int, str]], seconds: float) -> list[tuple[int, str]]:
+    """The worker processes still running after up to ``seconds`` (returns once none is)."""
+    end = time.monotonic() + seconds
+    while any(alive(w) for w in workers) and time.monotonic() < end:
+        time.sleep(0.1)
+    return [w for w in workers if alive(w)]
+
+
+def _reap(child: subprocess.Popen, workers: list[tuple[int, str]]) -> None:
+    """After a kill test, passed or failed: end the child and every worker it left (by pid)."""
+    if child.poll() is None:
+        child.kill()
+        child.wait()
+    for w in workers:
+        if alive(w):
+            os.kill(w[0], signal.SIGKILL)
+
+
 @pytest.mark.skipif(not HAVE_PROC, reason="reads /proc")
 def test_worker_processes_end_when_the_run_is_killed(tmp_path):
     out = tmp_path / "killed"
@@ -245,18 +263,10 @@ def test_worker_processes_end_when_the_run_is_killed(tmp_path):
         assert len(workers) >= 2, workers
         os.kill(child.pid, signal.SIGKILL)
         child.wait()
-        end = time.monotonic() + 5.0
-        while any(alive(w) for w in workers) and time.monotonic() < end:
-            time.sleep(0.1)
-        left = [w for w in workers if alive(w)]
+        left = _left_after(workers, 5.0)
         assert not left, f"worker processes {left} outlived their killed parent by 5 s"
     finally:
-        if child.poll() is None:
-            child.kill()
-            child.wait()
-        for w in workers:
-            if alive(w):
-                os.kill(w[0], signal.SIGKILL)
+        _reap(child, workers)
     # the killed workers' scratch datasets are in the run folder, not the system's temporary one
     # (where only multiprocessing's own pymp-* folder of the fork server's socket may be left)
     assert list(tmp.glob("fpr-mc-*")) == []
@@ -482,17 +492,9 @@ def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp
             assert ignores(w[0], signal.SIGINT), f"worker {w} does not ignore SIGINT"
         os.killpg(child.pid, signal.SIGINT)
         stdout, stderr = child.communicate(timeout=60)
-        end = time.monotonic() + 5.0
-        while any(alive(w) for w in workers) and time.monotonic() < end:
-            time.sleep(0.1)
-        assert not [w for w in workers if alive(w)], "a worker outlived the interrupted run by 5 s"
+        assert not _left_after(workers, 5.0), "a worker outlived the interrupted run by 5 s"
     finally:
-        if child.poll() is None:
-            child.kill()
-            child.wait()
-        for w in workers:
-            if alive(w):
-                os.kill(w[0], signal.SIGKILL)
+        _reap(child, workers)
     assert child.returncode == 130, stderr
     assert (f"fpr montecarlo: interrupted: 1 of 3 replications written to {out}; run the same "
             "command again to resume") in stderr, stderr
