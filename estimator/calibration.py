@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from estimator.io.errors import close_match
+from aircraft_models.schema import did_you_mean, unknown
 from estimator.problem import Problem
 from estimator.report import (
     Banner,
@@ -102,12 +102,9 @@ class CalibrationOptions:
         options = dict(options or {})
         solver_names, wf_names = set(_field_names(SolverOptions)), set(cls.option_names()) - set(
             _field_names(SolverOptions)) - {"plots"}
-        unknown = [k for k in options if k not in solver_names | wf_names | {"plots"}]
-        if unknown:
-            valid = cls.option_names()
-            hints = [f"{k!r}" + (f" (did you mean {m!r}?)" if (m := close_match(k, valid)) else "")
-                     for k in unknown]
-            raise ValueError(f"unknown calibration option(s) {', '.join(hints)}; valid: {', '.join(valid)}")
+        bad = [k for k in options if k not in solver_names | wf_names | {"plots"}]
+        if bad:
+            raise unknown(bad, cls.option_names(), "", ValueError, what="calibration option")
         solver = {k: v for k, v in options.items() if k in solver_names}
         if solver.get("start") == "both":
             solver["start"] = ("staged", "given")
@@ -444,8 +441,7 @@ class Calibration:
         """A copy of the report's table ``name`` (see :attr:`names`; ``"table2"``: Table 2 vs the model)."""
         key = "table2_model" if name == "table2" else name
         if key not in self._tables:
-            hint = close_match(key, self._tables)
-            raise KeyError(f"no table {name!r}" + (f" (did you mean {hint!r}?)" if hint else "")
+            raise KeyError(f"no table {name!r}" + did_you_mean(key, self._tables)
                            + f"; the tables: {', '.join(self._tables)}")
         return _read_only(self._tables[key])
 

@@ -390,7 +390,7 @@ def test_dataset_selection_errors(tmp_path):
         problem_from_dataset(tmp_path / "ds", select={"kind": ["shss"]})
     with pytest.raises(DataError, match="leaves no maneuvers"):
         problem_from_dataset(tmp_path / "ds", select={"mach_min": 0.9})
-    with pytest.raises(DataError, match="unknown select keys"):
+    with pytest.raises(DataError, match="unknown select key 'speed'"):
         problem_from_dataset(tmp_path / "ds", select={"speed": 1})
     with pytest.raises(DataError, match="came from .* not from an fpr dataset"):
         load_truth(load_problem(si_problem(tmp_path)), "flight")
@@ -589,7 +589,7 @@ def test_duplicate_ids_and_missing_sensor(tmp_path):
 def test_unknown_keys_and_missing_data_file(tmp_path):
     path = si_problem(tmp_path)
     path.write_text(path.read_text().replace('aircraft = "PV1"', 'aircraft = "PV1"\nheadr = true'))
-    raises(path, "[[files]]", "unknown key(s) ['headr']", "header")
+    raises(path, "[[files]]", "unknown key 'headr'", "did you mean 'header'")
     path = si_problem(tmp_path)
     path.write_text(path.read_text().replace('path = "flight.csv"', 'path = "nope.csv"'))
     raises(path, "nope.csv", "no such data file")

@@ -6,10 +6,13 @@ its time range, the channel and its source column) and ends with how to fix it.
 
 from __future__ import annotations
 
-import difflib
 import warnings
-from collections.abc import Iterable
 from dataclasses import dataclass
+
+# one definition of the close match, shared with every TOML format (re-exported here for the io modules)
+from aircraft_models.schema import close_match
+
+__all__ = ["DataError", "DataWarning", "Where", "at_row", "close_match", "warn"]
 
 
 class DataError(ValueError):
@@ -56,17 +59,3 @@ class Where:
 def at_row(t_s: float, row: int) -> str:
     """``"at t = 12.345 s (data row 493)"``: rows count from 0 after the header line."""
     return f"at t = {t_s:.3f} s (data row {row})"
-
-
-def close_match(name: str, valid: Iterable[str]) -> str | None:
-    """The valid name a misspelt one was most likely meant to be, or None.
-
-    :func:`difflib.get_close_matches`, ties broken in favour of a name with the same letters
-    (``alpha_lz`` is ``alpha_zl`` with two letters swapped, not ``alpha_zr``).
-    """
-    name = str(name)
-    cands = difflib.get_close_matches(name, [str(v) for v in valid], n=5, cutoff=0.6)
-    if not cands:
-        return None
-    return max(cands, key=lambda c: (round(difflib.SequenceMatcher(None, name, c).ratio(), 9),
-                                     sorted(c) == sorted(name)))

@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 
+from aircraft_models.schema import check
 from estimator.io.errors import DataError
 
 FORMAT = "fpr-dataset"
@@ -92,10 +93,7 @@ def select_entries(manifest: Mapping, select: Mapping | None, where: str) -> lis
     where : for messages.
     """
     entries = list(manifest["maneuvers"])
-    select = dict(select or {})
-    unknown = set(select) - set(SELECT_KEYS)
-    if unknown:
-        raise DataError(f"{where}: unknown select keys {sorted(unknown)}; valid: {list(SELECT_KEYS)}")
+    select = check(select or {}, SELECT_KEYS, where, DataError, what="select key")
     for key, field in (("kind", "kind"), ("configuration", "configuration"), ("aircraft", "aircraft"),
                        ("ids", "id")):
         if key in select:

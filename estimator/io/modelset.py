@@ -83,7 +83,8 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator.io.errors import DataError, close_match, warn
+from aircraft_models.schema import Key, check, did_you_mean
+from estimator.io.errors import DataError, warn
 from estimator.parameters import KINDS, SCOPES, ParameterSpec
 from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, ManeuverData
 
@@ -106,37 +107,19 @@ _PAIRED_KEYS = ("value", "bounds", "breakpoints", "values")
 #: Signals a channel model may use that refer to the channel itself: ``z`` its measurement,
 #: ``zhat`` its modelled measurement (see :mod:`estimator.problem`).
 OWN_SIGNALS = frozenset({"z", "zhat"})
-_CHANNEL_KEYS = {"name", "column", "model", "sensor", "delay", "recorder", "unit", "measures"}
+_CHANNEL_KEYS = ("name", "column", "model", "sensor", "delay", "recorder", "unit", "measures")
+#: value, bounds, breakpoints and values may be given in degrees (``value_deg``, ...): converted to rad
 _PARAM_KEYS = {
-    "unit", "kind", "scope", "value", "value_deg", "bounds", "bounds_deg", "free", "breakpoints",
-    "breakpoints_deg", "fixed_elements", "values", "values_deg", "free_instances",
+    **dict.fromkeys(("unit", "kind", "scope"), Key()), "value": Key(unit="rad"),
+    "bounds": Key(unit="rad"), "free": Key(), "breakpoints": Key(unit="rad"),
+    "fixed_elements": Key(), "values": Key(unit="rad"), "free_instances": Key(),
 }
 _DISPLAY = {"rad": (180.0 / math.pi, "deg"), "rad/s": (180.0 / math.pi, "deg/s"), "s": (1000.0, "ms")}
 
 
-def _deg(d: Mapping, key: str, where: str, default=None):
-    """Read ``key`` (SI) or ``key_deg`` (converted); not both."""
-    if key in d and f"{key}_deg" in d:
-        raise ValueError(f"{where}: give {key} or {key}_deg, not both")
-    if f"{key}_deg" in d:
-        v = d[f"{key}_deg"]
-        if isinstance(v, Mapping):
-            return {k: _scale(x, math.pi / 180.0) for k, x in v.items()}
-        return _scale(v, math.pi / 180.0)
-    return d.get(key, default)
-
-
-def _scale(v, f):
-    if isinstance(v, (list, tuple)):
-        return [x * f for x in v]
-    return v * f
-
-
 def parse_channel(d: Mapping, where: str) -> ChannelSpec:
     """A ``[[channel]]`` table as a :class:`ChannelSpec` (``where`` names it in messages)."""
-    unknown = set(d) - _CHANNEL_KEYS
-    if unknown:
-        raise ValueError(f"{where}: unknown keys {sorted(unknown)}; valid: {sorted(_CHANNEL_KEYS)}")
+    check(d, _CHANNEL_KEYS, where)
     if "name" not in d or "model" not in d:
         raise ValueError(f"{where}: a channel needs name and model")
     unit = d.get("unit", "rad")
@@ -150,22 +133,20 @@ def parse_channel(d: Mapping, where: str) -> ChannelSpec:
 
 def parse_parameter(name: str, d: Mapping, where: str) -> ParameterSpec:
     """A ``[parameter.NAME]`` table as a :class:`ParameterSpec` (``_deg`` keys converted)."""
-    unknown = set(d) - _PARAM_KEYS
-    if unknown:
-        raise ValueError(f"{where}: unknown keys {sorted(unknown)}; valid: {sorted(_PARAM_KEYS)}")
+    d = check(d, _PARAM_KEYS, where)
     unit = d.get("unit", "1")
     kind = d.get("kind", "other")
     scope = d.get("scope", "global")
     if kind not in KINDS or scope not in SCOPES:
         raise ValueError(f"{where}: kind must be one of {KINDS} and scope one of {SCOPES}")
-    breakpoints = _deg(d, "breakpoints", where)
-    value = _deg(d, "value", where, 0.0)
+    breakpoints = d.get("breakpoints")
+    value = d.get("value", 0.0)
     if value == "breakpoints":
         if breakpoints is None:
             raise ValueError(f"{where}: value = 'breakpoints' needs breakpoints")
         value = list(breakpoints)
-    bounds = _deg(d, "bounds", where, [-math.inf, math.inf])
-    per_instance = _deg(d, "values", where, {}) or {}
+    bounds = d.get("bounds", [-math.inf, math.inf])
+    per_instance = d.get("values", {}) or {}
     scale, dunit = _DISPLAY.get(unit, (1.0, unit))
     try:
         return ParameterSpec(
@@ -283,23 +264,12 @@ def declarations_of(problem_or_channels) -> Declarations:
     return next(iter(found.values()), Declarations())
 
 
-_SECTIONS = {"channel", "parameter", "requirements", "workflow", "initial_conditions", "report"}
-_REQUIREMENT_KEYS = {"sensor", "desired_3sigma_deg", "low_alpha_only"}
-_WORKFLOW_KEYS = {"reference_mach", "apportion_biases", "correction_model", "identity_table",
-                  "alpha_limit_channel"}
-_IC_KEYS = {"tas", "phi", "theta", "psi", "h", "alpha", "beta"}
-_REPORT_KEYS = {"crossplots", "truth_crossplots", "time_history"}
-
-
-def _check_keys(d, valid: set[str], where: str) -> None:
-    if not isinstance(d, Mapping):
-        raise ValueError(f"{where}: must be a table of keys ({', '.join(sorted(valid))})")
-    for key in d:
-        if key not in valid:
-            close = close_match(key, valid)
-            raise ValueError(f"{where}: unknown key {key!r}"
-                             + (f" (did you mean {close!r}?)" if close else "")
-                             + f"; valid: {', '.join(sorted(valid))}")
+_SECTIONS = ("channel", "parameter", "requirements", "workflow", "initial_conditions", "report")
+_REQUIREMENT_KEYS = ("sensor", "desired_3sigma_deg", "low_alpha_only")
+_WORKFLOW_KEYS = ("reference_mach", "apportion_biases", "correction_model", "identity_table",
+                  "alpha_limit_channel")
+_IC_KEYS = ("tas", "phi", "theta", "psi", "h", "alpha", "beta")
+_REPORT_KEYS = ("crossplots", "truth_crossplots", "time_history")
 
 
 def _names(value, where: str, valid: Sequence[str], what: str) -> tuple[str, ...]:
@@ -309,10 +279,8 @@ def _names(value, where: str, valid: Sequence[str], what: str) -> tuple[str, ...
         raise ValueError(f"{where}: must be a list of {what} names, e.g. [\"{next(iter(valid), 'x')}\"]")
     for v in value:
         if v not in valid:
-            close = close_match(v, valid)
-            raise ValueError(f"{where}: {v!r} is not a {what} of the model set"
-                             + (f" (did you mean {close!r}?)" if close else "")
-                             + f"; its {what}s: {' '.join(valid)}")
+            raise ValueError(f"{where}: {v!r} is not a {what} of the model set{did_you_mean(v, valid)}; "
+                             f"its {what}s: {' '.join(valid)}")
     return tuple(value)
 
 
@@ -332,7 +300,7 @@ def parse_declarations(raw: Mapping, channels: Sequence[ChannelSpec], params: Se
     _names(list(req_raw), f"{source}: [requirements]", names, "channel")
     for ch, r in req_raw.items():
         where = f"{source}: [requirements] {ch}"
-        _check_keys(r, _REQUIREMENT_KEYS, where)
+        check(r, _REQUIREMENT_KEYS, where)
         if not isinstance(r.get("sensor"), str) or not isinstance(r.get("desired_3sigma_deg"), (int, float)):
             raise ValueError(f"{where}: needs sensor = \"its name in Table 2\" and desired_3sigma_deg = "
                              "a number (deg)")
@@ -341,7 +309,7 @@ def parse_declarations(raw: Mapping, channels: Sequence[ChannelSpec], params: Se
 
     wf = raw.get("workflow", {})
     where = f"{source}: [workflow]"
-    _check_keys(wf, _WORKFLOW_KEYS, where)
+    check(wf, _WORKFLOW_KEYS, where)
     apportion = wf.get("apportion_biases", {})
     if not isinstance(apportion, Mapping) or not all(isinstance(v, str) for v in apportion.values()):
         raise ValueError(f"{where}: apportion_biases must be a table label = \"bias family\", "
@@ -374,7 +342,7 @@ def parse_declarations(raw: Mapping, channels: Sequence[ChannelSpec], params: Se
 
     ic = raw.get("initial_conditions", {})
     where = f"{source}: [initial_conditions]"
-    _check_keys(ic, _IC_KEYS, where)
+    check(ic, _IC_KEYS, where)
     scalars = {}
     for key in ("tas", "phi", "theta", "psi", "h"):
         if key in ic:
@@ -385,7 +353,7 @@ def parse_declarations(raw: Mapping, channels: Sequence[ChannelSpec], params: Se
 
     rep = raw.get("report", {})
     where = f"{source}: [report]"
-    _check_keys(rep, _REPORT_KEYS, where)
+    check(rep, _REPORT_KEYS, where)
     return Declarations(
         source=origin or source, requirements=reqs, reference_mach=None if ref is None else float(ref),
         apportion=dict(apportion), correction_model=correction, identity_table=identity,
@@ -401,7 +369,7 @@ def parse_model_set(raw: Mapping, source: str, origin: str | None = None
     Each channel carries the model set's :class:`Declarations` (:func:`declarations_of`), whose
     ``source`` is ``origin`` (the model set's file; default: ``source``).
     """
-    _check_keys(raw, _SECTIONS, source)
+    check(raw, _SECTIONS, source)
     channels = [parse_channel(c, f"{source}: channel[{i}]") for i, c in enumerate(raw.get("channel", []))]
     params = [parse_parameter(n, p, f"{source}: parameter.{n}") for n, p in raw.get("parameter", {}).items()]
     decl = parse_declarations(raw, channels, params, source, origin)
@@ -485,10 +453,9 @@ def merge_model_set(raw: Mapping, parameter_overrides: Mapping | None, extra_cha
     known = sorted({s.name for s in specs} - (set(parameter_overrides or {}) - set(raw.get("parameter", {}))))
     for name in parameter_overrides or {}:
         if name not in raw.get("parameter", {}) and name not in used:
-            close = close_match(name, known)
             raise DataError(
                 f"{where}: [parameter.{name}] is not a parameter of the model set ({source}) and no "
-                "channel uses it" + (f" (did you mean {close!r}?)" if close else "")
+                "channel uses it" + did_you_mean(name, known)
                 + f"; its parameters: {' '.join(known)}. Fix the name, or use it in a [[channel]] model"
             )
     return chans, specs, set(parameter_overrides or {})

@@ -11,10 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
+from aircraft_models.schema import SUFFIXES, Key, check, did_you_mean
 from estimator.io.assemble import DIMENSIONS, REQUIRED, ManeuverRequest, SourceTable
 from estimator.io.build import build_problem
 from estimator.io.dataset_problem import load_dataset_maneuvers
-from estimator.io.errors import DataError, close_match
+from estimator.io.errors import DataError
 from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
 from estimator.io.tables import check_data_path, infer_format, numeric, pick_column, read_table
 from estimator.parameters import ParameterSpec
@@ -22,23 +23,14 @@ from estimator.problem import LEVER_ARMS, STATE_SIGNALS, ChannelSpec, Problem
 
 TOP_KEYS = ("title", "g_mps2", "lever_arm", "model", "channels", "resample_hz", "sensors", "aircraft",
             "columns", "files", "data", "parameter", "channel", "workflow", "solver", "report")
-FILE_KEYS = ("path", "format", "header", "delimiter", "decimal", "skip_rows", "encoding", "aircraft",
-             "configuration",
-             "maneuvers", "resample_hz", "columns", "r_cg_body_m", "r_cg_body_in", "r_cg_body_ft")
-MANEUVER_KEYS = ("id", "t_start_s", "t_end_s", "configuration", "r_cg_body_m", "r_cg_body_in",
-                 "r_cg_body_ft")
+#: the CG, in m (or r_cg_body_in, r_cg_body_ft)
+_CG_KEYS = {"r_cg_body_m": Key(unit="m")}
+FILE_KEYS = {**dict.fromkeys(("path", "format", "header", "delimiter", "decimal", "skip_rows", "encoding",
+                              "aircraft", "configuration", "maneuvers", "resample_hz", "columns"), Key()),
+             **_CG_KEYS}
+MANEUVER_KEYS = {**dict.fromkeys(("id", "t_start_s", "t_end_s", "configuration"), Key()), **_CG_KEYS}
 COLUMN_KEYS = ("column", "unit", "optional", "own_rate")
-_LENGTH_SUFFIXES = (("_m", 1.0), ("_in", 0.0254), ("_ft", 0.3048))
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
-
-
-def _keys(d: Mapping, valid, where: str) -> None:
-    unknown = sorted(set(d) - set(valid))
-    if unknown:
-        close = {k: m for k in unknown if (m := close_match(k, valid)) is not None}
-        hint = (" (did you mean " + ", ".join(f"{m!r} for {k!r}" if len(unknown) > 1 else repr(m)
-                                             for k, m in close.items()) + "?)") if close else ""
-        raise DataError(f"{where}: unknown key(s) {unknown}{hint}; valid: {list(valid)}")
 
 
 def column_names(channels: Sequence[ChannelSpec], specs: Sequence[ParameterSpec]) -> dict[str, list[str]]:
@@ -59,10 +51,9 @@ def _check_names(table: Mapping, valid: Mapping[str, list[str]], where: str) -> 
     for name in table:
         if name not in known:
             listing = "; ".join(f"{k}: {' '.join(v)}" for k, v in valid.items())
-            m = close_match(name, known)
             raise DataError(
                 f"{where}: {name!r} is not a name the estimator or the model set knows"
-                + (f" (did you mean {m!r}?)" if m else "") + f"; valid names: {listing}. Fix the "
+                + did_you_mean(name, known) + f"; valid names: {listing}. Fix the "
                 "name (a data signal of your own is mapped once a [[channel]] model uses it)"
             )
 
@@ -89,7 +80,7 @@ def parse_positions(table: Mapping, where: str) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     for key, v in table.items():
         name, factor = key, 1.0
-        for suffix, f in _LENGTH_SUFFIXES:
+        for suffix, f in SUFFIXES["m"]:
             if key.endswith(suffix):
                 name, factor = key[: -len(suffix)], f
                 break
@@ -103,13 +94,9 @@ def parse_positions(table: Mapping, where: str) -> dict[str, np.ndarray]:
 
 
 def _cg(d: Mapping, where: str) -> np.ndarray | None:
-    got = {k: v for k, v in d.items() if k.startswith("r_cg_body_")}
-    if len(got) > 1:
-        raise DataError(f"{where}: give the CG once (one of r_cg_body_m, r_cg_body_in, r_cg_body_ft)")
-    if not got:
-        return None
-    (key, v), = got.items()
-    return parse_positions({key.replace("r_cg_body", "cg"): v}, where)["cg"]
+    """The CG of a table checked against :data:`_CG_KEYS` (converted to m there), or None."""
+    v = d.get("r_cg_body_m")
+    return None if v is None else _vector(v, f"{where}: r_cg_body_m")
 
 
 def _column_specs(table: Mapping, where: str, valid: Mapping[str, list[str]] | None = None
@@ -124,7 +111,7 @@ def _column_specs(table: Mapping, where: str, valid: Mapping[str, list[str]] | N
         if not isinstance(spec, Mapping):
             raise DataError(f"{w}: must be a table {{ column = \"NAME\" or index, unit = \"...\" }}, "
                             f"got {spec!r}")
-        _keys(spec, COLUMN_KEYS, w)
+        check(spec, COLUMN_KEYS, w, DataError)
         for flag in ("optional", "own_rate"):
             if not isinstance(spec.get(flag, False), bool):
                 raise DataError(f"{w}: {flag} = {spec[flag]!r} must be true or false (no quotes)")
@@ -203,13 +190,13 @@ def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[s
     for ac, d in aircraft.items():
         if not isinstance(d, Mapping):
             raise DataError(f"{where}: [aircraft.{ac}] must be a table with r_cg_body_m = [x, y, z]")
-        _keys(d, ("r_cg_body_m", "r_cg_body_in", "r_cg_body_ft"), f"{where}: [aircraft.{ac}]")
-        cgs[ac] = _cg(d, f"{where}: [aircraft.{ac}]")
+        w = f"{where}: [aircraft.{ac}]"
+        cgs[ac] = _cg(check(d, _CG_KEYS, w, DataError), w)
     global_cols = _column_specs(raw.get("columns", {}), f"{where}: [columns]", valid)
     pairs = []
     for i, entry in enumerate(files):
         w = f"{where}: [[files]] #{i + 1}"
-        _keys(entry, FILE_KEYS, w)
+        entry = check(entry, FILE_KEYS, w, DataError)
         if "path" not in entry:
             raise DataError(f"{w}: needs path = \"...\" (relative to the problem file)")
         w = f"{where}: [[files]] {entry['path']}"
@@ -233,7 +220,7 @@ def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[s
             mw = f"{w} maneuvers[{j}]"
             if not isinstance(man, Mapping) or "id" not in man:
                 raise DataError(f"{mw}: each maneuver needs id = \"...\" (and t_start_s, t_end_s)")
-            _keys(man, MANEUVER_KEYS, mw)
+            man = check(man, MANEUVER_KEYS, mw, DataError)
             cg = _cg(man, mw)
             cg = cg if cg is not None else file_cg if file_cg is not None else cgs[ac]
             t0 = _number(man.get("t_start_s"), "t_start_s", mw, "s, in the file's time base")
@@ -267,11 +254,9 @@ def parse_options(raw: Mapping, where: str) -> dict:
         for key in table:
             if key not in valid:
                 other = next((t for t, v in tables.items() if key in v), None)
-                m = close_match(key, valid)
                 raise DataError(
                     f"{where}: [{name}] {key!r} is not a {name} option"
-                    + (f" (it belongs under [{other}])" if other else "")
-                    + (f" (did you mean {m!r}?)" if m and not other else "")
+                    + (f" (it belongs under [{other}])" if other else did_you_mean(key, valid))
                     + f"; valid: {', '.join(valid)}")
         flat.update(table)
     try:
@@ -303,7 +288,7 @@ def load_problem(path: str | Path) -> Problem:
         raise DataError(f"{path}: is a folder; give the problem file (TOML), or the dataset folder to "
                         "fpr calibrate directly") from None
     where = str(path)
-    _keys(raw, TOP_KEYS, where)
+    check(raw, TOP_KEYS, where, DataError)
     options = parse_options(raw, where)
     base = path.resolve().parent
     raw_model, msource = read_model_set(raw.get("model", DEFAULT_MODEL_SET), base)
@@ -312,7 +297,7 @@ def load_problem(path: str | Path) -> Problem:
     sensors = parse_positions(raw.get("sensors", {}), f"{where}: [sensors]")
     data = raw.get("data")
     if data is not None:
-        _keys(data, ("dataset", "select"), f"{where}: [data]")
+        check(data, ("dataset", "select"), f"{where}: [data]", DataError)
         clash = [k for k in ("files", "columns", "aircraft") if k in raw]
         if clash:
             raise DataError(f"{where}: [data] dataset = ... reads everything from the dataset; "
@@ -320,7 +305,8 @@ def load_problem(path: str | Path) -> Problem:
         if "dataset" not in data:
             raise DataError(f"{where}: [data] needs dataset = \"path/to/dataset\"")
         ds = Path(data["dataset"])
-        pairs, pos = load_dataset_maneuvers(ds if ds.is_absolute() else base / ds, data.get("select"))
+        pairs, pos = load_dataset_maneuvers(ds if ds.is_absolute() else base / ds, data.get("select"),
+                                            chans)
         sensors = {**pos, **sensors}
     else:
         pairs = _file_pairs(raw, base, where, column_names(chans, specs))
