@@ -9,23 +9,19 @@ recover the injected IMU biases within three Cramér-Rao deviations.
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pandas as pd
 import pytest
 from _campaigns import linear_campaign
 
+from campaigns.benchmarks.user_files import USER_COLUMNS, write_user_files
 from campaigns.cli import EXIT_STATUS, main
 from synth.dataset import load_dataset
 
 CAMPAIGN = linear_campaign("cli", 5, [
     {"configurations": ["PV1-NP"], "mach": [0.6], "maneuvers": ["pitch_doublet", "pullup_rudder_doublets"],
      "altitude_m": 6000.0}], wind_ned_mps=[4.0, 2.0, 0.0], quiet_imu=True)
-DEG = 180.0 / math.pi
-KT = 1.0 / 0.514444
-FT = 1.0 / 0.3048
-G0 = 9.80665
 
 
 @pytest.fixture(scope="module")
@@ -34,65 +30,14 @@ def dataset(fly_once):
 
 
 def _write_user_files(ds_dir, tmp_path):
-    """One CSV of both maneuvers end to end (user units and names) and its problem file."""
-    ds = load_dataset(ds_dir)
-    frames, ranges, t0 = [], [], 1000.0
-    for entry, df in ds:
-        t = df["t_s"].to_numpy() - df["t_s"].iloc[0] + t0
-        frames.append(pd.DataFrame({
-            "Time": t,
-            "AX": df.ax_imu_mps2 / G0, "AY": df.ay_imu_mps2 / G0, "AZ": df.az_imu_mps2 / G0,
-            "P": df.p_rps * DEG, "Q": df.q_rps * DEG, "R": df.r_rps * DEG,
-            "PHI": df.phi_rad * DEG, "THETA": df.theta_rad * DEG, "PSI": df.psi_rad * DEG,
-            "TAS": df.tas_mps * KT, "HP": df.h_baro_m * FT,
-            "AOA_L": df.alpha_zl_rad * DEG, "AOA_R": df.alpha_zr_rad * DEG,
-        }))
-        ranges.append((entry["id"], t[0], t[-1]))
-        t0 = t[-1] + 100.0  # a gap between maneuvers, outside every time range
-    csv = tmp_path / "flight.csv"
-    pd.concat(frames).to_csv(csv, index=False)
-    pos = ds.manifest["airframe"]["positions_body_m"]
-    r_cg = ds.manifest["maneuvers"][0]["r_cg_body_m_mean"]
-    mans = ", ".join(f'{{ id = "{i}", t_start_s = {a:.6f}, t_end_s = {b:.6f} }}' for i, a, b in ranges)
-    problem = tmp_path / "problem.toml"
-    problem.write_text(f"""
-title = "CLI test flight"
-model = "tejas"
-channels = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr"]
-
-[sensors]
-imu = {pos["imu"]}
-vane_left = {pos["vane_left"]}
-vane_right = {pos["vane_right"]}
-
-[aircraft.PV1]
-r_cg_body_m = {r_cg}
-
-[columns]
-t = {{ column = "Time", unit = "s" }}
-ax = {{ column = "AX", unit = "g" }}
-ay = {{ column = "AY", unit = "g" }}
-az = {{ column = "AZ", unit = "g" }}
-p = {{ column = "P", unit = "deg/s" }}
-q = {{ column = "Q", unit = "deg/s" }}
-r = {{ column = "R", unit = "deg/s" }}
-phi = {{ column = "PHI", unit = "deg" }}
-theta = {{ column = "THETA", unit = "deg" }}
-psi = {{ column = "PSI", unit = "deg" }}
-tas = {{ column = "TAS", unit = "kt" }}
-h = {{ column = "HP", unit = "ft" }}
-alpha_zl = {{ column = "AOA_L", unit = "deg" }}
-alpha_zr = {{ column = "AOA_R", unit = "deg" }}
-
-[[files]]
-path = "flight.csv"
-aircraft = "PV1"
-maneuvers = [ {mans} ]
-
-[parameter.h0]
-free = true
-""")
-    return problem, ds
+    """One CSV of both maneuvers end to end (user units and names) and its problem file
+    (:func:`campaigns.benchmarks.user_files.write_user_files`)."""
+    channels = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr"]
+    columns = {k: USER_COLUMNS[k] for k in ("ax", "ay", "az", "p", "q", "r", *channels)}
+    problem = write_user_files(ds_dir, tmp_path / "user", columns, channels, "CLI test flight",
+                               sensors=("imu", "vane_left", "vane_right"),
+                               tail="\n[parameter.h0]\nfree = true\n")
+    return problem, load_dataset(ds_dir)
 
 
 @pytest.mark.slow

@@ -33,7 +33,6 @@ into a damped crawl (~8 s each).
 
 from __future__ import annotations
 
-import math
 import re
 import shutil
 import tomllib
@@ -44,17 +43,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from campaigns.benchmarks.user_files import DEG, FT, USER_COLUMNS, write_user_files
 from campaigns.cli import EXIT_STATUS, main
 from estimator.io import load_problem, problem_from_dataset
 from estimator.solver import SolverOptions, estimate
 from estimator.verdict import Finding, Severity, Verdict
 from synth.campaign import resolve_campaign_path
 from synth.dataset import load_dataset, write_maneuver
-
-DEG = 180.0 / math.pi
-KT = 1.0 / 0.514444
-FT = 1.0 / 0.3048
-G0 = 9.80665
 
 #: The shipped campaign campaigns/faults_base.toml, which the bad-input corpus
 #: (campaigns/benchmarks/bad_inputs.py) flies too: the nose probe's irregularity and high-AOA noise
@@ -314,63 +309,21 @@ def test_light_turbulence(flights):
 # ----------------------------------------------------------------------------------------------
 # unit mistakes in a user's problem file
 
-#: canonical name -> (CSV column, dataset column, factor from SI to the written unit, declared unit)
-USER_COLUMNS = {
-    "ax": ("AX", "ax_imu_mps2", 1.0 / G0, "g"), "ay": ("AY", "ay_imu_mps2", 1.0 / G0, "g"),
-    "az": ("AZ", "az_imu_mps2", 1.0 / G0, "g"),
-    "p": ("P", "p_rps", DEG, "deg/s"), "q": ("Q", "q_rps", DEG, "deg/s"), "r": ("R", "r_rps", DEG, "deg/s"),
-    "phi": ("PHI", "phi_rad", DEG, "deg"), "theta": ("THETA", "theta_rad", DEG, "deg"),
-    "psi": ("PSI", "psi_rad", DEG, "deg"), "tas": ("TAS", "tas_mps", KT, "kt"),
-    "h": ("HP", "h_baro_m", FT, "ft"),
-    "alpha_zl": ("AOA_L", "alpha_zl_rad", DEG, "deg"), "alpha_zr": ("AOA_R", "alpha_zr_rad", DEG, "deg"),
-    "alpha_zsp": ("AOA_SP", "alpha_zsp_rad", DEG, "deg"), "beta_zsp": ("AOSS_SP", "beta_zsp_rad", DEG, "deg"),
-}
+#: The user's columns and channels (bad_inputs.py's without the DGPS height, Mach and gear)
+USER_CHANNELS = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr", "alpha_zsp", "beta_zsp"]
+USER_FILE_COLUMNS = {k: USER_COLUMNS[k] for k in ("ax", "ay", "az", "p", "q", "r", *USER_CHANNELS)}
 
 
 def _write_user_files(ds_dir: Path, out: Path, wrong: tuple[str, float, str] | None = None) -> Path:
-    """One CSV of both maneuvers in engineering units, and its problem file (as
-    tests/test_calibrate_cli.py). ``wrong = (channel, factor, declared)``: that channel is written as
-    ``SI value * factor`` and declared in unit ``declared``."""
-    ds = load_dataset(ds_dir)
-    cols = dict(USER_COLUMNS)
+    """One CSV of both maneuvers in engineering units, and its problem file
+    (:func:`campaigns.benchmarks.user_files.write_user_files`). ``wrong = (channel, factor,
+    declared)``: that channel is written as ``SI value * factor`` and declared in unit ``declared``."""
+    cols = dict(USER_FILE_COLUMNS)
     if wrong is not None:
         name, factor, declared = wrong
-        cols[name] = (cols[name][0], cols[name][1], factor, declared)
-    frames, ranges, t0 = [], [], 1000.0
-    for entry, df in ds:
-        t = df["t_s"].to_numpy() - df["t_s"].iloc[0] + t0
-        written = {c: df[src].to_numpy() * k for c, src, k, _ in cols.values()}
-        frames.append(pd.DataFrame({"Time": t, **written}))
-        ranges.append((entry["id"], t[0], t[-1]))
-        t0 = t[-1] + 100.0
-    out.mkdir(parents=True)
-    pd.concat(frames).to_csv(out / "flight.csv", index=False)
-    pos = ds.manifest["airframe"]["positions_body_m"]
-    sensors = "\n".join(f"{k} = {pos[k]}" for k in ("imu", "vane_left", "vane_right", "side_probe_left",
-                                                    "side_probe_right"))
-    columns = "\n".join(f'{k} = {{ column = "{c}", unit = "{u}" }}' for k, (c, _, _, u) in cols.items())
-    mans = ", ".join(f'{{ id = "{i}", t_start_s = {a:.6f}, t_end_s = {b:.6f} }}' for i, a, b in ranges)
-    problem = out / "problem.toml"
-    problem.write_text(f"""title = "fault injection: units"
-model = "tejas"
-channels = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr", "alpha_zsp", "beta_zsp"]
-
-[sensors]
-{sensors}
-
-[aircraft.PV1]
-r_cg_body_m = {ds.manifest["maneuvers"][0]["r_cg_body_m_mean"]}
-
-[columns]
-t = {{ column = "Time", unit = "s" }}
-{columns}
-
-[[files]]
-path = "flight.csv"
-aircraft = "PV1"
-maneuvers = [ {mans} ]
-""")
-    return problem
+        csv, src, _, _, extra = cols[name]
+        cols[name] = (csv, src, factor, declared, extra)
+    return write_user_files(ds_dir, out, cols, USER_CHANNELS, "fault injection: units")
 
 
 def test_the_base_user_file_is_a_clean_success(base, tmp_path):

@@ -21,6 +21,7 @@ import pandas as pd
 import pytest
 from _campaigns import TINY_CAMPAIGN
 
+from campaigns.benchmarks.user_files import problem_text
 from campaigns.cli import main
 from estimator.io.outdir import LISTING_NAME, OutputFolderError, check_output, prepare_output
 from synth.campaign import parse_campaign
@@ -88,21 +89,11 @@ def _user_csv_problem(dataset: Path, folder: Path, problem_dir: Path) -> tuple[P
     csv = folder / "flight.csv"
     df[[c for c, _ in cols.values()]].to_csv(csv, index=False)
     pos = ds.manifest["airframe"]["positions_body_m"]
-    columns = "\n".join(f'{k} = {{ column = "{c}", unit = "{u}" }}' for k, (c, u) in cols.items())
     problem = problem_dir / "problem.toml"
-    problem.write_text(f"""
-channels = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr"]
-[sensors]
-imu = {pos["imu"]}
-vane_left = {pos["vane_left"]}
-vane_right = {pos["vane_right"]}
-[aircraft.PV1]
-r_cg_body_m = {entry["r_cg_body_m_mean"]}
-[columns]
-{columns}
-[[files]]
-path = "{csv.as_posix()}"
-""")
+    problem.write_text(problem_text(["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr"],
+                                    {k: pos[k] for k in ("imu", "vane_left", "vane_right")},
+                                    entry["r_cg_body_m_mean"], cols, f'path = "{csv.as_posix()}"',
+                                    model=None))
     return problem, csv
 
 

@@ -47,7 +47,6 @@ import argparse
 import contextlib
 import io
 import json
-import math
 import platform
 import re
 import shutil
@@ -62,13 +61,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from campaigns.benchmarks.user_files import DEG, G0, KT, USER_COLUMNS, write_user_files
+from campaigns.benchmarks.user_files import column_line as user_column_line
+
 # ----------------------------------------------------------------------------------------------
 # the base input
-
-DEG = 180.0 / math.pi
-KT = 1.0 / 0.514444
-FT = 1.0 / 0.3048
-G0 = 9.80665
 
 #: The good flights: the shipped campaign campaigns/faults_base.toml (the base of tests/test_faults.py
 #: too), PV1-NP at Mach 0.5, a pitch doublet and a pull-up with rudder doublets, typical sensor
@@ -82,22 +79,9 @@ PROBLEM = "problem.toml"
 #: Recorder time of the first sample of each maneuver in the CSV (not 0: a real recorder's clock).
 T_FIRST_S = {DOUBLET: 1520.0, RUDDER: 1700.0}
 
-#: canonical name -> (CSV column, dataset column, factor from SI to the written unit, unit, extra spec)
-COLUMNS = {
-    "ax": ("AX", "ax_imu_mps2", 1.0 / G0, "g", ""), "ay": ("AY", "ay_imu_mps2", 1.0 / G0, "g", ""),
-    "az": ("AZ", "az_imu_mps2", 1.0 / G0, "g", ""),
-    "p": ("P", "p_rps", DEG, "deg/s", ""), "q": ("Q", "q_rps", DEG, "deg/s", ""),
-    "r": ("R", "r_rps", DEG, "deg/s", ""),
-    "phi": ("PHI", "phi_rad", DEG, "deg", ""), "theta": ("THETA", "theta_rad", DEG, "deg", ""),
-    "psi": ("PSI", "psi_rad", DEG, "deg", ""), "tas": ("TAS", "tas_mps", KT, "kt", ""),
-    "h": ("HP", "h_baro_m", FT, "ft", ""),
-    "h_dgps": ("GPS_ALT", "h_dgps_m", FT, "ft", ", own_rate = true"),
-    "alpha_zl": ("AOA_L", "alpha_zl_rad", DEG, "deg", ""),
-    "alpha_zr": ("AOA_R", "alpha_zr_rad", DEG, "deg", ""),
-    "alpha_zsp": ("AOA_SP", "alpha_zsp_rad", DEG, "deg", ""),
-    "beta_zsp": ("AOSS_SP", "beta_zsp_rad", DEG, "deg", ""),
-    "mach": ("MACH", "mach", 1.0, "1", ""), "gear": ("GEAR", "gear_down", 1.0, "1", ""),
-}
+#: The user's columns: canonical name -> (CSV column, dataset column, factor from SI to the written
+#: unit, unit, extra spec)
+COLUMNS = USER_COLUMNS
 CHANNELS = ["phi", "theta", "psi", "tas", "h", "h_dgps", "alpha_zl", "alpha_zr", "alpha_zsp", "beta_zsp"]
 FLOAT_FORMAT = "%.6f"
 
@@ -131,45 +115,9 @@ def fly_base(root: Path) -> Path:
 
 def write_base(ds_dir: Path, dest: Path) -> None:
     """The user's files: one CSV of both maneuvers in engineering units and its problem file."""
-    from synth.dataset import load_dataset
-
-    ds = load_dataset(ds_dir)
-    frames, ranges = [], []
-    for entry, df in ds:
-        t = df["t_s"].to_numpy() - df["t_s"].iloc[0] + T_FIRST_S[entry["id"]]
-        cols = {c: df[src].to_numpy(dtype=float) * k for c, src, k, _, _ in COLUMNS.values()}
-        frames.append(pd.DataFrame({"Time": t, **cols}))
-        ranges.append((entry["id"], t[0], t[-1]))
-    dest.mkdir(parents=True)
-    pd.concat(frames).to_csv(dest / DATA, index=False, float_format=FLOAT_FORMAT)
-    pos = ds.manifest["airframe"]["positions_body_m"]
-    sensors = "\n".join(f"{k} = {pos[k]}" for k in ("imu", "vane_left", "vane_right", "side_probe_left",
-                                                    "side_probe_right"))
-    columns = "\n".join(column_line(k) for k in COLUMNS)
-    mans = ",\n  ".join(f'{{ id = "{i}", t_start_s = {a:.3f}, t_end_s = {b:.3f} }}' for i, a, b in ranges)
-    chans = ", ".join(f'"{c}"' for c in CHANNELS)
-    (dest / PROBLEM).write_text(f"""title = "PV1 vane calibration, flight 421"
-model = "tejas"
-channels = [{chans}]
-
-[sensors]
-{sensors}
-
-[aircraft.PV1]
-r_cg_body_m = {ds.manifest["maneuvers"][0]["r_cg_body_m_mean"]}
-
-[columns]
-t = {{ column = "Time", unit = "s" }}
-{columns}
-
-[[files]]
-path = "{DATA}"
-aircraft = "PV1"
-configuration = "PV1-NP"
-maneuvers = [
-  {mans},
-]
-""")
+    write_user_files(ds_dir, dest, COLUMNS, CHANNELS, "PV1 vane calibration, flight 421", csv_name=DATA,
+                     t_first_s=T_FIRST_S, float_format=FLOAT_FORMAT, configuration="PV1-NP",
+                     time_format=".3f")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -197,8 +145,7 @@ def edit_problem(d: Path, old: str, new: str) -> None:
 
 
 def column_line(name: str) -> str:
-    c, _, _, u, x = COLUMNS[name]
-    return f'{name} = {{ column = "{c}", unit = "{u}"{x} }}'
+    return user_column_line(name, COLUMNS[name])
 
 
 def set_unit(d: Path, name: str, unit: str) -> None:

@@ -1,0 +1,117 @@
+"""A flown dataset as a user's files: one CSV in engineering units and its problem file.
+
+The bad-input benchmark (``bad_inputs.py``) starts its corpus from these files, and the tests of
+``fpr calibrate``, of unit faults and of output folders write theirs with the same functions: a user's
+column names and units (:data:`USER_COLUMNS`), the problem file's layout (:func:`problem_text`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import pandas as pd
+
+DEG = 180.0 / math.pi
+KT = 1.0 / 0.514444
+FT = 1.0 / 0.3048
+G0 = 9.80665
+
+#: canonical name -> (CSV column, dataset column, factor from SI to the written unit, unit, extra spec)
+USER_COLUMNS = {
+    "ax": ("AX", "ax_imu_mps2", 1.0 / G0, "g", ""), "ay": ("AY", "ay_imu_mps2", 1.0 / G0, "g", ""),
+    "az": ("AZ", "az_imu_mps2", 1.0 / G0, "g", ""),
+    "p": ("P", "p_rps", DEG, "deg/s", ""), "q": ("Q", "q_rps", DEG, "deg/s", ""),
+    "r": ("R", "r_rps", DEG, "deg/s", ""),
+    "phi": ("PHI", "phi_rad", DEG, "deg", ""), "theta": ("THETA", "theta_rad", DEG, "deg", ""),
+    "psi": ("PSI", "psi_rad", DEG, "deg", ""), "tas": ("TAS", "tas_mps", KT, "kt", ""),
+    "h": ("HP", "h_baro_m", FT, "ft", ""),
+    "h_dgps": ("GPS_ALT", "h_dgps_m", FT, "ft", ", own_rate = true"),
+    "alpha_zl": ("AOA_L", "alpha_zl_rad", DEG, "deg", ""),
+    "alpha_zr": ("AOA_R", "alpha_zr_rad", DEG, "deg", ""),
+    "alpha_zsp": ("AOA_SP", "alpha_zsp_rad", DEG, "deg", ""),
+    "beta_zsp": ("AOSS_SP", "beta_zsp_rad", DEG, "deg", ""),
+    "mach": ("MACH", "mach", 1.0, "1", ""), "gear": ("GEAR", "gear_down", 1.0, "1", ""),
+}
+#: The IMU and the PV1 nose-probe aircraft's air-data sensors
+PV1_SENSORS = ("imu", "vane_left", "vane_right", "side_probe_left", "side_probe_right")
+
+
+def column_line(name: str, column: Sequence) -> str:
+    """The problem file's ``[columns]`` line of channel ``name``: ``column`` as in :data:`USER_COLUMNS`
+    (only the CSV column, unit and extra spec are read: a ``(column, unit)`` pair also does)."""
+    csv, unit, extra = (column[0], column[1], "") if len(column) == 2 else (column[0], column[3], column[4])
+    return f'{name} = {{ column = "{csv}", unit = "{unit}"{extra} }}'
+
+
+def problem_text(channels: Sequence[str], sensors: Mapping[str, Sequence[float]],
+                 r_cg_body_m: Sequence[float], columns: Mapping[str, Sequence], files: str,
+                 title: str | None = None, model: str | None = "tejas", tail: str = "") -> str:
+    """A problem file for aircraft PV1.
+
+    ``sensors``: name -> position, m; ``columns``: channel -> column (:func:`column_line`), after
+    the time column ``Time`` in s unless ``columns`` maps ``t``; ``files``: the ``[[files]]`` table's
+    lines; ``title``, ``model``: omitted when None; ``tail``: appended (e.g. ``[parameter.h0]``).
+    """
+    head = [f'title = "{title}"'] if title is not None else []
+    head += [f'model = "{model}"'] if model is not None else []
+    head += ["channels = [" + ", ".join(f'"{c}"' for c in channels) + "]"]
+    time = [] if "t" in columns else ['t = { column = "Time", unit = "s" }']
+    return "\n".join([
+        *head, "", "[sensors]", *(f"{k} = {v}" for k, v in sensors.items()), "",
+        "[aircraft.PV1]", f"r_cg_body_m = {r_cg_body_m}", "",
+        "[columns]", *time, *(column_line(k, c) for k, c in columns.items()), "",
+        "[[files]]", files, ""]) + tail
+
+
+def write_user_files(dataset_dir: Path, dest: Path, columns: Mapping[str, Sequence], channels: Sequence[str],
+                     title: str, csv_name: str = "flight.csv", t_first_s: Mapping[str, float] | None = None,
+                     float_format: str | None = None, configuration: str | None = None,
+                     sensors: Sequence[str] = PV1_SENSORS, time_format: str = ".6f", tail: str = "") -> Path:
+    """Every maneuver of a flown dataset in one CSV, ``dest/csv_name``, and ``dest/problem.toml``.
+
+    Parameters
+    ----------
+    dataset_dir : the flown dataset (aircraft PV1).
+    dest : a new folder, made here.
+    columns : channel -> (CSV column, dataset column, factor from SI, unit, extra spec), as
+        :data:`USER_COLUMNS`: each written as ``SI value * factor`` and declared in ``unit``.
+    channels : the problem's fitted channels.
+    title : the problem's title.
+    csv_name, float_format : the CSV's name and number format (None: full precision).
+    t_first_s : maneuver id -> the recorder time of its first sample, s; None: 1000 s for the
+        first, then 100 s after the previous one ends (a gap outside every time range).
+    configuration : the file's configuration, if any.
+    sensors : the sensors whose positions (the dataset's) the problem declares.
+    time_format : format of the maneuvers' time ranges in the problem file.
+    tail : text appended to the problem file.
+
+    Returns
+    -------
+    The problem file's path.
+    """
+    from synth.dataset import load_dataset
+
+    ds = load_dataset(dataset_dir)
+    frames, ranges, t0 = [], [], 1000.0
+    for entry, df in ds:
+        start = t0 if t_first_s is None else t_first_s[entry["id"]]
+        t = df["t_s"].to_numpy() - df["t_s"].iloc[0] + start
+        cols = {c[0]: df[c[1]].to_numpy(dtype=float) * c[2] for c in columns.values()}
+        frames.append(pd.DataFrame({"Time": t, **cols}))
+        ranges.append((entry["id"], t[0], t[-1]))
+        t0 = t[-1] + 100.0
+    dest.mkdir(parents=True)
+    pd.concat(frames).to_csv(dest / csv_name, index=False, float_format=float_format)
+    pos = ds.manifest["airframe"]["positions_body_m"]
+    mans = ",\n  ".join(f'{{ id = "{i}", t_start_s = {a:{time_format}}, t_end_s = {b:{time_format}} }}'
+                        for i, a, b in ranges)
+    files = "\n".join([f'path = "{csv_name}"', 'aircraft = "PV1"',
+                       *([f'configuration = "{configuration}"'] if configuration else []),
+                       f"maneuvers = [\n  {mans},\n]"])
+    problem = dest / "problem.toml"
+    problem.write_text(problem_text(channels, {k: pos[k] for k in sensors},
+                                    ds.manifest["maneuvers"][0]["r_cg_body_m_mean"], columns, files, title,
+                                    tail=tail))
+    return problem
