@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from estimator.core.expressions import Table
-from estimator.io import DATASET_COLUMNS, load_truth
+from estimator.io import dataset_column, load_truth
 from estimator.parameters import make_key
 from estimator.problem import Problem
 from estimator.result import EstimationResult
@@ -99,7 +99,7 @@ def true_parameters(problem: Problem, estimated: np.ndarray | None = None) -> Tr
                 values[_key(problem, name, m)] = float(gyr[i])
         for ch in problem.channels:
             if ch.delay and ch.column in m.measurements:
-                d = lag(inj, _dataset_column(ch.column))
+                d = lag(inj, maneuver_column(ch.column, m))
                 if d is not None:
                     values[_key(problem, ch.delay, m, ch)] = d
     free = ps.free_mask if estimated is None else np.asarray(estimated, dtype=bool)
@@ -107,12 +107,9 @@ def true_parameters(problem: Problem, estimated: np.ndarray | None = None) -> Tr
     return TruthProjection(values=values, structure_rms=structure)
 
 
-#: canonical channel name -> the dataset's column (the inverse of the estimator's import map)
-_DATASET_COLUMNS = {canonical: column for column, canonical in DATASET_COLUMNS.items()}
-
-
-def _dataset_column(canonical: str) -> str:
-    return _DATASET_COLUMNS.get(canonical, canonical)
+def maneuver_column(canonical: str, m) -> str:
+    """The dataset column of a canonical name in maneuver ``m`` (its manifest entry lists them)."""
+    return dataset_column(canonical, m.meta.get("channel_units", ()))
 
 
 def _key(problem: Problem, name: str, m, channel=None, element=None) -> str:
@@ -174,7 +171,7 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
             continue
         for m in problem.maneuvers:
             tr = truths[m.id]
-            clean_col = f"true_clean_{_dataset_column(ch.column)}"
+            clean_col = f"true_clean_{maneuver_column(ch.column, m)}"
             if ch.column not in m.measurements or clean_col not in tr:
                 continue
             t = tr["t_s"].to_numpy()
@@ -184,7 +181,7 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
             for name in ch.expression.names - set(sig):
                 if name in ps.specs:
                     continue
-                clean_other = f"true_clean_{_dataset_column(chan_col.get(name, name))}"
+                clean_other = f"true_clean_{maneuver_column(chan_col.get(name, name), m)}"
                 if clean_other in tr:
                     sig[name] = tr[clean_other].to_numpy()
                 elif name in m.signals:

@@ -20,9 +20,9 @@ import pandas as pd
 
 from campaigns.truth import (
     SENSOR_SIGNAL_KINDS,
-    _dataset_column,
     _sensor_col,
     channel_values,
+    maneuver_column,
     problem_tables,
     recovery_table,
     true_parameters,
@@ -55,7 +55,7 @@ def calibrated_errors(problem: Problem, result: EstimationResult) -> dict[str, p
             z = m.measurements[ch.column]
             keep = np.isfinite(z)
             # the truth at the time the sensor saw it: the column's injected total lag
-            t_seen = (m.t_s - float(inj.get(f"time_shift_s.{_dataset_column(ch.column)}", 0.0)))[keep]
+            t_seen = (m.t_s - float(inj.get(f"time_shift_s.{maneuver_column(ch.column, m)}", 0.0)))[keep]
 
             def at(c: str, t_seen=t_seen, tr=tr, t_tr=t_tr) -> np.ndarray:
                 return np.interp(t_seen, t_tr, tr[c].to_numpy())

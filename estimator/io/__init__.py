@@ -113,12 +113,14 @@ Instead of ``[[files]]``, ``[columns]`` and ``[aircraft]``, a dataset written by
     select = { kind = ["pitch_doublet", "3211"], configuration = ["PV1-NP"], aircraft = ["PV1"],
                mach_min = 0.45, mach_max = 0.55, gear_down = false, ids = ["m0000"] }
 
-Its columns are known by their SI names (``alpha_zl_rad`` -> ``alpha_zl``, ``gear_down`` ->
-``gear``, ``mach``, ...), sensor positions come from the manifest's airframe (``[sensors]`` may
-add or replace some), each maneuver's CG from its ``r_cg_body_m_mean``, aircraft and
-configuration from its entry. The truth (``true_*`` columns) is not part of the problem; each
-maneuver's ``meta`` keeps its manifest entry and the dataset path, and :func:`load_truth` reads
-the truth for the comparison afterwards.
+Its columns are known by their SI names: the format's own (``t_s`` -> ``t``, ``q_rps`` -> ``q``,
+``gear_down`` -> ``gear``, ``mach``, ...: :data:`FPR_COLUMNS`) and, for every other column, its
+name less its unit suffix (``alpha_zl_rad`` -> ``alpha_zl``); besides the format's own, only the
+columns of the model set's channels and of the data signals their models read are read. Sensor
+positions come from the manifest's airframe (``[sensors]`` may add or replace some), each
+maneuver's CG from its ``r_cg_body_m_mean``, aircraft and configuration from its entry. The
+truth (``true_*`` columns) is not part of the problem; each maneuver's ``meta`` keeps its manifest
+entry and the dataset path, and :func:`load_truth` reads the truth for the comparison afterwards.
 
 The ``[solver]``, ``[workflow]`` and ``[report]`` tables each take only their own options (a
 misspelt or misplaced one is refused with the close match);
@@ -221,7 +223,7 @@ measured flow angles, Euler angles, altitude); values given in the problem file 
 from estimator.io.build import subproblem
 from estimator.io.dataset_problem import load_dataset_maneuvers, problem_from_dataset
 from estimator.io.errors import DataError, DataWarning
-from estimator.io.fprdataset import DATASET_COLUMNS, load_truth
+from estimator.io.fprdataset import FPR_COLUMNS, dataset_column, load_truth
 from estimator.io.modelset import (
     IC_AVERAGE_SAMPLES,
     MIN_DURATION_S,
@@ -233,8 +235,8 @@ from estimator.io.timebase import GAP_FACTOR, JITTER_FRACTION, STAMP_TOLERANCE
 from estimator.io.units import UNITS, to_si
 
 __all__ = [
-    "DATASET_COLUMNS", "GAP_FACTOR", "IC_AVERAGE_SAMPLES", "JITTER_FRACTION", "MIN_DURATION_S",
+    "FPR_COLUMNS", "GAP_FACTOR", "IC_AVERAGE_SAMPLES", "JITTER_FRACTION", "MIN_DURATION_S",
     "MIN_SAMPLES_PER_FREE_PARAMETER", "STAMP_TOLERANCE", "UNITS", "DataError", "DataWarning",
-    "initial_condition_starts", "load_dataset_maneuvers", "load_problem", "load_truth",
+    "dataset_column", "initial_condition_starts", "load_dataset_maneuvers", "load_problem", "load_truth",
     "problem_from_dataset", "subproblem", "to_si",
 ]

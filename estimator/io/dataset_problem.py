@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -11,43 +11,61 @@ from estimator.io.assemble import ManeuverRequest, SourceTable
 from estimator.io.build import build_problem
 from estimator.io.errors import DataError
 from estimator.io.fprdataset import (
-    DATASET_COLUMNS,
+    canonical_name,
     column_unit,
     dataset_sensors,
     read_maneuver,
     read_manifest,
     select_entries,
 )
-from estimator.io.modelset import DEFAULT_MODEL_SET, merge_model_set, read_model_set
+from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
 from estimator.io.tables import numeric
-from estimator.problem import LEVER_ARMS, Problem
+from estimator.problem import LEVER_ARMS, STATE_SIGNALS, ChannelSpec, Problem
 
 
-def load_dataset_maneuvers(path: str | Path, select: Mapping | None = None
+def data_names(channels: Iterable[ChannelSpec]) -> set[str]:
+    """The canonical names a problem of these channels reads from a dataset besides the format's
+    own columns: each channel's measurement and every data signal its model reads."""
+    names = set()
+    for c in channels:
+        names |= {c.column} | (set(c.expression.names) - STATE_SIGNALS - OWN_SIGNALS)
+    return names
+
+
+def load_dataset_maneuvers(path: str | Path, select: Mapping | None = None,
+                           channels: Iterable[ChannelSpec] = ()
                            ) -> tuple[list[tuple[SourceTable, ManeuverRequest]], dict[str, np.ndarray]]:
     """The selected maneuvers of a dataset as (table, request) pairs, and the sensor positions.
 
-    Truth columns (``true_*``) are not read; each request's ``meta`` is the manifest entry plus
-    ``dataset`` (the directory) so that :func:`~estimator.io.fprdataset.load_truth` finds them.
+    Parameters
+    ----------
+    path : the dataset directory (or its manifest.json).
+    select : which maneuvers (:func:`~estimator.io.fprdataset.select_entries`); None: all.
+    channels : the model set's channels: besides the format's own columns (time, IMU, attitude,
+        air data, gear), the columns holding their measurements and the data signals their models
+        read are read (:func:`data_names`); none: the format's own columns only.
+
+    Each request's ``meta`` is the manifest entry plus ``dataset`` (the directory) so that
+    :func:`~estimator.io.fprdataset.load_truth` finds the truth (``true_*`` columns, never read here).
     """
     directory, manifest = read_manifest(path)
     entries = select_entries(manifest, select, str(directory))
+    names = data_names(channels)
     pairs = []
     for e in entries:
-        df = read_maneuver(directory, e)
+        df = read_maneuver(directory, e, names)
         file = directory / e["file"]
+        canon = {c: canonical_name(c) for c in df.columns}
         values, bad, text = {}, {}, {}
         for col in df.columns:
-            canon = DATASET_COLUMNS[col]
-            values[canon], bad[canon] = numeric(df[col])
-            if bad[canon].any():
-                text[canon] = df[col].to_numpy()
+            values[canon[col]], bad[canon[col]] = numeric(df[col])
+            if bad[canon[col]].any():
+                text[canon[col]] = df[col].to_numpy()
         table = SourceTable(
             path=file, values=values, not_numeric=bad, raw_text=text,
-            units={DATASET_COLUMNS[c]: column_unit(c) for c in df.columns},
-            labels={DATASET_COLUMNS[c]: f"{DATASET_COLUMNS[c]} (column {c!r})" for c in df.columns},
-            own_rate=frozenset(DATASET_COLUMNS[c] for c in e.get("own_rate_columns", ())
-                               if c in df.columns),
+            units={canon[c]: column_unit(c) for c in df.columns},
+            labels={canon[c]: f"{canon[c]} (column {c!r})" for c in df.columns},
+            own_rate=frozenset(canon[c] for c in e.get("own_rate_columns", ()) if c in df.columns),
         )
         if e.get("r_cg_body_m_mean") is None:
             raise DataError(f"{directory}: manifest entry {e['id']} has no r_cg_body_m_mean (the CG)")
@@ -91,7 +109,7 @@ def problem_from_dataset(
     """
     raw, msource = read_model_set(model)
     chans, specs, declared = merge_model_set(raw, overrides, extra_channels, msource, str(path))
-    pairs, pos = load_dataset_maneuvers(path, select)
+    pairs, pos = load_dataset_maneuvers(path, select, chans)
     pos.update({k: np.asarray(v, dtype=float) for k, v in (sensors or {}).items()})
     if "imu" not in pos:
         raise DataError(f"{path}: the manifest's airframe has no imu position; "

@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import math
 import shlex
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -21,18 +21,21 @@ from estimator.io.errors import DataError
 
 FORMAT = "fpr-dataset"
 MANIFEST = "manifest.json"
-#: Dataset column -> canonical name. Everything is SI already; units follow the name suffix.
-DATASET_COLUMNS: dict[str, str] = {
+#: The format's own columns, which every dataset has (time, IMU, INS attitude, air data, gear):
+#: dataset column -> canonical name. Everything is SI already; units follow the name suffix. Any
+#: other measured column is known by its name less its unit suffix (:func:`canonical_name`:
+#: ``<channel>_rad`` -> ``<channel>``): which of those a problem reads is the model set's to say
+#: (its channels and the data signals their models use), never a list here.
+FPR_COLUMNS: dict[str, str] = {
     "t_s": "t",
     "ax_imu_mps2": "ax", "ay_imu_mps2": "ay", "az_imu_mps2": "az",
     "p_rps": "p", "q_rps": "q", "r_rps": "r",
     "phi_rad": "phi", "theta_rad": "theta", "psi_rad": "psi",
     "tas_mps": "tas", "h_baro_m": "h", "h_dgps_m": "h_dgps",
-    "alpha_zl_rad": "alpha_zl", "alpha_zr_rad": "alpha_zr",
-    "alpha_zsp_rad": "alpha_zsp", "beta_zsp_rad": "beta_zsp", "beta_znp_rad": "beta_znp",
-    "alpha_zb_rad": "alpha_zb", "beta_zbu_rad": "beta_zbu", "beta_zbl_rad": "beta_zbl",
     "gear_down": "gear", "mach": "mach",
 }
+#: Columns of the truth (synthetic datasets): never read as data.
+TRUTH_PREFIX = "true_"
 _SUFFIX_UNITS = (("_mps2", "m/s^2"), ("_rps", "rad/s"), ("_rad", "rad"), ("_mps", "m/s"), ("_m", "m"),
                  ("_s", "s"))
 #: Keys of a ``select`` table.
@@ -45,6 +48,44 @@ def column_unit(column: str) -> str:
         if column.endswith(suffix):
             return unit
     return "1"
+
+
+def canonical_name(column: str) -> str:
+    """The canonical name of a dataset column: the format's own (:data:`FPR_COLUMNS`), else the
+    column's name less its unit suffix (``<channel>_rad`` -> ``<channel>``; no suffix: itself)."""
+    if column in FPR_COLUMNS:
+        return FPR_COLUMNS[column]
+    for suffix, _ in _SUFFIX_UNITS:
+        if column.endswith(suffix) and len(column) > len(suffix):
+            return column[: -len(suffix)]
+    return column
+
+
+def dataset_columns(names: Iterable[str], available: Iterable[str]) -> dict[str, str]:
+    """The columns of ``available`` to read as data: column -> canonical name.
+
+    Parameters
+    ----------
+    names : canonical names wanted besides the format's own columns (a model set's channels and
+        the data signals their models read).
+    available : the dataset's columns (a maneuver file's, or a manifest entry's ``channel_units``).
+
+    Returns
+    -------
+    The format's own columns present (in :data:`FPR_COLUMNS`' order), then every other non-truth
+    column whose canonical name (:func:`canonical_name`) is one of ``names`` (in ``available``'s).
+    """
+    have, wanted = list(available), set(names)
+    own = {c: FPR_COLUMNS[c] for c in FPR_COLUMNS if c in have}
+    return own | {c: canonical_name(c) for c in have if c not in FPR_COLUMNS
+                  and not c.startswith(TRUTH_PREFIX) and canonical_name(c) in wanted}
+
+
+def dataset_column(canonical: str, available: Iterable[str]) -> str:
+    """The column of ``available`` holding the canonical name ``canonical`` (the inverse of
+    :func:`canonical_name`); ``canonical`` itself when none does."""
+    return next((c for c in available if not c.startswith(TRUTH_PREFIX) and canonical_name(c) == canonical),
+                canonical)
 
 
 def read_manifest(path: str | Path) -> tuple[Path, dict]:
@@ -120,14 +161,14 @@ def select_entries(manifest: Mapping, select: Mapping | None, where: str) -> lis
     return entries
 
 
-def read_maneuver(directory: Path, entry: Mapping, columns: Sequence[str] | None = None) -> pd.DataFrame:
-    """The columns of one maneuver (default: the measured ones :data:`DATASET_COLUMNS` present)."""
+def read_maneuver(directory: Path, entry: Mapping, names: Iterable[str]) -> pd.DataFrame:
+    """The data columns of one maneuver, by their names in the file: the format's own and those
+    holding the canonical ``names`` (:func:`dataset_columns`)."""
     path = directory / entry["file"]
     if not path.exists():
         raise DataError(f"{path}: maneuver {entry['id']} listed in the manifest but its file is missing")
-    names = pq.read_schema(path).names
-    wanted = [c for c in (columns or DATASET_COLUMNS) if c in names]
-    return pq.read_table(path, columns=wanted).to_pandas()
+    wanted = dataset_columns(names, pq.read_schema(path).names)
+    return pq.read_table(path, columns=list(wanted)).to_pandas()
 
 
 def dataset_sensors(manifest: Mapping) -> dict[str, np.ndarray]:
