@@ -32,9 +32,10 @@ A campaign file::
 
 Every maneuver gets a stable index in file order, from which its seeds derive (turbulence:
 master seed + index; every error source: ``default_rng([source seed, index * 64 + segment,
-channel])``), so the same file gives bit-identical data whatever the number of worker processes,
-and a job's data do not depend on which other jobs ran: an interrupted dataset completed with
-``fly_campaign(..., resume=True)`` is byte-identical to an uninterrupted one.
+channel])``, :func:`synth.dataset.maneuver_key`), so the same file gives bit-identical data
+whatever the number of worker processes, and a job's data do not depend on which other jobs ran:
+an interrupted dataset completed with ``fly_campaign(..., resume=True)`` is byte-identical to an
+uninterrupted one.
 """
 
 from __future__ import annotations
@@ -52,16 +53,19 @@ from concurrent.futures import as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from aircraft_models import Fleet, load_fleet
 from synth.dataset import (
     FORMAT,
     FORMAT_VERSION,
     _jsonable,
+    airframe_manifest,
     damaged_manifest,
     dataset_status,
     job_entries,
+    maneuver_file,
+    maneuver_id,
+    maneuver_key,
+    manifest_entry,
     prepare_directory,
     read_manifest_if_dataset,
     remove_temp_files,
@@ -284,45 +288,13 @@ def _run_job(job: Job) -> JobResult:
         )
     entries = []
     for seg_no, truth in enumerate(segments):
-        # stable seed key per (job, segment); 64 segments per job is far more than any maneuver has
-        key = job.index * 64 + seg_no
-        inst = instrument(truth, fleet.airframe, cfg, errors, maneuver_key=key,
+        inst = instrument(truth, fleet.airframe, cfg, errors, maneuver_key=maneuver_key(job.index, seg_no),
                           common_rate_hz=_WORKER["rate"], truth_model=_WORKER["truth_model"],
                           adc_baseline=_WORKER["adc"])
-        mid = f"m{job.index:04d}" + (f"s{seg_no}" if len(segments) > 1 else "")
-        fname = f"maneuvers/{mid}.parquet"
-        data = inst.data
-        mach = truth.mach
-        entry = {
-            "id": mid,
-            "file": fname,
-            "job_index": job.index,
-            "configuration": cfg.id,
-            "aircraft": cfg.aircraft.id,
-            "nose_sensor": cfg.nose_sensor,
-            "sensors": list(cfg.sensors),
-            "kind": spec.kind,
-            "segment": seg_no,
-            "n_segments": len(segments),
-            "mach_nominal": spec.mach,
-            "mach_mean": float(np.mean(mach)),
-            "mach_min": float(np.min(mach)),
-            "mach_max": float(np.max(mach)),
-            "altitude_m": spec.altitude_m,
-            "gear_down": bool(spec.gear_down),
-            "duration_s": float(data["t_s"].iloc[-1] - data["t_s"].iloc[0]),
-            "n_samples": int(len(data)),
-            "sample_rate_hz": _WORKER["rate"],
-            "r_cg_body_m_mean": np.mean(truth.r_cg_body_m, axis=0).tolist(),
-            "g_mps2_mean": float(np.mean(truth.g_mps2)),
-            "maneuver": spec.to_dict(),
-            "environment": env.to_dict(),
-            "injected": inst.injected,
-            "channel_units": inst.channel_units,
-            "own_rate_columns": list(inst.own_rate_columns),
-            "flight_meta": {k: v for k, v in truth.meta.items() if k != "spec"},
-        }
-        write_maneuver(_WORKER["out_dir"] / fname, data, entry)
+        entry = manifest_entry(job_index=job.index, segment=seg_no, n_segments=len(segments),
+                               configuration=cfg, spec=spec, environment=env, truth=truth,
+                               instrumented=inst, sample_rate_hz=_WORKER["rate"])
+        write_maneuver(_WORKER["out_dir"] / entry["file"], inst.data, entry)
         entries.append(entry)
     return JobResult(job.index, tuple(entries), elapsed_s=time.perf_counter() - t0)
 
@@ -364,8 +336,7 @@ class FlyInterrupted(KeyboardInterrupt):
 def _job_files(job: Job) -> list[str]:
     """The files a job writes: one per segment of its maneuver (see :func:`_run_job`)."""
     n = ManeuverSpec.from_dict(job.maneuver).n_segments
-    return [f"maneuvers/m{job.index:04d}.parquet"] if n == 1 else \
-        [f"maneuvers/m{job.index:04d}s{k}.parquet" for k in range(n)]
+    return [maneuver_file(maneuver_id(job.index, k, n)) for k in range(n)]
 
 
 def _manifest_header(campaign: Campaign) -> dict:
@@ -384,12 +355,7 @@ def _manifest_header(campaign: Campaign) -> dict:
             "adc_baseline": campaign.adc_baseline,
         },
         "software": software_versions(),
-        "airframe": {
-            "name": campaign.fleet.airframe.name,
-            "jsbsim_model": campaign.fleet.airframe.jsbsim_model,
-            "reference_point": campaign.fleet.airframe.reference_point,
-            "positions_body_m": {k: v.tolist() for k, v in campaign.fleet.airframe.positions_body_m.items()},
-        },
+        "airframe": airframe_manifest(campaign.fleet.airframe),
         "fleet": {
             "source": campaign.fleet.source,
             "aircraft": {

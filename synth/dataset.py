@@ -17,8 +17,9 @@ has one entry per Parquet file with: ``id``, ``file``, ``configuration``, ``airc
 ``r_cg_body_m_mean``, ``g_mps2_mean`` (gravity JSBSim used), ``environment``, ``injected``
 (every injected error value, SI), ``channel_units`` and ``own_rate_columns`` (measured columns
 kept at their recorder's own, slower samples: empty between them, e.g. the 10 Hz DGPS height on a
-40 Hz base). The same entry is stored in each
-Parquet file's key-value metadata under ``fpr.maneuver`` so a single file stays self-describing.
+40 Hz base); :func:`manifest_entry` builds it, :func:`maneuver_id` names the maneuver and
+:func:`maneuver_key` gives its seed key. The same entry is stored in each Parquet file's key-value
+metadata under ``fpr.maneuver`` so a single file stays self-describing.
 
 The manifest is written first, before any maneuver, with ``complete = false``, the campaign
 definition and the planned ``jobs`` (each with the ``files`` it will write); it is rewritten with
@@ -43,11 +44,19 @@ import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
+
+if TYPE_CHECKING:  # annotations only: the format module imports nothing that flies or instruments
+    from aircraft_models import Airframe, Configuration
+    from synth.environment import Environment
+    from synth.instrument import InstrumentedManeuver
+    from synth.maneuvers import ManeuverSpec
+    from synth.truth import TruthTrajectory
 
 FORMAT = "fpr-dataset"
 FORMAT_VERSION = 1
@@ -59,6 +68,9 @@ MANEUVER_FILE_RE = re.compile(r"maneuvers/m\d{4,}(?:s\d+)?\.parquet")
 _TEMP_RE = re.compile(r"\.(?:m\d{4,}(?:s\d+)?\.parquet|manifest\.json)\.[A-Za-z0-9_]+\.tmp")
 #: Names shown in a refusal before "and N more".
 _MAX_SHOWN = 12
+#: Seed keys per job (:func:`maneuver_key`): far more segments than any maneuver has (an SHSS
+#: run of at most 300 s in pieces of at least 25 s has 12).
+SEGMENTS_PER_JOB = 64
 
 
 class IncompleteDatasetError(ValueError):
@@ -123,6 +135,102 @@ def write_manifest(directory: Path, manifest: Mapping) -> Path:
     text = json.dumps(_jsonable(manifest), indent=1, sort_keys=True) + "\n"
     _atomic_write_bytes(path, text.encode())
     return path
+
+
+def maneuver_key(job_index: int, segment: int) -> int:
+    """The seed key of one recorded maneuver: ``job_index * 64 + segment``.
+
+    Every random draw of channel ``c`` of the maneuver uses ``default_rng([source seed, key, c])``
+    (:func:`synth.errors.channel_rng`), so a maneuver's noise does not depend on which other
+    maneuvers are flown, nor on the number of workers.
+
+    Parameters
+    ----------
+    job_index : the maneuver's index in its campaign (file order, from 0).
+    segment : the recorded piece of the maneuver (0 except for the SHSS pieces), 0-63.
+
+    Raises
+    ------
+    ValueError
+        If ``job_index`` is negative or ``segment`` is outside 0-63 (two maneuvers would share a key).
+    """
+    if job_index < 0:
+        raise ValueError(f"maneuver_key: job index {job_index} is negative; a campaign numbers its "
+                         "maneuvers from 0 in file order")
+    if not 0 <= segment < SEGMENTS_PER_JOB:
+        raise ValueError(f"maneuver_key: segment {segment} of job {job_index} is outside "
+                         f"0-{SEGMENTS_PER_JOB - 1}: the seed layout job_index * {SEGMENTS_PER_JOB} + "
+                         f"segment has {SEGMENTS_PER_JOB} keys per job; record the maneuver in fewer "
+                         "pieces (SHSS: a longer segment_s)")
+    return job_index * SEGMENTS_PER_JOB + segment
+
+
+def maneuver_id(job_index: int, segment: int, n_segments: int) -> str:
+    """The id of one recorded maneuver: ``m0004`` (one piece) or ``m0004s1`` (piece 1 of several)."""
+    return f"m{job_index:04d}" + (f"s{segment}" if n_segments > 1 else "")
+
+
+def maneuver_file(maneuver_id: str) -> str:
+    """The maneuver's file, relative to the dataset directory (:data:`MANEUVER_FILE_RE`)."""
+    return f"maneuvers/{maneuver_id}.parquet"
+
+
+def airframe_manifest(airframe: Airframe) -> dict:
+    """The manifest's ``airframe`` block: name, JSBSim model, reference point, sensor positions."""
+    return {
+        "name": airframe.name,
+        "jsbsim_model": airframe.jsbsim_model,
+        "reference_point": airframe.reference_point,
+        "positions_body_m": {k: v.tolist() for k, v in airframe.positions_body_m.items()},
+    }
+
+
+def manifest_entry(*, job_index: int, segment: int, n_segments: int, configuration: Configuration,
+                   spec: ManeuverSpec, environment: Environment, truth: TruthTrajectory,
+                   instrumented: InstrumentedManeuver, sample_rate_hz: float) -> dict:
+    """The manifest entry of one recorded maneuver (the keys listed in this module's docstring).
+
+    Parameters
+    ----------
+    job_index, segment, n_segments : the maneuver's job, its piece and the job's number of pieces.
+    configuration : the aircraft configuration flown (:class:`aircraft_models.Configuration`).
+    spec, environment : what was flown, in which air.
+    truth : the piece's truth (:class:`synth.truth.TruthTrajectory`).
+    instrumented : its recorded channels (:func:`synth.instrument.instrument`).
+    sample_rate_hz : the dataset's common time base, Hz.
+    """
+    mid = maneuver_id(job_index, segment, n_segments)
+    data = instrumented.data
+    mach = truth.mach
+    return {
+        "id": mid,
+        "file": maneuver_file(mid),
+        "job_index": job_index,
+        "configuration": configuration.id,
+        "aircraft": configuration.aircraft.id,
+        "nose_sensor": configuration.nose_sensor,
+        "sensors": list(configuration.sensors),
+        "kind": spec.kind,
+        "segment": segment,
+        "n_segments": n_segments,
+        "mach_nominal": spec.mach,
+        "mach_mean": float(np.mean(mach)),
+        "mach_min": float(np.min(mach)),
+        "mach_max": float(np.max(mach)),
+        "altitude_m": spec.altitude_m,
+        "gear_down": bool(spec.gear_down),
+        "duration_s": float(data["t_s"].iloc[-1] - data["t_s"].iloc[0]),
+        "n_samples": int(len(data)),
+        "sample_rate_hz": sample_rate_hz,
+        "r_cg_body_m_mean": np.mean(truth.r_cg_body_m, axis=0).tolist(),
+        "g_mps2_mean": float(np.mean(truth.g_mps2)),
+        "maneuver": spec.to_dict(),
+        "environment": environment.to_dict(),
+        "injected": instrumented.injected,
+        "channel_units": instrumented.channel_units,
+        "own_rate_columns": list(instrumented.own_rate_columns),
+        "flight_meta": {k: v for k, v in truth.meta.items() if k != "spec"},
+    }
 
 
 def resume_command(directory: str | Path) -> str:

@@ -8,7 +8,7 @@ import pytest
 
 from campaigns.cli import main
 from synth.campaign import CampaignError, fly_campaign, load_campaign, parse_campaign
-from synth.dataset import load_dataset
+from synth.dataset import load_dataset, maneuver_file, maneuver_id, maneuver_key, manifest_entry
 
 SMALL = {
     "name": "small",
@@ -68,6 +68,56 @@ def test_manifest_records_what_was_flown(twin_runs):
     df = ds.load("m0000")
     assert {"alpha_zb_rad", "beta_zbu_rad", "beta_zbl_rad"} <= set(df.columns)
     assert "beta_znp_rad" not in df.columns, "the boom replaces the nose probe"
+
+def test_seed_key_and_maneuver_id_layout():
+    # job_index * 64 + segment: the key of every (job, segment) is its own
+    keys = [maneuver_key(0, 0), maneuver_key(0, 63), maneuver_key(1, 0), maneuver_key(3, 1)]
+    assert keys == [0, 63, 64, 193]
+    with pytest.raises(ValueError, match=r"segment 64 of job 2 is outside 0-63.*fewer pieces"):
+        maneuver_key(2, 64)
+    with pytest.raises(ValueError, match="segment -1 of job 2"):
+        maneuver_key(2, -1)
+    with pytest.raises(ValueError, match="job index -1 is negative"):
+        maneuver_key(-1, 0)
+    assert maneuver_id(4, 0, 1) == "m0004" and maneuver_id(4, 1, 3) == "m0004s1"
+    assert maneuver_id(12345, 0, 1) == "m12345"
+    assert maneuver_file("m0004s1") == "maneuvers/m0004s1.parquet"
+
+
+def test_manifest_entry_keys_and_values():
+    from types import SimpleNamespace as NS
+
+    import numpy as np
+    import pandas as pd
+
+    cfg = NS(id="PV1-NP", aircraft=NS(id="PV1"), nose_sensor="nose_probe", sensors=("vane_left",))
+    spec = NS(kind="shss", mach=0.6, altitude_m=6000.0, gear_down=0, to_dict=lambda: {"kind": "shss"})
+    env = NS(to_dict=lambda: {"planet": "flat"})
+    truth = NS(mach=np.array([0.5, 0.7]), r_cg_body_m=np.array([[1.0, 0.0, 0.0], [3.0, 0.0, 2.0]]),
+               g_mps2=np.array([9.8, 9.81]), meta={"spec": "dropped", "trim": 1})
+    inst = NS(data=pd.DataFrame({"t_s": [2.0, 2.5, 4.0]}), injected={"maneuver_key": 193.0},
+              channel_units={"q_rps": "rad/s"}, own_rate_columns=("h_dgps_m",))
+    entry = manifest_entry(job_index=3, segment=1, n_segments=2, configuration=cfg, spec=spec,
+                           environment=env, truth=truth, instrumented=inst, sample_rate_hz=40.0)
+    assert list(entry) == [
+        "id", "file", "job_index", "configuration", "aircraft", "nose_sensor", "sensors", "kind",
+        "segment", "n_segments", "mach_nominal", "mach_mean", "mach_min", "mach_max", "altitude_m",
+        "gear_down", "duration_s", "n_samples", "sample_rate_hz", "r_cg_body_m_mean", "g_mps2_mean",
+        "maneuver", "environment", "injected", "channel_units", "own_rate_columns", "flight_meta"]
+    assert entry["id"] == "m0003s1" and entry["file"] == "maneuvers/m0003s1.parquet"
+    assert entry["sensors"] == ["vane_left"] and entry["gear_down"] is False
+    assert entry["mach_mean"] == 0.6 and (entry["mach_min"], entry["mach_max"]) == (0.5, 0.7)
+    assert entry["duration_s"] == 2.0 and entry["n_samples"] == 3 and entry["sample_rate_hz"] == 40.0
+    assert entry["r_cg_body_m_mean"] == [2.0, 0.0, 1.0] and entry["own_rate_columns"] == ["h_dgps_m"]
+    assert entry["flight_meta"] == {"trim": 1}
+
+
+def test_flown_maneuvers_carry_their_seed_key(twin_runs):
+    # `fpr fly` seeds each maneuver with maneuver_key and files it under maneuver_id
+    for entry in load_dataset(twin_runs["a"]).manifest["maneuvers"]:
+        assert entry["injected"]["maneuver_key"] == maneuver_key(entry["job_index"], entry["segment"])
+        assert entry["id"] == maneuver_id(entry["job_index"], entry["segment"], entry["n_segments"])
+
 
 
 def test_default_campaign_covers_the_fleet_and_the_envelope():

@@ -41,7 +41,15 @@ from estimator.solver import estimate
 from estimator.verdict import Verdict
 from estimator.workflow import RAD2DEG, apportion, stage_residuals, three_sigma, vane_biases
 from synth.campaign import software_versions
-from synth.dataset import FORMAT, FORMAT_VERSION, write_maneuver, write_manifest
+from synth.dataset import (
+    FORMAT,
+    FORMAT_VERSION,
+    airframe_manifest,
+    maneuver_key,
+    manifest_entry,
+    write_maneuver,
+    write_manifest,
+)
 from synth.flight import fly_maneuver
 from synth.instrument import instrument
 from synth.local_flow import load_adc_baseline, load_local_flow_truth
@@ -66,9 +74,6 @@ _OPEN_SCRATCH: set[str] = set()
 #: where this process puts its replications' scratch directories (None: the system's temporary
 #: folder); :func:`scratch_in`
 _SCRATCH_ROOT: list[str | None] = [None]
-#: maneuver keys: one per (job, segment), as synth.campaign numbers them (so the noise of a
-#: maneuver does not depend on which other maneuvers are flown)
-_SEGMENTS_PER_JOB = 64
 
 
 @dataclass(frozen=True)
@@ -217,32 +222,6 @@ def fly(scenario: Scenario, md: ManeuverDraw) -> tuple[TruthTrajectory, ...]:
                               md.environment))
 
 
-def _entry(scenario: Scenario, md: ManeuverDraw, seg_no: int, n_seg: int, truth: TruthTrajectory,
-           inst, mid: str) -> dict:
-    """The manifest entry of one instrumented maneuver, as synth.campaign writes it (the same
-    keys: keep the two in step until synth.campaign offers this as a function)."""
-    fleet = scenario.campaign.fleet
-    cfg = fleet.configuration(md.job.configuration_id)
-    spec = ManeuverSpec.from_dict(md.job.maneuver)
-    data = inst.data
-    return {
-        "id": mid, "file": f"maneuvers/{mid}.parquet", "job_index": md.job.index,
-        "configuration": cfg.id, "aircraft": cfg.aircraft.id, "nose_sensor": cfg.nose_sensor,
-        "sensors": list(cfg.sensors), "kind": spec.kind, "segment": seg_no, "n_segments": n_seg,
-        "mach_nominal": spec.mach, "mach_mean": float(np.mean(truth.mach)),
-        "mach_min": float(np.min(truth.mach)), "mach_max": float(np.max(truth.mach)),
-        "altitude_m": spec.altitude_m, "gear_down": bool(spec.gear_down),
-        "duration_s": float(data["t_s"].iloc[-1] - data["t_s"].iloc[0]), "n_samples": int(len(data)),
-        "sample_rate_hz": scenario.campaign.common_rate_hz,
-        "r_cg_body_m_mean": np.mean(truth.r_cg_body_m, axis=0).tolist(),
-        "g_mps2_mean": float(np.mean(truth.g_mps2)), "maneuver": spec.to_dict(),
-        "environment": md.environment.to_dict(), "injected": inst.injected,
-        "channel_units": inst.channel_units,
-        "own_rate_columns": list(inst.own_rate_columns),
-        "flight_meta": {k: v for k, v in truth.meta.items() if k != "spec"},
-    }
-
-
 def write_scratch_dataset(scenario: Scenario, draws: Sequence[ManeuverDraw],
                           truths: Mapping[int, Sequence[TruthTrajectory]], models: Models,
                           directory: Path) -> dict[str, pd.DataFrame]:
@@ -258,24 +237,25 @@ def write_scratch_dataset(scenario: Scenario, draws: Sequence[ManeuverDraw],
     for md in draws:
         cfg = fleet.configuration(md.job.configuration_id)
         segments = truths[md.job.index]
+        spec = ManeuverSpec.from_dict(md.job.maneuver)
         for seg_no, truth in enumerate(segments):
+            # the seed key and the entry of synth.campaign's own datasets
             inst = instrument(truth, fleet.airframe, cfg, md.errors,
-                              maneuver_key=md.job.index * _SEGMENTS_PER_JOB + seg_no,
+                              maneuver_key=maneuver_key(md.job.index, seg_no),
                               common_rate_hz=scenario.campaign.common_rate_hz,
                               truth_model=models.truth_model, adc_baseline=models.adc_baseline)
-            mid = f"m{md.job.index:04d}" + (f"s{seg_no}" if len(segments) > 1 else "")
-            entry = _entry(scenario, md, seg_no, len(segments), truth, inst, mid)
+            entry = manifest_entry(job_index=md.job.index, segment=seg_no, n_segments=len(segments),
+                                   configuration=cfg, spec=spec, environment=md.environment,
+                                   truth=truth, instrumented=inst,
+                                   sample_rate_hz=scenario.campaign.common_rate_hz)
             write_maneuver(directory / entry["file"], inst.data, entry)
             entries.append(entry)
-            tables[mid] = inst.data
-    airframe = fleet.airframe
+            tables[entry["id"]] = inst.data
     write_manifest(directory, {
         "format": FORMAT, "format_version": FORMAT_VERSION,
         "campaign": {"name": scenario.name, "source": scenario.source, "seed": scenario.seed},
         "software": software_versions(),
-        "airframe": {"name": airframe.name, "jsbsim_model": airframe.jsbsim_model,
-                     "reference_point": airframe.reference_point,
-                     "positions_body_m": {k: v.tolist() for k, v in airframe.positions_body_m.items()}},
+        "airframe": airframe_manifest(fleet.airframe),
         "common_rate_hz": scenario.campaign.common_rate_hz,
         "maneuvers": entries, "failures": [],
     })
