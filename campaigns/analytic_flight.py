@@ -41,6 +41,10 @@ SENSORS = {
     "boom_beta_lower_vane": np.array([9.55, 0.0, 0.32]),
 }
 TABLES = ("f1", "f2", "f3", "f4", "f5")
+#: White measurement noise of the channels, standard deviations (SI).
+NOISE_SIGMA = {"phi": 0.03 * DEG, "theta": 0.03 * DEG, "psi": 0.03 * DEG, "tas": 0.3, "h": 1.0,
+               "alpha_zl": 0.07 * DEG, "alpha_zr": 0.07 * DEG, "alpha_zsp": 0.1 * DEG,
+               "beta_zsp": 0.1 * DEG, "beta_znp": 0.1 * DEG}
 
 #: A trajectory: inputs(t) -> (specific force at the CG, body rates), states(t) -> (N, 6 or 7).
 Inputs = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]

@@ -20,7 +20,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from campaigns.analytic_flight import DEG, Flight
+from campaigns.analytic_flight import DEG, NOISE_SIGMA, Flight
 from campaigns.analytic_flight import truth_values as _truth_values  # the name other tests import from here
 from estimator.io.modelset import load_model_set
 from estimator.model import Model
@@ -109,9 +109,6 @@ def test_known_time_shift_is_recovered(tau):
 
 def test_recovery_within_cramer_rao_bounds_with_white_noise(flight):
     rng = np.random.default_rng(11)
-    noise = {"phi": 0.03 * DEG, "theta": 0.03 * DEG, "psi": 0.03 * DEG, "tas": 0.3, "h": 1.0,
-             "alpha_zl": 0.07 * DEG, "alpha_zr": 0.07 * DEG, "alpha_zsp": 0.1 * DEG,
-             "beta_zsp": 0.1 * DEG, "beta_znp": 0.1 * DEG}
 
     def start(ps):
         # a poor start: every free parameter off by a sizeable amount
@@ -124,7 +121,7 @@ def test_recovery_within_cramer_rao_bounds_with_white_noise(flight):
             out[p.key] = p.value + off.get(p.kind, 0.0)
         return out
 
-    prob = flight.problem(start=start, noise=noise, rng=rng)
+    prob = flight.problem(start=start, noise=NOISE_SIGMA, rng=rng)
     truth = flight.problem().parameters
     res = estimate(prob, SolverOptions())
     assert res.success, res.message

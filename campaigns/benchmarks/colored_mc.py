@@ -19,16 +19,14 @@ from scipy import fft as sfft
 from scipy.signal import lfilter
 from threadpoolctl import threadpool_limits
 
-from campaigns.analytic_flight import DEG, RATE_HZ, Flight, truth_values
+from campaigns.analytic_flight import DEG, NOISE_SIGMA, RATE_HZ, Flight, truth_values
 from estimator.io.modelset import load_model_set
 from estimator.model import Model
 from estimator.solver import SolverOptions, estimate
 
 DT_S = 1.0 / RATE_HZ
 #: Noise standard deviations per channel (SI): those of the estimator's white-noise test.
-SIGMA = {"phi": 0.03 * DEG, "theta": 0.03 * DEG, "psi": 0.03 * DEG, "tas": 0.3, "h": 1.0,
-         "alpha_zl": 0.07 * DEG, "alpha_zr": 0.07 * DEG, "alpha_zsp": 0.1 * DEG,
-         "beta_zsp": 0.1 * DEG, "beta_znp": 0.1 * DEG}
+SIGMA = dict(NOISE_SIGMA)
 #: Channels sharing a common noise component, and the share of each channel's variance it has.
 GROUPS = {"alpha": ("alpha_zl", "alpha_zr", "alpha_zsp"), "beta": ("beta_zsp", "beta_znp")}
 RHO = {"alpha_zl": 0.6, "alpha_zr": 0.6, "alpha_zsp": 0.6, "beta_zsp": 0.5, "beta_znp": 0.5}

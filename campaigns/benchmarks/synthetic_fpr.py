@@ -26,6 +26,7 @@ from scipy.integrate import cumulative_simpson
 
 from campaigns.analytic_flight import (
     DEG,
+    NOISE_SIGMA,
     SENSORS,
     TABLES,
     G,
@@ -41,10 +42,7 @@ from estimator.problem import ManeuverData, Problem, expand_parameters
 
 #: aircraft id -> carries the boom (else the nose probe)
 FLEET = {"PV1": False, "PV2": False, "PV3": False, "PT1": True, "PT2": True}
-NOISE = {"phi": 0.03 * DEG, "theta": 0.03 * DEG, "psi": 0.03 * DEG, "tas": 0.3, "h": 1.0, "h_dgps": 0.5,
-         "alpha_zl": 0.07 * DEG, "alpha_zr": 0.07 * DEG, "alpha_zsp": 0.1 * DEG,
-         "beta_zsp": 0.1 * DEG, "beta_znp": 0.1 * DEG, "alpha_zb": 0.05 * DEG,
-         "beta_zbu": 0.05 * DEG, "beta_zbl": 0.05 * DEG}
+NOISE = {**NOISE_SIGMA, "h_dgps": 0.5, "alpha_zb": 0.05 * DEG, "beta_zbu": 0.05 * DEG, "beta_zbl": 0.05 * DEG}
 TAUS = {"tau_phi": 0.02, "tau_theta": 0.02, "tau_psi": 0.02, "tau_tas": 0.0, "tau_h": 0.0, "tau_dgps": 0.1,
         "tau_alpha_zl": 0.03, "tau_alpha_zr": 0.045, "tau_sp": 0.08, "tau_np": 0.06,
         "tau_ba": 0.01, "tau_bu": 0.015, "tau_bl": 0.015}
