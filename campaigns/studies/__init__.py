@@ -25,5 +25,10 @@ table and a PNG plot; the committed results are in ``campaigns/studies/results/`
 
         python -m campaigns.studies.robustness --out runs/robustness --results campaigns/studies/results
 
-:mod:`campaigns.studies.invocations` records what each run cost and which code ran it.
+Every study stands on :mod:`campaigns.studies.scaffold` (the shared command line ``--out``,
+``--results``, ``--replications``, ``--workers``, ``--size``; running the Monte Carlo runs; the
+results files ``NAME.txt`` / ``.csv`` / ``.png``; the report's header) and keeps only its own
+configuration, analysis and report; what several studies share about their flights and fits is in
+:mod:`campaigns.studies.common`. :mod:`campaigns.studies.invocations` records what each run cost and
+which code ran it (``OUT/NAME_invocations.json``).
 """

@@ -25,7 +25,11 @@ from synth.campaign import software_versions
 
 #: The code every study runs, besides its own file: estimator, synthesizer, engine, truth.
 STUDY_CODE = ("estimator", "synth", "aircraft_models", "campaigns/montecarlo", "campaigns/truth.py",
-              "campaigns/studies/invocations.py")
+              "campaigns/studies/invocations.py", "campaigns/studies/scaffold.py",
+              "campaigns/studies/common.py")
+#: the log studies (a) and (b) kept before the scaffold (one JSON line per invocation: wall_s,
+#: computed, replications, runs, code); read once, as the history of a new record
+LEGACY_LOG = "invocations.jsonl"
 
 
 def code_version(study_file: str | Path) -> str:
@@ -76,10 +80,32 @@ class Invocation:
                   "replications_run": replications_run, "load_start": self.load0,
                   "load_end": os.getloadavg()[0], "code_start": self.code0,
                   "code": code1 if code1 == self.code0 else f"{self.code0} -> {code1}"}
-        records = json.loads(log_path.read_text()) if log_path.exists() else []
+        records = json.loads(log_path.read_text()) if log_path.exists() else legacy_records(log_path.parent)
         records.append(record)
         _atomic_write(log_path, (json.dumps(records, indent=1) + "\n").encode())
         return records
+
+
+def legacy_records(out_dir: Path) -> list[dict[str, Any]]:
+    """The invocations of ``out_dir/invocations.jsonl`` (:data:`LEGACY_LOG`) as records; what that log
+    did not keep (CPU time, load, start time, command) is None."""
+    path = out_dir / LEGACY_LOG
+    if not path.exists():
+        return []
+    lines = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    return [{"started_utc": None, "command": None, "wall_s": e["wall_s"], "cpu_s": None,
+             "replications_run": e["computed"], "load_start": None, "load_end": None,
+             "code_start": e.get("code", "?"), "code": e.get("code", "?")} for e in lines]
+
+
+def _num(value: float | None, spec: str) -> str:
+    """A number of a record, '?' where the record does not have it (a legacy record)."""
+    return "?" if value is None else format(value, spec)
+
+
+def _total(invocations: Sequence[Mapping[str, Any]], key: str) -> float | None:
+    values = [i[key] for i in invocations]
+    return None if any(v is None for v in values) else sum(values)
 
 
 def invocations_text(invocations: Sequence[Mapping[str, Any]]) -> list[str]:
@@ -92,10 +118,11 @@ def invocations_text(invocations: Sequence[Mapping[str, Any]]) -> list[str]:
     if len(invocations) > 1:
         lines.append(f"the replications were computed over {len(invocations)} invocations (resumed): wall "
                      f"{sum(i['wall_s'] for i in invocations):.0f} s, CPU "
-                     f"{sum(i['cpu_s'] for i in invocations):.0f} s, "
+                     f"{_num(_total(invocations, 'cpu_s'), '.0f')} s, "
                      f"{sum(i['replications_run'] for i in invocations)} replications in all:")
-        lines += [f"  {i.get('started_utc', '?')}: {i['replications_run']} replications, wall "
-                  f"{i['wall_s']:.0f} s, CPU {i['cpu_s']:.0f} s, code {i['code']}" for i in invocations]
+        lines += [f"  {i.get('started_utc') or '?'}: {i['replications_run']} replications, wall "
+                  f"{i['wall_s']:.0f} s, CPU {_num(i['cpu_s'], '.0f')} s, code {i['code']}"
+                  for i in invocations]
     return lines
 
 

@@ -33,10 +33,7 @@ with a conclusion drawn from the numbers) and ``maneuvers_per_bin.png`` into ``-
 
 from __future__ import annotations
 
-import argparse
 import math
-import os
-import shlex
 import sys
 import textwrap
 from collections.abc import Mapping, Sequence
@@ -49,20 +46,17 @@ import pandas as pd
 from campaigns.montecarlo.flight_cache import SUFFIX as FLIGHT_SUFFIX
 from campaigns.montecarlo.flight_cache import read_flight
 from campaigns.montecarlo.summary import load_results, summarize_results
-from campaigns.studies.shss_segments import (
+from campaigns.studies import scaffold
+from campaigns.studies.common import (
     ALTITUDE_M,
-    COLD_IMU_SPREAD,
     COMMON_DRAWS,
+    IMU_SPREAD_ACCEL_MPS2,
+    IMU_SPREAD_GYRO_DEG_S,
     SEED,
     WIND_NED_MPS,
-    cost_text,
     fit_ok,
-    fmt,
-    load_average,
-    machine_text,
-    paragraph,
-    run_scenarios,
 )
+from campaigns.studies.scaffold import Invocations, fmt, paragraph
 from estimator.io.modelset import load_model_set
 
 STUDY = "maneuvers_per_bin"
@@ -138,8 +132,8 @@ def scenario_raw(s: ManeuverSet, config: StudyConfig, replications: int) -> dict
     flights = [{"configurations": [config.configuration], "mach": [s.mach], "maneuvers": [kind],
                 "altitude_m": ALTITUDE_M, "maneuver": {"heading_rad": math.radians(heading_deg)}}
                for kind, heading_deg in MIX[: s.n]]
-    draws = {"imu.accel_bias_mps2": {"dist": "normal", "std": COLD_IMU_SPREAD[0], "scope": "maneuver"},
-             "imu.gyro_bias_deg_s": {"dist": "normal", "std": COLD_IMU_SPREAD[1], "scope": "maneuver"},
+    draws = {"imu.accel_bias_mps2": {"dist": "normal", "std": IMU_SPREAD_ACCEL_MPS2, "scope": "maneuver"},
+             "imu.gyro_bias_deg_s": {"dist": "normal", "std": IMU_SPREAD_GYRO_DEG_S, "scope": "maneuver"},
              **COMMON_DRAWS}
     return {
         "name": f"{STUDY}_{s.name}",
@@ -179,7 +173,7 @@ class SetMetrics:
     Attributes
     ----------
     requested, used, failed, wrong_minimum : N, replications in the statistics, failed or not
-        converged, converged to a wrong minimum (:func:`~campaigns.studies.shss_segments.fit_ok`).
+        converged, converged to a wrong minimum (:func:`~campaigns.studies.common.fit_ok`).
     vane : per used replication: accuracy, |mean| and 3 std of the worse vane, deg.
     parameters : Monte Carlo summary per parameter.
     alpha_deg : true alpha range flown (min, max), deg; beta_deg : largest |beta|, deg.
@@ -434,7 +428,7 @@ def _limit_text(metrics: Mapping[ManeuverSet, SetMetrics], s: ManeuverSet) -> st
 # ---------------------------------------------------------------------------- plot
 
 
-def plot(config: StudyConfig, metrics: Mapping[ManeuverSet, SetMetrics], path: Path,
+def plot(metrics: Mapping[ManeuverSet, SetMetrics], config: StudyConfig, path: Path,
          replications: int) -> Path:
     """Accuracy vs N, its parts, vane-bias / f1 bounds and scatter vs N, alpha coverage vs N."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -494,27 +488,24 @@ def plot(config: StudyConfig, metrics: Mapping[ManeuverSet, SetMetrics], path: P
 # ---------------------------------------------------------------------------- report
 
 
-def report(config: StudyConfig, metrics: Mapping[ManeuverSet, SetMetrics], replications: int, command: str,
-           cost: str, load: tuple[float, float]) -> str:
+def report(metrics: Mapping[ManeuverSet, SetMetrics], config: StudyConfig, replications: int, command: str,
+           invocations: Invocations) -> str:
+    """The text file: header (command, machine, cost), setup, legend, tables, findings, conclusion."""
     mix = ", ".join(f"{k + 1} {SHORT_KIND[kind]}{'' if not hdg else f' (heading {hdg:g})'}"
                     for k, (kind, hdg) in enumerate(MIX[: max(config.counts)]))
     lines = [
-        *paragraph("Planning study (b): how many maneuvers per Mach bin reach the vane AOA requirement "
-                   f"(+-{DESIRED_VANE_DEG:g} deg 3-sigma)? Every set a Monte Carlo run of "
-                   "campaigns/montecarlo."),
-        f"$ {command}",
-        *machine_text().splitlines(),
-        *textwrap.wrap(f"{cost}; load average {load[0]:.1f} at the start, {load[1]:.1f} at the end",
-                       width=108),
-        "",
+        *scaffold.header_lines(
+            "Planning study (b): how many maneuvers per Mach bin reach the vane AOA requirement "
+            f"(+-{DESIRED_VANE_DEG:g} deg 3-sigma)? Every set a Monte Carlo run of campaigns/montecarlo.",
+            command, __file__, f"{replications} replications per set, {len(config.sets)} sets", invocations),
         *paragraph(
             f"sets: {config.configuration} flies the first N maneuvers of the mix (nested sets) at "
             f"{ALTITUDE_M:g} m, one Mach bin estimated at once: {mix} (PD pitch doublet, WUT wind-up turn, "
             "PRD pull-up with rudder doublets, 3211 multistep, RC roller coaster, PUPO pull-up/push-over; "
             f"default excitation per Mach). Steady wind {list(WIND_NED_MPS)} m/s, calm air; typical errors "
             "of SPEC §6 (nose-probe irregularity off), IMU biases drawn per maneuver (std "
-            f"{COLD_IMU_SPREAD[0]:g} m/s^2, {COLD_IMU_SPREAD[1]:g} deg/s), vane delays, INS clock offset "
-            "drawn as in mc_20maneuvers. Worlds: linear = local_flow_linear / adc_baseline_linear "
+            f"{IMU_SPREAD_ACCEL_MPS2:g} m/s^2, {IMU_SPREAD_GYRO_DEG_S:g} deg/s), vane delays, INS clock "
+            "offset drawn as in mc_20maneuvers. Worlds: linear = local_flow_linear / adc_baseline_linear "
             "(representable), realistic = local_flow_truth / adc_baseline. Estimator: tejas model set, "
             f"every channel with data, h0 free, at most {MAX_ITERATIONS} iterations."),
         *paragraph(
@@ -542,40 +533,20 @@ def report(config: StudyConfig, metrics: Mapping[ManeuverSet, SetMetrics], repli
 # ---------------------------------------------------------------------------- command line
 
 
+STUDY_SPEC = scaffold.Study(
+    name=STUDY, file=__file__, sizes=SIZES, unit="set",
+    description="Planning study (b): N = 1, 2, 4, 8, 16 maneuvers of a realistic mix per Mach bin; vane "
+    "AOA accuracy against the truth, vane-bias and table bounds and scatter, alpha coverage. Resumable: "
+    "run the same command again.",
+    workers_help="worker processes per Monte Carlo run (default: 2; 1 runs in this process)",
+    size_help="full: the study; tiny: a smoke run (linear world, Mach 0.5, N = 2 and 3)",
+    run=scaffold.monte_carlo_runs(lambda config: config.sets, scenario_raw),
+    analyse=lambda config, out_dir, n, _: collect(config, out_dir, n), report=report, plot=plot)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m campaigns.studies.maneuvers_per_bin --out DIR [--replications N] ...``"""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    p = argparse.ArgumentParser(
-        prog="python -m campaigns.studies.maneuvers_per_bin",
-        description="Planning study (b): N = 1, 2, 4, 8, 16 maneuvers of a realistic mix per Mach bin; vane "
-        "AOA accuracy against the truth, vane-bias and table bounds and scatter, alpha coverage. Resumable: "
-        "run the same command again.")
-    p.add_argument("--out", required=True, type=Path, help="work directory (each set's Monte Carlo run)")
-    p.add_argument("--results", type=Path, default=None, help=f"where {STUDY}.txt / .png go (default: --out)")
-    p.add_argument("--replications", type=int, default=None, metavar="N",
-                   help="replications per set (default: full 20, tiny 1)")
-    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
-                   help="worker processes per Monte Carlo run (default: 2; 1 runs in this process)")
-    p.add_argument("--size", choices=sorted(SIZES), default="full",
-                   help="full: the study; tiny: a smoke run (linear world, Mach 0.5, N = 2 and 3)")
-    args = p.parse_args(argv)
-    config = SIZES[args.size]
-    n = args.replications or config.replications
-    if n < 1:
-        p.error("--replications must be at least 1")
-    results = args.results or args.out
-    results.mkdir(parents=True, exist_ok=True)
-    command = "python -m campaigns.studies.maneuvers_per_bin " + shlex.join(argv)
-    load0 = load_average()
-    runs = [(s.name, scenario_raw(s, config, n)) for s in config.sets]
-    wall_s, computed = run_scenarios(runs, args.out, n, args.workers)
-    cost = cost_text(args.out, wall_s, computed, n, len(runs))
-    metrics = collect(config, args.out, n)
-    text = report(config, metrics, n, command, cost, (load0, load_average()))
-    (results / f"{STUDY}.txt").write_text(text)
-    plot(config, metrics, results / f"{STUDY}.png", n)
-    print(text)
-    return 0
+    return scaffold.main(STUDY_SPEC, argv)
 
 
 if __name__ == "__main__":

@@ -8,9 +8,10 @@ baseline, a steady wind of (6, -4, 0) m/s, calm air), the IMU biases scaled to `
 typical preset (``synth.errors.ErrorConfig.typical``: accelerometer (0.10, -0.08, 0.15) m/s^2,
 gyro (0.2, -0.3, 0.15) deg/s; ``k`` = 1, 2, 3, -3) and drawn per maneuver around that value
 (standard deviations ``|k|`` x 0.05 m/s^2 and ``|k|`` x 0.1 deg/s, the spread of planning study
-(c), :mod:`campaigns.studies.tolerance`). Each scale is a Monte Carlo scenario of
-:mod:`campaigns.montecarlo` (same master seed for every scale: replication ``r`` of every scale has
-the same noise and the same standardised IMU-bias draws, only scaled).
+(c), :mod:`campaigns.studies.tolerance`; :func:`campaigns.studies.common.set_imu_bias`). Each
+scale is a Monte Carlo scenario of :mod:`campaigns.montecarlo` (same master seed for every scale:
+replication ``r`` of every scale has the same noise and the same standardised IMU-bias draws, only
+scaled).
 
 Per replication, on the same instrumented data (:mod:`campaigns.montecarlo` draws, flies and
 instruments it), two fits:
@@ -72,21 +73,16 @@ replications stay in ``OUT/runs/x<k>/pairs/`` (one JSON record each).
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import dataclasses
 import json
 import math
-import os
-import shlex
-import sys
 import tempfile
 import textwrap
 import time
 import traceback
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import as_completed
 from pathlib import Path
 from typing import Any
 
@@ -98,22 +94,22 @@ from campaigns.montecarlo import Scenario, parse_scenario
 from campaigns.montecarlo.replication import Models, fly, write_scratch_dataset
 from campaigns.montecarlo.runner import _atomic_write, _Lock, prepare_output
 from campaigns.montecarlo.scenario import scenario_hash
-from campaigns.studies.invocations import Invocation, invocations_text, machine_text
-from campaigns.studies.shss_segments import fmt, paragraph
-from campaigns.studies.tolerance import (
+from campaigns.studies import scaffold
+from campaigns.studies.common import (
     IMU_SPREAD_ACCEL_MPS2,
     IMU_SPREAD_GYRO_DEG_S,
     VANE_BIAS_FAMILIES,
-    _set_imu_bias,
-    _typical_imu,
+    WIND_NED_MPS,
+    set_imu_bias,
+    typical_imu_biases_deg,
 )
+from campaigns.studies.scaffold import Invocations, fmt, paragraph
 from campaigns.truth import true_parameters
 from estimator.io import problem_from_dataset
 from estimator.problem import Problem
 from estimator.result import STATUS_TEXT, EstimationResult
 from estimator.solver import SolverOptions, estimate
 from synth.errors import ErrorConfig
-from synth.workers import worker_pool
 
 STUDY = "robustness"
 #: the master seed of every scale's scenario (replication r draws from (SEED, r))
@@ -130,8 +126,6 @@ NEAR_ATT_RATIO = 1.5
 ATTITUDE_CHANNELS = ("phi", "theta", "psi")
 #: the INS attitude noise of the typical preset, deg (what a fit's attitude residuals come down to)
 INS_NOISE_DEG = math.degrees(ErrorConfig.typical().ins.euler_noise_rad)
-#: one record per invocation of the study on an output directory (its cost, when resumed)
-INVOCATIONS_FILE = "robustness_invocations.json"
 
 #: outcomes of a judged fit (:func:`classify`), in table order
 OUTCOMES = ("success at the true minimum", "failure at the true minimum", "success at a wrong minimum",
@@ -198,13 +192,13 @@ def scenario_raw(scale: float, config: StudyConfig, replications: int) -> dict:
         "description": f"issue 10 robustness: IMU biases {scale_label(scale)} x typical, zero start",
         "seed": SEED, "replications": int(replications), "fleet": "fleet_default",
         "local_flow_truth": "local_flow_truth", "adc_baseline": "adc_baseline", "common_rate_hz": 40.0,
-        "environment": {"planet": "flat", "wind_ned_mps": [6.0, -4.0, 0.0], "turbulence": "none"},
+        "environment": {"planet": "flat", "wind_ned_mps": list(WIND_NED_MPS), "turbulence": "none"},
         "errors": {"preset": "typical"},
         "flights": [dict(f) for f in config.flights],
         "draw": {"turbulence": "frozen", "errors": {}},
         "estimator": dict(config.estimator),
     }
-    _set_imu_bias(raw, scale)
+    set_imu_bias(raw, scale)
     for key in ("imu.accel_bias_mps2", "imu.gyro_bias_deg_s"):  # a spread, whatever the sign of the scale
         raw["draw"]["errors"][key]["std"] = abs(raw["draw"]["errors"][key]["std"])
     return raw
@@ -473,14 +467,7 @@ def run_study(config: StudyConfig, out_dir: Path, replications: int, workers: in
                 f"{classify_record(rec)}, dJ {rec['dcost']:.3g}")
             log(f"  x{scale_label(rec['scale'])} r{rec['replication']}: {what} ({rec['wall_s']:.1f} s)")
 
-        if workers <= 1:
-            for s, k in todo:
-                write(pair_task(raws[s], s, k))
-        elif todo:
-            with worker_pool(workers) as pool:  # workers end with this process; Ctrl-C stops them
-                futures = [pool.submit(pair_task, raws[s], s, k) for s, k in todo]
-                for fut in as_completed(futures):
-                    write(fut.result())
+        scaffold.run_in_processes(pair_task, [(raws[s], s, k) for s, k in todo], workers, write)
     return len(todo)
 
 
@@ -838,22 +825,19 @@ def plot(df: pd.DataFrame, scales: Sequence[float], path: Path, replications: in
 
 
 def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: str,
-           invocations: Sequence[Mapping[str, Any]]) -> str:
+           invocations: Invocations) -> str:
     """The text file: header (command, machine, code, cost), setting, legend, tables, conclusions."""
-    accel, gyro = _typical_imu()
+    accel, gyro = typical_imu_biases_deg()
     table = scale_table(df, config.scales)
     flights = "; ".join(f"{'+'.join(b['configurations'])} at Mach {b['mach']}, {b['altitude_m']:g} m: "
                         f"{', '.join(b['maneuvers'])}" + (f" ({b['maneuver']})" if "maneuver" in b else "")
                         for b in config.flights)
     shss = " (SHSS split into its segments)" if any("shss" in b["maneuvers"] for b in config.flights) else ""
     lines = [
-        *paragraph("Robustness (issue 10): fits from the estimator's default (zero) start with the IMU "
-                   "biases at k x typical, judged against a fit started from the truth (the true minimum)."),
-        f"$ {command}",
-        *machine_text(__file__, invocations[-1].get("code_start")).splitlines(),
-        f"{replications} replications per scale, {len(config.scales)} scales",
-        *invocations_text(invocations),
-        "",
+        *scaffold.header_lines(
+            "Robustness (issue 10): fits from the estimator's default (zero) start with the IMU biases at "
+            "k x typical, judged against a fit started from the truth (the true minimum).", command, __file__,
+            f"{replications} replications per scale, {len(config.scales)} scales", invocations),
         *paragraph(f"setting: {flights}{shss}; the default campaign's world: "
                    "typical errors, local_flow_truth / adc_baseline, steady wind (6, -4, 0) m/s, calm air, "
                    f"flat earth; IMU biases k x typical (accel {accel} m/s^2, gyro "
@@ -893,43 +877,21 @@ def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: st
 # ---------------------------------------------------------------------------- command line
 
 
+STUDY_SPEC = scaffold.Study(
+    name=STUDY, file=__file__, sizes=SIZES, unit="scale",
+    description="Issue 10 robustness: IMU biases at k x typical (1, 2, 3, -3), fits from the default "
+    "(zero) start judged against a fit from the truth: the fraction at the true minimum and the fits "
+    "reported as success at a wrong minimum. Resumable: run the same command again.",
+    workers_help="replications run at once, one process each (default: 2; 1 runs in this process)",
+    size_help="full: the study; tiny: a smoke run (one 20 s pitch doublet at 3x, one replication)",
+    run=lambda config, out_dir, n, workers, log: (run_study(config, out_dir, n, workers, log), None),
+    analyse=lambda config, out_dir, n, _: records_frame(load_records(config, out_dir, n)),
+    report=report, plot=lambda df, config, path, n: plot(df, config.scales, path, n), table=lambda df: df)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m campaigns.studies.robustness --out DIR [--results DIR] [--replications N] ...``"""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    p = argparse.ArgumentParser(
-        prog=f"python -m campaigns.studies.{STUDY}",
-        description="Issue 10 robustness: IMU biases at k x typical (1, 2, 3, -3), fits from the default "
-        "(zero) start judged against a fit from the truth: the fraction at the true minimum and the fits "
-        "reported as success at a wrong minimum. Resumable: run the same command again.")
-    p.add_argument("--out", required=True, type=Path,
-                   help="work directory (each scale's replication records)")
-    p.add_argument("--results", type=Path, default=None,
-                   help=f"where {STUDY}.txt / .png / .csv go (default: --out)")
-    p.add_argument("--replications", type=int, default=None, metavar="N",
-                   help="replications per scale (default: full 10, tiny 1)")
-    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
-                   help="replications run at once, one process each (default: 2; 1 runs in this process)")
-    p.add_argument("--size", choices=sorted(SIZES), default="full",
-                   help="full: the study; tiny: a smoke run (one 20 s pitch doublet at 3x, one replication)")
-    args = p.parse_args(argv)
-    config = SIZES[args.size]
-    n = args.replications or config.replications
-    if n < 1:
-        p.error("--replications must be >= 1")
-    results = args.results or args.out
-    results.mkdir(parents=True, exist_ok=True)
-    args.out.mkdir(parents=True, exist_ok=True)
-    invocation = Invocation(__file__)
-    n_ran = run_study(config, args.out, n, args.workers, log=lambda s: print(s, file=sys.stderr, flush=True))
-    command = f"python -m campaigns.studies.{STUDY} " + shlex.join(argv)
-    invocations = invocation.finish(args.out / INVOCATIONS_FILE, command, n_ran)
-    df = records_frame(load_records(config, args.out, n))
-    text = report(df, config, n, command, invocations)
-    (results / f"{STUDY}.txt").write_text(text)
-    df.to_csv(results / f"{STUDY}.csv", index=False)
-    plot(df, config.scales, results / f"{STUDY}.png", n)
-    print(text)
-    return 0
+    return scaffold.main(STUDY_SPEC, argv)
 
 
 if __name__ == "__main__":

@@ -28,8 +28,8 @@ parameters (side-probe, nose-probe and boom sideslip biases, scale factors and t
 sidewash coupling f2, the vane AOA biases); the residual fit (1-sigma per channel); the accuracy
 of each calibrated sideslip channel against the true flow angle (``|mean| + 3 std``, the same
 definition as study (c)); and how many replications the estimator fitted at all (a fit whose
-attitude residuals exceed :data:`ATTITUDE_FIT_LIMIT_DEG` 3-sigma sits in a wrong minimum, although
-the solver may report convergence).
+attitude residuals exceed :data:`~campaigns.studies.common.ATTITUDE_FIT_LIMIT_DEG` 3-sigma sits in
+a wrong minimum, although the solver may report convergence).
 
 Run (resumable: the same command again skips finished replications)::
 
@@ -43,15 +43,9 @@ with a conclusion drawn from the numbers) and ``shss_segments.png`` into ``--res
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
-import os
-import shlex
-import subprocess
 import sys
 import textwrap
-import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -59,18 +53,25 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from campaigns.machine import cpu_model, memory_gib
-from campaigns.montecarlo import parse_scenario, run_montecarlo
 from campaigns.montecarlo.replication import ReplicationResult
 from campaigns.montecarlo.summary import load_results, summarize_results
-from synth.campaign import software_versions
-from synth.errors import ErrorConfig
+from campaigns.studies import scaffold
+from campaigns.studies.common import (
+    ALTITUDE_M,
+    ATTITUDE_FIT_LIMIT_DEG,
+    COMMON_DRAWS,
+    IMU_SPREAD_ACCEL_MPS2,
+    IMU_SPREAD_GYRO_DEG_S,
+    SEED,
+    VANE_BIAS_FAMILIES,
+    WIND_NED_MPS,
+    fit_ok,
+    typical_imu_biases,
+)
+from campaigns.studies.scaffold import Invocations, fmt, paragraph
 
 STUDY = "shss_segments"
 SHSS_BETA_DEG = 4.5
-ALTITUDE_M = 6000.0
-WIND_NED_MPS = (6.0, -4.0, 0.0)
-SEED = 2026
 CONDITIONS: dict[str, str] = {
     "calm": "calm air, typical errors (IMU noise on), warm IMU-bias start",
     "ideal_imu": "as calm, IMU noise and quantization off",
@@ -79,23 +80,11 @@ CONDITIONS: dict[str, str] = {
 }
 #: IMU-bias spread drawn per maneuver around the typical values: (accel m/s^2, gyro deg/s)
 WARM_IMU_SPREAD = (0.01, 0.02)
-COLD_IMU_SPREAD = (0.05, 0.1)
-#: drawn every replication besides the IMU biases (as campaigns/mc_20maneuvers.toml)
-COMMON_DRAWS: dict[str, dict] = {
-    "sensors.vane_left.delay_ms": {"dist": "uniform", "half_width": 20.0},
-    "sensors.vane_right.delay_ms": {"dist": "uniform", "half_width": 20.0},
-    "recorders.ins.clock_offset_ms": {"dist": "uniform", "low": -20.0, "high": 40.0},
-    "sensors.boom_alpha_vane.scale": {"dist": "normal", "std": 0.01},
-    "sensors.boom_beta_upper_vane.scale": {"dist": "normal", "std": 0.01},
-    "sensors.boom_beta_lower_vane.scale": {"dist": "normal", "std": 0.01},
-}
+COLD_IMU_SPREAD = (IMU_SPREAD_ACCEL_MPS2, IMU_SPREAD_GYRO_DEG_S)
 MAX_ITERATIONS = 60
-#: an estimate whose phi/theta/psi residual 3-sigma exceeds this sits in a wrong minimum (a good
-#: fit leaves the INS noise, ~0.1 deg; turbulence ~1 deg; a wrong minimum 10 deg and more)
-ATTITUDE_FIT_LIMIT_DEG = 3.0
-#: parameter families the sideslip calibration is about, and the vane AOA biases
+#: parameter families the sideslip calibration is about (the vane AOA biases:
+#: :data:`~campaigns.studies.common.VANE_BIAS_FAMILIES`)
 SIDESLIP_FAMILIES = ("b_sb", "b_n", "b_bu", "b_bl", "k_bu", "k_bl", "k_spr", "f4", "f5", "f2")
-VANE_BIAS_FAMILIES = ("b_l", "b_r")
 #: calibrated sideslip channels: label, desired accuracy deg (SPEC §8; None: no requirement)
 SIDESLIP_CHANNELS: dict[str, tuple[str, float | None]] = {
     "beta_zsp": ("side-probe AOSS", 1.0),
@@ -175,12 +164,6 @@ SIZES: dict[str, StudyConfig] = {
 # ---------------------------------------------------------------------------- scenarios
 
 
-def typical_imu_biases() -> tuple[list[float], list[float]]:
-    """The typical preset's IMU biases: accelerometer m/s^2, gyro rad/s."""
-    imu = ErrorConfig.typical().imu
-    return list(imu.accel_bias_mps2), list(imu.gyro_bias_rps)
-
-
 def scenario_raw(variant: Variant, config: StudyConfig, replications: int) -> dict:
     """The Monte Carlo scenario (TOML tables) of one variant."""
     cold = variant.condition == "cold_start"
@@ -222,52 +205,7 @@ def scenario_raw(variant: Variant, config: StudyConfig, replications: int) -> di
     }
 
 
-def run_scenarios(runs: Sequence[tuple[str, dict]], out_dir: Path, replications: int,
-                  workers: int) -> tuple[float, int]:
-    """Run (or resume) each scenario into ``out_dir/runs/NAME`` with the Monte Carlo engine.
-
-    Returns the wall time, s, and the number of replications computed (not already on disk).
-    Progress goes to stderr.
-    """
-    t0 = time.perf_counter()
-    computed = 0
-    for k, (name, raw) in enumerate(runs):
-        scenario = parse_scenario(raw, source=f"{raw['name']} (built by campaigns.studies)")
-        report = run_montecarlo(scenario, out_dir / "runs" / name, replications=replications, workers=workers)
-        computed += len(report.ran)
-        print(f"[{k + 1}/{len(runs)}] {report.text()}", file=sys.stderr, flush=True)
-    return time.perf_counter() - t0, computed
-
-
-def cost_text(out_dir: Path, wall_s: float, computed: int, replications: int, runs: int) -> str:
-    """Log this invocation's cost in ``out_dir/invocations.jsonl`` and say what the study cost in all
-    (a resumed study computes only what is missing)."""
-    log = out_dir / "invocations.jsonl"
-    entry = {"wall_s": round(wall_s, 1), "computed": computed, "replications": replications, "runs": runs,
-             "code": code_commit()}
-    with open(log, "a") as fh:
-        fh.write(json.dumps(entry) + "\n")
-    past = [json.loads(line) for line in log.read_text().splitlines() if line.strip()]
-    text = (f"wall {wall_s:.0f} s for the whole study ({replications} replications per run, {runs} runs, "
-            f"{computed} replications computed by this invocation)")
-    if len(past) > 1:
-        total = sum(e["wall_s"] for e in past)
-        codes = ", ".join(dict.fromkeys(e.get("code", "?") for e in past if e["computed"]))
-        text += (f"; over the {len(past)} invocations into this directory: {total:.0f} s, "
-                 f"{sum(e['computed'] for e in past)} replications computed (code {codes or '-'})")
-    return text
-
-
 # ---------------------------------------------------------------------------- metrics
-
-
-def fit_ok(result: ReplicationResult) -> bool:
-    """The replication converged and its attitude residuals are those of a fit, not of a wrong minimum."""
-    if not result.ok or not len(result.channels):
-        return False
-    ch = result.channels
-    att = ch[(ch["kind"] == "residual") & ch["name"].isin(["phi", "theta", "psi"])]
-    return bool(len(att)) and float(att["three_sigma"].max()) <= ATTITUDE_FIT_LIMIT_DEG
 
 
 def channel_rows(results: Sequence[ReplicationResult]) -> pd.DataFrame:
@@ -290,7 +228,8 @@ class RunMetrics:
     requested : N.
     files : replications with a file.
     failed : replications whose estimation failed or did not converge.
-    wrong_minimum : converged replications whose fit is not one (:func:`fit_ok`).
+    wrong_minimum : converged replications whose fit is not one
+        (:func:`~campaigns.studies.common.fit_ok`).
     used : replications in the statistics.
     parameters : the Monte Carlo summary per parameter (crb_mean, mc_std, ratio_crb, ...).
     channels : per replication and channel (:func:`channel_rows`) of the used replications.
@@ -390,46 +329,6 @@ def parameter_names(metrics: Mapping[Variant, RunMetrics]) -> tuple[list[str], l
         names += [n for n in study_parameters(m.parameters, SIDESLIP_FAMILIES + VANE_BIAS_FAMILIES)
                   if n not in names]
     return names, [n for n in names if n.split("[")[0] in SIDESLIP_FAMILIES]
-
-
-# ---------------------------------------------------------------------------- machine, formatting
-
-
-def code_commit() -> str:
-    """The working tree's commit (short hash), '?' outside git."""
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                              cwd=Path(__file__).parent, check=False).stdout.strip() or "?"
-    except OSError:
-        return "?"
-
-
-def machine_text() -> str:
-    """CPU model, cores, memory, software versions and the code's commit."""
-    cpu = cpu_model()
-    gib = memory_gib()
-    mem = "" if gib is None else f", {gib:.0f} GiB"
-    commit = code_commit()
-    versions = ", ".join(f"{k} {v}" for k, v in software_versions().items())
-    return (f"machine: {cpu}, {os.cpu_count()} cores{mem}; {versions}\n"
-            f"code: {commit} (the shared working tree)")
-
-
-def fmt(v: float, spec: str = ".3g") -> str:
-    """A number for the tables ('-' when missing)."""
-    return "-" if v is None or not np.isfinite(v) else format(v, spec)
-
-
-def paragraph(text: str, width: int = 108) -> list[str]:
-    """``text`` wrapped, then an empty line."""
-    return [*textwrap.wrap(text, width=width), ""]
-
-
-def load_average() -> float:
-    try:
-        return os.getloadavg()[0]
-    except OSError:
-        return math.nan
 
 
 #: a parameter enters the geometric means when its Cramér-Rao std in the reference run is below
@@ -726,12 +625,12 @@ def conclusion(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names
 # ---------------------------------------------------------------------------- plot
 
 
-def plot(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names: Sequence[str], path: Path,
-         replications: int) -> Path:
+def plot(metrics: Mapping[Variant, RunMetrics], config: StudyConfig, path: Path, replications: int) -> Path:
     """Four panels: relative bounds, relative scatter, calibrated sideslip accuracy, residuals."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
+    names = parameter_names(metrics)[1]
     variants = list(config.variants)
     x = np.arange(len(variants))
     labels = [f"v{k + 1} {v.label}" for k, v in enumerate(variants)]
@@ -785,9 +684,9 @@ def plot(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], names: Sequ
 # ---------------------------------------------------------------------------- report
 
 
-def report(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], replications: int, command: str,
-           cost: str, load: tuple[float, float]) -> str:
-    """The text file: header, setup, legend, tables, conclusion."""
+def report(metrics: Mapping[Variant, RunMetrics], config: StudyConfig, replications: int, command: str,
+           invocations: Invocations) -> str:
+    """The text file: header (command, machine, cost), setup, legend, tables, conclusion."""
     names, side = parameter_names(metrics)
     accel, gyro = typical_imu_biases()
     df = summary_frame(config, metrics, side)
@@ -796,14 +695,11 @@ def report(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], replicati
     ref = config.variants[0].cut(config.reference_pieces).split
     limits = ", ".join(f"{v:g} {u}" for u, v in WELL_DETERMINED.items())
     lines = [
-        *paragraph(f"Planning study (a): the steady-heading sideslip (SHSS) flown as one {duration:g} s "
-                   f"maneuver or split into pieces ({ref} s is the paper's 30-40 s practice). Every "
-                   "variant a Monte Carlo run of campaigns/montecarlo."),
-        f"$ {command}",
-        *machine_text().splitlines(),
-        *textwrap.wrap(f"{cost}; load average {load[0]:.1f} at the start, {load[1]:.1f} at the end",
-                       width=108),
-        "",
+        *scaffold.header_lines(
+            f"Planning study (a): the steady-heading sideslip (SHSS) flown as one {duration:g} s maneuver "
+            f"or split into pieces ({ref} s is the paper's 30-40 s practice). Every variant a Monte Carlo "
+            "run of campaigns/montecarlo.", command, __file__,
+            f"{replications} replications per variant, {len(config.variants)} variants", invocations),
         *paragraph(f"flights per variant: {' + '.join(config.configurations)} at the variant's Mach number, "
                    f"{ALTITUDE_M:g} m: one pitch doublet and the {duration:g} s SHSS at "
                    f"{', '.join(f'{b:+g}' for b in config.betas_deg)} deg sideslip, cut into the variant's "
@@ -860,40 +756,20 @@ def report(config: StudyConfig, metrics: Mapping[Variant, RunMetrics], replicati
 # ---------------------------------------------------------------------------- command line
 
 
+STUDY_SPEC = scaffold.Study(
+    name=STUDY, file=__file__, sizes=SIZES, unit="variant",
+    description="Planning study (a): the 105 s SHSS as one maneuver or split into 52.5 / 35 s pieces; "
+    "Cramer-Rao bounds, Monte Carlo scatter, residual fit and calibrated sideslip accuracy. Resumable: "
+    "run the same command again.",
+    workers_help="worker processes per Monte Carlo run (default: 2; 1 runs in this process)",
+    size_help="full: the study; tiny: a smoke run (PV1, one side, a 50 s run as 1 or 2 pieces)",
+    run=scaffold.monte_carlo_runs(lambda config: config.variants, scenario_raw),
+    analyse=lambda config, out_dir, n, _: collect(config, out_dir, n), report=report, plot=plot)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m campaigns.studies.shss_segments --out DIR [--replications N] ...``"""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    p = argparse.ArgumentParser(
-        prog="python -m campaigns.studies.shss_segments",
-        description="Planning study (a): the 105 s SHSS as one maneuver or split into 52.5 / 35 s pieces; "
-        "Cramer-Rao bounds, Monte Carlo scatter, residual fit and calibrated sideslip accuracy. Resumable: "
-        "run the same command again.")
-    p.add_argument("--out", required=True, type=Path, help="work directory (each variant's Monte Carlo run)")
-    p.add_argument("--results", type=Path, default=None, help=f"where {STUDY}.txt / .png go (default: --out)")
-    p.add_argument("--replications", type=int, default=None, metavar="N",
-                   help="replications per variant (default: full 15, tiny 1)")
-    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
-                   help="worker processes per Monte Carlo run (default: 2; 1 runs in this process)")
-    p.add_argument("--size", choices=sorted(SIZES), default="full",
-                   help="full: the study; tiny: a smoke run (PV1, one side, a 50 s run as 1 or 2 pieces)")
-    args = p.parse_args(argv)
-    config = SIZES[args.size]
-    n = args.replications or config.replications
-    if n < 1:
-        p.error("--replications must be at least 1")
-    results = args.results or args.out
-    results.mkdir(parents=True, exist_ok=True)
-    command = "python -m campaigns.studies.shss_segments " + shlex.join(argv)
-    load0 = load_average()
-    runs = [(v.name, scenario_raw(v, config, n)) for v in config.variants]
-    wall_s, computed = run_scenarios(runs, args.out, n, args.workers)
-    cost = cost_text(args.out, wall_s, computed, n, len(runs))
-    metrics = collect(config, args.out, n)
-    text = report(config, metrics, n, command, cost, (load0, load_average()))
-    (results / f"{STUDY}.txt").write_text(text)
-    plot(config, metrics, parameter_names(metrics)[1], results / f"{STUDY}.png", n)
-    print(text)
-    return 0
+    return scaffold.main(STUDY_SPEC, argv)
 
 
 if __name__ == "__main__":
