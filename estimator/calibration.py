@@ -40,6 +40,7 @@ from estimator.report import (
     figure_crossplot,
     figure_table_updates,
     figure_time_history,
+    time_history_maneuver,
     write_report,
 )
 from estimator.solver import SolverOptions
@@ -145,8 +146,6 @@ TruthHook = Callable[[WorkflowResult], "TruthSections | None"]
 # the truth-free report
 
 _LEVEL = {Verdict.SUCCESS: "success", Verdict.SUCCESS_WITH_WARNINGS: "warning", Verdict.FAILURE: "failure"}
-#: Fig. 3 shows a maneuver of these kinds if the reference bin has one (the paper's pitch doublet).
-TIME_HISTORY_KINDS = ("pitch_doublet", "3211")
 
 
 def _mean_bias_label(families) -> tuple[str, str]:
@@ -368,8 +367,7 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: TruthHook
 def _time_history(ref: Stage, channels: Sequence[str]):
     """Fig. 3's channels (measured, model, unit) on the shown maneuver's time base."""
     res = ref.residuals
-    mid = next((m.id for m in ref.problem.maneuvers if m.meta.get("kind") in TIME_HISTORY_KINDS),
-               ref.problem.maneuvers[0].id)
+    mid = time_history_maneuver(ref.problem.maneuvers)
     units = {c.name: (c.display_scale, c.display_unit) for c in ref.problem.channels}
     # channels fitted at different samples (a time-shifted channel loses its edges, an own-rate one
     # has its own) go onto the maneuver's time base, NaN where a channel has no sample

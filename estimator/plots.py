@@ -14,11 +14,8 @@ import pandas as pd
 
 from estimator.model import Model
 from estimator.problem import Problem
-from estimator.report import figure_crossplot, figure_time_history, save_png
+from estimator.report import figure_crossplot, figure_time_history, save_png, time_history_maneuver
 from estimator.result import EstimationResult
-
-#: The time-history figure shows a maneuver of these kinds if there is one (the paper's Fig. 3).
-TIME_HISTORY_KINDS = ("pitch_doublet", "3211")
 
 
 def time_histories(problem: Problem, values: np.ndarray) -> pd.DataFrame:
@@ -50,8 +47,7 @@ def time_histories(problem: Problem, values: np.ndarray) -> pd.DataFrame:
 def _time_history_channels(problem: Problem, hist: pd.DataFrame):
     """The shown maneuver, its time base and ``channel -> (measured, model, unit)`` on it (NaN where a
     channel has no sample: a time-shifted channel loses its edges, an own-rate one has its own)."""
-    mid = next((m.id for m in problem.maneuvers if m.meta.get("kind") in TIME_HISTORY_KINDS),
-               problem.maneuvers[0].id)
+    mid = time_history_maneuver(problem.maneuvers)
     t_all = next(m.t_s for m in problem.maneuvers if m.id == mid)
     h = hist[hist["maneuver"] == mid]
     chans = {}

@@ -43,6 +43,7 @@ __all__ = [
     "figure_table_updates",
     "figure_time_history",
     "save_png",
+    "time_history_maneuver",
     "write_report",
 ]
 
@@ -166,6 +167,17 @@ def figure_time_history(
     axes[-1].set_xlabel("time [s]", fontsize=9)
     fig.suptitle(f"{maneuver_id}: time-history match, measured vs model", fontsize=10)
     return fig
+
+
+#: Fig. 3 shows a maneuver of these kinds if there is one (the paper's is a pitch doublet). Maneuver
+#: kinds are the flight-test programme's vocabulary (a dataset entry's ``kind``), not the aircraft's.
+TIME_HISTORY_KINDS = ("pitch_doublet", "3211")
+
+
+def time_history_maneuver(maneuvers: Sequence) -> str:
+    """The id of the maneuver the time-history figure shows: the first whose ``meta["kind"]`` is one
+    of :data:`TIME_HISTORY_KINDS`, else the first (``maneuvers``: objects with ``id`` and ``meta``)."""
+    return next((m.id for m in maneuvers if m.meta.get("kind") in TIME_HISTORY_KINDS), maneuvers[0].id)
 
 
 def figure_bias_vs_mach(bias: pd.DataFrame, reference_mach: float | None = None, *,

@@ -103,3 +103,47 @@ def test_dataset_files_are_not_private(tmp_path):
     os.umask(umask)
     mode = stat.S_IMODE((tmp_path / "ds" / "manifest.json").stat().st_mode)
     assert mode == 0o666 & ~umask, oct(mode)
+
+
+# --------------------------------------------------------------------------------------------------
+# the estimator's reader: the format's own columns, and the model set's channels
+
+
+def test_column_names_come_from_the_format_and_the_unit_suffix():
+    from estimator.io.fprdataset import FPR_COLUMNS, canonical_name, dataset_column, dataset_columns
+
+    assert canonical_name("h_baro_m") == "h" and canonical_name("gear_down") == "gear"
+    assert canonical_name("alpha_zl_rad") == "alpha_zl" and canonical_name("mach") == "mach"
+    cols = ["t_s", "q_rps", "h_baro_m", "alpha_zl_rad", "alpha_lm_rad", "true_alpha_zl_rad", "qc_pa"]
+    assert dataset_column("alpha_zl", cols) == "alpha_zl_rad"
+    assert dataset_column("h", cols) == "h_baro_m"
+    assert dataset_column("beta_x", cols) == "beta_x"  # none: the name itself
+    # the format's own columns always; others only when named, never the truth
+    assert dataset_columns([], cols) == {"t_s": "t", "q_rps": "q", "h_baro_m": "h"}
+    assert dataset_columns(["alpha_zl"], cols) == {"t_s": "t", "q_rps": "q", "h_baro_m": "h",
+                                                   "alpha_zl_rad": "alpha_zl"}
+    assert "alpha_zl" not in FPR_COLUMNS.values()  # a flow channel is the model set's, not the format's
+
+
+@pytest.mark.slow
+def test_the_reader_reads_the_model_sets_channels_and_no_list_of_its_own(tiny_dataset):
+    from estimator.io import FPR_COLUMNS, load_dataset_maneuvers, problem_from_dataset
+    from estimator.io.modelset import load_model_set
+
+    tejas, _ = load_model_set("tejas")
+    (table, _req), *_ = load_dataset_maneuvers(tiny_dataset, {"ids": "m0000"}, tejas)[0]
+    own = set(FPR_COLUMNS.values())
+    assert set(table.values) - own == {"alpha_zl", "alpha_zr", "alpha_zsp", "beta_zsp", "beta_znp"}
+    assert table.labels["alpha_zl"] == "alpha_zl (column 'alpha_zl_rad')"
+    assert table.units["alpha_zl"] == "rad"
+    (table, _req), *_ = load_dataset_maneuvers(tiny_dataset, {"ids": "m0000"})[0]
+    assert set(table.values) <= own
+
+    # a channel only the problem declares reads its column too: the left vane's raw output
+    problem = problem_from_dataset(tiny_dataset, {"ids": "m0000"}, channels=["theta", "alpha_lm"],
+                                   extra_channels=[{"name": "alpha_lm", "sensor": "vane_left",
+                                                    "measures": "alpha_s", "model": "alpha_s"}])
+    m = problem.maneuvers[0]
+    assert [c.name for c in problem.channels] == ["theta", "alpha_lm"]
+    raw = pd.read_parquet(tiny_dataset / m.meta["file"], columns=["alpha_lm_rad"])["alpha_lm_rad"]
+    np.testing.assert_array_equal(m.measurements["alpha_lm"], raw.to_numpy())

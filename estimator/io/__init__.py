@@ -30,6 +30,7 @@ z down) from the aircraft's reference point::
     vane_left = [6.20, -0.45, 0.25]
     vane_right = [6.20, 0.45, 0.25]
     side_probe = [6.60, 0.0, 0.05]   # if absent, the mean of side_probe_left and side_probe_right
+                                     # (the model set's [sensor_midpoints])
     # every sensor a channel of the model set names (tejas: vane_left, vane_right, side_probe,
     # nose_probe, boom_alpha_vane, boom_beta_upper_vane, boom_beta_lower_vane) needs a position
 

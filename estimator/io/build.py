@@ -12,7 +12,9 @@ from estimator.io.errors import DataError, close_match, warn
 from estimator.io.modelset import (
     check_data_names,
     check_maneuver_lengths,
+    declarations_of,
     finalize_parameters,
+    sensor_positions,
 )
 from estimator.io.units import UNITS
 from estimator.parameters import ParameterSpec
@@ -56,7 +58,8 @@ def build_problem(
     channels, specs : the model set with the problem's changes.
     user_declared : parameter names the problem file declared or changed (warned about if unused).
     explicit_channels : the problem's ``channels`` list, or None for "every channel with data".
-    sensors : sensor positions, body axes, m.
+    sensors : sensor positions, body axes, m (the model set's midpoint sensors are added:
+        :func:`~estimator.io.modelset.sensor_positions`).
     imu_position_body_m : accelerometer position, body axes, m.
     g_mps2 : gravity of the flat-earth equations.
     source : problem file or dataset, for messages.
@@ -68,6 +71,7 @@ def build_problem(
         raise DataError(f"{source}: g_mps2 = {g_mps2} is not an Earth gravity in m/s^2 (9.78 to 9.83); "
                         "give it in m/s^2, e.g. 9.80665")
     chans = select_channels(channels, explicit_channels, source)
+    sensors = sensor_positions(sensors, declarations_of(channels))
     expected = {c.column: UNITS[c.unit].dimension for c in chans if c.unit in UNITS}
     for table in {id(t): t for t, _ in pairs}.values():
         check_dimensions(table, expected)

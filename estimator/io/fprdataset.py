@@ -172,12 +172,10 @@ def read_maneuver(directory: Path, entry: Mapping, names: Iterable[str]) -> pd.D
 
 
 def dataset_sensors(manifest: Mapping) -> dict[str, np.ndarray]:
-    """Sensor positions from the manifest's airframe; ``side_probe`` = mean of left and right."""
+    """Sensor positions from the manifest's airframe (a model set's midpoint sensors are added when
+    the problem is built: :func:`~estimator.io.modelset.sensor_positions`)."""
     table = manifest.get("airframe", {}).get("positions_body_m", {})
-    pos = {k: np.asarray(v, dtype=float) for k, v in table.items()}
-    if "side_probe" not in pos and "side_probe_left" in pos and "side_probe_right" in pos:
-        pos["side_probe"] = 0.5 * (pos["side_probe_left"] + pos["side_probe_right"])
-    return pos
+    return {k: np.asarray(v, dtype=float) for k, v in table.items()}
 
 
 def load_truth(problem_or_dataset, maneuver_id: str) -> pd.DataFrame:

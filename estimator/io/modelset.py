@@ -69,6 +69,9 @@ optional, each name checked against the model set's channels and parameters)::
     truth_crossplots = ["alpha_zl"]    # calibrated - true (synthetic data)
     time_history = ["theta", "tas", "alpha_zl"]   # measured vs model (paper Fig. 3)
 
+    [sensor_midpoints]             # a sensor without a position of its own is the mean of these
+    side_probe = ["side_probe_left", "side_probe_right"]   # (a pair of probes read as one sensor)
+
 The channels read from a model set carry these (:class:`DeclaredChannel`), so that a problem
 built from it tells the workflow and its report what to show (:func:`declarations_of`).
 """
@@ -227,6 +230,8 @@ class Declarations:
     crossplots : ``[report]``: channels of the measurement - model cross-plots (paper Fig. 5).
     truth_crossplots : channels of the calibrated - true cross-plots (synthetic data only).
     time_history : channels of the time-history figure (paper Fig. 3).
+    sensor_midpoints : ``[sensor_midpoints]``: sensor -> the sensors whose mean position is its
+        position when none is given (a pair of probes read as one sensor).
     """
 
     source: str = ""
@@ -240,6 +245,18 @@ class Declarations:
     crossplots: tuple[str, ...] = ()
     truth_crossplots: tuple[str, ...] = ()
     time_history: tuple[str, ...] = ()
+    sensor_midpoints: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+
+
+def sensor_positions(positions: Mapping[str, np.ndarray], declarations: Declarations
+                     ) -> dict[str, np.ndarray]:
+    """The sensor positions with each of the model set's midpoint sensors added where it has no
+    position of its own and every sensor it is the mean of has one (:class:`Declarations`)."""
+    out = dict(positions)
+    for name, parts in declarations.sensor_midpoints.items():
+        if name not in out and all(p in out for p in parts):
+            out[name] = np.mean([np.asarray(out[p], dtype=float) for p in parts], axis=0)
+    return out
 
 
 @dataclass(frozen=True)
@@ -264,7 +281,8 @@ def declarations_of(problem_or_channels) -> Declarations:
     return next(iter(found.values()), Declarations())
 
 
-_SECTIONS = ("channel", "parameter", "requirements", "workflow", "initial_conditions", "report")
+_SECTIONS = ("channel", "parameter", "requirements", "workflow", "initial_conditions", "report",
+             "sensor_midpoints")
 _REQUIREMENT_KEYS = ("sensor", "desired_3sigma_deg", "low_alpha_only")
 _WORKFLOW_KEYS = ("reference_mach", "apportion_biases", "correction_model", "identity_table",
                   "alpha_limit_channel")
@@ -286,9 +304,10 @@ def _names(value, where: str, valid: Sequence[str], what: str) -> tuple[str, ...
 
 def parse_declarations(raw: Mapping, channels: Sequence[ChannelSpec], params: Sequence[ParameterSpec],
                        source: str, origin: str | None = None) -> Declarations:
-    """The ``[requirements]``, ``[workflow]``, ``[initial_conditions]`` and ``[report]`` tables
-    (module docstring), checked against the model set's channels and parameters; ``source`` names
-    them in messages, ``origin`` is the model set's file (default: ``source``)."""
+    """The ``[requirements]``, ``[workflow]``, ``[initial_conditions]``, ``[report]`` and
+    ``[sensor_midpoints]`` tables (module docstring), checked against the model set's channels and
+    parameters; ``source`` names them in messages, ``origin`` is the model set's file (default:
+    ``source``)."""
     names = [c.name for c in channels]
     columns = list(dict.fromkeys([*names, *(c.column for c in channels)]))
     specs = {s.name: s for s in params}
@@ -354,11 +373,23 @@ def parse_declarations(raw: Mapping, channels: Sequence[ChannelSpec], params: Se
     rep = raw.get("report", {})
     where = f"{source}: [report]"
     check(rep, _REPORT_KEYS, where)
+    report = {k: _names(rep.get(k, []), f"{where} {k}", names, "channel") for k in sorted(_REPORT_KEYS)}
+
+    mids = raw.get("sensor_midpoints", {})
+    where = f"{source}: [sensor_midpoints]"
+    if not isinstance(mids, Mapping):
+        raise ValueError(f"{where}: must be a table SENSOR = [\"its part\", \"its other part\"]")
+    _names(list(mids), where, list(dict.fromkeys(c.sensor for c in channels if c.sensor)), "sensor")
+    for name, parts in mids.items():
+        if (isinstance(parts, str) or not isinstance(parts, (list, tuple)) or len(parts) < 2
+                or not all(isinstance(x, str) for x in parts)):
+            raise ValueError(f"{where} {name}: must be a list of two or more sensor names (the sensors "
+                             f"whose mean position is {name}'s)")
     return Declarations(
         source=origin or source, requirements=reqs, reference_mach=None if ref is None else float(ref),
         apportion=dict(apportion), correction_model=correction, identity_table=identity,
         alpha_limit_channel=limit_ch, initial_conditions=sources,
-        **{k: _names(rep.get(k, []), f"{where} {k}", names, "channel") for k in sorted(_REPORT_KEYS)},
+        **report, sensor_midpoints={k: tuple(v) for k, v in mids.items()},
     )
 
 

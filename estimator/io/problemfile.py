@@ -88,8 +88,6 @@ def parse_positions(table: Mapping, where: str) -> dict[str, np.ndarray]:
             raise DataError(f"{where}: position of {name!r} given twice (as {key} and in another unit); "
                             "keep one")
         out[name] = _vector(v, f"{where}: {key}") * factor
-    if "side_probe" not in out and "side_probe_left" in out and "side_probe_right" in out:
-        out["side_probe"] = 0.5 * (out["side_probe_left"] + out["side_probe_right"])
     return out
 
 
