@@ -28,7 +28,6 @@ import pandas as pd
 
 from estimator.core.expressions import Table
 from estimator.io import dataset_column, load_truth
-from estimator.parameters import make_key
 from estimator.problem import Problem
 from estimator.result import EstimationResult
 
@@ -88,20 +87,20 @@ def true_parameters(problem: Problem, estimated: np.ndarray | None = None) -> Tr
               "phi0": "true_phi_rad", "theta0": "true_theta_rad", "psi0": "true_psi_rad"}
         for name, col in ic.items():
             if name in specs:
-                values[make_key(name, m.id)] = float(_interp_truth(tr, col, t_imu)[0])
+                values[ps.key_of(name, m)] = float(_interp_truth(tr, col, t_imu)[0])
         acc = inj.get("imu.accel_bias_mps2")
         gyr = inj.get("imu.gyro_bias_rps")
         for i, name in enumerate(("dax", "day", "daz")):
             if acc is not None and name in specs:
-                values[_key(problem, name, m)] = float(acc[i])
+                values[ps.key_of(name, m)] = float(acc[i])
         for i, name in enumerate(("dp", "dq", "dr")):
             if gyr is not None and name in specs:
-                values[_key(problem, name, m)] = float(gyr[i])
+                values[ps.key_of(name, m)] = float(gyr[i])
         for ch in problem.channels:
             if ch.delay and ch.column in m.measurements:
                 d = lag(inj, maneuver_column(ch.column, m))
                 if d is not None:
-                    values[_key(problem, ch.delay, m, ch)] = d
+                    values[ps.key_of(ch.delay, m, ch)] = d
     free = ps.free_mask if estimated is None else np.asarray(estimated, dtype=bool)
     structure = _project_calibration(problem, truths, values, chan_col, free)
     return TruthProjection(values=values, structure_rms=structure)
@@ -110,13 +109,6 @@ def true_parameters(problem: Problem, estimated: np.ndarray | None = None) -> Tr
 def maneuver_column(canonical: str, m) -> str:
     """The dataset column of a canonical name in maneuver ``m`` (its manifest entry lists them)."""
     return dataset_column(canonical, m.meta.get("channel_units", ()))
-
-
-def _key(problem: Problem, name: str, m, channel=None, element=None) -> str:
-    spec = problem.parameters.specs[name]
-    inst = {"global": "", "aircraft": m.aircraft, "configuration": m.configuration,
-            "maneuver": m.id, "recorder": channel.recorder if channel is not None else ""}[spec.scope]
-    return make_key(name, inst, element)
 
 
 #: model signal -> the truth column it is at the CG (or from the IMU's true rates)
@@ -147,8 +139,8 @@ def channel_values(problem: Problem, theta: np.ndarray, m, ch, tables: dict[str,
     missing (an aircraft without that parameter)."""
     ps = problem.parameters
     expr = ch.expression
-    params = {n: theta[ps.index(_key(problem, n, m, ch))] for n in expr.names if n in ps.specs}
-    tabs = {n: (tables[n], theta[[ps.index(_key(problem, n, m, ch, e))
+    params = {n: theta[ps.index(ps.key_of(n, m, ch))] for n in expr.names if n in ps.specs}
+    tabs = {n: (tables[n], theta[[ps.index(ps.key_of(n, m, ch, e))
                                   for e in range(tables[n].breakpoints.size)]])
             for n in expr.tables}
     return params, tabs
@@ -202,7 +194,7 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
             residuals[ch.name] = np.concatenate([residuals.get(ch.name, np.zeros(0)), r])
             A = np.zeros((y.size, len(free_calib)))
             for n, d in dual.dparam.items():
-                k = _key(problem, n, m, ch)
+                k = ps.key_of(n, m, ch)
                 if k in index:
                     A[:, index[k]] += np.broadcast_to(d, y.shape)
             for n, terms in dual.dtable.items():
@@ -210,7 +202,7 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
                     idx = np.broadcast_to(idx, y.shape)
                     coef = np.broadcast_to(coef, y.shape)
                     for e in np.unique(idx):
-                        k = _key(problem, n, m, ch, int(e))
+                        k = ps.key_of(n, m, ch, int(e))
                         if k in index:
                             A[:, index[k]] += np.where(idx == e, coef, 0.0)
             rows.append(A)

@@ -30,6 +30,7 @@ from campaigns.truth import (
 )
 from estimator.calibrated import calibrated_channel
 from estimator.io import load_truth
+from estimator.parameters import make_key
 from estimator.problem import Problem
 from estimator.result import EstimationResult
 from estimator.workflow import RAD2DEG, WorkflowResult, apportion_biases, three_sigma
@@ -118,10 +119,10 @@ def installation_recovery(wf: WorkflowResult) -> pd.DataFrame:
         st = next(s for s in wf.first if s.mach == mach)
         truth = true_parameters(st.problem, st.result.free_estimated).values
         ac = [a for a in sorted({m.aircraft for m in st.problem.maneuvers})
-              if all(f"{fam}[{a}]" in truth for fam in families.values())]
+              if all(make_key(fam, a) in truth for fam in families.values())]
         if not ac:
             continue
-        ap = apportion_biases({k: {a: truth[f"{fam}[{a}]"] for a in ac} for k, fam in families.items()})
+        ap = apportion_biases({k: {a: truth[make_key(fam, a)] for a in ac} for k, fam in families.items()})
         inj = {}
         for m in st.problem.maneuvers:
             i = m.meta.get("injected", {})

@@ -49,8 +49,7 @@ from estimator.core.expressions import Table
 from estimator.core.kinematics import smoothed_derivative
 from estimator.core.observations import flow_signal_batch
 from estimator.core.sensitivity import LEVER_ARMS, N_SENS, Inputs, integrate_many, worker_threads
-from estimator.parameters import make_key
-from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, Problem
+from estimator.problem import STATE_PARAMS, STATE_SIGNALS, Problem
 
 _EULER_INDEX = {"phi": 3, "theta": 4, "psi": 5, "h": 6}
 _RATE_INDEX = {"p": 0, "q": 1, "r": 2}
@@ -234,7 +233,7 @@ class _ChannelLayout:
         self.pslot, self.pidx = {}, {}
         nslot = len(STATE_PARAMS)
         for name in self.pnames:
-            idx = np.array([ps.index(model.key(name, int(k), ch)) for k in self.mans], dtype=np.intp)
+            idx = np.array([ps.index(ps.key_of(name, m, ch)) for m in mans], dtype=np.intp)
             self.pidx[name] = idx
             self.pslot[name] = nslot
             cols.append(idx[:, None])
@@ -242,7 +241,7 @@ class _ChannelLayout:
         self.tbase, self.tidx = {}, {}
         for t in self.tnames:
             K = model._tables[t].breakpoints.size
-            idx = np.array([[ps.index(model.key(t, int(k), ch, e)) for e in range(K)] for k in self.mans],
+            idx = np.array([[ps.index(ps.key_of(t, m, ch, e)) for e in range(K)] for m in mans],
                            dtype=np.intp).reshape(len(self.mans), K)
             self.tidx[t] = idx
             self.tbase[t] = nslot
@@ -250,7 +249,7 @@ class _ChannelLayout:
             nslot += K
         self.didx = None
         if ch.delay:
-            self.didx = np.array([ps.index(model.key(ch.delay, int(k), ch)) for k in self.mans],
+            self.didx = np.array([ps.index(ps.key_of(ch.delay, m, ch)) for m in mans],
                                  dtype=np.intp)
             self.dslot = nslot
             cols.append(self.didx[:, None])
@@ -381,24 +380,14 @@ class Model:
         return {ch.name: ch.column for ch in self.problem.channels}
 
     # ------------------------------------------------------------------ parameter resolution
-    def key(self, name: str, k: int, channel: ChannelSpec | None = None, element: int | None = None) -> str:
-        spec = self.problem.parameters.specs[name]
-        m = self.problem.maneuvers[k]
-        inst = {
-            "global": "",
-            "aircraft": m.aircraft,
-            "configuration": m.configuration,
-            "maneuver": m.id,
-            "recorder": channel.recorder if channel is not None else "",
-        }[spec.scope]
-        return make_key(name, inst, element)
-
+    # (keys: estimator.parameters.ParameterSet.key_of, the one resolver)
     def value(self, values: np.ndarray, name: str, k: int, channel=None) -> float:
-        return float(values[self.problem.parameters.index(self.key(name, k, channel))])
+        ps = self.problem.parameters
+        return float(values[ps.index(ps.key_of(name, self.problem.maneuvers[k], channel))])
 
     def state_columns(self, k: int) -> np.ndarray:
         ps = self.problem.parameters
-        return np.array([ps.index(self.key(n, k)) for n in STATE_PARAMS])
+        return np.array([ps.index(ps.key_of(n, self.problem.maneuvers[k])) for n in STATE_PARAMS])
 
     def guard_samples(self, k: int, c: int) -> int:
         m = self.problem.maneuvers[k]

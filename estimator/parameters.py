@@ -18,8 +18,12 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # annotations only: estimator.problem builds on this module
+    from estimator.problem import ChannelSpec, ManeuverData
 
 SCOPES = ("global", "aircraft", "configuration", "recorder", "maneuver")
 #: What a parameter is, for reports and for the identifiability checks.
@@ -143,6 +147,22 @@ def make_key(name: str, instance: str = "", element: int | None = None) -> str:
     return key + (f"[{element}]" if element is not None else "")
 
 
+def instance_of(scope: str, maneuver: ManeuverData, channel: ChannelSpec | None = None) -> str:
+    """The instance of a ``scope`` family that a maneuver's data (through ``channel``) use.
+
+    ``global``: "" (one value); ``aircraft``, ``configuration``: the maneuver's aircraft or
+    configuration id; ``maneuver``: its id; ``recorder``: the channel's recorder ("" without a
+    channel).
+    """
+    return {
+        "global": "",
+        "aircraft": maneuver.aircraft,
+        "configuration": maneuver.configuration,
+        "maneuver": maneuver.id,
+        "recorder": channel.recorder if channel is not None else "",
+    }[scope]
+
+
 @dataclass(frozen=True)
 class ParameterSet:
     """An ordered, immutable set of scalar parameters, looked up by key."""
@@ -210,6 +230,27 @@ class ParameterSet:
 
     def __getitem__(self, key: str) -> Parameter:
         return self.parameters[self.index(key)]
+
+    def key_of(self, name: str, maneuver: ManeuverData, channel: ChannelSpec | None = None,
+               element: int | None = None) -> str:
+        """The key of family ``name``'s scalar that ``maneuver`` (through ``channel``) uses.
+
+        Parameters
+        ----------
+        name : the family (``b_l``, ``f1``, ``u0``).
+        maneuver : the maneuver whose data the value serves (its id, aircraft, configuration).
+        channel : the channel, for recorder-scoped families (its recorder).
+        element : the table element, for tables.
+
+        Examples
+        --------
+        ``b_l`` (per aircraft) in a PV1 maneuver: ``b_l[PV1]``; ``f1`` element 3: ``f1[3]``.
+        """
+        try:
+            spec = self.specs[name]
+        except KeyError:
+            raise KeyError(f"no parameter family {name!r}; declared: {sorted(self.specs)}") from None
+        return make_key(name, instance_of(spec.scope, maneuver, channel), element)
 
     def __contains__(self, key: str) -> bool:
         return key in self._index  # type: ignore[attr-defined]
