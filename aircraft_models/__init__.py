@@ -23,6 +23,8 @@ from types import MappingProxyType
 
 import numpy as np
 
+from aircraft_models.schema import Key, check
+
 DATA_DIR = Path(__file__).resolve().parent
 
 #: Sensors every configuration carries.
@@ -35,6 +37,14 @@ NOSE_SENSORS = {
 ALL_SENSORS = COMMON_SENSORS + NOSE_SENSORS["nose_probe"] + NOSE_SENSORS["boom"]
 #: Non-air-data installations whose position matters.
 INERTIAL_UNITS = ("imu", "ins")
+
+#: The keys of an airframe file (positions_body_m: installation name -> [x, y, z], m).
+AIRFRAME_KEYS = ("name", "jsbsim_model", "reference_point", "positions_body_m")
+#: The keys of a fleet file, of its [[aircraft]] and of its [[configuration]] entries.
+FLEET_KEYS = ("airframe", "aircraft", "configuration")
+AIRCRAFT_KEYS = {"id": Key(str, required=True), "fuel_kg": Key(float), "ballast_kg": Key(float),
+                 "ballast_position_body_m": Key(list), "installation_bias_deg": Key(Mapping)}
+CONFIGURATION_KEYS = {"id": Key(str, required=True), "aircraft": Key(), "nose_sensor": Key(str)}
 
 
 def _vec3(value, where: str) -> np.ndarray:
@@ -166,6 +176,7 @@ def load_airframe(name_or_path: str | Path = "f16_testbed") -> Airframe:
     """Load an airframe definition (shipped name such as ``"f16_testbed"`` or a TOML path)."""
     path = _resolve(name_or_path)
     raw = read_toml(path)
+    check(raw, AIRFRAME_KEYS, str(path))
     try:
         positions = {
             k: _vec3(v, f"{path}: positions_body_m.{k}") for k, v in raw["positions_body_m"].items()
@@ -188,35 +199,33 @@ def load_fleet(name_or_path: str | Path = "fleet_default") -> Fleet:
     """Load a fleet (shipped name such as ``"fleet_default"`` or a TOML path)."""
     path = _resolve(name_or_path)
     raw = read_toml(path)
+    check(raw, FLEET_KEYS, str(path))
     airframe_name = raw.get("airframe", "f16-testbed").replace("-", "_")
     airframe = load_airframe(airframe_name)
     aircraft: dict[str, Aircraft] = {}
     for i, a in enumerate(raw.get("aircraft", [])):
         where = f"{path}: aircraft[{i}]"
-        try:
-            biases_deg = dict(a.get("installation_bias_deg", {}))
-            unknown = set(biases_deg) - set(ALL_SENSORS)
-            if unknown:
-                raise ValueError(f"{where}: unknown sensors {sorted(unknown)}; known {ALL_SENSORS}")
-            ac = Aircraft(
-                id=a["id"],
-                fuel_kg=float(a.get("fuel_kg", 1360.0)),
-                ballast_kg=float(a.get("ballast_kg", 0.0)),
-                ballast_position_body_m=_vec3(
-                    a.get("ballast_position_body_m", [0.0, 0.0, 0.0]), f"{where}.ballast_position"
-                ),
-                installation_bias_rad=MappingProxyType(
-                    {s: math.radians(float(biases_deg.get(s, 0.0))) for s in ALL_SENSORS}
-                ),
-            )
-        except KeyError as exc:
-            raise ValueError(f"{where}: missing key {exc}") from None
+        a = check(a, AIRCRAFT_KEYS, where)
+        biases_deg = check(a.get("installation_bias_deg", {}), ALL_SENSORS, f"{where}.installation_bias_deg",
+                           what="sensor")
+        ac = Aircraft(
+            id=a["id"],
+            fuel_kg=float(a.get("fuel_kg", 1360.0)),
+            ballast_kg=float(a.get("ballast_kg", 0.0)),
+            ballast_position_body_m=_vec3(
+                a.get("ballast_position_body_m", [0.0, 0.0, 0.0]), f"{where}.ballast_position"
+            ),
+            installation_bias_rad=MappingProxyType(
+                {s: math.radians(float(biases_deg.get(s, 0.0))) for s in ALL_SENSORS}
+            ),
+        )
         if ac.id in aircraft:
             raise ValueError(f"{where}: duplicate aircraft id {ac.id!r}")
         aircraft[ac.id] = ac
     configurations: dict[str, Configuration] = {}
     for i, c in enumerate(raw.get("configuration", [])):
         where = f"{path}: configuration[{i}]"
+        c = check(c, CONFIGURATION_KEYS, where)
         if c.get("aircraft") not in aircraft:
             raise ValueError(
                 f"{where}: aircraft {c.get('aircraft')!r} is not in the fleet {sorted(aircraft)}"

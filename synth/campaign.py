@@ -54,6 +54,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from aircraft_models import Fleet, load_fleet
+from aircraft_models.schema import check, unknown
 from synth.dataset import (
     FORMAT,
     FORMAT_VERSION,
@@ -146,9 +147,7 @@ def resolve_campaign_path(name_or_path: str | Path) -> Path:
 
 def parse_campaign(raw: Mapping, source: str = "<dict>") -> Campaign:
     """Validate a campaign mapping (as read from TOML) and expand it into jobs."""
-    unknown = set(raw) - _TOP_KEYS
-    if unknown:
-        raise CampaignError(f"{source}: unknown keys {sorted(unknown)}; valid: {sorted(_TOP_KEYS)}")
+    check(raw, sorted(_TOP_KEYS), source, CampaignError)
     fleet = load_fleet(raw.get("fleet", "fleet_default"))
     seed = int(raw.get("seed", 0))
     env_base = dict(raw.get("environment", {}))
@@ -165,9 +164,7 @@ def parse_campaign(raw: Mapping, source: str = "<dict>") -> Campaign:
     jobs: list[Job] = []
     for b, block in enumerate(blocks):
         where = f"{source}: flights[{b}]"
-        unknown = set(block) - _BLOCK_KEYS
-        if unknown:
-            raise CampaignError(f"{where}: unknown keys {sorted(unknown)}; valid: {sorted(_BLOCK_KEYS)}")
+        check(block, sorted(_BLOCK_KEYS), where, CampaignError)
         configs = block.get("configurations", "all")
         configs = list(fleet.configurations) if configs == "all" else list(configs)
         for c in configs:
@@ -176,7 +173,7 @@ def parse_campaign(raw: Mapping, source: str = "<dict>") -> Campaign:
         kinds = list(MANEUVER_KINDS) if kinds == "all" else list(kinds)
         bad = [k for k in kinds if k not in MANEUVER_KINDS]
         if bad:
-            raise CampaignError(f"{where}: unknown maneuvers {bad}; valid: {list(MANEUVER_KINDS)}")
+            raise unknown(bad, MANEUVER_KINDS, where, CampaignError, what="maneuver")
         machs = block.get("mach")
         if not machs:
             raise CampaignError(f"{where}: give `mach = [...]`, the Mach numbers to fly")

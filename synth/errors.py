@@ -90,6 +90,7 @@ from typing import Any
 import numpy as np
 
 from aircraft_models import ALL_SENSORS
+from aircraft_models.schema import SUFFIXES, Key, check, unknown
 
 Vec3 = tuple[float, float, float]
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
@@ -312,6 +313,17 @@ def _default_recorders() -> Mapping[str, RecorderErrors]:
     return MappingProxyType({r: RecorderErrors() for r in RECORDERS})
 
 
+_SWITCHES = ("local_flow", "baseline_mismatch", "installation_biases", "nose_probe_irregularity")
+_GROUPS = ("imu", "ins", "airdata", "dgps")
+#: the keys of an errors block (module docstring); the two channel-delay spellings are converted below
+_ERROR_KEYS = {"preset": Key(), **{s: Key(bool) for s in _SWITCHES}, **dict.fromkeys(_GROUPS, Key()),
+               **dict.fromkeys(("sensors", "recorders", "channel_delays_s", "channel_delays_ms", "seeds"),
+                               Key())}
+#: the units whose edge spelling a field accepts, by its SI suffix: _deg_per_deg, _deg, _deg_s, _ms
+#: (the longer suffix first: a ``_rad_per_rad`` field is no ``_rad`` one)
+_EDGE_UNITS = ("rad/rad", "rad", "rad/s", "s")
+
+
 @dataclass(frozen=True)
 class ErrorConfig:
     """Every injected instrumentation error of a maneuver (SI, radians).
@@ -333,25 +345,24 @@ class ErrorConfig:
     seeds: Seeds = field(default_factory=Seeds)
 
     def __post_init__(self) -> None:
-        unknown = set(self.sensors) - set(ALL_SENSORS)
-        if unknown:
-            raise ValueError(f"sensors: unknown {sorted(unknown)}; valid: {list(ALL_SENSORS)}")
+        bad = sorted(set(self.sensors) - set(ALL_SENSORS))
+        if bad:
+            raise unknown(bad, ALL_SENSORS, "sensors", what="sensor")
         sensors = {s: self.sensors.get(s, FlowSensorErrors()) for s in ALL_SENSORS}
         for s, e in sensors.items():
             e.check(s)
         object.__setattr__(self, "sensors", MappingProxyType(sensors))
-        unknown = set(self.recorders) - set(RECORDERS)
-        if unknown:
-            raise ValueError(f"recorders: unknown {sorted(unknown)}; valid: {list(RECORDERS)}")
+        bad = sorted(set(self.recorders) - set(RECORDERS))
+        if bad:
+            raise unknown(bad, RECORDERS, "recorders", what="recorder")
         recorders = {r: self.recorders.get(r, RecorderErrors()) for r in RECORDERS}
         for r, e in recorders.items():
             e.check(r)
         object.__setattr__(self, "recorders", MappingProxyType(recorders))
-        unknown = set(self.channel_delays_s) - set(DIRECT_CHANNELS)
-        if unknown:
-            raise ValueError(
-                f"channel_delays: unknown channels {sorted(unknown)}; valid: {sorted(DIRECT_CHANNELS)}"
-                " (a flow sensor's delay is sensors.<name>.delay_s)")
+        bad = sorted(set(self.channel_delays_s) - set(DIRECT_CHANNELS))
+        if bad:
+            msg = unknown(bad, sorted(DIRECT_CHANNELS), "channel_delays", what="channel")
+            raise ValueError(f"{msg} (a flow sensor's delay is sensors.<name>.delay_s)")
         delays = {k: float(v) for k, v in self.channel_delays_s.items()}
         if not all(math.isfinite(v) for v in delays.values()):
             raise ValueError(f"channel_delays: every delay must be finite, got {delays}")
@@ -438,41 +449,31 @@ class ErrorConfig:
         ValueError
             On an unknown key (the message lists the valid ones) or a bad value.
         """
-        d = dict(d)
+        d = check(d, _ERROR_KEYS, "errors")
         preset = d.pop("preset", "none")
         presets = {"none": cls.none, "typical": cls.typical}
         if preset not in presets:
             raise ValueError(f"errors.preset = {preset!r}; valid: {sorted(presets)}")
         base = presets[preset]()
         changes: dict[str, Any] = {}
-        switches = ("local_flow", "baseline_mismatch", "installation_biases",
-                    "nose_probe_irregularity")
-        groups = ("imu", "ins", "airdata", "dgps")
-        valid_top = sorted((*switches, *groups, "sensors", "recorders", "channel_delays_s",
-                            "channel_delays_ms", "seeds", "preset"))
-        unknown = set(d) - set(valid_top)
-        if unknown:
-            raise ValueError(f"errors: unknown keys {sorted(unknown)}; valid: {valid_top}")
-        for s in switches:
+        for s in _SWITCHES:
             if s in d:
-                if not isinstance(d[s], bool):
-                    raise ValueError(f"errors.{s} must be true or false, got {d[s]!r}")
                 changes[s] = d[s]
-        for g in groups:
+        for g in _GROUPS:
             if g in d:
                 changes[g] = _update(getattr(base, g), d[g], f"errors.{g}")
         if "sensors" in d:
             sensors = dict(base.sensors)
             for s, sd in _mapping(d["sensors"], "errors.sensors").items():
                 if s not in ALL_SENSORS:
-                    raise ValueError(f"errors.sensors.{s}: unknown sensor; valid: {list(ALL_SENSORS)}")
+                    raise unknown([s], ALL_SENSORS, "errors.sensors", what="sensor")
                 sensors[s] = _update(sensors[s], sd, f"errors.sensors.{s}")
             changes["sensors"] = MappingProxyType(sensors)
         if "recorders" in d:
             recorders = dict(base.recorders)
             for r, rd in _mapping(d["recorders"], "errors.recorders").items():
                 if r not in RECORDERS:
-                    raise ValueError(f"errors.recorders.{r}: unknown recorder; valid: {list(RECORDERS)}")
+                    raise unknown([r], RECORDERS, "errors.recorders", what="recorder")
                 recorders[r] = _update(recorders[r], rd, f"errors.recorders.{r}")
             changes["recorders"] = MappingProxyType(recorders)
         if "channel_delays_s" in d and "channel_delays_ms" in d:
@@ -562,31 +563,21 @@ def _mapping(value: Any, where: str) -> Mapping:
     return value
 
 
-def _edge_aliases(name: str) -> dict[str, float]:
-    """Accepted keys for SI field ``name`` and their factor to SI."""
-    out = {name: 1.0}
-    if name.endswith("_rad_per_rad"):
-        out[name[: -len("_rad_per_rad")] + "_deg_per_deg"] = 1.0
-    elif name.endswith("_rad"):
-        out[name[:-4] + "_deg"] = math.pi / 180.0
-    elif name.endswith("_rps"):
-        out[name[:-4] + "_deg_s"] = math.pi / 180.0
-    elif name.endswith("_s"):
-        out[name[:-2] + "_ms"] = 1e-3
-    return out
+def _edge_unit(name: str) -> str | None:
+    """The SI unit of field ``name`` whose edge-unit spelling it accepts (:data:`_EDGE_UNITS`)."""
+    return next((u for u in _EDGE_UNITS if name.endswith(SUFFIXES[u][0][0])), None)
 
 
 def _update(obj: Any, d: Any, where: str) -> Any:
     """``dataclasses.replace(obj, ...)`` from a dict whose keys may carry edge units."""
     d = _mapping(d, where)
-    alias: dict[str, tuple[str, float]] = {}
-    for f in fields(obj):
-        for key, factor in _edge_aliases(f.name).items():
-            alias[key] = (f.name, factor)
+    # the schema's spellings, converted here as before (a quoted number stays accepted)
+    alias = {key: (f.name, factor) for f in fields(obj)
+             for key, factor in Key(unit=_edge_unit(f.name)).spellings(f.name).items()}
     changes: dict[str, Any] = {}
     for key, value in d.items():
         if key not in alias:
-            raise ValueError(f"{where}: unknown key {key!r}; valid: {sorted(alias)}")
+            raise unknown([key], alias, where)
         name, factor = alias[key]
         if name in changes:
             raise ValueError(f"{where}: {name} given twice (as {key!r} and another unit)")

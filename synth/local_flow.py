@@ -66,6 +66,7 @@ from pathlib import Path
 import numpy as np
 
 from aircraft_models import read_toml, resolve_data_file
+from aircraft_models.schema import Key, check
 
 # ------------------------------------------------------------------ rigid-body kinematics
 
@@ -331,17 +332,21 @@ def _law(cls, raw: dict | None, where: str):
     """Build a law dataclass from a TOML table whose keys may say ``_deg`` (converted to rad)."""
     if raw is None:
         raise ValueError(f"{where}: missing table")
-    names = {f.name for f in dataclasses.fields(cls)}
-    valid = sorted(names | {n[:-4] + "_deg" for n in names if n.endswith("_rad")})
-    kwargs = {}
-    for key, value in raw.items():
-        if key in names:
-            kwargs[key] = value
-        elif key.endswith("_deg") and key[:-4] + "_rad" in names:
-            kwargs[key[:-4] + "_rad"] = float(value) * _D2R
-        else:
-            raise ValueError(f"{where}: unknown key {key!r}; valid: {valid}")
-    return cls(**kwargs)
+    keys = {f.name: Key(unit="rad" if f.name.endswith("_rad") else None) for f in dataclasses.fields(cls)}
+    return cls(**check(raw, keys, where))
+
+
+#: the tables of a local-flow file and their keys ("": the top level; the laws' keys: :func:`_law`);
+#: the boom's tables are read only for the truth
+_TABLES = {
+    "": ("name", "mach_clamp", "vane", "side_probe", "nose_probe", "boom_alpha_vane", "boom_beta_upper_vane",
+         "boom_beta_lower_vane"),
+    "vane": ("upwash", "coupling"),
+    "side_probe": ("port_cant_deg", "upwash", "sidewash", "pressure"),
+    "nose_probe": ("sidewash", "pressure", "irregularity"),
+    "boom_alpha_vane": ("upwash",), "boom_beta_upper_vane": ("sidewash",),
+    "boom_beta_lower_vane": ("sidewash",),
+}
 
 
 def _model_from_raw(raw: dict, path: Path, *, truth: bool) -> LocalFlowModel:
@@ -352,8 +357,11 @@ def _model_from_raw(raw: dict, path: Path, *, truth: bool) -> LocalFlowModel:
         return node
 
     where = str(path)
+    check(raw, _TABLES[""], where)
+    for name, keys in _TABLES.items():
+        if name and name in raw:
+            check(raw[name], keys, f"{where}: [{name}]")
     sp = table("side_probe") or {}
-    npb = table("nose_probe") or {}
     irr = table("nose_probe", "irregularity")
     kwargs = dict(
         name=str(raw.get("name", path.stem)),
@@ -383,10 +391,6 @@ def _model_from_raw(raw: dict, path: Path, *, truth: bool) -> LocalFlowModel:
             boom_beta_lower_sidewash=_law(SidewashLaw, table("boom_beta_lower_vane", "sidewash"),
                                           f"{where}: [boom_beta_lower_vane.sidewash]"),
         )
-    extra = set(sp) - {"port_cant_deg", "upwash", "sidewash", "pressure"}
-    extra |= {f"nose_probe.{k}" for k in set(npb) - {"sidewash", "pressure", "irregularity"}}
-    if extra:
-        raise ValueError(f"{where}: unknown keys {sorted(extra)}")
     model = LocalFlowModel(**kwargs)
     if not 0.0 < model.mach_clamp < 1.0:
         raise ValueError(f"{where}: mach_clamp must be in (0, 1), got {model.mach_clamp}")

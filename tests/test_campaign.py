@@ -135,10 +135,10 @@ def test_default_campaign_covers_the_fleet_and_the_envelope():
 @pytest.mark.parametrize(
     "patch, message",
     [
-        ({"flightz": []}, "unknown keys"),
+        ({"flightz": []}, "unknown key 'flightz' \\(did you mean 'flights'\\?\\)"),
         ({"flights": []}, "no \\[\\[flights\\]\\]"),
         ({"flights": [{"configurations": ["XX-NP"], "mach": [0.5]}]}, "XX-NP"),
-        ({"flights": [{"mach": [0.5], "maneuvers": ["loop"]}]}, "unknown maneuvers"),
+        ({"flights": [{"mach": [0.5], "maneuvers": ["loop"]}]}, "unknown maneuver 'loop'.*valid: "),
         ({"flights": [{"maneuvers": ["3211"]}]}, "mach"),
     ],
 )

@@ -57,7 +57,6 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
-import math
 import tomllib
 import zlib
 from collections.abc import Mapping, Sequence
@@ -67,8 +66,8 @@ from typing import Any
 
 import numpy as np
 
+from aircraft_models.schema import SUFFIXES, check, did_you_mean
 from estimator.calibration import CalibrationOptions, option_tables
-from estimator.io.errors import close_match
 from estimator.solver import SolverOptions
 from synth.campaign import CAMPAIGN_DIR, Campaign, Job, parse_campaign
 from synth.environment import Environment
@@ -76,16 +75,17 @@ from synth.errors import ErrorConfig
 
 #: keys a scenario adds to a synth campaign file
 _MC_KEYS = {"replications", "draw", "estimator"}
-_DRAW_KEYS = {"turbulence", "errors", "environment"}
-_DIST_KEYS = {"dist", "mean", "std", "low", "high", "half_width", "scope"}
-_ESTIMATOR_KEYS = {"model", "channels", "select", "lever_arm", "max_iterations", "colored",
-                   "parameters", "g_mps2", "solver"}
+_DRAW_KEYS = ("turbulence", "errors", "environment")
+_DIST_KEYS = ("dist", "mean", "std", "low", "high", "half_width", "scope")
+_ESTIMATOR_KEYS = ("model", "channels", "select", "lever_arm", "max_iterations", "colored",
+                   "parameters", "g_mps2", "solver")
 #: solver options an [estimator] table may give directly (older scenario files), not under [estimator.solver]
 _FLAT_SOLVER_KEYS = ("max_iterations", "colored")
 SCOPES = ("replication", "aircraft", "maneuver")
-#: edge-unit suffix of a drawn error path -> (SI suffix, factor to SI); the table of synth.errors
-_EDGE_UNITS = (("_deg_per_deg", "_rad_per_rad", 1.0), ("_deg_s", "_rps", math.pi / 180.0),
-               ("_deg", "_rad", math.pi / 180.0), ("_ms", "_s", 1e-3))
+#: edge-unit suffix of a drawn error path -> (SI suffix, factor to SI), the edge units synth.errors
+#: accepts, from the schema's one table (the longer suffix first: _deg_per_deg, _deg_s, _deg, _ms)
+_EDGE_UNITS = tuple((edge, SUFFIXES[unit][0][0], factor) for unit in ("rad/rad", "rad/s", "rad", "s")
+                    for edge, factor in SUFFIXES[unit][1:])
 #: environment fields a scenario may draw
 _ENV_DRAWABLE = ("wind_ned_mps",)
 
@@ -160,15 +160,14 @@ def _parse_distribution(target: str, key: str, spec: Any, where: str) -> Distrib
     if not isinstance(spec, Mapping):
         raise ScenarioError(f"{where}: {key} = {spec!r}; give a table such as "
                             "{ dist = \"normal\", std = 0.1 } or { dist = \"uniform\", half_width = 0.2 }")
-    unknown = set(spec) - _DIST_KEYS
-    if unknown:
-        raise ScenarioError(f"{where}: {key}: unknown keys {sorted(unknown)}; valid: {sorted(_DIST_KEYS)}")
+    check(spec, _DIST_KEYS, f"{where}: {key}", ScenarioError)
     dist = spec.get("dist")
     if dist not in ("normal", "uniform"):
         raise ScenarioError(f"{where}: {key}: dist = {dist!r}; give dist = \"normal\" or \"uniform\"")
     scope = spec.get("scope", "replication")
     if scope not in SCOPES:
-        raise ScenarioError(f"{where}: {key}: scope = {scope!r}; valid: {list(SCOPES)}")
+        raise ScenarioError(f"{where}: {key}: scope = {scope!r}{did_you_mean(scope, SCOPES)}; "
+                            f"valid: {list(SCOPES)}")
     path, factor = _si_path(key) if target == "errors" else (key, 1.0)
 
     def arr(name: str) -> np.ndarray | None:
@@ -355,12 +354,7 @@ def _solver_options(est: Mapping, where: str) -> SolverOptions:
     table = est.get("solver", {})
     if not isinstance(table, Mapping):
         raise ScenarioError(f"{where}.solver must be a table of option = value, got {table!r}")
-    valid = option_tables()["solver"]
-    for key in table:
-        if key not in valid:
-            m = close_match(key, valid)
-            raise ScenarioError(f"{where}.solver: {key!r} is not a solver option"
-                                + (f" (did you mean {m!r}?)" if m else "") + f"; valid: {', '.join(valid)}")
+    check(table, option_tables()["solver"], f"{where}.solver", ScenarioError, what="solver option")
     twice = [k for k in _FLAT_SOLVER_KEYS if k in est and k in table]
     if twice:
         raise ScenarioError(f"{where}: {twice} given both in [estimator] and [estimator.solver]; keep one")
@@ -390,9 +384,7 @@ def parse_scenario(raw: Mapping, source: str = "<dict>") -> Scenario:
         raise ScenarioError(f"{source}: replications = {n!r}; give the number of replications, an "
                             "integer >= 1 (the command line's --replications overrides it)")
     draw = dict(raw.get("draw", {}))
-    unknown = set(draw) - _DRAW_KEYS
-    if unknown:
-        raise ScenarioError(f"{source}: [draw]: unknown keys {sorted(unknown)}; valid: {sorted(_DRAW_KEYS)}")
+    check(draw, _DRAW_KEYS, f"{source}: [draw]", ScenarioError)
     turbulence = draw.get("turbulence", "redraw")
     if turbulence not in ("redraw", "frozen"):
         raise ScenarioError(f"{source}: [draw] turbulence = {turbulence!r}; give \"redraw\" or \"frozen\"")
@@ -400,7 +392,8 @@ def parse_scenario(raw: Mapping, source: str = "<dict>") -> Scenario:
              for k, v in dict(draw.get("errors", {})).items()]
     for k, v in dict(draw.get("environment", {})).items():
         if k not in _ENV_DRAWABLE:
-            raise ScenarioError(f"{source}: [draw.environment]: {k!r} cannot be drawn; drawable: "
+            raise ScenarioError(f"{source}: [draw.environment]: {k!r} cannot be drawn"
+                                f"{did_you_mean(k, _ENV_DRAWABLE)}; drawable: "
                                 f"{list(_ENV_DRAWABLE)} (turbulence realisations: [draw] turbulence)")
         dists.append(_parse_distribution("environment", k, v, f"{source}: [draw.environment]"))
     seen: set[str] = set()
@@ -409,10 +402,7 @@ def parse_scenario(raw: Mapping, source: str = "<dict>") -> Scenario:
             raise ScenarioError(f"{source}: [draw] {d.path} is drawn twice (in two units?); keep one")
         seen.add(d.path)
     est = dict(raw.get("estimator", {}))
-    unknown = set(est) - _ESTIMATOR_KEYS
-    if unknown:
-        raise ScenarioError(f"{source}: [estimator]: unknown keys {sorted(unknown)}; "
-                            f"valid: {sorted(_ESTIMATOR_KEYS)}")
+    check(est, _ESTIMATOR_KEYS, f"{source}: [estimator]", ScenarioError)
     channels = est.get("channels")
     solver = _solver_options(est, f"{source}: [estimator]")
     settings = EstimatorSettings(
