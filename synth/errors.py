@@ -90,7 +90,7 @@ from typing import Any
 import numpy as np
 
 from aircraft_models import ALL_SENSORS
-from aircraft_models.schema import SUFFIXES, Key, check, unknown
+from aircraft_models.schema import SUFFIXES, Key, check, did_you_mean, unknown
 
 Vec3 = tuple[float, float, float]
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
@@ -453,7 +453,8 @@ class ErrorConfig:
         preset = d.pop("preset", "none")
         presets = {"none": cls.none, "typical": cls.typical}
         if preset not in presets:
-            raise ValueError(f"errors.preset = {preset!r}; valid: {sorted(presets)}")
+            raise ValueError(f"errors.preset = {preset!r}{did_you_mean(str(preset), presets)}; "
+                             f"valid: {sorted(presets)}")
         base = presets[preset]()
         changes: dict[str, Any] = {}
         for s in _SWITCHES:

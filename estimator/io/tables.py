@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 
+from aircraft_models.schema import did_you_mean
 from estimator.io.errors import DataError, close_match, warn
 
 FORMATS = ("csv", "whitespace", "parquet")
@@ -39,9 +40,9 @@ def infer_format(path: Path, fmt: str | None, where: str) -> str:
 def check_data_path(path: Path, fmt: str | None = None) -> None:
     """The data file must exist, be a file and (text) not be empty; the message says what to fix."""
     if not path.exists():
-        near = close_match(path.name, [q.name for q in path.parent.iterdir()]) if path.parent.is_dir() \
-            else None
-        raise DataError(f"{path}: no such data file" + (f" (did you mean {near!r}?)" if near else "")
+        here = [q.name for q in path.parent.iterdir()] if path.parent.is_dir() else []
+        near = did_you_mean(path.name, here)
+        raise DataError(f"{path}: no such data file{near}"
                         + "; check path under its [[files]] entry: paths are relative to the problem "
                         "file's folder")
     if path.is_dir():
