@@ -48,6 +48,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from campaigns.studies import scaffold
+from campaigns.studies.tolerance import plot, report, run
 from campaigns.studies.tolerance.analysis import (
     collect,
     failing_groups,
@@ -60,6 +61,7 @@ from campaigns.studies.tolerance.config import (
     FULL,
     SENSOR_GROUPS,
     SIZES,
+    STUDY_CODE,
     TINY,
     Factor,
     Point,
@@ -67,14 +69,13 @@ from campaigns.studies.tolerance.config import (
     base_scenario,
     study_points,
 )
-from campaigns.studies.tolerance.plot import plot
-from campaigns.studies.tolerance.report import STUDY_CODE, conclusion, report, table_text
-from campaigns.studies.tolerance.run import run, run_points
+from campaigns.studies.tolerance.report import conclusion, table_text
+from campaigns.studies.tolerance.run import run_points
 
 __all__ = ["DESIRED_3SIGMA_DEG", "FULL", "SENSOR_GROUPS", "SIZES", "STUDY_SPEC", "TINY", "Factor",
            "Point", "StudyConfig", "base_scenario", "collect", "conclusion", "failing_groups",
-           "group_accuracy", "main", "plot", "point_metrics", "report", "run", "run_points", "study_points",
-           "swept_truth", "table_text"]
+           "group_accuracy", "main", "point_metrics", "run_points", "study_points", "swept_truth",
+           "table_text"]
 
 STUDY_SPEC = scaffold.Study(
     name="tolerance", file=STUDY_CODE, sizes=SIZES, unit="point",
@@ -83,10 +84,10 @@ STUDY_SPEC = scaffold.Study(
     "and pass/fail against the desired accuracy. Resumable: run the same command again.",
     workers_help="points run at once, one process each (default: 2)",
     size_help="full: the study; tiny: one configuration, two maneuvers, two levels per factor",
-    run=run,
+    run=run.run,
     analyse=lambda config, out_dir, n, errors: collect(study_points(config, out_dir), n, errors),
-    report=report,
-    plot=lambda df, config, path, n: plot(df, config.factors, path, n),
+    report=report.report,
+    plot=lambda df, config, path, n: plot.plot(df, config.factors, path, n),
     table=lambda df: df)
 
 

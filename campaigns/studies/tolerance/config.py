@@ -34,6 +34,8 @@ SHORT_TITLE = {"vane AOA": "vane_a", "side-probe AOA": "sp_a", "side-probe AOSS"
 #: a steady wind blows towards this heading (the air mass moves towards it), deg from north
 WIND_TOWARDS_DEG = 120.0
 Level = float | str
+#: the study's code (its uncommitted changes count in the code version of its header)
+STUDY_CODE = Path(__file__).parent
 
 
 # ---------------------------------------------------------------------------- the factors

@@ -20,6 +20,7 @@ from campaigns.studies.tolerance.config import (
     DESIRED_3SIGMA_DEG,
     SENSOR_GROUPS,
     SHORT_TITLE,
+    STUDY_CODE,
     WIND_TOWARDS_DEG,
     Factor,
     StudyConfig,
@@ -28,8 +29,6 @@ from campaigns.studies.tolerance.config import (
 )
 from synth.errors import ErrorConfig
 
-#: the study's code (its uncommitted changes count in the code version of its header)
-STUDY_CODE = Path(__file__).parent
 
 def _tightest(r: Mapping[str, Any]) -> str:
     margins = {g: r[f"acc_{g}"] / req for g, req in DESIRED_3SIGMA_DEG.items()
