@@ -3,15 +3,21 @@
 The world of studies (a) and (b) (altitude, steady wind, seed, the errors drawn every replication),
 the typical IMU biases and the spread of their per-maneuver draws (as ``campaigns/mc_20maneuvers.toml``;
 studies (a), (b), (c) and the robustness study), scaling the IMU biases in a scenario (study (c) and
-the robustness study), and the test of a fit that sits in a wrong minimum (studies (a) and (b)).
+the robustness study), and the test of a fit that sits in a wrong minimum and the replications it
+leaves (studies (a) and (b)).
 One definition each: a study imports them from here, never from a sibling study.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
 
 from campaigns.montecarlo.replication import ReplicationResult
+from campaigns.montecarlo.summary import load_results
 from synth.errors import ErrorConfig
 
 #: studies (a) and (b): flight altitude, m; steady wind, m/s (north, east, down); master seed
@@ -72,3 +78,41 @@ def fit_ok(result: ReplicationResult) -> bool:
     ch = result.channels
     att = ch[(ch["kind"] == "residual") & ch["name"].isin(["phi", "theta", "psi"])]
     return bool(len(att)) and float(att["three_sigma"].max()) <= ATTITUDE_FIT_LIMIT_DEG
+
+
+@dataclass(frozen=True)
+class RunReplications:
+    """A Monte Carlo run's replications as studies (a) and (b) count them.
+
+    Attributes
+    ----------
+    results : every replication 0..N-1 with a file (results and failure records).
+    ok : those whose estimation converged.
+    used : those of them whose fit is one (:func:`fit_ok`): the replications in the statistics.
+    """
+
+    results: list[ReplicationResult]
+    ok: list[ReplicationResult]
+    used: list[ReplicationResult]
+
+    @property
+    def failed(self) -> int:
+        """Replications whose estimation failed or did not converge."""
+        return len(self.results) - len(self.ok)
+
+    @property
+    def wrong_minimum(self) -> int:
+        """Converged replications whose fit sits in a wrong minimum."""
+        return len(self.ok) - len(self.used)
+
+    @property
+    def elapsed_s(self) -> float:
+        """Median wall time of a replication, s (NaN: none)."""
+        return float(np.median([r.elapsed_s for r in self.results])) if self.results else math.nan
+
+
+def read_run(run_dir: Path, replications: int) -> RunReplications:
+    """Replications 0..N-1 of the Monte Carlo run in ``run_dir`` (none when it has not run)."""
+    results = load_results(run_dir, replications) if (run_dir / "replications").is_dir() else []
+    ok = [r for r in results if r.ok]
+    return RunReplications(results=results, ok=ok, used=[r for r in ok if fit_ok(r)])

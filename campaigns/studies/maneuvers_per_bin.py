@@ -45,7 +45,7 @@ import pandas as pd
 
 from campaigns.montecarlo.flight_cache import SUFFIX as FLIGHT_SUFFIX
 from campaigns.montecarlo.flight_cache import read_flight
-from campaigns.montecarlo.summary import load_results, summarize_results
+from campaigns.montecarlo.summary import summarize_results
 from campaigns.studies import scaffold
 from campaigns.studies.common import (
     ALTITUDE_M,
@@ -54,7 +54,7 @@ from campaigns.studies.common import (
     IMU_SPREAD_GYRO_DEG_S,
     SEED,
     WIND_NED_MPS,
-    fit_ok,
+    read_run,
 )
 from campaigns.studies.scaffold import Invocations, fmt, paragraph
 from estimator.io.modelset import load_model_set
@@ -212,17 +212,15 @@ def vane_accuracy(channels: pd.DataFrame) -> dict[str, float]:
 
 def set_metrics(run_dir: Path, replications: int) -> SetMetrics:
     """Read a set's replications 0..N-1 and reduce them to :class:`SetMetrics`."""
-    results = load_results(run_dir, replications) if (run_dir / "replications").is_dir() else []
-    ok = [r for r in results if r.ok]
-    used = [r for r in ok if fit_ok(r)]
+    run = read_run(run_dir, replications)
+    used = run.used
     vane = pd.DataFrame([vane_accuracy(r.channels) for r in used],
                         columns=["accuracy", "offset", "three_std"])
     params = summarize_results(used).parameters if used else pd.DataFrame()
     lo, hi, beta = coverage_deg(run_dir) if (run_dir / "flights").is_dir() else (math.nan, math.nan, math.nan)
-    return SetMetrics(requested=replications, used=len(used), failed=len(results) - len(ok),
-                      wrong_minimum=len(ok) - len(used), vane=vane, parameters=params, alpha_deg=(lo, hi),
-                      beta_deg=beta,
-                      elapsed_s=float(np.median([r.elapsed_s for r in results])) if results else math.nan)
+    return SetMetrics(requested=replications, used=len(used), failed=run.failed,
+                      wrong_minimum=run.wrong_minimum, vane=vane, parameters=params, alpha_deg=(lo, hi),
+                      beta_deg=beta, elapsed_s=run.elapsed_s)
 
 
 def f1_breakpoints_deg() -> np.ndarray:

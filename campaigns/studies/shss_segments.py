@@ -54,7 +54,7 @@ import numpy as np
 import pandas as pd
 
 from campaigns.montecarlo.replication import ReplicationResult
-from campaigns.montecarlo.summary import load_results, summarize_results
+from campaigns.montecarlo.summary import summarize_results
 from campaigns.studies import scaffold
 from campaigns.studies.common import (
     ALTITUDE_M,
@@ -65,7 +65,7 @@ from campaigns.studies.common import (
     SEED,
     VANE_BIAS_FAMILIES,
     WIND_NED_MPS,
-    fit_ok,
+    read_run,
     typical_imu_biases,
 )
 from campaigns.studies.scaffold import Invocations, fmt, paragraph
@@ -268,16 +268,14 @@ class RunMetrics:
 
 def run_metrics(run_dir: Path, replications: int) -> RunMetrics:
     """Read a run's replications 0..N-1 and reduce them to :class:`RunMetrics`."""
-    results = load_results(run_dir, replications) if (run_dir / "replications").is_dir() else []
-    ok = [r for r in results if r.ok]
-    used = [r for r in ok if fit_ok(r)]
+    run = read_run(run_dir, replications)
+    used = run.used
     params = summarize_results(used).parameters if used else pd.DataFrame()
     held = intermittently_held(used)
     unheld = [r for r in used if not held_in(r) & held]
-    return RunMetrics(requested=replications, files=len(results), failed=len(results) - len(ok),
-                      wrong_minimum=len(ok) - len(used), used=len(used), parameters=params,
-                      channels=channel_rows(used),
-                      elapsed_s=float(np.median([r.elapsed_s for r in results])) if results else math.nan,
+    return RunMetrics(requested=replications, files=len(run.results), failed=run.failed,
+                      wrong_minimum=run.wrong_minimum, used=len(used), parameters=params,
+                      channels=channel_rows(used), elapsed_s=run.elapsed_s,
                       held=len(used) - len(unheld), held_names=tuple(sorted(held)),
                       parameters_unheld=summarize_results(unheld).parameters if unheld else pd.DataFrame())
 
