@@ -64,7 +64,7 @@ MANIFEST = "manifest.json"
 METADATA_KEY = b"fpr.maneuver"
 #: The maneuver files the tool writes, relative to the dataset directory (job index, SHSS segment).
 MANEUVER_FILE_RE = re.compile(r"maneuvers/m\d{4,}(?:s\d+)?\.parquet")
-#: The tool's temporary files (:func:`_atomic_write_bytes`: ``.NAME.RANDOM.tmp`` beside ``NAME``).
+#: The tool's temporary files (:func:`atomic_write_bytes`: ``.NAME.RANDOM.tmp`` beside ``NAME``).
 _TEMP_RE = re.compile(r"\.(?:m\d{4,}(?:s\d+)?\.parquet|manifest\.json)\.[A-Za-z0-9_]+\.tmp")
 #: Names shown in a refusal before "and N more".
 _MAX_SHOWN = 12
@@ -95,7 +95,9 @@ def _jsonable(obj):
     return obj
 
 
-def _atomic_write_bytes(path: Path, payload: bytes) -> None:
+def atomic_write_bytes(path: Path, payload: bytes) -> None:
+    """Write ``payload`` to ``path`` through a temporary file beside it (``.NAME.RANDOM.tmp``) and an
+    atomic rename: a reader or a killed run never sees half a file. Permissions follow the umask."""
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
@@ -126,14 +128,14 @@ def write_maneuver(path: Path, data: pd.DataFrame, entry: Mapping) -> None:
     sink = pa.BufferOutputStream()
     # no statistics-dependent or time-dependent fields: the same data give the same bytes
     pq.write_table(table, sink, compression="zstd", write_statistics=False)
-    _atomic_write_bytes(path, sink.getvalue().to_pybytes())
+    atomic_write_bytes(path, sink.getvalue().to_pybytes())
 
 
 def write_manifest(directory: Path, manifest: Mapping) -> Path:
     """Write ``manifest.json`` atomically; returns its path."""
     path = Path(directory) / MANIFEST
     text = json.dumps(_jsonable(manifest), indent=1, sort_keys=True) + "\n"
-    _atomic_write_bytes(path, text.encode())
+    atomic_write_bytes(path, text.encode())
     return path
 
 

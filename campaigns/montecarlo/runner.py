@@ -64,7 +64,6 @@ import shutil
 import signal
 import socket
 import sys
-import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, wait
@@ -76,6 +75,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from synth.campaign import software_versions
+from synth.dataset import atomic_write_bytes
 from synth.flight import FlightError
 from synth.truth import TruthTrajectory
 from synth.workers import worker_pool
@@ -114,19 +114,6 @@ _OWN_NAMES = {_REP: re.compile(r"r(\d{5})\.(parquet|failed\.json)"),
 # ---------------------------------------------------------------------------- files
 
 
-def _atomic_write(path: Path, payload: bytes) -> None:
-    """Write ``payload`` to a temporary file beside ``path`` and rename it into place."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(payload)
-        os.chmod(tmp, 0o644)  # mkstemp's 0600 would hide results from the rest of the team
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def replication_file(out_dir: Path, index: int, failed: bool = False) -> Path:
     """The file of replication ``index`` (finished or failed)."""
     name = f"r{index:05d}.failed.json" if failed else f"r{index:05d}.parquet"
@@ -158,7 +145,7 @@ def write_replication(out_dir: Path, result: ReplicationResult) -> Path:
     bytes in any run (its wall time goes to :func:`append_timing`)."""
     if not result.ok:
         path = replication_file(out_dir, result.index, failed=True)
-        _atomic_write(path, failure_record(result).encode())
+        atomic_write_bytes(path, failure_record(result).encode())
         return path
     table = pa.Table.from_pandas(result.to_pandas(), preserve_index=False)
     meta = dict(table.schema.metadata or {})
@@ -167,7 +154,7 @@ def write_replication(out_dir: Path, result: ReplicationResult) -> Path:
     # no statistics: the same table gives the same bytes (as synth.dataset.write_maneuver)
     pq.write_table(table.replace_schema_metadata(meta), sink, compression="zstd", write_statistics=False)
     path = replication_file(out_dir, result.index)
-    _atomic_write(path, sink.getvalue().to_pybytes())
+    atomic_write_bytes(path, sink.getvalue().to_pybytes())
     replication_file(out_dir, result.index, failed=True).unlink(missing_ok=True)
     return path
 
@@ -361,12 +348,12 @@ def prepare_output(scenario: Scenario, out_dir: Path) -> Path:
         p.unlink(missing_ok=True)
     src = Path(scenario.source)
     if src.is_file() and not (out_dir / "scenario.toml").exists():
-        _atomic_write(out_dir / "scenario.toml", src.read_bytes())
+        atomic_write_bytes(out_dir / "scenario.toml", src.read_bytes())
     state = {"format": FORMAT, "format_version": FORMAT_VERSION, "name": scenario.name,
              "source": scenario.source, "scenario_hash": scenario.hash,
              "replications": scenario.replications, "scenario": scenario.raw,
              "software": software_versions()}
-    _atomic_write(state_path, (json.dumps(state, indent=1, sort_keys=True, default=str) + "\n").encode())
+    atomic_write_bytes(state_path, (json.dumps(state, indent=1, sort_keys=True, default=str) + "\n").encode())
     return out_dir
 
 
@@ -500,13 +487,13 @@ class RunReport:
         return "\n".join(lines)
 
 
-class _Lock:
+class RunLock:
     """An exclusive lock on the output directory for the duration of a run."""
 
     def __init__(self, out_dir: Path):
         self.path = Path(out_dir) / ".lock"
 
-    def __enter__(self) -> _Lock:
+    def __enter__(self) -> RunLock:
         self.fh = open(self.path, "a")  # noqa: SIM115 (held until __exit__)
         try:
             fcntl.flock(self.fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -564,7 +551,7 @@ def run_montecarlo(
     scenario = with_replications(scenario, replications)
     n = scenario.replications
     out_dir = prepare_output(scenario, Path(out_dir))
-    with _Lock(out_dir):
+    with RunLock(out_dir):
         have = finished_replications(out_dir)
         wanted = range(n) if indices is None else sorted(set(int(i) for i in indices))
         bad = [i for i in wanted if not 0 <= i < n]
@@ -667,7 +654,7 @@ def _store_flights(scenario: Scenario, out_dir: Path,
             errors.append(f"  maneuver {job_index} ({job.configuration_id}, {job.maneuver['kind']}, "
                           f"Mach {job.maneuver['mach']}): {error}")
             continue
-        _atomic_write(flight_file(out_dir / _FLIGHTS, job_index), flight_bytes(segments))
+        atomic_write_bytes(flight_file(out_dir / _FLIGHTS, job_index), flight_bytes(segments))
         n += 1
     if errors:
         raise ScenarioError(f"{scenario.source}: {len(errors)} maneuver(s) cannot be flown, so no "

@@ -20,8 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from campaigns.machine import cpu_model, memory_gib
-from campaigns.montecarlo.runner import _atomic_write
 from synth.campaign import software_versions
+from synth.dataset import atomic_write_bytes
 
 #: The code every study runs, besides its own file: estimator, synthesizer, engine, truth.
 STUDY_CODE = ("estimator", "synth", "aircraft_models", "campaigns/montecarlo", "campaigns/truth.py",
@@ -82,7 +82,7 @@ class Invocation:
                   "code": code1 if code1 == self.code0 else f"{self.code0} -> {code1}"}
         records = json.loads(log_path.read_text()) if log_path.exists() else legacy_records(log_path.parent)
         records.append(record)
-        _atomic_write(log_path, (json.dumps(records, indent=1) + "\n").encode())
+        atomic_write_bytes(log_path, (json.dumps(records, indent=1) + "\n").encode())
         return records
 
 

@@ -92,7 +92,7 @@ from threadpoolctl import threadpool_limits
 
 from campaigns.montecarlo import Scenario, parse_scenario
 from campaigns.montecarlo.replication import Models, fly, write_scratch_dataset
-from campaigns.montecarlo.runner import _atomic_write, _Lock, prepare_output
+from campaigns.montecarlo.runner import RunLock, prepare_output
 from campaigns.montecarlo.scenario import scenario_hash
 from campaigns.studies import scaffold
 from campaigns.studies.common import (
@@ -109,6 +109,7 @@ from estimator.io import problem_from_dataset
 from estimator.problem import Problem
 from estimator.result import STATUS_TEXT, EstimationResult
 from estimator.solver import SolverOptions, estimate
+from synth.dataset import atomic_write_bytes
 from synth.errors import ErrorConfig
 
 STUDY = "robustness"
@@ -454,7 +455,7 @@ def run_study(config: StudyConfig, out_dir: Path, replications: int, workers: in
             d = run_directory(out_dir, s)
             # the engine's output-directory check: a directory of another scenario is refused
             prepare_output(parse_scenario(raw, source=f"campaigns.studies.{STUDY}:{raw['name']}"), d)
-            stack.enter_context(_Lock(d))
+            stack.enter_context(RunLock(d))
             (d / "pairs").mkdir(exist_ok=True)
             todo += [(s, k) for k in range(replications) if not finished(record_file(out_dir, s, k))]
         done = len(config.scales) * replications - len(todo)
@@ -462,7 +463,7 @@ def run_study(config: StudyConfig, out_dir: Path, replications: int, workers: in
 
         def write(rec: dict[str, Any]) -> None:
             path = record_file(out_dir, rec["scale"], rec["replication"])
-            _atomic_write(path, (json.dumps(rec, indent=1, sort_keys=True) + "\n").encode())
+            atomic_write_bytes(path, (json.dumps(rec, indent=1, sort_keys=True) + "\n").encode())
             what = rec.get("error", "").splitlines()[0] if "error" in rec else (
                 f"{classify_record(rec)}, dJ {rec['dcost']:.3g}")
             log(f"  x{scale_label(rec['scale'])} r{rec['replication']}: {what} ({rec['wall_s']:.1f} s)")
