@@ -24,14 +24,13 @@ import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from aircraft_models.schema import did_you_mean, unknown
-from estimator.problem import Problem
+from estimator.problem import Problem, ReadOnlyMapping
 from estimator.report import (
     Banner,
     Section,
@@ -43,6 +42,7 @@ from estimator.report import (
     time_history_maneuver,
     write_report,
 )
+from estimator.result import ReadOnlyTable
 from estimator.solver import SolverOptions
 from estimator.verdict import Finding, Verdict, reasons
 from estimator.workflow import RAD2DEG, Stage, WorkflowOptions, WorkflowResult, run_workflow
@@ -395,10 +395,6 @@ def _time_history(ref: Stage, channels: Sequence[str]):
 # calibrate() and its result
 
 
-def _read_only(frame: pd.DataFrame) -> pd.DataFrame:
-    return frame.copy(deep=True)
-
-
 @dataclass(frozen=True)
 class Calibration:
     """The result of :func:`calibrate`: the workflow's estimations, the report's tables, the verdict.
@@ -415,10 +411,12 @@ class Calibration:
     problem: Problem = field(repr=False)
     options: CalibrationOptions
     workflow: WorkflowResult = field(repr=False)
-    _tables: Mapping[str, pd.DataFrame] = field(init=False, repr=False, compare=False)
+    _tables: Mapping[str, ReadOnlyTable] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
-        object.__setattr__(self, "_tables", MappingProxyType(workflow_tables(self.workflow)))
+        # kept read-only (index included); every read hands out a new DataFrame
+        object.__setattr__(self, "_tables", ReadOnlyMapping(
+            {k: ReadOnlyTable.of(v, keep_index=True) for k, v in workflow_tables(self.workflow).items()}))
 
     @property
     def verdict(self) -> Verdict:
@@ -441,11 +439,11 @@ class Calibration:
         if key not in self._tables:
             raise KeyError(f"no table {name!r}" + did_you_mean(key, self._tables)
                            + f"; the tables: {', '.join(self._tables)}")
-        return _read_only(self._tables[key])
+        return self._tables[key].to_pandas()
 
     def tables(self) -> dict[str, pd.DataFrame]:
         """Every table by name (copies)."""
-        return {k: _read_only(v) for k, v in self._tables.items()}
+        return {k: v.to_pandas() for k, v in self._tables.items()}
 
     def write(self, out_dir: str | os.PathLike, *, overwrite: bool = False, truth: TruthHook | None = None,
               title: str | None = None, protect: Iterable[str | os.PathLike] = (),

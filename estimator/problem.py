@@ -140,9 +140,10 @@ class ManeuverData:
         return float((self.t_s[-1] - self.t_s[0]) / (len(self.t_s) - 1))
 
 
-class ReadOnlyOptions(Mapping):
-    """A read-only mapping of option names (picklable, unlike ``MappingProxyType``: problems go to
-    worker processes)."""
+class ReadOnlyMapping(Mapping):
+    """A read-only mapping (of option names, a model set's declarations, a stage's residuals):
+    picklable, unlike ``MappingProxyType``, because problems go to worker processes. It holds a
+    copy of what it is given."""
 
     def __init__(self, options: Mapping[str, Any] = ()) -> None:
         self._d = dict(options)
@@ -157,7 +158,7 @@ class ReadOnlyOptions(Mapping):
         return len(self._d)
 
     def __repr__(self) -> str:
-        return f"ReadOnlyOptions({self._d!r})"
+        return f"ReadOnlyMapping({self._d!r})"
 
 
 @dataclass(frozen=True)
@@ -194,7 +195,7 @@ class Problem:
 
     def __post_init__(self) -> None:
         # read-only: the options are the file's, and a Problem is shared by the workflow's stages
-        object.__setattr__(self, "options", ReadOnlyOptions(self.options))
+        object.__setattr__(self, "options", ReadOnlyMapping(self.options))
         if self.lever_arm not in LEVER_ARMS:
             raise ValueError(f"{self.source}: lever_arm must be one of {LEVER_ARMS}, got {self.lever_arm!r}")
         ids = [m.id for m in self.maneuvers]

@@ -53,27 +53,84 @@ def _read_only(a, dtype=float) -> np.ndarray | None:
 
 @dataclass(frozen=True)
 class ReadOnlyTable:
-    """A table that cannot be changed in place: named read-only columns.
+    """A table that cannot be changed in place: named read-only columns (and index levels).
 
     ``to_pandas()`` gives a DataFrame (a new one each time, the caller's to change).
+
+    Attributes
+    ----------
+    columns : the column names.
+    data : one read-only array per column (its dtype kept).
+    index_names, index : the index's level names and one read-only array per level; empty: the
+        default index (0, 1, ...).
+    columns_name : the name of the columns' axis (a pivot table's), if it has one.
     """
 
     columns: tuple[str, ...]
     data: tuple[np.ndarray, ...] = field(repr=False)
+    index_names: tuple[str | None, ...] = ()
+    index: tuple[np.ndarray, ...] = field(default=(), repr=False)
+    columns_name: str | None = None
 
     @classmethod
-    def of(cls, table: pd.DataFrame | ReadOnlyTable) -> ReadOnlyTable:
+    def of(cls, table: pd.DataFrame | ReadOnlyTable, keep_index: bool = False) -> ReadOnlyTable:
+        """A read-only copy of ``table``; ``keep_index``: its index too, unless it is the default."""
         if isinstance(table, ReadOnlyTable):
             return table
+        names, levels, axis = (), (), None
+        ix = table.index
+        if keep_index and not (isinstance(ix, pd.RangeIndex) and ix.start == 0 and ix.step == 1):
+            names = tuple(None if n is None else str(n) for n in ix.names)
+            levels = tuple(_read_only(ix.get_level_values(i).to_numpy(copy=True), dtype=None)
+                           for i in range(ix.nlevels))
+        if keep_index and table.columns.name is not None:
+            axis = str(table.columns.name)
         return cls(tuple(str(c) for c in table.columns),
-                   tuple(_read_only(table[c].to_numpy(copy=True), dtype=None) for c in table.columns))
+                   tuple(_read_only(table[c].to_numpy(copy=True), dtype=None) for c in table.columns),
+                   names, levels, axis)
 
     def __len__(self) -> int:
-        return len(self.data[0]) if self.data else 0
+        return len(self.data[0]) if self.data else (len(self.index[0]) if self.index else 0)
 
     def to_pandas(self) -> pd.DataFrame:
-        return pd.DataFrame({c: np.array(v, copy=True) for c, v in zip(self.columns, self.data, strict=True)},
-                            columns=list(self.columns))
+        index = None
+        if len(self.index) == 1:
+            index = pd.Index(np.array(self.index[0], copy=True), name=self.index_names[0])
+        elif self.index:
+            index = pd.MultiIndex.from_arrays([np.array(v, copy=True) for v in self.index],
+                                              names=list(self.index_names))
+        data = {c: np.array(v, copy=True) for c, v in zip(self.columns, self.data, strict=True)}
+        frame = pd.DataFrame(data, columns=list(self.columns), index=index)
+        frame.columns.name = self.columns_name
+        return frame
+
+    def to_dict(self) -> dict:
+        """Plain JSON values, each column's dtype with it (:meth:`from_dict` reads it back; a
+        number JSON cannot hold is ``null``: NaN in a float column, None in an object one)."""
+        def col(a: np.ndarray) -> dict:
+            return {"dtype": a.dtype.str if a.dtype != object else "object", "values": _json_clean(a)}
+
+        return {"columns": list(self.columns), "data": [col(a) for a in self.data],
+                "index_names": list(self.index_names), "index": [col(a) for a in self.index],
+                "columns_name": self.columns_name}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> ReadOnlyTable:
+        """The table :meth:`to_dict` gave."""
+        def col(c: Mapping) -> np.ndarray:
+            values = c["values"]
+            if c["dtype"] == "object":
+                a = np.empty(len(values), dtype=object)
+                a[:] = values
+                return a
+            dtype = np.dtype(c["dtype"])
+            if dtype.kind == "f":
+                return np.array([_num(v) for v in values], dtype=dtype)
+            return np.array(values, dtype=dtype)
+
+        return cls(tuple(d["columns"]), tuple(_read_only(col(c), dtype=None) for c in d["data"]),
+                   tuple(d["index_names"]), tuple(_read_only(col(c), dtype=None) for c in d["index"]),
+                   d.get("columns_name"))
 
 
 @dataclass(frozen=True)
@@ -330,6 +387,10 @@ class EstimationResult:
         """Everything, with the verdict and its findings at the top; :meth:`from_json` reads it
         back. Strict JSON: a value that is not a finite number (a deviation of a held parameter)
         is ``null`` (an infinite bound too: ``[null, null]`` is unbounded)."""
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False))
+
+    def to_dict(self) -> dict:
+        """What :meth:`to_json` writes, as plain JSON values (:meth:`from_dict` reads it back)."""
         records = self.to_pandas().reset_index().to_dict(orient="records")
         for row, p in zip(records, self.parameters, strict=True):
             row["element"] = p.element  # an int, not the float of a column that also holds None
@@ -363,7 +424,7 @@ class EstimationResult:
             "parameter_specs": [{f.name: getattr(sp, f.name) for f in fields(sp)}
                                 for sp in self.parameters.specs.values()],
         }
-        Path(path).write_text(json.dumps(_json_clean(doc), indent=1, allow_nan=False))
+        return _json_clean(doc)
 
     @classmethod
     def from_json(cls, path: str | Path) -> EstimationResult:
@@ -387,6 +448,13 @@ class EstimationResult:
         except json.JSONDecodeError as exc:
             raise ValueError(f"{path}: not JSON ({exc}); expected a result.json written by "
                              f"EstimationResult.to_json (fpr calibrate --single)") from None
+        return cls.from_dict(doc, str(path))
+
+    @classmethod
+    def from_dict(cls, doc: Mapping, where: str = "the result") -> EstimationResult:
+        """The result of :meth:`to_dict`'s document ``doc`` (as :meth:`from_json`; ``where`` names
+        it in messages)."""
+        path = where
         need = ("status", "verdict", "parameters", "correlation", "residuals")
         missing = [k for k in need if not isinstance(doc, dict) or k not in doc]
         if missing:

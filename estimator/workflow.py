@@ -44,11 +44,13 @@ Everything here runs on flight data alone (no truth); comparisons with a synthet
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -56,13 +58,15 @@ import pandas as pd
 from estimator.io import subproblem
 from estimator.io.modelset import Declarations, Requirement, declarations_of
 from estimator.model import Model
-from estimator.problem import Problem
-from estimator.result import EstimationResult
+from estimator.problem import Problem, ReadOnlyMapping
+from estimator.result import EstimationResult, ReadOnlyTable, _json_clean
 from estimator.solver import SolverOptions, estimate
 from estimator.verdict import Finding, Severity, Verdict, findings_frame, judge
 from estimator.verdict import Status as _Status
 
 RAD2DEG = 180.0 / math.pi
+#: What :meth:`WorkflowResult.to_json` writes (``format``); :meth:`WorkflowResult.from_json` reads it.
+JSON_FORMAT = "fpr-workflow-result/1"
 
 
 __all__ = [
@@ -113,19 +117,85 @@ class Stage:
     name : "biases free", "installation biases fixed" or "gear down".
     mach : the bin's centre Mach.
     gear_down : the bin's gear position.
-    problem, result : what was estimated and the estimate.
+    problem, result : what was estimated and the estimate (``problem`` None: a stage read back
+        by :meth:`WorkflowResult.from_json` without the problem the workflow ran on).
+    maneuver_ids, start_values : the stage's maneuvers and its parameters' start values (read-only;
+        from ``problem`` when given), all it takes to rebuild ``problem`` from the workflow's.
     """
 
     name: str
     mach: float
     gear_down: bool
-    problem: Problem = field(repr=False)
+    problem: Problem | None = field(repr=False)
     result: EstimationResult = field(repr=False)
+    maneuver_ids: tuple[str, ...] = field(default=(), repr=False)
+    start_values: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.problem is not None:
+            object.__setattr__(self, "maneuver_ids", tuple(m.id for m in self.problem.maneuvers))
+            object.__setattr__(self, "start_values", self.problem.parameters.values)
+        object.__setattr__(self, "maneuver_ids", tuple(self.maneuver_ids))
+        if self.start_values is not None:
+            start = np.array(self.start_values, dtype=float, copy=True)
+            start.setflags(write=False)
+            object.__setattr__(self, "start_values", start)
 
     @cached_property
-    def residuals(self) -> dict[str, ChannelResiduals]:
-        """Channel name -> residuals at the estimate (:func:`stage_residuals`), evaluated once."""
-        return stage_residuals(self)
+    def residuals(self) -> Mapping[str, ChannelResiduals]:
+        """Channel name -> residuals at the estimate (:func:`stage_residuals`), evaluated once;
+        read-only (the stage's problem is needed)."""
+        if self.problem is None:
+            raise ValueError(f"{self.name} at Mach {self.mach:.2f}: a stage read back without its problem "
+                             "has no residuals; read the workflow result with "
+                             "WorkflowResult.from_json(path, problem)")
+        return ReadOnlyMapping(stage_residuals(self))
+
+    def to_dict(self) -> dict:
+        """Plain JSON values: what the stage was (bin, maneuvers, start values) and its result."""
+        return {"name": self.name, "mach": self.mach, "gear_down": self.gear_down,
+                "maneuvers": list(self.maneuver_ids),
+                "start_values": None if self.start_values is None else self.start_values.tolist(),
+                "result": self.result.to_dict()}
+
+    @classmethod
+    def from_dict(cls, d: Mapping, problem: Problem | None = None, where: str = "the stage") -> Stage:
+        """The stage of :meth:`to_dict`; with the workflow's ``problem``, its own problem rebuilt
+        (its maneuvers, the result's parameters at their start values)."""
+        result = EstimationResult.from_dict(d["result"], where)
+        ids, start = tuple(d["maneuvers"]), d["start_values"]
+        sub = None
+        if problem is not None:
+            try:
+                sub = subproblem(problem, list(ids))
+            except ValueError as exc:  # its maneuvers are not all there
+                raise ValueError(f"{where}: {exc}: give the problem the workflow ran on") from None
+            if sub.parameters.keys != result.parameters.keys or start is None:
+                raise ValueError(f"{where}: its parameters are not those of {problem.source}'s maneuvers "
+                                 f"{', '.join(ids[:5])}: give the problem the workflow ran on")
+            sub = replace(sub, parameters=result.parameters.with_values(np.asarray(start, dtype=float)))
+        return cls(str(d["name"]), float(d["mach"]), bool(d["gear_down"]), sub, result,
+                   maneuver_ids=ids, start_values=start)
+
+
+class _Table:
+    """A table attribute of a frozen dataclass that cannot be changed in place: it is kept as a
+    :class:`~estimator.result.ReadOnlyTable` (index included), and each read gives a new DataFrame,
+    the caller's to change."""
+
+    def __set_name__(self, owner, name: str) -> None:
+        self._key = f"_{name}_table"
+
+    def __get__(self, obj, objtype=None) -> pd.DataFrame:
+        if obj is None:  # the dataclass asks for a default: there is none
+            raise AttributeError(self._key)
+        return obj.__dict__[self._key].to_pandas()
+
+    def __set__(self, obj, value: pd.DataFrame | ReadOnlyTable) -> None:
+        obj.__dict__[self._key] = ReadOnlyTable.of(value, keep_index=True)
+
+    def frozen(self, obj) -> ReadOnlyTable:
+        return obj.__dict__[self._key]
 
 
 @dataclass(frozen=True)
@@ -151,22 +221,86 @@ class WorkflowResult:
         failures, each message prefixed with its stage.
     declarations : what the model set declared (requirements, apportionment, report channels).
     reference_mach : the Mach the installation biases were meant to be taken at.
+
+    Immutable, however made: the tables (``maneuvers``, ``vane_bias``, ``installation``,
+    ``accuracy``, ``alpha_limit_growth``) are kept read-only and each read gives a new DataFrame
+    (the caller's to change); sequences are tuples; the stages, their results and the declarations
+    are immutable too. :meth:`to_json` writes it and :meth:`from_json` reads it back.
     """
 
-    maneuvers: pd.DataFrame
+    maneuvers: pd.DataFrame = _Table()
     first: tuple[Stage, ...]
     final: tuple[Stage, ...]
     gear_down: tuple[Stage, ...]
-    vane_bias: pd.DataFrame
-    installation: pd.DataFrame
-    accuracy: pd.DataFrame
-    alpha_limit_growth: pd.DataFrame
+    vane_bias: pd.DataFrame = _Table()
+    installation: pd.DataFrame = _Table()
+    accuracy: pd.DataFrame = _Table()
+    alpha_limit_growth: pd.DataFrame = _Table()
     alpha_limit_deg: float | None
     notes: tuple[str, ...] = ()
     elapsed_s: float = 0.0
     findings: tuple[Finding, ...] = ()
     declarations: Declarations = field(default_factory=Declarations)
     reference_mach: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("first", "final", "gear_down", "notes", "findings"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+
+    def to_json(self, path: str | Path) -> None:
+        """Everything, the verdict and its findings at the top, each stage with its estimation
+        result (as :meth:`EstimationResult.to_json <estimator.result.EstimationResult.to_json>`
+        writes it) but not its data; :meth:`from_json` reads it back."""
+        tables = ("maneuvers", "vane_bias", "installation", "accuracy", "alpha_limit_growth")
+        doc = {
+            "format": JSON_FORMAT, "verdict": self.verdict.name, "verdict_code": self.verdict.code,
+            "verdict_text": self.verdict.text,
+            "findings": [f.to_dict() for f in self.findings], "notes": list(self.notes),
+            "elapsed_s": self.elapsed_s, "alpha_limit_deg": self.alpha_limit_deg,
+            "reference_mach": self.reference_mach, "declarations": self.declarations.to_dict(),
+            "tables": {n: type(self).__dict__[n].frozen(self).to_dict() for n in tables},
+            "stages": {n: [st.to_dict() for st in getattr(self, n)] for n in ("first", "final", "gear_down")},
+        }
+        Path(path).write_text(json.dumps(_json_clean(doc), indent=1, allow_nan=False))
+
+    @classmethod
+    def from_json(cls, path: str | Path, problem: Problem | None = None) -> WorkflowResult:
+        """The workflow result that :meth:`to_json` wrote to ``path``.
+
+        The tables, notes, findings, declarations and every stage's estimation result come back as
+        they were (a number JSON cannot hold comes back as NaN). The data are not in the file: with
+        the ``problem`` the workflow ran on, each stage's problem is rebuilt (its residuals, the
+        report's figures); without, ``stage.problem`` is None.
+
+        Raises
+        ------
+        ValueError
+            The file is not JSON, not a workflow result, of another format, or ``problem`` is not
+            the one the workflow ran on.
+        """
+        path = Path(path)
+        try:
+            doc = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}: not JSON ({exc}); expected a file written by "
+                             "WorkflowResult.to_json") from None
+        fmt = doc.get("format") if isinstance(doc, dict) else None
+        if fmt != JSON_FORMAT:
+            raise ValueError(f"{path}: format {fmt!r}, this version reads {JSON_FORMAT!r} (a file written "
+                             "by WorkflowResult.to_json); read it with the version that wrote it")
+        try:
+            stages = {n: tuple(Stage.from_dict(d, problem, f"{path}: {n} stage {i}")
+                               for i, d in enumerate(doc["stages"][n]))
+                      for n in ("first", "final", "gear_down")}
+            tables = {n: ReadOnlyTable.from_dict(t) for n, t in doc["tables"].items()}
+            return cls(**tables, **stages, alpha_limit_deg=doc["alpha_limit_deg"], notes=doc["notes"],
+                       elapsed_s=float(doc["elapsed_s"]),
+                       findings=tuple(Finding.from_dict(f) for f in doc["findings"]),
+                       declarations=Declarations.from_dict(doc["declarations"]),
+                       reference_mach=doc["reference_mach"])
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"{path}: not a readable workflow result "
+                             f"({type(exc).__name__}: {exc})") from None
 
     @property
     def identity_table(self) -> str | None:
@@ -205,7 +339,7 @@ class WorkflowResult:
         rows = []
         for st in self.usable:
             df = st.result.to_pandas()
-            for name, spec in st.problem.parameters.specs.items():
+            for name, spec in st.result.parameters.specs.items():
                 if spec.kind != "table":
                     continue
                 bp = np.asarray(spec.breakpoints) * RAD2DEG
@@ -600,6 +734,12 @@ class ChannelResiduals:
     z: np.ndarray
     y: np.ndarray
     alpha_t_rad: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("maneuver", "t_s", "z", "y", "alpha_t_rad"):  # read-only copies
+            a = np.array(getattr(self, name), copy=True)
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
 
     @property
     def e(self) -> np.ndarray:

@@ -270,3 +270,32 @@ def test_import_estimator_is_light():
             "'estimator.solver') if m in sys.modules])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+# ------------------------------------------------------------------------------------ as plain values
+def test_a_result_goes_to_plain_values_and_back(result):
+    doc = result.to_dict()
+    assert json.loads(json.dumps(doc, allow_nan=False)) == doc  # strict JSON already
+    back = EstimationResult.from_dict(doc)
+    assert back.to_dict() == doc
+    pd.testing.assert_frame_equal(back.to_pandas(), result.to_pandas())
+
+
+def test_a_read_only_table_keeps_its_index_dtypes_and_missing_values():
+    frame = pd.DataFrame({"mach": [0.5, np.nan], "passed": [True, None],
+                          "n": np.array([3, 4], dtype=np.int64), "ok": [True, False],
+                          "aircraft": ["PV1", None]}, index=pd.Index(["a", "b"], name="aircraft_id"))
+    frame.columns.name = "column"
+    table = ReadOnlyTable.of(frame, keep_index=True)
+    pd.testing.assert_frame_equal(table.to_pandas(), frame, check_exact=True)
+    back = ReadOnlyTable.from_dict(json.loads(json.dumps(table.to_dict(), allow_nan=False)))
+    pd.testing.assert_frame_equal(back.to_pandas(), frame, check_exact=True)
+    with pytest.raises(ValueError, match="read-only"):
+        back.data[0][0] = 1.0
+    with pytest.raises(ValueError, match="read-only"):
+        table.index[0][0] = "c"
+    mine = table.to_pandas()  # the caller's to change
+    mine.loc["a", "mach"] = 9.0
+    assert table.to_pandas().loc["a", "mach"] == 0.5
+    # without keep_index (a result's fit-quality table) the index is the default one
+    assert ReadOnlyTable.of(frame).to_pandas().index.equals(pd.RangeIndex(2))

@@ -1,6 +1,9 @@
-"""The calibration workflow's arithmetic (issue 4): Mach bins, bias apportionment, alpha limit."""
+"""The calibration workflow's arithmetic (issue 4): Mach bins, bias apportionment, alpha limit; its
+result immutable, written and read back (issue 12)."""
 
 from __future__ import annotations
+
+import json
 
 import numpy as np
 import pandas as pd
@@ -153,3 +156,160 @@ def test_tejas_declarations_reach_the_workflow_through_the_channels():
                         channels[6].display_scale, channels[6].display_unit, channels[6].measures)
     assert declarations_of([plain]).requirements == {} and not declarations_of([plain]).apportion
     assert declarations_of([plain, channels[6]]) is decl
+
+
+# --------------------------------------------------------------------------------------------------
+# the workflow's result: immutable, written and read back (issue 12)
+
+
+@pytest.fixture(scope="module")
+def small_workflow(tiny_dataset):
+    """The workflow on the shared tiny campaign (one Mach bin of four maneuvers, two aircraft)."""
+    import warnings
+
+    from estimator.io import problem_from_dataset
+    from estimator.workflow import run_workflow
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the boom channels have no data in the tiny campaign
+        problem = problem_from_dataset(tiny_dataset)
+    wf = run_workflow(problem)
+    assert wf.final and len(wf.installation) and len(wf.accuracy) and wf.notes  # every part filled
+    return problem, wf
+
+
+_TABLES = ("maneuvers", "vane_bias", "installation", "accuracy", "alpha_limit_growth")
+
+
+def _cannot_change(wf):
+    import dataclasses
+
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        wf.notes = ()
+    # each table read is the caller's own copy: changing it changes nothing in the result
+    for name in _TABLES:
+        before = getattr(wf, name)
+        mine = getattr(wf, name)
+        if len(mine.columns):
+            mine[mine.columns[0]] = 0
+        mine["added"] = 1
+        pd.testing.assert_frame_equal(getattr(wf, name), before)
+    for seq in ("first", "final", "gear_down", "notes", "findings"):
+        assert isinstance(getattr(wf, seq), tuple), seq
+    with pytest.raises(TypeError):
+        wf.declarations.requirements["alpha_zl"] = None
+    with pytest.raises(TypeError):
+        wf.declarations.apportion["left"] = "b_r"
+    st = wf.final[0]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        st.mach = 0.9
+    with pytest.raises(ValueError, match="read-only"):
+        st.start_values[0] = 0.0
+    with pytest.raises(TypeError):
+        st.result.R["theta"] = 0.0
+    if st.problem is not None:
+        ch = next(iter(st.residuals))
+        with pytest.raises(TypeError):
+            st.residuals[ch] = None
+        with pytest.raises(ValueError, match="read-only"):
+            st.residuals[ch].z[0] = 0.0
+
+
+@pytest.mark.slow
+def test_a_workflow_result_cannot_be_changed_in_place(small_workflow):
+    from dataclasses import replace
+
+    problem, wf = small_workflow
+    _cannot_change(wf)
+    # replace() with the caller's own frame and list: the result holds read-only copies
+    mine, notes = wf.maneuvers, ["a note"]
+    copied = replace(wf, maneuvers=mine, notes=notes)
+    mine.loc[0, "used"] = not mine.loc[0, "used"]
+    notes.append("another")
+    assert copied.maneuvers.loc[0, "used"] == wf.maneuvers.loc[0, "used"] and copied.notes == ("a note",)
+    _cannot_change(copied)
+
+
+@pytest.mark.slow
+def test_a_calibration_cannot_be_changed_in_place(small_workflow):
+    import dataclasses
+
+    from estimator.calibration import Calibration, CalibrationOptions
+
+    problem, wf = small_workflow
+    cal = Calibration(problem, CalibrationOptions(plots=False), wf)
+    table = cal.to_pandas("maneuvers")
+    table.loc[0, "id"] = "changed"
+    assert cal.to_pandas("maneuvers").loc[0, "id"] != "changed"
+    assert all(cal.tables()["table2_model"].equals(cal.to_pandas("table2")) for _ in range(2))
+    with pytest.raises(TypeError):
+        cal._tables["maneuvers"] = None  # noqa: SLF001 - its store is read-only too
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        cal.workflow = wf
+    _cannot_change(cal.workflow)
+
+
+@pytest.mark.slow
+def test_from_json_gives_back_the_workflow_result(small_workflow, tmp_path):
+    from estimator.workflow import JSON_FORMAT, WorkflowResult
+
+    problem, wf = small_workflow
+    wf.to_json(tmp_path / "workflow.json")
+    assert JSON_FORMAT == "fpr-workflow-result/1"
+    assert json.loads((tmp_path / "workflow.json").read_text())["format"] == JSON_FORMAT
+    back = WorkflowResult.from_json(tmp_path / "workflow.json", problem)
+    for name in _TABLES:
+        pd.testing.assert_frame_equal(getattr(back, name), getattr(wf, name), check_exact=True)
+    assert (back.notes, back.findings, back.declarations, back.verdict, back.elapsed_s, back.alpha_limit_deg,
+            back.reference_mach) == (wf.notes, wf.findings, wf.declarations, wf.verdict, wf.elapsed_s,
+                                     wf.alpha_limit_deg, wf.reference_mach)
+    assert len(back.stages) == len(wf.stages)
+    for a, b in zip(wf.stages, back.stages, strict=True):
+        assert (a.name, a.mach, a.gear_down, a.maneuver_ids) == (b.name, b.mach, b.gear_down, b.maneuver_ids)
+        pd.testing.assert_frame_equal(b.result.to_pandas(), a.result.to_pandas())
+        assert b.result.verdict is a.result.verdict and b.result.findings == a.result.findings
+        # the stage's problem rebuilt from the workflow's: the same parameters, the same residuals
+        assert b.problem.parameters == a.problem.parameters
+        assert [m.id for m in b.problem.maneuvers] == [m.id for m in a.problem.maneuvers]
+        assert b.residuals.keys() == a.residuals.keys()
+        for ch, r in a.residuals.items():
+            np.testing.assert_array_equal(b.residuals[ch].e, r.e)
+    pd.testing.assert_frame_equal(back.table_updates(), wf.table_updates())
+    _cannot_change(back)
+    # written again, the same file
+    back.to_json(tmp_path / "again.json")
+    assert (tmp_path / "again.json").read_text() == (tmp_path / "workflow.json").read_text()
+
+    # without the problem: every table and result, no data behind the stages
+    bare = WorkflowResult.from_json(tmp_path / "workflow.json")
+    assert all(st.problem is None for st in bare.stages)
+    pd.testing.assert_frame_equal(bare.table_updates(), wf.table_updates())
+    with pytest.raises(ValueError, match=r"from_json\(path, problem\)"):
+        bare.final[0].residuals  # noqa: B018
+    bare.to_json(tmp_path / "bare.json")
+    assert (tmp_path / "bare.json").read_text() == (tmp_path / "workflow.json").read_text()
+
+
+@pytest.mark.slow
+def test_from_json_refuses_what_is_not_a_workflow_result(small_workflow, tmp_path):
+    from estimator.io import subproblem
+    from estimator.workflow import WorkflowResult
+
+    problem, wf = small_workflow
+    (tmp_path / "broken.json").write_text("{ not json")
+    with pytest.raises(ValueError, match=r"broken\.json: not JSON"):
+        WorkflowResult.from_json(tmp_path / "broken.json")
+    (tmp_path / "result.json").write_text(json.dumps({"format": "fpr-estimation-result/2"}))
+    with pytest.raises(ValueError, match=r"result\.json: format 'fpr-estimation-result/2'.*WorkflowResult"):
+        WorkflowResult.from_json(tmp_path / "result.json")
+    wf.to_json(tmp_path / "workflow.json")
+    doc = json.loads((tmp_path / "workflow.json").read_text())
+    del doc["tables"]
+    (tmp_path / "cut.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"cut\.json: not a readable workflow result.*tables"):
+        WorkflowResult.from_json(tmp_path / "cut.json")
+    # another problem (one aircraft's maneuvers only): its parameters are not the stages'
+    first = problem.maneuvers[0].aircraft
+    one = subproblem(problem, [m.id for m in problem.maneuvers if m.aircraft == first])
+    with pytest.raises(ValueError, match="give the problem the workflow ran on"):
+        WorkflowResult.from_json(tmp_path / "workflow.json", one)

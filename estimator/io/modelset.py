@@ -89,7 +89,7 @@ import numpy as np
 from aircraft_models.schema import Key, check, did_you_mean
 from estimator.io.errors import DataError, warn
 from estimator.parameters import KINDS, SCOPES, ParameterSpec
-from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, ManeuverData
+from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, ManeuverData, ReadOnlyMapping
 
 #: The shipped model sets: ``<name>.toml``.
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
@@ -246,6 +246,45 @@ class Declarations:
     truth_crossplots: tuple[str, ...] = ()
     time_history: tuple[str, ...] = ()
     sensor_midpoints: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        # immutable however made: read-only copies of the mappings, tuples of the lists
+        def put(name, value):
+            object.__setattr__(self, name, value)
+
+        put("requirements", ReadOnlyMapping(self.requirements))
+        put("apportion", ReadOnlyMapping(self.apportion))
+        put("sensor_midpoints", ReadOnlyMapping({k: tuple(v) for k, v in self.sensor_midpoints.items()}))
+        for name in ("correction_model", "crossplots", "truth_crossplots", "time_history"):
+            put(name, tuple(getattr(self, name)))
+
+    def to_dict(self) -> dict:
+        """Plain JSON values (:meth:`from_dict` reads them back)."""
+        ic = {f.name: getattr(self.initial_conditions, f.name) for f in fields(InitialConditionSources)}
+        return {
+            "source": self.source,
+            "requirements": {k: {"sensor": r.sensor, "desired_deg": r.desired_deg,
+                                 "low_alpha_only": r.low_alpha_only} for k, r in self.requirements.items()},
+            "reference_mach": self.reference_mach, "apportion": dict(self.apportion),
+            "correction_model": list(self.correction_model), "identity_table": self.identity_table,
+            "alpha_limit_channel": self.alpha_limit_channel,
+            "initial_conditions": {k: list(v) if isinstance(v, tuple) else v for k, v in ic.items()},
+            "crossplots": list(self.crossplots), "truth_crossplots": list(self.truth_crossplots),
+            "time_history": list(self.time_history),
+            "sensor_midpoints": {k: list(v) for k, v in self.sensor_midpoints.items()},
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> Declarations:
+        """The declarations :meth:`to_dict` gave."""
+        ic = {k: tuple(v) if isinstance(v, list) else v for k, v in d["initial_conditions"].items()}
+        return cls(
+            source=d["source"], requirements={k: Requirement(**r) for k, r in d["requirements"].items()},
+            reference_mach=d["reference_mach"], apportion=d["apportion"],
+            correction_model=d["correction_model"], identity_table=d["identity_table"],
+            alpha_limit_channel=d["alpha_limit_channel"], initial_conditions=InitialConditionSources(**ic),
+            crossplots=d["crossplots"], truth_crossplots=d["truth_crossplots"],
+            time_history=d["time_history"], sensor_midpoints=d["sensor_midpoints"])
 
 
 def sensor_positions(positions: Mapping[str, np.ndarray], declarations: Declarations
