@@ -58,6 +58,7 @@ import pandas as pd
 from estimator.io import subproblem
 from estimator.io.modelset import Declarations, Requirement, declarations_of
 from estimator.model import Model
+from estimator.parameters import make_key
 from estimator.problem import Problem, ReadOnlyMapping
 from estimator.result import EstimationResult, ReadOnlyTable, _json_clean
 from estimator.solver import SolverOptions, estimate
@@ -344,7 +345,7 @@ class WorkflowResult:
                     continue
                 bp = np.asarray(spec.breakpoints) * RAD2DEG
                 for e in range(len(bp)):
-                    key = f"{name}[{e}]"
+                    key = make_key(name, element=e)
                     if key not in df.index:
                         continue
                     r = df.loc[key]
@@ -567,12 +568,12 @@ def vane_biases(problem: Problem, result: EstimationResult, names: Sequence[str]
     ac = sorted({m.aircraft for m in problem.maneuvers})
     ok = []
     for a in ac:
-        keys = [f"{n}[{a}]" for n in names]
+        keys = [make_key(n, a) for n in names]
         est = result.free_estimated if result.free_estimated is not None else result.parameters.free_mask
         if all(k in result.parameters and est[result.parameters.index(k)] and np.isfinite(result.std(k))
                for k in keys):
             ok.append(a)
-    keys = [f"{n}[{a}]" for n in names for a in ok]
+    keys = [make_key(n, a) for n in names for a in ok]
     vals = np.array([result.value(k) for k in keys])
     return ok, vals, result.covariance(keys), result.covariance(keys, colored=True)
 
@@ -668,7 +669,7 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     fixed_bias: dict[str, float] = {}
     for a, r in inst.iterrows():
         for k, fam in families.items():
-            fixed_bias[f"{fam}[{a}]"] = r[f"installation_{k}_deg"] / RAD2DEG
+            fixed_bias[make_key(fam, a)] = r[f"installation_{k}_deg"] / RAD2DEG
     free4 = {k: False for k in fixed_bias} | {t: True for t in decl.correction_model
                                                if t in problem.parameters.specs}
     ident = decl.identity_table

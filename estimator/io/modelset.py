@@ -88,7 +88,7 @@ import numpy as np
 
 from aircraft_models.schema import Key, check, did_you_mean
 from estimator.io.errors import DataError, warn
-from estimator.parameters import KINDS, SCOPES, ParameterSpec
+from estimator.parameters import KINDS, SCOPES, ParameterSpec, instance_of
 from estimator.problem import STATE_PARAMS, STATE_SIGNALS, ChannelSpec, ManeuverData, ReadOnlyMapping
 
 #: The shipped model sets: ``<name>.toml``.
@@ -591,16 +591,9 @@ def _fix_instances_without_data(spec: ParameterSpec, channels, maneuvers) -> Par
              or ch.delay == spec.name]
     have: set[str] = set()
     every: set[str] = set()
-    for m in maneuvers:
-        present = [ch for ch in users if ch.column in m.measurements]
-        if spec.scope == "recorder":
-            every |= {ch.recorder for ch in channels}
-            have |= {ch.recorder for ch in present}
-        else:
-            inst = m.aircraft if spec.scope == "aircraft" else m.configuration
-            every.add(inst)
-            if present:
-                have.add(inst)
+    for m in maneuvers:  # the instances the data have, by the one instance rule
+        every |= {instance_of(spec.scope, m, ch) for ch in channels}
+        have |= {instance_of(spec.scope, m, ch) for ch in users if ch.column in m.measurements}
     fixed = {i: False for i in sorted(every - have)}
     if not fixed:
         return spec
