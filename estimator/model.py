@@ -381,10 +381,6 @@ class Model:
 
     # ------------------------------------------------------------------ parameter resolution
     # (keys: estimator.parameters.ParameterSet.key_of, the one resolver)
-    def value(self, values: np.ndarray, name: str, k: int, channel=None) -> float:
-        ps = self.problem.parameters
-        return float(values[ps.index(ps.key_of(name, self.problem.maneuvers[k], channel))])
-
     def state_columns(self, k: int) -> np.ndarray:
         ps = self.problem.parameters
         return np.array([ps.index(ps.key_of(n, self.problem.maneuvers[k])) for n in STATE_PARAMS])

@@ -27,7 +27,7 @@ with ``V_s = V + omega x (r_sensor - r_cg)``, the exact rigid-body velocity (SPE
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -35,7 +35,7 @@ import numpy as np
 
 from estimator.core.expressions import Expression, parse
 from estimator.core.sensitivity import LEVER_ARMS
-from estimator.parameters import ParameterSet, ParameterSpec
+from estimator.parameters import ParameterSet, ParameterSpec, instance_of
 
 #: Signals computed from the reconstructed states (their derivatives are chained to the states).
 STATE_SIGNALS = frozenset(
@@ -210,12 +210,20 @@ class Problem:
                 )
 
 
-def expand_parameters(specs: list[ParameterSpec], maneuvers, channels) -> ParameterSet:
-    """Expand parameter families over the instances present in the maneuvers and channels."""
+def expand_parameters(specs: list[ParameterSpec], maneuvers: Sequence[ManeuverData],
+                      channels: Sequence[ChannelSpec]) -> ParameterSet:
+    """Expand parameter families over the instances present in the maneuvers and channels.
+
+    The instances are those :func:`estimator.parameters.instance_of` (the one instance rule)
+    gives the data: sorted, but per-maneuver ones in the maneuvers' order.
+    """
+    def used(scope: str, chans: Sequence[ChannelSpec | None] = (None,)) -> list[str]:
+        return sorted({instance_of(scope, m, c) for m in maneuvers for c in chans})
+
     inst = {
-        "aircraft": sorted({m.aircraft for m in maneuvers}),
-        "configuration": sorted({m.configuration for m in maneuvers}),
-        "recorder": sorted({c.recorder for c in channels}),
-        "maneuver": [m.id for m in maneuvers],
+        "aircraft": used("aircraft"),
+        "configuration": used("configuration"),
+        "recorder": used("recorder", channels),
+        "maneuver": [instance_of("maneuver", m) for m in maneuvers],
     }
     return ParameterSet.expand(specs, inst)

@@ -4,6 +4,10 @@ another time is another process."""
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import time
 from pathlib import Path
 
 #: whether this system has the ``/proc`` these helpers read
@@ -40,6 +44,26 @@ def alive(proc: tuple[int, str]) -> bool:
     """Whether the process (pid, start time) still runs (a zombie computes nothing)."""
     st = proc_stat(proc[0])
     return st is not None and st[19] == proc[1] and st[0] not in "ZX"
+
+
+def left_after(procs: list[tuple[int, str]], seconds: float) -> list[tuple[int, str]]:
+    """The processes (pid, start time) still running after up to ``seconds`` (returns as soon as
+    none is)."""
+    end = time.monotonic() + seconds
+    while any(alive(p) for p in procs) and time.monotonic() < end:
+        time.sleep(0.05)
+    return [p for p in procs if alive(p)]
+
+
+def reap(child: subprocess.Popen, procs: list[tuple[int, str]]) -> None:
+    """After a kill test, passed or failed: end the child and every process of ``procs`` (pid,
+    start time) it left, by pid."""
+    if child.poll() is None:
+        child.kill()
+        child.wait()
+    for p in procs:
+        if alive(p):
+            os.kill(p[0], signal.SIGKILL)
 
 
 def ignores(pid: int, signum: int) -> bool:

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _processes import HAVE_PROC, alive, descendants, ignores, sigint_default
+from _processes import HAVE_PROC, descendants, ignores, left_after, reap, sigint_default
 from test_montecarlo import SCENARIO_TOML, _scenario
 
 from campaigns import montecarlo_cli
@@ -224,24 +224,6 @@ run_montecarlo(_scenario(), {out!r}, replications=40, workers=2)
 """
 
 
-def _left_after(workers: list[tuple[int, str]], seconds: float) -> list[tuple[int, str]]:
-    """The worker processes still running after up to ``seconds`` (returns once none is)."""
-    end = time.monotonic() + seconds
-    while any(alive(w) for w in workers) and time.monotonic() < end:
-        time.sleep(0.1)
-    return [w for w in workers if alive(w)]
-
-
-def _reap(child: subprocess.Popen, workers: list[tuple[int, str]]) -> None:
-    """After a kill test, passed or failed: end the child and every worker it left (by pid)."""
-    if child.poll() is None:
-        child.kill()
-        child.wait()
-    for w in workers:
-        if alive(w):
-            os.kill(w[0], signal.SIGKILL)
-
-
 @pytest.mark.skipif(not HAVE_PROC, reason="reads /proc")
 def test_worker_processes_end_when_the_run_is_killed(tmp_path):
     out = tmp_path / "killed"
@@ -263,10 +245,10 @@ def test_worker_processes_end_when_the_run_is_killed(tmp_path):
         assert len(workers) >= 2, workers
         os.kill(child.pid, signal.SIGKILL)
         child.wait()
-        left = _left_after(workers, 5.0)
+        left = left_after(workers, 5.0)
         assert not left, f"worker processes {left} outlived their killed parent by 5 s"
     finally:
-        _reap(child, workers)
+        reap(child, workers)
     # the killed workers' scratch datasets are in the run folder, not the system's temporary one
     # (where only multiprocessing's own pymp-* folder of the fork server's socket may be left)
     assert list(tmp.glob("fpr-mc-*")) == []
@@ -492,9 +474,9 @@ def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp
             assert ignores(w[0], signal.SIGINT), f"worker {w} does not ignore SIGINT"
         os.killpg(child.pid, signal.SIGINT)
         stdout, stderr = child.communicate(timeout=60)
-        assert not _left_after(workers, 5.0), "a worker outlived the interrupted run by 5 s"
+        assert not left_after(workers, 5.0), "a worker outlived the interrupted run by 5 s"
     finally:
-        _reap(child, workers)
+        reap(child, workers)
     assert child.returncode == 130, stderr
     assert (f"fpr montecarlo: interrupted: 1 of 3 replications written to {out}; run the same "
             "command again to resume") in stderr, stderr

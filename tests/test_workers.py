@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from _processes import HAVE_PROC, alive, descendants, proc_stat
+from _processes import HAVE_PROC, descendants, left_after, proc_stat, reap
 
 from synth import workers
 from synth.workers import worker_pool
@@ -70,18 +70,10 @@ def test_workers_end_within_5_s_of_a_sigkill_of_the_pools_process(tmp_path, meth
         assert pids <= {p for p, _ in below}, (pids, below)
         os.kill(proc.pid, signal.SIGKILL)  # the pool's process alone; nothing tells the workers
         proc.wait(timeout=10)
-        end = time.monotonic() + 5.0
-        while any(alive(p) for p in below) and time.monotonic() < end:
-            time.sleep(0.05)
         # the workers, and under forkserver/spawn the server and resource tracker too
-        assert not [p for p in below if alive(p)], f"{method}: processes outlived their parent by 5 s"
+        assert not left_after(below, 5.0), f"{method}: processes outlived their parent by 5 s"
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        for p in below:
-            if alive(p):
-                os.kill(p[0], signal.SIGKILL)
+        reap(proc, below)
         proc.stderr.close()
 
 
