@@ -39,6 +39,11 @@ ignore it (:func:`init_pool_worker`, so that no worker prints a traceback of its
 process that made the pool stops them (:func:`stop_pool`): SIGTERM first (a handler set in the
 initializer may clean up, e.g. remove scratch files, and exit), SIGKILL only if a worker has not
 ended after a timeout.
+
+CPU time: under ``forkserver`` the workers are the fork server's children, not this process's, so
+``getrusage(RUSAGE_CHILDREN)`` never sees them. A :func:`worker_pool`'s workers add their CPU time
+to a counter shared with the pool's process after every task and when they exit;
+:func:`workers_cpu_s` reads it, whatever the start method.
 """
 
 from __future__ import annotations
@@ -51,8 +56,10 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
+from multiprocessing import util
 
 _PR_SET_PDEATHSIG = 1
 
@@ -168,11 +175,79 @@ def init_pool_worker(parent_pid: int) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-def _init_bound(parent_pid: int, initializer: Callable[..., object] | None, initargs: tuple) -> None:
-    """:func:`worker_pool`'s initializer: :func:`init_pool_worker`, then the caller's own."""
+# ---------------------------------------------------------------------------- CPU time of the workers
+
+#: in a worker: the pool's shared CPU counter (a synchronized ``Value('d')``), and the part of this
+#: worker's CPU time already added to it
+_worker_cpu_total = None
+_worker_cpu_reported_s = 0.0
+
+#: in the process that makes pools: CPU seconds of the workers of its finished pools, and the
+#: counters of the pools still open
+_pools_cpu_done_s = 0.0
+_pools_cpu_open: list = []
+_pools_cpu_lock = threading.Lock()
+
+
+def _own_cpu_s() -> float:
+    """This process's CPU time (every thread) and its ended, collected children's, s."""
+    t = os.times()
+    return time.process_time() + t.children_user + t.children_system
+
+
+def _report_worker_cpu() -> None:
+    """In a worker: add the CPU time spent since the last report (the initializer's, then each
+    task's) to the pool's counter."""
+    global _worker_cpu_reported_s
+    if _worker_cpu_total is None:
+        return
+    now = _own_cpu_s()
+    with _worker_cpu_total.get_lock():
+        _worker_cpu_total.value += now - _worker_cpu_reported_s
+    _worker_cpu_reported_s = now
+
+
+def _run_counted(fn: Callable[..., object], /, *args, **kwargs) -> object:
+    """In a worker: ``fn(*args, **kwargs)``, then its CPU time to the pool's counter (a task's
+    CPU is counted as soon as it ends, even if the worker is killed later)."""
+    try:
+        return fn(*args, **kwargs)
+    finally:
+        _report_worker_cpu()
+
+
+def _init_bound(parent_pid: int, cpu_total, initializer: Callable[..., object] | None,
+                initargs: tuple) -> None:
+    """:func:`worker_pool`'s initializer: :func:`init_pool_worker`, the CPU counter (the rest of
+    the worker's CPU time, since its last task, is added when it exits normally), then the
+    caller's own initializer."""
+    global _worker_cpu_total, _worker_cpu_reported_s
     init_pool_worker(parent_pid)
+    # the worker's clock starts at 0 (fork resets it; spawn starts a new process): its start counts
+    _worker_cpu_total, _worker_cpu_reported_s = cpu_total, 0.0
+    util.Finalize(None, _report_worker_cpu, exitpriority=0)
     if initializer is not None:
         initializer(*initargs)
+
+
+def workers_cpu_s() -> float:
+    """CPU seconds of every :func:`worker_pool` worker this process has made so far, whatever the
+    start method: each worker adds its time after every task and when it exits normally.
+
+    Not counted: a worker's time since its last task when it was killed (:func:`stop_pool`, an
+    out-of-memory kill), the fork server's own (its start, once per process), and pools built by
+    hand rather than by :func:`worker_pool`.
+    """
+    with _pools_cpu_lock:
+        return _pools_cpu_done_s + sum(v.value for v in _pools_cpu_open)
+
+
+class _CountingPool(ProcessPoolExecutor):
+    """A ``ProcessPoolExecutor`` whose tasks add their CPU time to the pool's counter
+    (:func:`_run_counted`); ``map`` goes through ``submit`` too."""
+
+    def submit(self, fn: Callable[..., object], /, *args, **kwargs) -> Future:
+        return super().submit(_run_counted, fn, *args, **kwargs)
 
 
 @contextlib.contextmanager
@@ -183,22 +258,32 @@ def worker_pool(max_workers: int, initializer: Callable[..., object] | None = No
     Its context is :func:`pool_context`; each worker runs :func:`init_pool_worker` and then
     ``initializer(*initargs)`` (an importable function: it is pickled to the worker). On leaving
     the block normally the pool is shut down after its tasks; on any exception (Ctrl-C, an error
-    writing a result) it is stopped at once (:func:`stop_pool`) and the exception goes on.
+    writing a result) it is stopped at once (:func:`stop_pool`) and the exception goes on. The
+    workers' CPU time counts in :func:`workers_cpu_s`.
 
     Parameters
     ----------
     max_workers : worker processes.
     initializer, initargs : a per-worker initializer of the caller's, and its arguments.
     """
-    pool = ProcessPoolExecutor(max_workers=max_workers, mp_context=pool_context(),
-                               initializer=_init_bound,
-                               initargs=(os.getpid(), initializer, tuple(initargs)))
+    global _pools_cpu_done_s
+    ctx = pool_context() or multiprocessing.get_context()
+    cpu_total = ctx.Value("d", 0.0)
+    with _pools_cpu_lock:
+        _pools_cpu_open.append(cpu_total)
     try:
-        yield pool
-    except BaseException:
-        stop_pool(pool)
-        raise
-    pool.shutdown(wait=True)
+        pool = _CountingPool(max_workers=max_workers, mp_context=ctx, initializer=_init_bound,
+                             initargs=(os.getpid(), cpu_total, initializer, tuple(initargs)))
+        try:
+            yield pool
+        except BaseException:
+            stop_pool(pool)
+            raise
+        pool.shutdown(wait=True)  # joins the workers: their exit reports are in
+    finally:
+        with _pools_cpu_lock:
+            _pools_cpu_open.remove(cpu_total)
+            _pools_cpu_done_s += cpu_total.value
 
 
 def stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 5.0) -> None:
