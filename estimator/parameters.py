@@ -147,6 +147,11 @@ def make_key(name: str, instance: str = "", element: int | None = None) -> str:
     return key + (f"[{element}]" if element is not None else "")
 
 
+def family_of(key: str) -> str:
+    """The family (parameter name) of a key made by :func:`make_key`: ``b_l[PT1]`` -> ``b_l``."""
+    return key.split("[", 1)[0]
+
+
 def instance_of(scope: str, maneuver: ManeuverData, channel: ChannelSpec | None = None) -> str:
     """The instance of a ``scope`` family that a maneuver's data (through ``channel``) use.
 

@@ -35,6 +35,7 @@ from threadpoolctl import threadpool_limits
 from campaigns.truth import TruthProjection, recovery_table, true_parameters
 from campaigns.workflow_truth import calibrated_errors
 from estimator.io import problem_from_dataset
+from estimator.parameters import family_of
 from estimator.problem import Problem
 from estimator.result import STATUS_TEXT, EstimationResult
 from estimator.solver import estimate
@@ -485,7 +486,7 @@ def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequen
         calibrated, not_computed = calibrated_accuracy(problem, result)
         channels = pd.concat([residual_accuracy(problem, result), calibrated], ignore_index=True)
     params = pd.DataFrame({
-        "name": rec.index.astype(str), "family": [k.split("[")[0] for k in rec.index],
+        "name": rec.index.astype(str), "family": [family_of(k) for k in rec.index],
         "kind": rec["kind"].astype(str), "unit": rec["display_unit"].astype(str),
         "estimate": rec["value_display"], "truth": rec["truth_display"], "error": rec["error_display"],
         "std_crb": rec["std_crb_display"], "std_colored": rec["std_colored_display"],

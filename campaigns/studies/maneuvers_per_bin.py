@@ -58,6 +58,7 @@ from campaigns.studies.common import (
 )
 from campaigns.studies.scaffold import Invocations, fmt, paragraph
 from estimator.io.modelset import load_model_set
+from estimator.parameters import family_of
 
 STUDY = "maneuvers_per_bin"
 #: the desired vane AOA accuracy, deg 3-sigma (paper Table 2, SPEC §8), and the margin asked for:
@@ -301,7 +302,7 @@ def parameter_grid(config: StudyConfig, metrics: Mapping[ManeuverSet, SetMetrics
             names += [n for n in p.index[p["family"].isin(["b_l", "b_r", "f1", "f2"])
                                          & np.isfinite(p["crb_mean"])] if n not in names]
     order = {"b_l": 0, "b_r": 1, "f1": 2, "f2": 3}
-    names.sort(key=lambda n: (order[n.split("[")[0]], n))
+    names.sort(key=lambda n: (order[family_of(n)], n))
     lines = []
     for world in config.worlds:
         for mach in config.machs:

@@ -69,6 +69,7 @@ from campaigns.studies.common import (
     typical_imu_biases,
 )
 from campaigns.studies.scaffold import Invocations, fmt, paragraph
+from estimator.parameters import family_of
 
 STUDY = "shss_segments"
 SHSS_BETA_DEG = 4.5
@@ -326,7 +327,7 @@ def parameter_names(metrics: Mapping[Variant, RunMetrics]) -> tuple[list[str], l
     for m in metrics.values():
         names += [n for n in study_parameters(m.parameters, SIDESLIP_FAMILIES + VANE_BIAS_FAMILIES)
                   if n not in names]
-    return names, [n for n in names if n.split("[")[0] in SIDESLIP_FAMILIES]
+    return names, [n for n in names if family_of(n) in SIDESLIP_FAMILIES]
 
 
 #: a parameter enters the geometric means when its Cramér-Rao std in the reference run is below

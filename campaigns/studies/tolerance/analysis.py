@@ -21,6 +21,7 @@ from campaigns.studies.tolerance.config import DESIRED_3SIGMA_DEG, SENSOR_GROUPS
 from campaigns.truth import true_parameters
 from estimator.io import problem_from_dataset
 from estimator.io.modelset import load_model_set
+from estimator.parameters import family_of
 
 
 def bounds_display() -> dict[str, tuple[float, float]]:
@@ -152,9 +153,9 @@ def swept_truth(point: Point) -> dict[str, tuple[np.ndarray, list[str]]]:
     specs = problem.parameters.specs
     out = {}
     for label, families, _ in point.factor.swept:
-        keys = [k for k in values if k.split("[")[0] in families]
-        out[label] = (np.array([values[k] * specs[k.split("[")[0]].display_scale for k in keys]),
-                      [k.split("[")[0] for k in keys])
+        keys = [k for k in values if family_of(k) in families]
+        out[label] = (np.array([values[k] * specs[family_of(k)].display_scale for k in keys]),
+                      [family_of(k) for k in keys])
     return out
 
 
