@@ -21,7 +21,8 @@ def _check_outputs(directory, stem: str, command: str) -> str:
     head = f"$ python -m campaigns.studies.{stem} "
     assert any(line.startswith(head) and command in line for line in lines)
     assert any(line.startswith("machine: ") for line in lines)
-    assert re.search(r"^this invocation: wall \d+ s, CPU \d+ s in its processes, \d+ replications computed",
+    assert re.search(r"^this invocation: wall \d+ s, CPU \d+ s in its processes and their pool workers, "
+                     r"\d+ replications computed",
                      text, re.M)
     assert "Conclusion: " in text and text.rstrip().endswith(".")
     return text

@@ -48,3 +48,27 @@ def test_the_workers_cpu_time_reaches_the_pools_process(monkeypatch, method):
     assert used >= 2 * BUSY_S
     assert workers_cpu_s() - before >= used
 
+
+
+def test_a_studys_record_counts_its_pool_workers(tmp_path):
+    """The CPU time a study's header states includes its pool's workers; an older record, which
+    missed them, says "at least"."""
+    from campaigns.studies import invocations
+    from campaigns.studies.invocations import CPU_KEY, Invocation, invocations_text
+
+    start = workers_cpu_s()
+    own = time.process_time()  # this process's CPU so far: part of the record too
+    invocation = Invocation(invocations.__file__)
+    with worker_pool(2) as pool:
+        used = sum(f.result() for f in [pool.submit(_busy, BUSY_S), pool.submit(_busy, BUSY_S)])
+    assert workers_cpu_s() - start >= used >= 2 * BUSY_S
+    records = invocation.finish(tmp_path / "log.json", "a command", 2)
+    assert records[-1][CPU_KEY] and records[-1]["cpu_s"] >= own + used
+    old = {**records[-1], "cpu_s": 14.0}
+    del old[CPU_KEY]
+    lines = invocations_text([old, records[-1]])
+    assert lines[0].startswith("this invocation: wall ")
+    now_s = records[-1]["cpu_s"]
+    assert f"CPU {now_s:.0f} s in its processes and their pool workers, 2 replications" in lines[0]
+    assert f"CPU at least {14 + now_s:.0f} s, 4 replications in all:" in lines[1]
+    assert ", CPU at least 14 s, code " in lines[2] and f", CPU {now_s:.0f} s, code " in lines[3]

@@ -4,6 +4,12 @@ A study is resumable (the same command again computes only the missing replicati
 committed header must say what all its invocations cost together and which code each ran (other
 engineers commit to the shared tree meanwhile). :class:`Invocation` takes the snapshot at the start
 and appends the record at the end; :func:`invocations_text` writes the header's cost lines.
+
+CPU time counts this process, its collected children and the workers of its pools
+(:func:`synth.workers.workers_cpu_s`: under ``forkserver`` they are the fork server's children, which
+``getrusage(RUSAGE_CHILDREN)`` never sees). Not counted: a pool worker's time since its last task
+when it was killed, and the fork server's own start. Records written before the workers were
+counted (no :data:`CPU_KEY`) state their CPU as "at least".
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from typing import Any
 from campaigns.machine import cpu_model, memory_gib
 from synth.campaign import software_versions
 from synth.dataset import atomic_write_bytes
+from synth.workers import workers_cpu_s
 
 #: The code every study runs, besides its own file: estimator, synthesizer, engine, truth.
 STUDY_CODE = ("estimator", "synth", "aircraft_models", "campaigns/montecarlo", "campaigns/truth.py",
@@ -30,6 +37,9 @@ STUDY_CODE = ("estimator", "synth", "aircraft_models", "campaigns/montecarlo", "
 #: the log studies (a) and (b) kept before the scaffold (one JSON line per invocation: wall_s,
 #: computed, replications, runs, code); read once, as the history of a new record
 LEGACY_LOG = "invocations.jsonl"
+#: a record's flag: its ``cpu_s`` includes the pool workers' time (older records missed it under
+#: ``forkserver``, by up to the whole computation)
+CPU_KEY = "cpu_includes_pool_workers"
 
 
 def code_version(study_file: str | Path) -> str:
@@ -68,15 +78,17 @@ class Invocation:
     def finish(self, log_path: Path, command: str, replications_run: int) -> list[dict[str, Any]]:
         """Append this invocation's record to ``log_path`` (atomically) and return every record.
 
-        The record: start time, command, wall and CPU seconds (this process and its children),
-        replications computed, load average at the start and the end, and the code (``start ->
-        end`` when the tree moved meanwhile).
+        The record: start time, command, wall and CPU seconds (this process, its children and its
+        pools' workers: the module's docstring says what is not counted), replications computed,
+        load average at the start and the end, and the code (``start -> end`` when the tree moved
+        meanwhile).
         """
         own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
         code1 = code_version(self.study_file)
         record = {"started_utc": self.started_utc, "command": command,
                   "wall_s": time.perf_counter() - self.t0,
-                  "cpu_s": own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime,
+                  "cpu_s": (own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+                            + workers_cpu_s()), CPU_KEY: True,
                   "replications_run": replications_run, "load_start": self.load0,
                   "load_end": os.getloadavg()[0], "code_start": self.code0,
                   "code": code1 if code1 == self.code0 else f"{self.code0} -> {code1}"}
@@ -108,20 +120,28 @@ def _total(invocations: Sequence[Mapping[str, Any]], key: str) -> float | None:
     return None if any(v is None for v in values) else sum(values)
 
 
+def _cpu(invocations: Sequence[Mapping[str, Any]]) -> str:
+    """The CPU seconds of these invocations together: '?' when a record does not have them, "at
+    least" when a record's figure missed its pool workers (no :data:`CPU_KEY`)."""
+    total = _num(_total(invocations, "cpu_s"), ".0f")
+    return total if total == "?" or all(i.get(CPU_KEY) for i in invocations) else f"at least {total}"
+
+
 def invocations_text(invocations: Sequence[Mapping[str, Any]]) -> list[str]:
     """The cost lines: this invocation, and every one when the study was resumed (the code each
     ran, at its start -> end when the shared tree moved meanwhile)."""
     now = invocations[-1]
-    lines = [f"this invocation: wall {now['wall_s']:.0f} s, CPU {now['cpu_s']:.0f} s in its processes, "
+    lines = [f"this invocation: wall {now['wall_s']:.0f} s, CPU {_cpu([now])} s in its processes and their "
+             f"pool workers, "
              f"{now['replications_run']} replications computed; load average {now['load_start']:.1f} at "
              f"the start, {now['load_end']:.1f} at the end (other jobs share the machine)"]
     if len(invocations) > 1:
         lines.append(f"the replications were computed over {len(invocations)} invocations (resumed): wall "
                      f"{sum(i['wall_s'] for i in invocations):.0f} s, CPU "
-                     f"{_num(_total(invocations, 'cpu_s'), '.0f')} s, "
+                     f"{_cpu(invocations)} s, "
                      f"{sum(i['replications_run'] for i in invocations)} replications in all:")
         lines += [f"  {i.get('started_utc') or '?'}: {i['replications_run']} replications, wall "
-                  f"{i['wall_s']:.0f} s, CPU {_num(i['cpu_s'], '.0f')} s, code {i['code']}"
+                  f"{i['wall_s']:.0f} s, CPU {_cpu([i])} s, code {i['code']}"
                   for i in invocations]
     return lines
 
