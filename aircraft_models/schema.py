@@ -1,8 +1,9 @@
 """The keys of a TOML table, declared once and checked in one place.
 
-Every TOML format of the project (problem file, model set, dataset selection, campaign, errors
-block, Monte Carlo scenario, fleet, airframe and local-flow files) declares each table's keys and
-checks the table with :func:`check`:
+Every TOML format of the project (problem file, model set, dataset selection, campaign and its
+environment and maneuver tables, errors block, Monte Carlo scenario, fleet, airframe and
+local-flow files) declares each table's keys (:func:`field_keys` derives them from a dataclass)
+and checks the table with :func:`check`:
 
 - an unknown key is an error naming the table (``where``), the key, its close match ("did you
   mean ...?") and the valid keys;
@@ -27,7 +28,7 @@ import difflib
 import math
 import numbers
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 #: SI unit -> the suffixes a key in that unit may carry and each one's factor to SI (SI first)
@@ -101,6 +102,18 @@ class Key:
         (si, _), *others = SUFFIXES[self.unit]
         stem = name[: -len(si)] if name.endswith(si) else name
         return {name: 1.0, **{stem + suffix: f for suffix, f in others}}
+
+
+def field_keys(cls: type, required: Iterable[str] = (), units: Iterable[str] = ()) -> dict[str, Key]:
+    """The keys of a table that builds the dataclass ``cls``: one per field, untyped (the
+    dataclass checks its values), those in ``required`` required; a field named with the SI
+    suffix of one of ``units`` (keys of :data:`SUFFIXES`; ``heading_rad`` for ``"rad"``) is
+    declared in that unit, so its other suffixes are accepted too (``heading_deg``)."""
+    required = set(required)
+    si = {SUFFIXES[u][0][0]: u for u in units}
+    return {f.name: Key(required=f.name in required,
+                        unit=next((u for s, u in si.items() if f.name.endswith(s)), None))
+            for f in fields(cls)}
 
 
 def _scale(value: Any, factor: float, where: str, key: str, error: type[Exception]) -> Any:

@@ -153,11 +153,10 @@ def parse_campaign(raw: Mapping, source: str = "<dict>") -> Campaign:
     env_base = dict(raw.get("environment", {}))
     errors_raw = dict(raw.get("errors", {}))
     per_aircraft = errors_raw.pop("aircraft", {})
-    bad = set(per_aircraft) - set(fleet.aircraft)
+    bad = sorted(a for a in per_aircraft if a not in fleet.aircraft)
     if bad:
-        raise CampaignError(
-            f"{source}: [errors.aircraft] names {sorted(bad)}, not in the fleet {sorted(fleet.aircraft)}"
-        )
+        raise unknown(bad, sorted(fleet.aircraft), f"{source}: [errors.aircraft]", CampaignError,
+                      what="aircraft id")
     blocks = raw.get("flights", [])
     if not blocks:
         raise CampaignError(f"{source}: no [[flights]] block; add one (see campaigns/default.toml)")

@@ -15,7 +15,9 @@ Example
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
+
+from aircraft_models.schema import check, field_keys
 
 PLANETS = ("flat", "wgs84")
 
@@ -130,40 +132,30 @@ class Environment:
 
         Keys are the attribute names; ``gust`` is a nested table with :class:`Gust`'s keys.
         Degrees are accepted only where the key says so (``latitude_deg``, ``longitude_deg``).
+
+        Raises
+        ------
+        TypeError
+            ``d`` is no dict.
+        ValueError
+            A key :func:`aircraft_models.schema.check` rejects (unknown: named with its close
+            match; given in two units), a gust without ``amplitude_mps``, a value out of range.
         """
         if not isinstance(d, dict):
             raise TypeError(f"environment must be a table/dict, got {type(d).__name__}")
-        d = dict(d)
-        for deg_key, rad_key in (("latitude_deg", "latitude_rad"), ("longitude_deg", "longitude_rad")):
-            if deg_key in d:
-                if rad_key in d:
-                    raise ValueError(f"environment: give {deg_key} or {rad_key}, not both")
-                d[rad_key] = math.radians(float(d.pop(deg_key)))
-        known = {f.name for f in fields(cls)}
-        unknown = set(d) - known
-        if unknown:
-            hints = []
-            for k in sorted(unknown):
-                if k.startswith("wind") and k != "wind_ned_mps":
-                    hints.append(f"{k!r}: use wind_ned_mps = [north, east, down] in m/s")
-                else:
-                    hints.append(repr(k))
-            raise ValueError(
-                f"environment: unknown keys {', '.join(hints)}; known keys: {sorted(known)} "
-                "(plus latitude_deg, longitude_deg)"
-            )
+        given = d
+        try:
+            d = check(given, _ENVIRONMENT_KEYS, "environment")
+        except ValueError as exc:
+            if any(k.startswith("wind") and k not in _ENVIRONMENT_KEYS for k in given):
+                raise ValueError(f"{exc}; the wind is wind_ned_mps = [north, east, down] in m/s") from None
+            raise
+        for k in ("latitude_rad", "longitude_rad"):
+            if k in d and k not in given:
+                d[k] = float(d[k])  # given in degrees: a float, as math.radians returned
         gust = d.get("gust")
         if gust is not None:
-            if not isinstance(gust, dict):
-                raise ValueError("environment.gust must be a table with amplitude_mps, ...")
-            gknown = {f.name for f in fields(Gust)}
-            gunknown = set(gust) - gknown
-            if gunknown:
-                raise ValueError(
-                    f"environment.gust: unknown keys {sorted(gunknown)}; known: {sorted(gknown)}"
-                )
-            if "amplitude_mps" not in gust:
-                raise ValueError("environment.gust needs amplitude_mps (m/s)")
+            gust = check(gust, _GUST_KEYS, "environment.gust")
             d["gust"] = Gust(**{k: (tuple(v) if k == "direction_ned" else float(v))
                                 for k, v in gust.items()})
         if "wind_ned_mps" in d:
@@ -179,6 +171,11 @@ class Environment:
         else:
             out["gust"]["direction_ned"] = list(self.gust.direction_ned)
         return out
+
+
+# the values' types and ranges are checked by the dataclasses themselves
+_GUST_KEYS = field_keys(Gust, required=("amplitude_mps",))
+_ENVIRONMENT_KEYS = field_keys(Environment, units=("rad",))
 
 
 __all__ = ["Environment", "Gust", "PLANETS", "TURBULENCE_LEVELS"]

@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 
 from aircraft_models import ALL_SENSORS, Airframe, Configuration
+from aircraft_models.schema import unknown
 from synth.airdata_computer import (
     AirdataComputer,
     build_airdata_computer,
@@ -198,7 +199,7 @@ def channel_response(
     The channel's value, rad (beta channels of the boom: the flank-angle measurement).
     """
     if channel not in CHANNEL_TRUTH:
-        raise ValueError(f"channel_response: unknown channel {channel!r}; valid: {list(CHANNEL_TRUTH)}")
+        raise unknown([channel], CHANNEL_TRUTH, "channel_response", what="channel")
     switches = ErrorConfig(local_flow=local_flow, baseline_mismatch=baseline_mismatch)
     _, sensing, adc = _models(switches, truth_model, adc_baseline)
     alpha, beta, mach, gear = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in

@@ -29,10 +29,11 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from aircraft_models.schema import check, field_keys
 from synth.jsbsim_io import COL
 
 KINDS = (
@@ -289,32 +290,40 @@ class ManeuverSpec:
 
     @classmethod
     def from_dict(cls, d: dict) -> ManeuverSpec:
-        """Build from a plain dict; ``*_deg`` keys are accepted and converted to ``*_rad``."""
+        """Build from a plain dict; ``*_deg`` keys are accepted and converted to ``*_rad``.
+
+        Raises
+        ------
+        TypeError
+            ``d`` is no dict.
+        ValueError
+            An unknown key (with its close match and the valid keys), a key given in two units,
+            a missing ``kind``, ``mach`` or ``altitude_m``, or a value out of range.
+        """
         if not isinstance(d, dict):
             raise TypeError(f"maneuver must be a table/dict, got {type(d).__name__}")
-        d = dict(d)
-        for key in list(d):
-            if key.endswith("_deg"):
-                rad_key = key[: -len("_deg")] + "_rad"
-                if rad_key in d:
-                    raise ValueError(f"maneuver: give {key} or {rad_key}, not both")
-                d[rad_key] = math.radians(float(d.pop(key)))
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            hints = [
-                f"{k!r} (did you mean altitude_m? altitudes are metres)" if "alt" in k else repr(k)
-                for k in unknown
-            ]
-            raise ValueError(f"maneuver: unknown keys {', '.join(hints)}; known: {sorted(known)}")
-        for req in ("kind", "mach", "altitude_m"):
-            if req not in d:
-                raise ValueError(f"maneuver: missing {req!r} (kind one of {KINDS})")
+        given = d
+        try:
+            d = check(given, _SPEC_KEYS, "maneuver")
+        except ValueError as exc:
+            note = ("; the altitude is altitude_m, in metres"
+                    if any("alt" in k and k not in _SPEC_KEYS for k in given)
+                    else f"; kind is one of {', '.join(KINDS)}" if "kind" not in given else "")
+            if note:
+                raise ValueError(f"{exc}{note}") from None
+            raise
+        for k in d:
+            if k not in given:
+                d[k] = float(d[k])  # given in degrees: a float, as math.radians returned
         return cls(**d)
 
     def to_dict(self) -> dict:
         """Plain dict with every field resolved (defaults filled, ``None`` fields dropped)."""
         return {k: v for k, v in asdict(self).items() if v is not None}
+
+
+# the values' types and ranges are checked by ManeuverSpec itself
+_SPEC_KEYS = field_keys(ManeuverSpec, required=("kind", "mach", "altitude_m"), units=("rad",))
 
 
 # --- controllers ----------------------------------------------------------------------------------

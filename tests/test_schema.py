@@ -16,15 +16,18 @@ from test_io import SENSORS, raises, si_problem
 
 import estimator.io.errors
 from aircraft_models import DATA_DIR, load_airframe, load_fleet
-from aircraft_models.schema import Key, check, close_match, did_you_mean, unknown
+from aircraft_models.schema import Key, check, close_match, did_you_mean, field_keys, unknown
 from campaigns.montecarlo.scenario import ScenarioError, load_scenario, parse_scenario
 from estimator.calibration import CalibrationOptions
 from estimator.io import DataError, load_problem
 from estimator.io.fprdataset import select_entries
 from estimator.io.modelset import parse_model_set, parse_parameter
 from synth.campaign import CampaignError, parse_campaign
+from synth.environment import Environment
 from synth.errors import ErrorConfig
+from synth.instrument import channel_response
 from synth.local_flow import load_local_flow_truth
+from synth.maneuvers import ManeuverSpec
 
 DEG = math.pi / 180.0
 
@@ -238,3 +241,82 @@ def test_a_typo_in_a_fleet_airframe_or_local_flow_file_gives_the_close_match(
     path.write_text(text.replace(old, new, 1))
     with pytest.raises(ValueError, match=message):
         load(path)
+
+
+def test_field_keys_declares_a_dataclass_table_with_the_units_asked_for():
+    from dataclasses import dataclass
+
+    @dataclass
+    class Spec:
+        kind: str
+        heading_rad: float = 0.0
+        duration_s: float = 1.0
+
+    keys = field_keys(Spec, required=("kind",), units=("rad",))
+    assert list(keys) == ["kind", "heading_rad", "duration_s"]
+    assert keys["kind"].required and not keys["heading_rad"].required
+    # only the units asked for: duration_ms is no new spelling
+    assert check({"kind": "x", "heading_deg": 90}, keys, "s") == {"kind": "x", "heading_rad": math.pi / 2}
+    with pytest.raises(ValueError, match="unknown key 'duration_ms'"):
+        check({"kind": "x", "duration_ms": 5}, keys, "s")
+
+
+# ---------------------------------------- the environment, maneuver and channel names of the testbed
+
+CAMPAIGN = {"name": "x", "seed": 1, "flights": [{"mach": [0.5], "maneuvers": ["shss"]}]}
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"environment": {"turbulance": "light"}},
+     r"c\.toml: maneuver 0 .*environment: unknown key 'turbulance' \(did you mean 'turbulence'\?\); "
+     r"valid: planet, wind_ned_mps, turbulence, turbulence_seed, gust, latitude_rad, latitude_deg, "),
+    ({"environment": {"wind_kts": 20}},
+     r"unknown key 'wind_kts' .*; the wind is wind_ned_mps = \[north, east, down\] in m/s"),
+    ({"environment": {"gust": {"amplitude_mp": 3.0}}},
+     r"environment\.gust: unknown key 'amplitude_mp' \(did you mean 'amplitude_mps'\?\); "
+     r"valid: amplitude_mps, direction_ned, start_s, duration_s"),
+    ({"environment": {"gust": {"start_s": 3.0}}}, r"environment\.gust: missing key 'amplitude_mps'"),
+    ({"environment": {"latitude_deg": 45.0, "latitude_rad": 0.5}},
+     r"environment: latitude_rad given twice \(as latitude_deg and latitude_rad\)"),
+    ({"flights": [{"mach": [0.5], "maneuvers": ["shss"], "maneuver": {"beta_dg": 4.0}}]},
+     r"maneuver: unknown key 'beta_dg' \(did you mean 'beta_deg'\?\)"),
+    ({"flights": [{"mach": [0.5], "maneuvers": ["shss"], "maneuver": {"segmnt_s": 40.0}}]},
+     r"maneuver: unknown key 'segmnt_s' \(did you mean 'segment_s'\?\)"),
+    ({"errors": {"aircraft": {"PV33": {}}}},
+     r"c\.toml: \[errors\.aircraft\]: unknown aircraft id 'PV33' \(did you mean 'PV3'\?\); "
+     r"valid: PT1, PT2, PV1, PV2, PV3$"),
+])
+def test_a_typo_in_a_campaign_environment_gust_or_maneuver_table_gives_the_close_match(change, message):
+    with pytest.raises(CampaignError, match=message):
+        parse_campaign({**CAMPAIGN, **change}, source="c.toml")
+
+
+def test_maneuver_and_environment_degrees_are_read_as_before():
+    spec = ManeuverSpec.from_dict({"kind": "shss", "mach": 0.6, "altitude_m": 5000, "beta_deg": -4,
+                                   "heading_deg": 90})
+    # a float, bit-identical to math.radians (what the hand-written check returned)
+    assert type(spec.beta_rad) is float and spec.beta_rad == math.radians(-4.0)
+    assert spec.heading_rad == math.radians(90.0)
+    assert ManeuverSpec.from_dict(spec.to_dict()) == spec
+    with pytest.raises(ValueError, match="maneuver: heading_rad given twice"):
+        ManeuverSpec.from_dict({**spec.to_dict(), "heading_deg": 90})
+    with pytest.raises(ValueError, match=r"unknown key 'altitude_ft' \(did you mean 'altitude_m'\?\).*"
+                                         r"; the altitude is altitude_m, in metres"):
+        ManeuverSpec.from_dict({"kind": "shss", "mach": 0.6, "altitude_ft": 5000})
+    with pytest.raises(ValueError, match="maneuver: missing key 'mach'"):
+        ManeuverSpec.from_dict({"kind": "shss", "altitude_m": 5000})
+    with pytest.raises(ValueError, match="maneuver: missing key 'kind'; kind is one of pitch_doublet, "):
+        ManeuverSpec.from_dict({"mach": 0.6, "altitude_m": 5000})
+    with pytest.raises(TypeError, match="maneuver must be a table"):
+        ManeuverSpec.from_dict([("kind", "shss")])
+    env = Environment.from_dict({"latitude_deg": 45, "longitude_deg": -7.5})
+    assert type(env.latitude_rad) is float and env.latitude_rad == math.radians(45.0)
+    assert env.longitude_rad == math.radians(-7.5)
+    with pytest.raises(TypeError, match="environment must be a table"):
+        Environment.from_dict("calm")
+
+
+def test_channel_response_typo_gives_the_close_match():
+    with pytest.raises(ValueError, match=r"channel_response: unknown channel 'alpha_lz_rad' "
+                                         r"\(did you mean 'alpha_zl_rad'\?\); valid: alpha_zl_rad, "):
+        channel_response("alpha_lz_rad", 0.0, 0.0, 0.5)
