@@ -61,6 +61,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from aircraft_models.schema import unknown
 from campaigns.benchmarks.user_files import DEG, G0, KT, USER_COLUMNS, write_user_files
 from campaigns.benchmarks.user_files import column_line as user_column_line
 
@@ -1160,8 +1161,9 @@ def main(argv: list[str] | None = None) -> int:
     names = {c.name for c in CASES}
     if len(names) != len(CASES):
         raise SystemExit("corpus bug: duplicate case names")
-    if args.only and set(args.only) - names:
-        raise SystemExit(f"unknown case(s) {sorted(set(args.only) - names)}; known: {sorted(names)}")
+    bad = [n for n in args.only or () if n not in names]
+    if bad:
+        raise unknown(bad, [c.name for c in CASES], "--only", SystemExit, what="case")
     root = args.out.resolve()
     marker = root / MARKER
     if root.exists() and any(root.iterdir()) and not marker.is_file():
