@@ -189,6 +189,11 @@ _pools_cpu_open: list = []
 _pools_cpu_lock = threading.Lock()
 
 
+#: how long a process waits for a pool's CPU counter, s: a worker killed while adding to it leaves
+#: its lock taken, and a lost count is better than a hang
+_CPU_LOCK_TIMEOUT_S = 2.0
+
+
 def _own_cpu_s() -> float:
     """This process's CPU time (every thread) and its ended, collected children's, s."""
     t = os.times()
@@ -202,9 +207,24 @@ def _report_worker_cpu() -> None:
     if _worker_cpu_total is None:
         return
     now = _own_cpu_s()
-    with _worker_cpu_total.get_lock():
-        _worker_cpu_total.value += now - _worker_cpu_reported_s
-    _worker_cpu_reported_s = now
+    lock = _worker_cpu_total.get_lock()
+    if lock.acquire(timeout=_CPU_LOCK_TIMEOUT_S):
+        try:
+            _worker_cpu_total.get_obj().value += now - _worker_cpu_reported_s
+        finally:
+            lock.release()
+        _worker_cpu_reported_s = now
+
+
+def _read_cpu_total(cpu_total) -> float:
+    """A pool's CPU counter, s (read without its lock if a killed worker left the lock taken)."""
+    lock = cpu_total.get_lock()
+    if not lock.acquire(timeout=_CPU_LOCK_TIMEOUT_S):
+        return cpu_total.get_obj().value
+    try:
+        return cpu_total.get_obj().value
+    finally:
+        lock.release()
 
 
 def _run_counted(fn: Callable[..., object], /, *args, **kwargs) -> object:
@@ -239,7 +259,7 @@ def workers_cpu_s() -> float:
     hand rather than by :func:`worker_pool`.
     """
     with _pools_cpu_lock:
-        return _pools_cpu_done_s + sum(v.value for v in _pools_cpu_open)
+        return _pools_cpu_done_s + sum(_read_cpu_total(v) for v in _pools_cpu_open)
 
 
 class _CountingPool(ProcessPoolExecutor):
@@ -283,7 +303,7 @@ def worker_pool(max_workers: int, initializer: Callable[..., object] | None = No
     finally:
         with _pools_cpu_lock:
             _pools_cpu_open.remove(cpu_total)
-            _pools_cpu_done_s += cpu_total.value
+            _pools_cpu_done_s += _read_cpu_total(cpu_total)
 
 
 def stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 5.0) -> None:
