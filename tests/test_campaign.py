@@ -69,6 +69,7 @@ def test_manifest_records_what_was_flown(twin_runs):
     assert {"alpha_zb_rad", "beta_zbu_rad", "beta_zbl_rad"} <= set(df.columns)
     assert "beta_znp_rad" not in df.columns, "the boom replaces the nose probe"
 
+
 def test_seed_key_and_maneuver_id_layout():
     # job_index * 64 + segment: the key of every (job, segment) is its own
     keys = [maneuver_key(0, 0), maneuver_key(0, 63), maneuver_key(1, 0), maneuver_key(3, 1)]
@@ -117,7 +118,6 @@ def test_flown_maneuvers_carry_their_seed_key(twin_runs):
     for entry in load_dataset(twin_runs["a"]).manifest["maneuvers"]:
         assert entry["injected"]["maneuver_key"] == maneuver_key(entry["job_index"], entry["segment"])
         assert entry["id"] == maneuver_id(entry["job_index"], entry["segment"], entry["n_segments"])
-
 
 
 def test_default_campaign_covers_the_fleet_and_the_envelope():
