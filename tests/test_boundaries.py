@@ -23,10 +23,10 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 PACKAGES = ("estimator", "synth", "campaigns", "aircraft_models")
 
-#: the tests' own modules (``tests/*.py``: helpers such as ``_analytic_fpr``, ``conftest``, test files)
+#: the tests' own modules (``tests/**/*.py``: helpers such as ``_campaigns``, ``conftest``, test files)
 #: and the packages only the ``test`` extra installs
 TEST_ONLY = frozenset({"tests", "conftest", "pytest", "_pytest", "hypothesis",
-                       *(p.stem for p in (REPO / "tests").glob("*.py"))})
+                       *(p.stem for p in (REPO / "tests").rglob("*.py"))})
 
 
 @dataclass(frozen=True)
@@ -237,8 +237,8 @@ SYNTHETIC = [
     ("estimator.io", True, "x = __import__('campaigns')\n", "campaigns", 1),
     # beyond the top package: cannot run, still resolved to the package it names
     ("synth.flight", False, "from ..estimator import solver\n", "estimator.solver", 1),
-    ("synth.flight", False, "import numpy\nfrom _analytic_fpr import analytic\n",
-     "_analytic_fpr.analytic", 2),
+    ("synth.flight", False, "import numpy\nfrom _campaigns import TINY_CAMPAIGN\n",
+     "_campaigns.TINY_CAMPAIGN", 2),
     ("synth.flight", False, "import pytest\n", "pytest", 1),
     ("estimator.model", False, "from tests import conftest\n", "tests.conftest", 1),
     # the schema helper every package imports imports none of them

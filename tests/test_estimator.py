@@ -21,7 +21,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from campaigns.analytic_flight import DEG, NOISE_SIGMA, Flight
-from campaigns.analytic_flight import truth_values as _truth_values  # the name other tests import from here
+from campaigns.analytic_flight import truth_values as _truth_values
 from estimator.io.modelset import load_model_set
 from estimator.model import Model
 from estimator.solver import SolverOptions, estimate

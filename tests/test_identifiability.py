@@ -18,8 +18,9 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 import pytest
-from test_estimator import DEG, Flight, _truth_values
 
+from campaigns.analytic_flight import DEG, Flight
+from campaigns.analytic_flight import truth_values as _truth_values
 from estimator.identifiability import _screen
 from estimator.io.modelset import load_model_set
 from estimator.iteration import _evaluate

@@ -13,7 +13,16 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from test_io import DEG, SENSORS, SI_COLUMNS, flight_frame, one_range, raises, si_problem, write_problem
+from _problem_files import (
+    DEG,
+    SENSORS,
+    SI_COLUMNS,
+    flight_frame,
+    one_range,
+    raises,
+    si_problem,
+    write_problem,
+)
 
 from estimator.io import DataWarning, load_problem
 

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from _analytic_fpr import G, analytic
 from _kinematics_reference import integrate_rk4, specific_force_at_cg, state_derivative
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from campaigns.analytic_flight import G, analytic
 from estimator.core.kinematics import smoothed_derivative
 
 

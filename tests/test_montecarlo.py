@@ -116,6 +116,7 @@ def test_bad_scenarios_are_refused_with_the_key_named(change, message):
         _scenario(**change)
 
 
+@pytest.mark.slow
 def test_same_seed_gives_identical_replications_in_any_order(base_run, tmp_path):
     out, report = base_run
     assert report.ran == (0, 1, 2) and report.flights_flown == 2 and not report.failed
@@ -148,6 +149,7 @@ def test_same_seed_gives_identical_replications_in_any_order(base_run, tmp_path)
         assert r.meta()["verdict"] in ("success", "success with warnings")
 
 
+@pytest.mark.slow
 def test_interrupted_run_resumes_to_exactly_n_files(base_run, tmp_path, monkeypatch):
     out = tmp_path / "resume"
     scenario = _scenario()
@@ -181,6 +183,7 @@ def test_interrupted_run_resumes_to_exactly_n_files(base_run, tmp_path, monkeypa
     assert run_montecarlo(scenario, out, workers=1).ran == ()  # nothing left
 
 
+@pytest.mark.slow
 def test_failed_replication_is_recorded_and_others_continue(tmp_path, monkeypatch):
     out = tmp_path / "fail"
     real = replication_module.run_replication
@@ -221,12 +224,14 @@ def test_non_converged_estimation_is_a_failure_with_the_estimators_message(tmp_p
     assert "1 left out of the statistics because their verdict was failure" in summary.text()
 
 
+@pytest.mark.slow
 def test_another_scenario_is_refused_in_the_same_directory(base_run):
     out, _ = base_run
     with pytest.raises(ScenarioError, match="another scenario"):
         run_montecarlo(_scenario(seed=32), out, replications=3, workers=1)
 
 
+@pytest.mark.slow
 def test_summary_and_cli(base_run, capsys):
     out, _ = base_run
     summary = summarize(out)
@@ -249,6 +254,7 @@ def test_summary_and_cli(base_run, capsys):
     assert kinds.loc["time_delay", "n"] == 3 * kinds.loc["time_delay", "parameters"]
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_gives_the_local_results(base_run, tmp_path):
     distributed = pytest.importorskip("dask.distributed", reason="dask[distributed] is not installed")
     out = tmp_path / "dask"
@@ -289,6 +295,7 @@ parameters = { f1 = { free = false }, f2 = { free = false } }
 """
 
 
+@pytest.mark.slow
 def test_cli_resumes_a_run_from_the_scenario_file(base_run, tmp_path, capsys):
     assert tomllib.loads(SCENARIO_TOML) == RAW  # the file is the scenario of base_run
     path = tmp_path / "mc_test.toml"
@@ -401,6 +408,7 @@ def test_verdicts_are_counted_and_failures_left_out(tmp_path):
         (2, -1, 1, results[2].findings), (3, None, 0, ())]
 
 
+@pytest.mark.slow
 def test_channel_accuracy_is_three_rms_about_zero(base_run):
     # one definition, imported: the workflow's Table 2 (3 x rms about zero; a mean offset counts)
     assert replication_module.three_sigma is workflow.three_sigma
@@ -413,6 +421,7 @@ def test_channel_accuracy_is_three_rms_about_zero(base_run):
     np.testing.assert_allclose(ch["three_sigma"], 3.0 * np.hypot(ch["mean"], ch["std"]), rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_calibrated_channels_are_the_workflow_reports_and_a_flat_segment_is_a_note(base_run, monkeypatch):
     out, _ = base_run
     scenario = _scenario()

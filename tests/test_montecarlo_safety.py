@@ -63,6 +63,7 @@ def _files(directory: Path) -> dict[str, bytes]:
             for p in sorted(directory.rglob("*")) if p.is_file()}
 
 
+@pytest.mark.slow
 def test_a_planted_pickle_in_a_copied_run_folder_is_never_loaded(tmp_path, monkeypatch, capsys):
     # no flight held in memory from another test of this process: the folder alone decides
     monkeypatch.setattr(runner, "_PROCESS", {})
@@ -95,6 +96,7 @@ def test_a_planted_pickle_in_a_copied_run_folder_is_never_loaded(tmp_path, monke
     assert not marker.exists()
 
 
+@pytest.mark.slow
 def test_a_run_removes_only_its_own_leftovers(tmp_path):
     out = tmp_path / "run"
     runner.prepare_output(_scenario(), out)
@@ -182,6 +184,7 @@ def test_the_flight_cache_round_trip_is_lossless_and_deterministic(tmp_path):
         _assert_same_segments(segments, back)
 
 
+@pytest.mark.slow
 def test_an_interrupted_run_resumed_ends_byte_identical_to_an_uninterrupted_one(tmp_path, monkeypatch):
     scenario = _scenario()
     whole = tmp_path / "whole"
@@ -224,6 +227,7 @@ run_montecarlo(_scenario(), {out!r}, replications=40, workers=2)
 """
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not HAVE_PROC, reason="reads /proc")
 def test_worker_processes_end_when_the_run_is_killed(tmp_path):
     out = tmp_path / "killed"
@@ -283,6 +287,7 @@ def _copy(run: Path, to: Path) -> Path:
     return to
 
 
+@pytest.mark.slow
 def test_a_users_summary_file_is_refused_by_name_never_replaced(run3, tmp_path, capsys):
     out = _copy(run3[1], tmp_path / "run")
     mine = b"my notes on this run\n"
@@ -310,6 +315,7 @@ def test_a_users_summary_file_is_refused_by_name_never_replaced(run3, tmp_path, 
     assert _files(out) == before
 
 
+@pytest.mark.slow
 def test_the_summarys_own_files_are_replaced_an_edited_one_is_not(run3, tmp_path, capsys):
     out = _copy(run3[1], tmp_path / "run")
     (out / "summary_notes.txt").write_bytes(b"a name beside the summary's: never looked at")
@@ -361,6 +367,7 @@ def test_prepare_files_replaces_only_the_files_it_listed(tmp_path):
     assert (tmp_path / "other.txt").read_text() == "the user's"
 
 
+@pytest.mark.slow
 def test_foreign_files_in_a_run_folder_survive_a_resume_and_are_not_taken_for_results(run3, tmp_path,
                                                                                       capsys):
     toml, run = run3
@@ -393,6 +400,7 @@ def test_foreign_files_in_a_run_folder_survive_a_resume_and_are_not_taken_for_re
     assert sorted(p.name for p in other.iterdir()) == ["figures", "thesis.tex"]
 
 
+@pytest.mark.slow
 def test_a_file_with_a_result_name_the_run_did_not_write_is_refused(run3, tmp_path, capsys):
     toml, run = run3
     out = _copy(run, tmp_path / "run")
@@ -441,6 +449,7 @@ replication.write_scratch_dataset = held
 """
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not HAVE_PROC, reason="reads /proc")
 def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp_path, capsys):
     toml, whole = run3

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pickle
 
 import pytest
-from test_io import si_problem
+from _problem_files import si_problem
 
 import estimator.calibration as calibration
 from campaigns.cli import main

@@ -27,10 +27,11 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 import pytest
-from test_estimator import DEG, Flight, _truth_values
 from test_identifiability import NOISE, _with_bounds
 
 import estimator
+from campaigns.analytic_flight import DEG, Flight
+from campaigns.analytic_flight import truth_values as _truth_values
 from estimator.io.modelset import load_model_set
 from estimator.parameters import ParameterSet, ParameterSpec
 from estimator.result import JSON_FORMAT, STATUS_TEXT, EstimationResult, ReadOnlyTable

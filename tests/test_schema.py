@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from test_io import SENSORS, raises, si_problem
+from _problem_files import SENSORS, raises, si_problem
 
 import estimator.io.errors
 from aircraft_models import DATA_DIR, load_airframe, load_fleet
