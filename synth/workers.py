@@ -40,10 +40,11 @@ process that made the pool stops them (:func:`stop_pool`): SIGTERM first (a hand
 initializer may clean up, e.g. remove scratch files, and exit), SIGKILL only if a worker has not
 ended after a timeout.
 
-CPU time: under ``forkserver`` the workers are the fork server's children, not this process's, so
-``getrusage(RUSAGE_CHILDREN)`` never sees them. A :func:`worker_pool`'s workers add their CPU time
-to a counter shared with the pool's process after every task and when they exit;
-:func:`workers_cpu_s` reads it, whatever the start method.
+CPU time and memory: under ``forkserver`` the workers are the fork server's children, not this
+process's, so ``getrusage(RUSAGE_CHILDREN)`` never sees them. A :func:`worker_pool`'s workers add
+their CPU time, and their peak resident memory, to counters shared with the pool's process after
+every task and when they exit; :func:`workers_cpu_s` and :func:`workers_peak_rss_mib` read them,
+whatever the start method.
 """
 
 from __future__ import annotations
@@ -60,6 +61,11 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from multiprocessing import util
+
+try:
+    import resource
+except ImportError:  # not POSIX (Windows): no peak memory to report
+    resource = None
 
 _PR_SET_PDEATHSIG = 1
 
@@ -175,23 +181,28 @@ def init_pool_worker(parent_pid: int) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-# ---------------------------------------------------------------------------- CPU time of the workers
+# ------------------------------------------------------------------ CPU time and memory of the workers
 
-#: in a worker: the pool's shared CPU counter (a synchronized ``Value('d')``), and the part of this
-#: worker's CPU time already added to it
-_worker_cpu_total = None
+#: in a worker: the pool's shared counters (a synchronized ``Array('d', 2)``: CPU seconds, and the
+#: largest peak resident memory of its workers in KiB), and the part of this worker's CPU time
+#: already added to them
+_worker_counters = None
 _worker_cpu_reported_s = 0.0
 
-#: in the process that makes pools: CPU seconds of the workers of its finished pools, and the
-#: counters of the pools still open
+#: the counters' places in the shared array
+_CPU_S, _PEAK_RSS_KIB = 0, 1
+
+#: in the process that makes pools: CPU seconds and the largest peak RSS (KiB) of the workers of
+#: its finished pools, and the counters of the pools still open
 _pools_cpu_done_s = 0.0
-_pools_cpu_open: list = []
-_pools_cpu_lock = threading.Lock()
+_pools_peak_rss_done_kib = 0.0
+_pools_open: list = []
+_pools_lock = threading.Lock()
 
 
-#: how long a process waits for a pool's CPU counter, s: a worker killed while adding to it leaves
-#: its lock taken, and a lost count is better than a hang
-_CPU_LOCK_TIMEOUT_S = 2.0
+#: how long a process waits for a pool's counters, s: a worker killed while adding to them leaves
+#: their lock taken, and a lost count is better than a hang
+_COUNTERS_LOCK_TIMEOUT_S = 2.0
 
 
 def _own_cpu_s() -> float:
@@ -200,52 +211,65 @@ def _own_cpu_s() -> float:
     return time.process_time() + t.children_user + t.children_system
 
 
-def _report_worker_cpu() -> None:
+def peak_rss_mib() -> float:
+    """This process's peak resident memory so far, MiB (0 where the platform cannot say)."""
+    if resource is None:
+        return 0.0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    # ru_maxrss is bytes on macOS, KiB on Linux and the other BSDs
+    return peak / (1024.0 * 1024.0 if sys.platform == "darwin" else 1024.0)
+
+
+def _report_worker() -> None:
     """In a worker: add the CPU time spent since the last report (the initializer's, then each
-    task's) to the pool's counter."""
+    task's) to the pool's counter, and raise its peak memory to this worker's if larger."""
     global _worker_cpu_reported_s
-    if _worker_cpu_total is None:
+    if _worker_counters is None:
         return
     now = _own_cpu_s()
-    lock = _worker_cpu_total.get_lock()
-    if lock.acquire(timeout=_CPU_LOCK_TIMEOUT_S):
+    peak_kib = peak_rss_mib() * 1024.0
+    lock = _worker_counters.get_lock()
+    if lock.acquire(timeout=_COUNTERS_LOCK_TIMEOUT_S):
         try:
-            _worker_cpu_total.get_obj().value += now - _worker_cpu_reported_s
+            counters = _worker_counters.get_obj()
+            counters[_CPU_S] += now - _worker_cpu_reported_s
+            counters[_PEAK_RSS_KIB] = max(counters[_PEAK_RSS_KIB], peak_kib)
         finally:
             lock.release()
         _worker_cpu_reported_s = now
 
 
-def _read_cpu_total(cpu_total) -> float:
-    """A pool's CPU counter, s (read without its lock if a killed worker left the lock taken)."""
-    lock = cpu_total.get_lock()
-    if not lock.acquire(timeout=_CPU_LOCK_TIMEOUT_S):
-        return cpu_total.get_obj().value
+def _read_counters(counters) -> tuple[float, float]:
+    """A pool's counters: its workers' CPU s and largest peak RSS KiB (read without their lock if
+    a killed worker left the lock taken)."""
+    lock = counters.get_lock()
+    if not lock.acquire(timeout=_COUNTERS_LOCK_TIMEOUT_S):
+        return counters[_CPU_S], counters[_PEAK_RSS_KIB]
     try:
-        return cpu_total.get_obj().value
+        return counters[_CPU_S], counters[_PEAK_RSS_KIB]
     finally:
         lock.release()
 
 
 def _run_counted(fn: Callable[..., object], /, *args, **kwargs) -> object:
-    """In a worker: ``fn(*args, **kwargs)``, then its CPU time to the pool's counter (a task's
-    CPU is counted as soon as it ends, even if the worker is killed later)."""
+    """In a worker: ``fn(*args, **kwargs)``, then its CPU time and the worker's peak memory to the
+    pool's counters (a task's is counted as soon as it ends, even if the worker is killed later)."""
     try:
         return fn(*args, **kwargs)
     finally:
-        _report_worker_cpu()
+        _report_worker()
 
 
-def _init_bound(parent_pid: int, cpu_total, initializer: Callable[..., object] | None,
+def _init_bound(parent_pid: int, counters, initializer: Callable[..., object] | None,
                 initargs: tuple) -> None:
-    """:func:`worker_pool`'s initializer: :func:`init_pool_worker`, the CPU counter (the rest of
-    the worker's CPU time, since its last task, is added when it exits normally), then the
+    """:func:`worker_pool`'s initializer: :func:`init_pool_worker`, the counters (the rest of the
+    worker's CPU time and memory, since its last task, is added when it exits normally), then the
     caller's own initializer."""
-    global _worker_cpu_total, _worker_cpu_reported_s
+    global _worker_counters, _worker_cpu_reported_s
     init_pool_worker(parent_pid)
     # the worker's clock starts at 0 (fork resets it; spawn starts a new process): its start counts
-    _worker_cpu_total, _worker_cpu_reported_s = cpu_total, 0.0
-    util.Finalize(None, _report_worker_cpu, exitpriority=0)
+    _worker_counters, _worker_cpu_reported_s = counters, 0.0
+    util.Finalize(None, _report_worker, exitpriority=0)
     if initializer is not None:
         initializer(*initargs)
 
@@ -258,13 +282,29 @@ def workers_cpu_s() -> float:
     out-of-memory kill), the fork server's own (its start, once per process), and pools built by
     hand rather than by :func:`worker_pool`.
     """
-    with _pools_cpu_lock:
-        return _pools_cpu_done_s + sum(_read_cpu_total(v) for v in _pools_cpu_open)
+    with _pools_lock:
+        return _pools_cpu_done_s + sum(_read_counters(c)[_CPU_S] for c in _pools_open)
+
+
+def workers_peak_rss_mib() -> float:
+    """The largest peak resident memory of any :func:`worker_pool` worker this process has made
+    so far, MiB, whatever the start method (0 before the first task ends): each worker reports
+    its own peak (``getrusage(RUSAGE_SELF).ru_maxrss``) after every task and when it exits
+    normally. Under ``forkserver`` ``getrusage(RUSAGE_CHILDREN)`` never sees the workers.
+
+    Not counted: a worker's growth since its last task when it was killed (:func:`stop_pool`, an
+    out-of-memory kill), the fork server, and pools built by hand rather than by
+    :func:`worker_pool`. Under ``fork`` a worker's peak includes the pages it shares with this
+    process at the fork.
+    """
+    with _pools_lock:
+        peaks_kib = [_read_counters(c)[_PEAK_RSS_KIB] for c in _pools_open]
+        return max([_pools_peak_rss_done_kib, *peaks_kib]) / 1024.0
 
 
 class _CountingPool(ProcessPoolExecutor):
-    """A ``ProcessPoolExecutor`` whose tasks add their CPU time to the pool's counter
-    (:func:`_run_counted`); ``map`` goes through ``submit`` too."""
+    """A ``ProcessPoolExecutor`` whose tasks add their CPU time and peak memory to the pool's
+    counters (:func:`_run_counted`); ``map`` goes through ``submit`` too."""
 
     def submit(self, fn: Callable[..., object], /, *args, **kwargs) -> Future:
         return super().submit(_run_counted, fn, *args, **kwargs)
@@ -279,21 +319,22 @@ def worker_pool(max_workers: int, initializer: Callable[..., object] | None = No
     ``initializer(*initargs)`` (an importable function: it is pickled to the worker). On leaving
     the block normally the pool is shut down after its tasks; on any exception (Ctrl-C, an error
     writing a result) it is stopped at once (:func:`stop_pool`) and the exception goes on. The
-    workers' CPU time counts in :func:`workers_cpu_s`.
+    workers' CPU time counts in :func:`workers_cpu_s`, their peak memory in
+    :func:`workers_peak_rss_mib`.
 
     Parameters
     ----------
     max_workers : worker processes.
     initializer, initargs : a per-worker initializer of the caller's, and its arguments.
     """
-    global _pools_cpu_done_s
+    global _pools_cpu_done_s, _pools_peak_rss_done_kib
     ctx = pool_context() or multiprocessing.get_context()
-    cpu_total = ctx.Value("d", 0.0)
-    with _pools_cpu_lock:
-        _pools_cpu_open.append(cpu_total)
+    counters = ctx.Array("d", 2)  # zeros: _CPU_S, _PEAK_RSS_KIB
+    with _pools_lock:
+        _pools_open.append(counters)
     try:
         pool = _CountingPool(max_workers=max_workers, mp_context=ctx, initializer=_init_bound,
-                             initargs=(os.getpid(), cpu_total, initializer, tuple(initargs)))
+                             initargs=(os.getpid(), counters, initializer, tuple(initargs)))
         try:
             yield pool
         except BaseException:
@@ -301,9 +342,11 @@ def worker_pool(max_workers: int, initializer: Callable[..., object] | None = No
             raise
         pool.shutdown(wait=True)  # joins the workers: their exit reports are in
     finally:
-        with _pools_cpu_lock:
-            _pools_cpu_open.remove(cpu_total)
-            _pools_cpu_done_s += _read_cpu_total(cpu_total)
+        with _pools_lock:
+            _pools_open.remove(counters)
+            cpu_s, peak_kib = _read_counters(counters)
+            _pools_cpu_done_s += cpu_s
+            _pools_peak_rss_done_kib = max(_pools_peak_rss_done_kib, peak_kib)
 
 
 def stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 5.0) -> None:
