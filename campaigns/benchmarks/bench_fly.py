@@ -4,8 +4,11 @@
 
 Measures, for each maneuver kind at Mach 0.6 (one process): wall time to fly with JSBSim, to
 instrument, and to write; then a whole mixed campaign with 1 and with all worker processes, in
-maneuvers per second; peak resident memory of this process and of the workers. Timing never decides
-a test; the result table is committed so changes in speed are visible in review.
+maneuvers per second; peak resident memory of this process (which flies the 1-worker campaign) and
+of the largest pool worker (each worker reports its own: :func:`synth.workers.workers_peak_rss_mib`;
+under ``forkserver`` the workers are not this process's children, so ``RUSAGE_CHILDREN`` never
+sees them). Timing never decides a test; the result table is committed so changes in speed are
+visible in review.
 """
 
 from __future__ import annotations
@@ -13,7 +16,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import resource
 import sys
 import tempfile
 import time
@@ -28,13 +30,9 @@ from synth.errors import ErrorConfig
 from synth.flight import fly_maneuver
 from synth.instrument import instrument
 from synth.maneuvers import MANEUVER_KINDS, ManeuverSpec
+from synth.workers import peak_rss_mib, workers_peak_rss_mib
 
 HERE = Path(__file__).resolve().parent
-
-
-def _peak_mib(who: int) -> float:
-    # ru_maxrss is KiB on Linux
-    return resource.getrusage(who).ru_maxrss / 1024.0
 
 
 def per_kind(lines: list[str]) -> None:
@@ -101,8 +99,9 @@ def main() -> int:
     per_kind(lines)
     campaign(lines, args.n_mach, sorted({1, os.cpu_count() or 1}))
     lines.append("")
-    lines.append(f"peak RSS: this process {_peak_mib(resource.RUSAGE_SELF):.0f} MiB, "
-                 f"largest worker {_peak_mib(resource.RUSAGE_CHILDREN):.0f} MiB")
+    lines.append(f"peak RSS: this process {peak_rss_mib():.0f} MiB, "
+                 f"largest worker {workers_peak_rss_mib():.0f} MiB")
+    lines.append("load average at end: " + " ".join(f"{v:.2f}" for v in os.getloadavg()))
     text = "\n".join(lines) + "\n"
     print(text)
     args.out.parent.mkdir(parents=True, exist_ok=True)
