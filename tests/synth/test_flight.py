@@ -566,7 +566,7 @@ def test_no_jsbsim_banner_on_stdout():
     env = {k: v for k, v in os.environ.items() if k != "JSBSIM_DEBUG"}
     code = "from synth import jsbsim_io as io; io.create_fdm('f16', 'flat', 1 / 120)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
-                         cwd=Path(__file__).resolve().parents[1], check=True)
+                         cwd=Path(__file__).resolve().parents[2], check=True)
     assert "JSBSim" not in out.stdout and "JSBSim" not in out.stderr, out.stdout
 
 

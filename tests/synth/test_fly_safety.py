@@ -20,7 +20,7 @@ from estimator.io.fprdataset import read_manifest
 from synth.campaign import fly_campaign, parse_campaign
 from synth.dataset import MANIFEST, IncompleteDatasetError, load_dataset, prepare_directory, write_manifest
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 #: one short maneuver per job; 7 configurations x 3 Mach numbers: enough jobs that a run killed
 #: at its first file is far from done, few enough to fly in seconds

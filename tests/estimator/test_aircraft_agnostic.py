@@ -18,7 +18,7 @@ import pytest
 from estimator.io.fprdataset import FPR_COLUMNS
 from estimator.problem import STATE_PARAMS
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = ROOT / "estimator"
 MODEL_SETS = sorted((PACKAGE / "models").glob("*.toml"))
 

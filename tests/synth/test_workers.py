@@ -17,7 +17,8 @@ from _processes import HAVE_PROC, descendants, left_after, proc_stat, reap
 from synth import workers
 from synth.workers import worker_pool
 
-TESTS = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parent  # this file's folder: a child process imports test_workers
+TESTS = HERE.parent  # tests/: the helpers (_processes)
 ROOT = TESTS.parent
 
 linux_only = pytest.mark.skipif(not HAVE_PROC, reason="reads /proc")
@@ -31,7 +32,7 @@ def _hold(directory: str) -> None:
 
 _PARENT = """\
 import os, sys, time
-sys.path.insert(0, {tests!r})
+sys.path[:0] = [{here!r}, {tests!r}]
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from synth.workers import init_pool_worker
@@ -53,7 +54,7 @@ def test_workers_end_within_5_s_of_a_sigkill_of_the_pools_process(tmp_path, meth
     held = tmp_path / "held"
     held.mkdir()
     script = tmp_path / "parent.py"
-    script.write_text(_PARENT.format(tests=str(TESTS), method=method, held=str(held)))
+    script.write_text(_PARENT.format(here=str(HERE), tests=str(TESTS), method=method, held=str(held)))
     # TMPDIR: multiprocessing's own folder (the fork server's socket), which a killed parent leaves
     proc = subprocess.Popen([sys.executable, str(script)], cwd=ROOT, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, start_new_session=True,

@@ -45,7 +45,8 @@ from campaigns.montecarlo.summary import load_results
 from estimator.io import outdir
 from synth.truth import TruthTrajectory
 
-ROOT = Path(__file__).resolve().parents[1]
+HERE = Path(__file__).resolve().parent  # a child process imports test_montecarlo from here
+ROOT = HERE.parents[1]
 
 
 class _Planted:
@@ -220,7 +221,7 @@ def test_an_interrupted_run_resumed_ends_byte_identical_to_an_uninterrupted_one(
 
 _RUN_IN_CHILD = """
 import sys
-sys.path.insert(0, {tests!r})
+sys.path[:0] = [{here!r}, {tests!r}]
 from test_montecarlo import _scenario
 from campaigns.montecarlo import run_montecarlo
 run_montecarlo(_scenario(), {out!r}, replications=40, workers=2)
@@ -233,8 +234,8 @@ def test_worker_processes_end_when_the_run_is_killed(tmp_path):
     out = tmp_path / "killed"
     tmp = tmp_path / "tmp"  # the system's temporary folder, for the run: nothing may leak there
     tmp.mkdir()
-    child = subprocess.Popen([sys.executable, "-c", _RUN_IN_CHILD.format(tests=str(ROOT / "tests"),
-                                                                       out=str(out))], cwd=ROOT,
+    script = _RUN_IN_CHILD.format(here=str(HERE), tests=str(ROOT / "tests"), out=str(out))
+    child = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT,
                              env=dict(os.environ, TMPDIR=str(tmp)))
     try:
         deadline = time.monotonic() + 120

@@ -1,22 +1,29 @@
-"""The CPU time of a pool's workers reaches the process that made the pool, whatever the start
-method: :func:`synth.workers.workers_cpu_s`. Under ``forkserver`` (the project's start method on
-Linux) the workers are the fork server's children, so ``getrusage(RUSAGE_CHILDREN)`` misses them
-and a study's header said "CPU 14 s" for 682 s of two busy cores.
+"""The CPU time and peak memory of a pool's workers reach the process that made the pool,
+whatever the start method: :func:`synth.workers.workers_cpu_s`,
+:func:`synth.workers.workers_peak_rss_mib`. Under ``forkserver`` (the project's start method on
+Linux) the workers are the fork server's children, so ``getrusage(RUSAGE_CHILDREN)`` misses them:
+a study's header said "CPU 14 s" for 682 s of two busy cores, and the fly benchmark's "largest
+worker" peak memory would have been the fork server's.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import time
 
 import pytest
 
 from synth import workers
-from synth.workers import worker_pool, workers_cpu_s
+from synth.workers import peak_rss_mib, worker_pool, workers_cpu_s, workers_peak_rss_mib
 
 #: CPU seconds each task burns
 BUSY_S = 0.5
 METHODS = [m for m in ("forkserver", "fork", "spawn") if m in multiprocessing.get_all_start_methods()]
+#: MiB a task allocates and touches
+ALLOC_MIB = 200
+#: MiB a worker's peak may grow between a task measuring it and the worker reporting it
+REPORT_SLACK_MIB = 8
 
 
 def _busy(seconds: float, fail: bool = False) -> float:
@@ -30,6 +37,32 @@ def _busy(seconds: float, fail: bool = False) -> float:
     if fail:
         raise RuntimeError(repr(used))
     return used
+
+
+def _rss_now_mib() -> float | None:
+    """This process's resident memory now, MiB (Linux's ``/proc``; None elsewhere)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            pages = int(fh.read().split()[1])
+    except OSError:
+        return None
+    return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def _allocate(mib: int) -> float:
+    """A pool task: allocate ``mib`` MiB and touch every page (``numpy.ones`` writes them); returns
+    this worker's peak resident memory after it, MiB."""
+    import numpy as np
+
+    now_mib = _rss_now_mib()
+    block = np.ones(mib * 1024 * 1024 // 8)
+    after_mib = peak_rss_mib()
+    # the pages were touched, not merely reserved: the peak rose above the memory in use before
+    # by (nearly) all of them (the peak before may already stand higher, e.g. from imports; the
+    # kernel's counters lag by a few pages)
+    assert now_mib is None or after_mib - now_mib >= 0.95 * mib - 1.0, (now_mib, after_mib)
+    del block
+    return after_mib
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -48,6 +81,21 @@ def test_the_workers_cpu_time_reaches_the_pools_process(monkeypatch, method):
     assert used >= 2 * BUSY_S
     assert workers_cpu_s() - before >= used
 
+
+@pytest.mark.parametrize("method", METHODS)
+def test_the_workers_peak_memory_reaches_the_pools_process(monkeypatch, method):
+    monkeypatch.setattr(workers, "pool_context", lambda: multiprocessing.get_context(method))
+    # this test's workers alone: not an earlier test's pools
+    monkeypatch.setattr(workers, "_pools_peak_rss_done_kib", 0.0)
+    assert workers_peak_rss_mib() == 0.0
+    with worker_pool(2) as pool:
+        peaks_mib = [f.result() for f in [pool.submit(_allocate, ALLOC_MIB), pool.submit(_allocate, 0)]]
+        # each task's peak is reported as soon as it ends, before the pool closes; the largest
+        # worker's, not a sum over workers
+        assert max(peaks_mib) >= ALLOC_MIB
+        assert max(peaks_mib) <= workers_peak_rss_mib() <= max(peaks_mib) + REPORT_SLACK_MIB
+    # the workers' exit reports keep the largest
+    assert workers_peak_rss_mib() >= max(peaks_mib)
 
 
 def test_a_studys_record_counts_its_pool_workers(tmp_path):

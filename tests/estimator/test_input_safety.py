@@ -498,9 +498,9 @@ def test_calibrate_help_points_only_at_what_exists():
     options = {s for a in cal._actions for s in a.option_strings}
     for flag in re.findall(r"(?<![\w-])--[a-z][a-z-]*\*?", CALIBRATE_EPILOG):
         assert flag in options, f"{flag} in `fpr calibrate --help` is not an option"
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     headings = [h.strip() for h in re.findall(r"^#+ (.*)$", readme, flags=re.M)]
     for section in re.findall(r'README section\s+"([^"]+)"', CALIBRATE_EPILOG):
         assert any(h.startswith(section) for h in headings), f"no README section {section!r}"
     for path in re.findall(r"\b((?:estimator|campaigns|synth)/[\w/]+\.py)\b", CALIBRATE_EPILOG):
-        assert (Path(__file__).resolve().parents[1] / path).is_file(), path
+        assert (Path(__file__).resolve().parents[2] / path).is_file(), path
