@@ -193,8 +193,10 @@ _worker_cpu_reported_s = 0.0
 _CPU_S, _PEAK_RSS_KIB = 0, 1
 
 #: in the process that makes pools: CPU seconds and the largest peak RSS (KiB) of the workers of
-#: its finished pools, and the counters of the pools still open
+#: its finished pools (and the CPU of those whose workers were not its children: forkserver), and
+#: the counters of the pools still open
 _pools_cpu_done_s = 0.0
+_pools_cpu_done_not_children_s = 0.0
 _pools_peak_rss_done_kib = 0.0
 _pools_open: list = []
 _pools_lock = threading.Lock()
@@ -274,16 +276,23 @@ def _init_bound(parent_pid: int, counters, initializer: Callable[..., object] | 
         initializer(*initargs)
 
 
-def workers_cpu_s() -> float:
+def workers_cpu_s(not_in_children: bool = False) -> float:
     """CPU seconds of every :func:`worker_pool` worker this process has made so far, whatever the
     start method: each worker adds its time after every task and when it exits normally.
+
+    ``not_in_children=True``: only what ``getrusage(RUSAGE_CHILDREN)`` does not already hold — the
+    workers of finished ``forkserver`` pools (the fork server's children, not ours) and of pools
+    still open (not yet reaped); a finished ``fork``/``spawn`` pool's workers were this process's
+    children, reaped at its shutdown, and are in ``RUSAGE_CHILDREN``. Add it to that to count each
+    worker once.
 
     Not counted: a worker's time since its last task when it was killed (:func:`stop_pool`, an
     out-of-memory kill), the fork server's own (its start, once per process), and pools built by
     hand rather than by :func:`worker_pool`.
     """
     with _pools_lock:
-        return _pools_cpu_done_s + sum(_read_counters(c)[_CPU_S] for c in _pools_open)
+        done = _pools_cpu_done_not_children_s if not_in_children else _pools_cpu_done_s
+        return done + sum(_read_counters(c)[_CPU_S] for c in _pools_open)
 
 
 def workers_peak_rss_mib() -> float:
@@ -327,8 +336,10 @@ def worker_pool(max_workers: int, initializer: Callable[..., object] | None = No
     max_workers : worker processes.
     initializer, initargs : a per-worker initializer of the caller's, and its arguments.
     """
-    global _pools_cpu_done_s, _pools_peak_rss_done_kib
+    global _pools_cpu_done_s, _pools_cpu_done_not_children_s, _pools_peak_rss_done_kib
     ctx = pool_context() or multiprocessing.get_context()
+    # fork/spawn workers are this process's children, reaped at shutdown (RUSAGE_CHILDREN has them)
+    not_children = ctx.get_start_method() == "forkserver"
     counters = ctx.Array("d", 2)  # zeros: _CPU_S, _PEAK_RSS_KIB
     with _pools_lock:
         _pools_open.append(counters)
@@ -346,6 +357,8 @@ def worker_pool(max_workers: int, initializer: Callable[..., object] | None = No
             _pools_open.remove(counters)
             cpu_s, peak_kib = _read_counters(counters)
             _pools_cpu_done_s += cpu_s
+            if not_children:
+                _pools_cpu_done_not_children_s += cpu_s
             _pools_peak_rss_done_kib = max(_pools_peak_rss_done_kib, peak_kib)
 
 

@@ -68,8 +68,9 @@ from campaigns.benchmarks.user_files import column_line as user_column_line
 # ----------------------------------------------------------------------------------------------
 # the base input
 
-#: The good flights: the shipped campaign campaigns/faults_base.toml (the base of tests/campaigns/test_faults.py
-#: too), PV1-NP at Mach 0.5, a pitch doublet and a pull-up with rudder doublets, typical sensor
+#: The good flights: the shipped campaign campaigns/faults_base.toml (the base of
+#: tests/campaigns/test_faults.py too), PV1-NP at Mach 0.5, a pitch doublet and a pull-up with rudder
+#: doublets, typical sensor
 #: errors, steady wind, calm air, the linear local-flow truth the model set represents exactly.
 CAMPAIGN = "faults_base"
 DOUBLET, RUDDER = "m0000", "m0001"

@@ -88,7 +88,7 @@ class Invocation:
         record = {"started_utc": self.started_utc, "command": command,
                   "wall_s": time.perf_counter() - self.t0,
                   "cpu_s": (own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
-                            + workers_cpu_s()), CPU_KEY: True,
+                            + workers_cpu_s(not_in_children=True)), CPU_KEY: True,
                   "replications_run": replications_run, "load_start": self.load0,
                   "load_end": os.getloadavg()[0], "code_start": self.code0,
                   "code": code1 if code1 == self.code0 else f"{self.code0} -> {code1}"}

@@ -120,3 +120,28 @@ def test_a_studys_record_counts_its_pool_workers(tmp_path):
     assert f"CPU {now_s:.0f} s in its processes and their pool workers, 2 replications" in lines[0]
     assert f"CPU at least {14 + now_s:.0f} s, 4 replications in all:" in lines[1]
     assert ", CPU at least 14 s, code " in lines[2] and f", CPU {now_s:.0f} s, code " in lines[3]
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_children_and_workers_together_count_each_worker_once(method, monkeypatch):
+    # A study adds RUSAGE_CHILDREN and workers_cpu_s(not_in_children=True): under fork/spawn the
+    # workers are this process's children (in RUSAGE_CHILDREN once reaped), under forkserver not;
+    # either way their CPU must be counted once, not twice (nor not at all).
+    import resource
+
+    monkeypatch.setattr(workers, "pool_context", lambda: multiprocessing.get_context(method))
+
+    def total() -> float:
+        ch = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return ch.ru_utime + ch.ru_stime + workers_cpu_s(not_in_children=True)
+
+    before, all_before = total(), workers_cpu_s()
+    with worker_pool(2) as pool:
+        measured = sum(pool.map(_busy, [BUSY_S, BUSY_S]))
+    counted = total() - before
+    workers_s = workers_cpu_s() - all_before  # every worker's own report, start-up included
+    assert measured <= counted + 0.05, f"{method}: counted {counted:.2f} s < the tasks' {measured:.2f} s"
+    # once: what RUSAGE_CHILDREN adds for reaped workers is what they reported themselves (their
+    # exit after the last report costs little); twice would be ~2 x workers_s
+    assert abs(counted - workers_s) < 0.1 * workers_s + 0.25, (
+        f"{method}: counted {counted:.2f} s, the workers reported {workers_s:.2f} s")
