@@ -135,6 +135,139 @@ def _reinit_with_wind(fdm: jsbsim.FGFDMExec, reader: io.SampleReader, wind_ned_m
     io.set_wind_ned(fdm, wind_ned_mps)
 
 
+def trim_point(x_si) -> TrimPoint:
+    """The :class:`TrimPoint` of an SI state row (indexed by ``jsbsim_io.COL``): where a
+    maneuver's controller starts from."""
+    C = io.COL
+    return TrimPoint(
+        mach=float(x_si[C["mach"]]),
+        altitude_m=float(x_si[C["h_m"]]),
+        heading_rad=float(x_si[C["psi_rad"]]),
+        alpha_rad=float(x_si[C["alpha_rad"]]),
+        theta_rad=float(x_si[C["theta_rad"]]),
+        throttle_cmd_norm=float(x_si[C["throttle_cmd_norm"]]),
+        tas_mps=float(x_si[C["tas_mps"]]),
+    )
+
+
+def start_flight(
+    spec: ManeuverSpec, airframe: Airframe, aircraft: Aircraft, env: Environment, dt_s: float
+) -> tuple[jsbsim.FGFDMExec, io.SampleReader, TrimPoint, dict]:
+    """Build the FDM, load the aircraft, trim at ``spec``'s test point, apply ``env`` (wind,
+    turbulence) and fly hands-off for :data:`SETTLE_S`.
+
+    Returns
+    -------
+    The FDM, its sample reader, the trim point and the trim's facts for the metadata.
+
+    Raises
+    ------
+    FlightError
+        If the mass cannot be loaded or the trim fails.
+    """
+    where = _where(spec)
+    fdm, frame = io.create_fdm(airframe.jsbsim_model, env.planet, dt_s, airframe.reference_point)
+    fdm["simulation/randomseed"] = env.turbulence_seed
+    try:
+        io.set_mass(fdm, frame, aircraft.fuel_kg, aircraft.ballast_kg,
+                    aircraft.ballast_position_body_m)
+    except ValueError as exc:
+        raise FlightError(f"{where}: aircraft {aircraft.id}: {exc}") from None
+    io.set_initial_conditions(
+        fdm,
+        latitude_rad=env.latitude_rad,
+        longitude_rad=env.longitude_rad,
+        altitude_m=spec.altitude_m,
+        heading_rad=spec.heading_rad,
+        mach=spec.trim_mach,
+    )
+    io.start_engines(fdm)
+    io.set_gear(fdm, spec.gear_down)
+    fdm.run_ic()
+    trim_residuals = _trim(fdm, spec)
+    reader = io.SampleReader(fdm, frame)
+    x_trim = reader.read_si()
+    C = io.COL
+    trim = trim_point(x_trim)
+    trim_meta = {
+        "mach": trim.mach, "altitude_m": trim.altitude_m, "heading_rad": trim.heading_rad,
+        "alpha_rad": trim.alpha_rad, "theta_rad": trim.theta_rad,
+        "throttle_cmd_norm": trim.throttle_cmd_norm,
+        "elevator_pos_rad": float(x_trim[C["elevator_pos_rad"]]),
+        "mass_kg": float(x_trim[C["mass_kg"]]),
+        "r_cg_body_m": [float(x_trim[C[f"cg_{a}_m"]]) for a in "xyz"],
+        "gear_pos_norm": float(x_trim[C["gear_pos_norm"]]),
+        "residuals": {k: float(v) for k, v in trim_residuals.items()},
+    }
+    if any(env.wind_ned_mps):
+        _reinit_with_wind(fdm, reader, env.wind_ned_mps)
+    if env.turbulence != "none":
+        io.set_turbulence(fdm, severity=env.turbulence_severity,
+                          windspeed_at_20ft_mps=env.turbulence_w20_mps)
+    settle_steps = int(round(SETTLE_S / dt_s))
+    for _ in range(settle_steps):
+        fdm.run()
+
+    return fdm, reader, trim, trim_meta
+
+
+def fly_controller(
+    fdm: jsbsim.FGFDMExec,
+    reader: io.SampleReader,
+    controller,
+    n: int,
+    dt_s: float,
+    advice: str,
+    on_step=None,
+) -> np.ndarray:
+    """Let ``controller`` fly ``n`` samples (``n - 1`` steps) from the FDM's current state.
+
+    Departures (:func:`_departure`) and the controller's own checks are tested on the way and on the
+    whole record at the end, then ``controller.finish`` judges the run. ``on_step(i)`` (optional) is
+    called at each sample before the inputs are set (the gust's onset). The FDM is left at the last
+    sample's state, so a following leg starts where this one ends.
+
+    Returns
+    -------
+    (n, channels) SI samples (``jsbsim_io.COL``), the first the state on entry.
+
+    Raises
+    ------
+    ManeuverFailure
+        With the time since entry, what went wrong and ``advice``.
+    """
+    t_s = np.arange(n) * dt_s
+    raw = np.empty((n, reader.n_channels))
+    setters = io.InputSetter(fdm)
+    scale, offset = reader.scale, reader.offset
+    read_raw = reader.read_raw
+    run = fdm.run
+    for i in range(n):
+        row = read_raw()
+        raw[i] = row
+        # plain floats: the controllers' scalar math is several times faster than on numpy
+        x = (raw[i] * scale + offset).tolist()
+        t = i * dt_s
+        if i % _CHECK_EVERY == 0:
+            msg = _departure(x)
+            if msg is not None:
+                raise ManeuverFailure(msg, t, advice)
+            controller.check(t, x)
+        if on_step is not None:
+            on_step(i)
+        if i < n - 1:
+            setters.set(*controller.inputs(t, x))
+            if not run():
+                raise ManeuverFailure("JSBSim stopped the run", t, "check the JSBSim log")
+    si = reader.to_si(raw)
+    # the per-step checks sample every few steps; departures must not slip between them
+    k = _first_departure(si)
+    if k is not None:
+        raise ManeuverFailure(_departure(si[k]) or "departed", float(t_s[k]), advice)
+    controller.finish(si, t_s)
+    return si
+
+
 def fly_maneuver(
     spec: ManeuverSpec,
     airframe: Airframe,
@@ -165,61 +298,10 @@ def fly_maneuver(
         If the trim fails, the aircraft departs, or the controller cannot hold its target.
     """
     where = _where(spec)
-    fdm, frame = io.create_fdm(airframe.jsbsim_model, env.planet, dt_s, airframe.reference_point)
-    fdm["simulation/randomseed"] = env.turbulence_seed
-    try:
-        io.set_mass(fdm, frame, aircraft.fuel_kg, aircraft.ballast_kg,
-                    aircraft.ballast_position_body_m)
-    except ValueError as exc:
-        raise FlightError(f"{where}: aircraft {aircraft.id}: {exc}") from None
-    io.set_initial_conditions(
-        fdm,
-        latitude_rad=env.latitude_rad,
-        longitude_rad=env.longitude_rad,
-        altitude_m=spec.altitude_m,
-        heading_rad=spec.heading_rad,
-        mach=spec.trim_mach,
-    )
-    io.start_engines(fdm)
-    io.set_gear(fdm, spec.gear_down)
-    fdm.run_ic()
-    trim_residuals = _trim(fdm, spec)
-    reader = io.SampleReader(fdm, frame)
-    x_trim = reader.read_si()
-    C = io.COL
-    trim = TrimPoint(
-        mach=float(x_trim[C["mach"]]),
-        altitude_m=float(x_trim[C["h_m"]]),
-        heading_rad=float(x_trim[C["psi_rad"]]),
-        alpha_rad=float(x_trim[C["alpha_rad"]]),
-        theta_rad=float(x_trim[C["theta_rad"]]),
-        throttle_cmd_norm=float(x_trim[C["throttle_cmd_norm"]]),
-        tas_mps=float(x_trim[C["tas_mps"]]),
-    )
-    trim_meta = {
-        "mach": trim.mach, "altitude_m": trim.altitude_m, "heading_rad": trim.heading_rad,
-        "alpha_rad": trim.alpha_rad, "theta_rad": trim.theta_rad,
-        "throttle_cmd_norm": trim.throttle_cmd_norm,
-        "elevator_pos_rad": float(x_trim[C["elevator_pos_rad"]]),
-        "mass_kg": float(x_trim[C["mass_kg"]]),
-        "r_cg_body_m": [float(x_trim[C[f"cg_{a}_m"]]) for a in "xyz"],
-        "gear_pos_norm": float(x_trim[C["gear_pos_norm"]]),
-        "residuals": {k: float(v) for k, v in trim_residuals.items()},
-    }
-    if any(env.wind_ned_mps):
-        _reinit_with_wind(fdm, reader, env.wind_ned_mps)
-    if env.turbulence != "none":
-        io.set_turbulence(fdm, severity=env.turbulence_severity,
-                          windspeed_at_20ft_mps=env.turbulence_w20_mps)
-    settle_steps = int(round(SETTLE_S / dt_s))
-    for _ in range(settle_steps):
-        fdm.run()
-
+    fdm, reader, trim, trim_meta = start_flight(spec, airframe, aircraft, env, dt_s)
     controller = make_controller(spec, trim, dt_s)
     n = int(round(spec.duration_s / dt_s)) + 1
     t_s = np.arange(n) * dt_s
-    raw = np.empty((n, reader.n_channels))
-    setters = io.InputSetter(fdm)
     gust_step = (
         int(round(env.gust.start_s / dt_s)) if env.gust is not None else -1
     )
@@ -228,35 +310,15 @@ def fly_maneuver(
             f"{where}: gust start_s {env.gust.start_s} s is after the end of the "
             f"{spec.duration_s} s maneuver; start it earlier"
         )
-    scale, offset = reader.scale, reader.offset
-    read_raw = reader.read_raw
-    run = fdm.run
+
+    def start_gust(i: int) -> None:
+        if i == gust_step:
+            io.start_cosine_gust(fdm, amplitude_mps=env.gust.amplitude_mps,
+                                 direction_ned=env.gust.direction_ned,
+                                 duration_s=env.gust.duration_s)
+
     try:
-        for i in range(n):
-            row = read_raw()
-            raw[i] = row
-            # plain floats: the controllers' scalar math is several times faster than on numpy
-            x = (raw[i] * scale + offset).tolist()
-            t = i * dt_s
-            if i % _CHECK_EVERY == 0:
-                msg = _departure(x)
-                if msg is not None:
-                    raise ManeuverFailure(msg, t, _advice(spec))
-                controller.check(t, x)
-            if i == gust_step:
-                io.start_cosine_gust(fdm, amplitude_mps=env.gust.amplitude_mps,
-                                     direction_ned=env.gust.direction_ned,
-                                     duration_s=env.gust.duration_s)
-            if i < n - 1:
-                setters.set(*controller.inputs(t, x))
-                if not run():
-                    raise ManeuverFailure("JSBSim stopped the run", t, "check the JSBSim log")
-        si = reader.to_si(raw)
-        # the per-step checks sample every few steps; departures must not slip between them
-        k = _first_departure(si)
-        if k is not None:
-            raise ManeuverFailure(_departure(si[k]) or "departed", float(t_s[k]), _advice(spec))
-        controller.finish(si, t_s)
+        si = fly_controller(fdm, reader, controller, n, dt_s, _advice(spec), start_gust)
     except ManeuverFailure as exc:
         raise FlightError(
             f"{where} (aircraft {aircraft.id}), t = {exc.t_s:.2f} s into "
