@@ -371,7 +371,16 @@ class ErrorConfig:
     # ------------------------------------------------------------------ presets
     @classmethod
     def none(cls) -> ErrorConfig:
-        """Everything off, ideal recorders: each channel carries the truth at its sensor."""
+        """Everything off, ideal recorders: each channel carries the truth at its sensor.
+
+        One true effect remains: the side-probe pair's sideslip ``beta_zsp_rad`` is not
+        ``true_beta_sp_rad`` (the free-stream sideslip at the pair's mean position). A roll rate
+        gives the two probes, at y = +-Y, opposite local alpha, which the canted port pair
+        (cant c) reads as sideslip: to first order -Y (p + r tan alpha) cos(alpha) cos(beta)^2 /
+        (u tan c), up to 0.085 deg in the default campaign's maneuvers. This is physics, not an
+        error; the estimator models it as ``k_spr (p + r tan alpha_s) / tas_t`` (k_spr about
+        -Y / tan c). Its angle of attack ``alpha_zsp_rad`` is exact to second order.
+        """
         return cls()
 
     @classmethod

@@ -292,7 +292,8 @@ def instrument(
         alpha_zsp_rad beta_zsp_rad`` + ``beta_znp_rad`` or ``alpha_zb_rad beta_zbu_rad
         beta_zbl_rad``); raw ``alpha_lm_rad alpha_rm_rad dp_alpha_lsp_pa dp_alpha_rsp_pa
         alpha_lsp_rad alpha_rsp_rad [dp_beta_np_pa flank_np_rad] qc_pa ps_pa tt_k``; and the
-        ``true_*`` columns (CG state, winds, Euler angles, forces, CG position, atmosphere, and
+        ``true_*`` columns (CG state, the INS point's NED velocity ``true_{vn,ve,vd}_ins_mps``,
+        winds, Euler angles, forces, CG position, atmosphere, and
         per sensor ``true_{alpha,beta,flank}_<sensor>_rad`` and ``true_local_*_<sensor>_rad``;
         ``true_alpha_sp_rad``/``true_beta_sp_rad`` at the side probes' mean position;
         ``true_clean_<channel>`` for each calibrated flow channel: its value with every
@@ -321,7 +322,7 @@ def instrument(
     qc_true = impact_pressure_pa(truth.mach, truth.p_static_pa)
 
     flow = _flow_at_sensors(truth, airframe, configuration, errors, truth_model, sensing)
-    direct, f_imu, v_ned = _continuous_signals(truth, airframe, euler, qc_true)
+    direct, f_imu, v_ned, v_ins_ned = _continuous_signals(truth, airframe, euler, qc_true)
     rec = _plan_recorders(truth.t_s, sensors, errors, direct, common_rate_hz)
 
     def rng(seed: int, name: str) -> np.random.Generator:
@@ -336,7 +337,7 @@ def instrument(
     common, own_rate = _to_common_base(streams, rec, common_rate_hz)
     columns: dict[str, np.ndarray] = {"t_s": rec.t_common_s}
     columns.update({c: common[c] for c in _MEASURED_ORDER if c in common})
-    tr = _truth_columns(truth, euler, qc_true, f_imu, v_ned, flow, clean_cols)
+    tr = _truth_columns(truth, euler, qc_true, f_imu, v_ned, v_ins_ned, flow, clean_cols)
     for c, v in tr.items():
         columns[c] = sample_at(truth.t_s, v, rec.t_common_s)
     data = pd.DataFrame(columns)
@@ -428,17 +429,24 @@ def _flow_at_sensors(truth: TruthTrajectory, airframe: Airframe, configuration: 
 
 
 def _continuous_signals(truth: TruthTrajectory, airframe: Airframe, euler: np.ndarray,
-                        qc_true: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+                        qc_true: np.ndarray
+                        ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray]:
     """The continuous signal behind each non-flow raw channel, at the truth rate.
 
-    Returns ``(direct, f_imu, v_ned)``: raw column -> its true signal (SI, the column's unit);
-    the specific force at the IMU, m/s^2 (n, 3); the NED velocity, m/s (n, 3). ``euler`` in rad
-    with psi unwrapped, ``qc_true`` in Pa.
+    Returns ``(direct, f_imu, v_ned, v_ins_ned)``: raw column -> its true signal (SI, the
+    column's unit); the specific force at the IMU, m/s^2 (n, 3); the NED velocity of the CG and
+    of the INS point, ``v_cg + omega x (r_ins - r_cg)`` rotated to NED, m/s (n, 3): the INS
+    measures the latter; its Euler angles are the body's (one attitude for every point of a rigid
+    body). ``euler`` in rad with psi unwrapped, ``qc_true`` in Pa.
     """
     r_imu_cg = airframe.position("imu") - truth.r_cg_body_m
     f_imu = imu_specific_force_body_mps2(truth.specific_force_cg_body_mps2, truth.omega_body_rps,
                                          truth.omega_dot_body_rps2, r_imu_cg)
     v_ned = ned_velocity_mps(truth.v_body_mps, euler)
+    # one rigid-body transport for every point velocity: the one the flow at the sensors uses
+    # (earth- and air-relative velocities differ by the wind, the same at every point)
+    v_ins_ned = ned_velocity_mps(air_velocity_at_sensor_body_mps(
+        truth.v_body_mps, truth.omega_body_rps, airframe.position("ins"), truth.r_cg_body_m), euler)
     tt_true = total_temperature_k(truth.t_static_k, truth.mach)
     direct = {
         "ax_imu_mps2": f_imu[:, 0], "ay_imu_mps2": f_imu[:, 1], "az_imu_mps2": f_imu[:, 2],
@@ -446,10 +454,10 @@ def _continuous_signals(truth: TruthTrajectory, airframe: Airframe, euler: np.nd
         "r_rps": truth.omega_body_rps[:, 2],
         "qc_pa": qc_true, "ps_pa": truth.p_static_pa, "tt_k": tt_true, "gear_down": truth.gear_pos_norm,
         "phi_rad": euler[:, 0], "theta_rad": euler[:, 1], "psi_rad": euler[:, 2],
-        "vn_mps": v_ned[:, 0], "ve_mps": v_ned[:, 1], "vd_mps": v_ned[:, 2],
+        "vn_mps": v_ins_ned[:, 0], "ve_mps": v_ins_ned[:, 1], "vd_mps": v_ins_ned[:, 2],
         "h_dgps_m": truth.h_m,
     }
-    return direct, f_imu, v_ned
+    return direct, f_imu, v_ned, v_ins_ned
 
 
 @dataclass(frozen=True)
@@ -701,10 +709,11 @@ def _to_common_base(streams: dict[str, dict[str, np.ndarray]], rec: _RecorderPla
 
 
 def _truth_columns(truth: TruthTrajectory, euler: np.ndarray, qc_true: np.ndarray, f_imu: np.ndarray,
-                   v_ned: np.ndarray, flow: _SensorFlow, clean_cols: dict[str, np.ndarray]
-                   ) -> dict[str, np.ndarray]:
+                   v_ned: np.ndarray, v_ins_ned: np.ndarray, flow: _SensorFlow,
+                   clean_cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The ``true_*`` columns at the truth rate (SI, units in their names), to be sampled at true
-    time = the common base, no delay."""
+    time = the common base, no delay. ``v_ned``: the CG's NED velocity (``true_{vn,ve,vd}_mps``);
+    ``v_ins_ned``: the INS point's (``true_{vn,ve,vd}_ins_mps``, what the INS measures)."""
     r_cg = truth.r_cg_body_m
     return {
         "true_alpha_cg_rad": truth.alpha_rad, "true_beta_cg_rad": truth.beta_rad,
@@ -714,6 +723,8 @@ def _truth_columns(truth: TruthTrajectory, euler: np.ndarray, qc_true: np.ndarra
         "true_u_mps": truth.v_body_mps[:, 0], "true_v_mps": truth.v_body_mps[:, 1],
         "true_w_mps": truth.v_body_mps[:, 2],
         "true_vn_mps": v_ned[:, 0], "true_ve_mps": v_ned[:, 1], "true_vd_mps": v_ned[:, 2],
+        "true_vn_ins_mps": v_ins_ned[:, 0], "true_ve_ins_mps": v_ins_ned[:, 1],
+        "true_vd_ins_mps": v_ins_ned[:, 2],
         "true_wind_n_mps": truth.wind_ned_mps[:, 0], "true_wind_e_mps": truth.wind_ned_mps[:, 1],
         "true_wind_d_mps": truth.wind_ned_mps[:, 2],
         "true_phi_rad": euler[:, 0], "true_theta_rad": euler[:, 1], "true_psi_rad": euler[:, 2],

@@ -1,4 +1,4 @@
-"""Sensor kinematics and transduction errors: IMU lever arm, INS outputs, scale/noise/quantization.
+"""Sensor kinematics and transduction errors: IMU and INS lever arms, scale/noise/quantization.
 
 Equations (SPEC §3, §6)
 -----------------------
@@ -7,10 +7,16 @@ Specific force at an IMU at ``r_imu`` (body axes), rigid body, CG at ``r_cg``::
     f_imu = f_cg + omega_dot x r + omega x (omega x r),      r = r_imu - r_cg
 
 (the CG's slow motion relative to the structure, fuel burn, contributes nothing measurable and is
-ignored). Gyros sense omega itself. INS velocity in NED from the body-axis earth-relative velocity
-with the 3-2-1 Euler angles (psi, theta, phi)::
+ignored). Gyros sense omega itself. The INS outputs the velocity of its own point ``r_ins``: the
+CG's body-axis earth-relative velocity carried to it by the rigid-body transport (the one the flow
+at the sensors uses, :func:`synth.local_flow.air_velocity_at_sensor_body_mps`), then in NED with
+the 3-2-1 Euler angles (psi, theta, phi)::
 
-    v_ned = C_nb(phi, theta, psi) v_body
+    v_ned = C_nb(phi, theta, psi) (v_body + omega x (r_ins - r_cg))
+
+(omega is the inertial rate; on the rotating WGS84 earth the earth-relative rate differs by the
+earth rate, 7.3e-5 rad/s, i.e. < 2e-4 m/s over these lever arms). Its Euler angles are the body's:
+a rigid body has one attitude at every point.
 
 Transduction of every measured sample::
 

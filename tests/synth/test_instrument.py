@@ -168,8 +168,16 @@ def test_zero_errors_inertial_and_airdata_channels_are_the_truth():
     assert np.abs(df["h_dgps_m"] - df["true_h_m"]).max() < 1e-9
     ned = df[["vn_mps", "ve_mps", "vd_mps"]].to_numpy()
     from _synthetic_truth import dcm_body_to_ned
-    want = np.einsum("nij,nj->ni", dcm_body_to_ned(FLIGHT.euler(t)), FLIGHT.v_body(t))
+    # the INS measures the velocity of its own point: v_cg + omega x (r_ins - r_cg), in NED
+    c_nb = dcm_body_to_ned(FLIGHT.euler(t))
+    v_ins = FLIGHT.v_body(t) + np.cross(omega, AIRFRAME.position("ins") - FLIGHT.r_cg(t))
+    want = np.einsum("nij,nj->ni", c_nb, v_ins)
     assert np.abs(ned - want).max() < 1e-9
+    assert np.abs(df[["true_vn_ins_mps", "true_ve_ins_mps", "true_vd_ins_mps"]].to_numpy()
+                  - want).max() < 1e-9
+    cg = np.einsum("nij,nj->ni", c_nb, FLIGHT.v_body(t))
+    assert np.abs(df[["true_vn_mps", "true_ve_mps", "true_vd_mps"]].to_numpy() - cg).max() < 1e-9
+    assert np.abs(ned - cg).max() > 1e-3, "the INS is off the CG: the lever arm must be visible"
     assert not df["gear_down"].any()
 
 
