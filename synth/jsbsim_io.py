@@ -12,6 +12,25 @@ It also
   overwrites the rudder position and limits rudder to about 5 deg and sideslip to about 1 deg
   (SPEC §7); every model gets a zero-weight ``Ballast`` point mass whose weight and position are set
   per aircraft at run time;
+* corrects the ``f16``'s flaperon mixing. The shipped FCS sums the two flaperons, ``(-tef - ail) +
+  (tef - ail) = -2 ail``, times 1.4324, into ``fcs/flaperon-mix-rad``, the deflection that the
+  trailing-edge-flap lift and drag (``aero/coefficient/CLDflaps``, 0.35 per rad times the
+  ground-effect factor; ``CDDflaps``, 0.08 per rad) take: the flap lift followed the roll command
+  (an aileron step of +-0.25 moved the flaps' lift coefficient by -+0.20 within 0.5 s at Mach 0.4,
+  6000 m; issue 13 measured -+0.49) and the flaps gave none. The sum should have been the difference
+  of the two mirrored surfaces (each flaperon's trailing-edge-down deflection is ``tef +- ail``: the
+  mean, the symmetric flap, is ``tef``; the half difference, the aileron, already drives the roll
+  and yaw terms through ``fcs/aileron-pos-rad``), and 1.4324 = 2.864789 / 2 is norm per rad where
+  rad per norm was meant (a sign flip alone gives 2.86 rad of "flap", +1.0 of lift coefficient). The
+  patch makes ``fcs/flaperon-mix-rad`` the symmetric flap deflection, rad: ``fcs/tef-control`` (the
+  scheduled flap, norm, rate-limited to full travel in 3 s) times 1 / 2.864789 rad per norm, so the
+  full flap (``fcs/tef-pos-rad`` = 0.349 rad, 20 deg) adds 0.35 * 0.349 = 0.122 to the lift
+  coefficient and 0.08 * 0.349 = 0.028 to the drag coefficient out of ground effect, and the aileron
+  none. The flaps come down only with the landing-gear handle (``gear/gear-cmd-norm`` >= 0.5) and,
+  as the shipped schedule says, below 250 kt calibrated; above Mach 0.9 they reflex to -0.0349 rad
+  as shipped. A flaperon reaching its stop when flap and aileron add is not modelled (the shipped
+  roll terms ignore it too); ``fcs/left-`` and ``right-flaperon-norm`` are left as shipped (no aero
+  term reads them);
 * writes a flat, non-rotating planet definition (a sphere so large that curvature and transport
   rate are negligible, with constant gravity) and builds an :class:`jsbsim.FGFDMExec` on it or on
   JSBSim's default rotating WGS84 earth;
@@ -48,8 +67,12 @@ RANKINE_TO_K = 5.0 / 9.0
 SLUGFT3_TO_KGM3 = SLUG_TO_KG / FT_TO_M**3
 DEG_TO_RAD = math.pi / 180.0
 
-#: Version of the model patches below; bump it whenever a patch changes so caches are rebuilt.
-PATCH_VERSION = "2"
+#: The f16's full trailing-edge-flap deflection, rad (20 deg; its ``fcs/tef-pos-rad`` switch).
+F16_TEF_DOWN_RAD = 0.349
+#: The f16's ``fcs/tef-pos-norm`` gain is 2.864789 norm per rad; the flaperon mix takes it back.
+F16_TEF_RAD_PER_NORM = 1.0 / 2.864789
+#: The condition the patch adds to the f16's flaps-down test: the landing-gear handle is down.
+F16_GEAR_HANDLE_DOWN_TEST = "gear/gear-cmd-norm ge 0.5"
 
 #: Name of the point mass added to every patched model.
 BALLAST_NAME = "Ballast"
@@ -98,18 +121,50 @@ def _flat_planet_xml() -> str:
     )
 
 
+def _f16_component(root: ET.Element, tag: str, name: str, what: str) -> ET.Element:
+    """The f16 FCS component ``<tag name=name>``, or an error saying which patch no longer fits."""
+    comp = root.find(f".//flight_control//{tag}[@name='{name}']")
+    if comp is None:
+        raise RuntimeError(
+            f"JSBSim {JSBSIM_VERSION}: f16 has no <{tag} name='{name}'>; the {what} patch no longer "
+            "applies - check the model's FCS and update synth/jsbsim_io.py (_patch_model_xml)"
+        )
+    return comp
+
+
+def _patch_f16_flaperons(root: ET.Element) -> None:
+    """Symmetric trailing-edge flap from the flap schedule, not from the roll command (module doc)."""
+    what = "flaperon-mixing"
+    tef = _f16_component(root, "switch", "fcs/tef-pos-rad", what)
+    down = [t for t in tef.findall("test") if float(t.get("value", "nan")) == F16_TEF_DOWN_RAD]
+    if len(down) != 1 or "vc-kts" not in (down[0].text or ""):
+        raise RuntimeError(
+            f"JSBSim {JSBSIM_VERSION}: the f16's fcs/tef-pos-rad has no single 'flaps down "
+            f"{F16_TEF_DOWN_RAD} rad below a calibrated airspeed' test; the {what} patch no longer "
+            "applies - check the model's FCS and update synth/jsbsim_io.py (_patch_model_xml)"
+        )
+    # the F-16's flaps come down with the landing-gear handle, not with airspeed alone
+    down[0].text = (down[0].text or "").rstrip() + f"\n     {F16_GEAR_HANDLE_DOWN_TEST}\n    "
+    mix = _f16_component(root, "pure_gain", "fcs/flaperon-mix-rad", what)
+    for child in list(mix):
+        mix.remove(child)
+    ET.SubElement(mix, "input").text = "fcs/tef-control"
+    ET.SubElement(mix, "gain").text = repr(F16_TEF_RAD_PER_NORM)
+
+
 def _patch_model_xml(model: str, text: bytes) -> bytes:
-    """Return the patched aircraft definition (rudder fix for the f16, ballast point mass)."""
+    """Return the patched aircraft definition (f16: rudder and flaperon fixes; ballast point mass)."""
     root = ET.fromstring(text)
     if model == "f16":
-        pid = root.find(".//flight_control//pid[@name='fcs/yaw-load-pid']")
-        if pid is None or pid.find("output") is None:
+        pid = _f16_component(root, "pid", "fcs/yaw-load-pid", "rudder (SPEC §7)")
+        if pid.find("output") is None:
             raise RuntimeError(
                 f"JSBSim {JSBSIM_VERSION}: f16 has no fcs/yaw-load-pid with an <output>; the rudder "
                 "fix of SPEC §7 no longer applies - check the model and update synth/jsbsim_io.py"
             )
         for out in pid.findall("output"):
             pid.remove(out)
+        _patch_f16_flaperons(root)
     mass_balance = root.find("mass_balance")
     if mass_balance is None:
         raise RuntimeError(f"JSBSim model {model!r} has no <mass_balance>; cannot add ballast")
@@ -124,10 +179,11 @@ def _patch_model_xml(model: str, text: bytes) -> bytes:
 def patched_root_dir(model: str) -> Path:
     """Build (once, atomically) and return a JSBSim root directory holding the patched ``model``.
 
-    The directory is ``<cache_root>/jsbsim-<version>-<hash>`` where the hash covers the original
-    model file, the patch version and the planet definition, so a JSBSim upgrade or a patch change
-    gives a fresh directory. Parallel processes may race to build it: each builds in its own
-    temporary directory and renames it into place; the loser discards its copy.
+    The directory is ``<cache_root>/jsbsim-<version>-<model>-<hash>`` where the hash covers the
+    patched model file and the planet definition, so a JSBSim upgrade or any patch change gives a
+    fresh directory (directories built by older code are left in place, never read). Parallel
+    processes may race to build it: each builds in its own temporary directory and renames it into
+    place; the loser discards its copy.
 
     Parameters
     ----------
@@ -144,9 +200,11 @@ def patched_root_dir(model: str) -> Path:
             f"JSBSim {JSBSIM_VERSION} ships no aircraft {model!r} ({src_file} missing); "
             "check jsbsim_model in the airframe TOML"
         )
-    original = src_file.read_bytes()
+    patched = _patch_model_xml(model, src_file.read_bytes())
     planet = _flat_planet_xml().encode()
-    digest = hashlib.sha256(original + planet + PATCH_VERSION.encode() + model.encode()).hexdigest()
+    # keyed by the generated bytes themselves: any change of a patch (or of the shipped model) gives
+    # a new directory, so a cache built by older code is never served
+    digest = hashlib.sha256(patched + planet + model.encode()).hexdigest()
     final = cache_root() / f"jsbsim-{JSBSIM_VERSION}-{model}-{digest[:12]}"
     if (final / "aircraft" / model / f"{model}.xml").exists():
         return final
@@ -159,7 +217,7 @@ def patched_root_dir(model: str) -> Path:
         for item in (src_root / "aircraft" / model).iterdir():
             if item.name != f"{model}.xml":
                 os.symlink(item, ac_dir / item.name)
-        (ac_dir / f"{model}.xml").write_bytes(_patch_model_xml(model, original))
+        (ac_dir / f"{model}.xml").write_bytes(patched)
         for shared in ("engine", "systems"):
             os.symlink(src_root / shared, tmp / shared)
         (tmp / "flat_planet.xml").write_bytes(planet)
@@ -323,8 +381,14 @@ def set_initial_conditions(
     fdm["ic/mach"] = mach
 
 
-def trim(fdm: jsbsim.FGFDMExec) -> dict[str, float]:
-    """Run JSBSim's full trim and return the residual accelerations in SI.
+def trim(fdm: jsbsim.FGFDMExec, nz: float | None = None) -> dict[str, float]:
+    """Run JSBSim's full trim (or, given ``nz``, its pull-up trim) and return the residuals in SI.
+
+    Parameters
+    ----------
+    fdm : the FDM, initial conditions set.
+    nz : load factor to trim at (JSBSim's pull-up trim: wings level, a steady pitch rate; its
+        achieved load factor is within about 0.01 of ``nz``); None for the full 1 g trim.
 
     Returns
     -------
@@ -335,14 +399,34 @@ def trim(fdm: jsbsim.FGFDMExec) -> dict[str, float]:
     RuntimeError
         If JSBSim reports that the trim failed (its message is kept).
     """
+    if nz is not None:
+        fdm["ic/targetNlf"] = float(nz)
     try:
-        fdm.do_trim(1)
+        fdm.do_trim(1 if nz is None else 3)  # FGTrim modes: 1 full, 3 pull-up
     except Exception as exc:  # JSBSim raises its own TrimFailureException
         raise RuntimeError(f"JSBSim trim failed: {exc}") from None
     out = {f"{a}dot_mps2": fdm[f"accelerations/{a}dot-ft_sec2"] * FT_TO_M for a in "uvw"}
     out.update({f"{a}dot_rps2": fdm[f"accelerations/{a}dot-rad_sec2"] for a in "pqr"})
     out["mach"] = fdm["velocities/mach"]
     return out
+
+
+def lift_and_flap_coefficients(fdm: jsbsim.FGFDMExec) -> dict[str, float]:
+    """The aerodynamic lift coefficient and the trailing-edge flaps' share of lift and drag.
+
+    Returns
+    -------
+    ``{"cl", "cl_flap", "cd_flap", "flap_rad"}``: total lift coefficient (wind axes), the flap's
+    lift and drag coefficients (the f16's ``aero/coefficient/CLDflaps`` and ``CDDflaps``, forces
+    divided by dynamic pressure and wing area) and the symmetric flap deflection, rad, they use.
+    """
+    qs_lbf = fdm["aero/qbar-psf"] * fdm["metrics/Sw-sqft"]
+    return {
+        "cl": fdm["forces/fwz-aero-lbs"] / qs_lbf,
+        "cl_flap": fdm["aero/coefficient/CLDflaps"] / qs_lbf,
+        "cd_flap": fdm["aero/coefficient/CDDflaps"] / qs_lbf,
+        "flap_rad": fdm["fcs/flaperon-mix-rad"],
+    }
 
 
 def start_engines(fdm: jsbsim.FGFDMExec) -> None:

@@ -271,8 +271,11 @@ def test_forward_cg_windup_reaches_its_target_in_calm_air(mach, altitude_m):
     assert (peaks["alpha_peak_rad"] >= spec["alpha_max_rad"] - 0.1 * DEG
             or peaks["nz_peak"] >= spec["nz_max"] - 0.05), peaks
     # with stick to spare: the pilot ends the wind-up on the target, not the FCS at full aft stick
-    # (the stop is -1; PT1's command bottoms at -0.83 at Mach 0.7, -0.82 at Mach 0.8)
-    assert tr.controls["elevator_cmd_norm"].min() > -0.9
+    # (the stop is -1; PT1's command bottoms at -0.91 at Mach 0.7, -0.81 at Mach 0.8: at Mach 0.7
+    # the turn's standing aileron of +0.04 cost 0.07 of lift coefficient through the shipped
+    # f16's flaperon mix (jsbsim_io), so 12 deg came at 3.8 g and -0.83; on the aircraft's own
+    # lift curve 12 deg is 4.2 g, which the g-command pitch channel asks more stick for)
+    assert tr.controls["elevator_cmd_norm"].min() > -0.95
     assert np.max(np.abs(tr.mach - mach)) <= MAX_WINDUP_MACH_DRIFT
     # a wind-up: g rises through the run while alpha is swept well beyond trim
     nz = _nz(tr)
