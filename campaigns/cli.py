@@ -42,11 +42,20 @@ manifest and the maneuver files it names); a directory holding anything else is 
 Maneuvers that fail (the aircraft departs, a controller cannot hold its target) are reported and
 listed in the manifest; the exit status is then 1. Exit status 2: bad input or usage.
 
+--sortie [CONFIG] flies one configuration's maneuvers (default: the campaign's first) as one
+continuous flight instead, in the campaign's order: trim at the first test point, then between
+maneuvers a transition (speed change, climb or descent, gear, turn back to the test heading,
+settle). It writes manifest.json (format fpr-sortie, with the maneuver boundaries as truth),
+sortie.parquet (the common time base with the truth), streams/dru.parquet, streams/ins.parquet,
+streams/dgps.parquet (each recorder's raw stream, one per sortie) and boundaries.csv. Load it with
+`synth.dataset.load_sortie(DIR)`; its `.cut(ID)` cuts a maneuver out by its boundaries.
+
 examples:
   fpr fly default --out data/default
   fpr fly --config PV1-NP PT1-BOOM --mach 0.4 0.6 --maneuver pitch_doublet shss --out data/small
   fpr fly --mach 0.3 --maneuver pitch_doublet --gear-down --altitude-m 1000 --out data/gear
   fpr fly --resume --out data/default       complete an interrupted run
+  fpr fly default --sortie PV1-NP --out data/sortie-pv1   one whole sortie of configuration PV1-NP
 """
 
 
@@ -73,6 +82,10 @@ def _add_fly(sub: argparse._SubParsersAction) -> None:
                       "maneuvers (the campaign is read from its manifest; a campaign given too "
                       "must be the same)")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: all CPUs)")
+    p.add_argument("--sortie", nargs="?", const="", default=None, metavar="CONFIG",
+                   help="fly the maneuvers of one configuration (default: the campaign's first) as "
+                   "one continuous sortie with transitions between them, one stream per recorder "
+                   "and the maneuver boundaries as truth (see below); not with --resume")
     g = p.add_argument_group("campaign by flags (ignored when a campaign file is given)")
     g.add_argument("--config", nargs="+", default="all", metavar="ID",
                    help="fleet configuration ids, or all (default: all seven: PV1-NP PV2-NP "
@@ -124,6 +137,8 @@ def _fly(args: argparse.Namespace) -> int:
             ),
             source="command-line flags",
         )
+    if args.sortie is not None:
+        return _fly_sortie(args, campaign)
     print(f"campaign {campaign.name!r}: {len(campaign.jobs)} maneuvers -> {args.out}"
           + (" (resuming)" if args.resume else ""))
 
@@ -144,6 +159,27 @@ def _fly(args: argparse.Namespace) -> int:
         print(f"wrote {args.out} in {result.wall_s:.1f} s"
               + (f" ({result.flown} maneuvers flown now)" if args.resume else ""))
     return 0 if result.ok else 1
+
+
+def _fly_sortie(args: argparse.Namespace, campaign) -> int:
+    from synth.flight import FlightError
+    from synth.sortie import fly_sortie_campaign, sortie_jobs, summarize_sortie
+
+    if args.resume:
+        print("fpr fly: error: --sortie flies a whole sortie at once; --resume does not apply "
+              "(fly it again with --overwrite)", file=sys.stderr)
+        return 2
+    cid, jobs = sortie_jobs(campaign, args.sortie or None)
+    print(f"campaign {campaign.name!r}: one sortie of configuration {cid}, {len(jobs)} maneuvers "
+          f"-> {args.out}")
+    try:
+        result = fly_sortie_campaign(campaign, args.out, configuration=cid, overwrite=args.overwrite)
+    except FlightError as exc:
+        print(f"fpr fly: the sortie failed: {exc}", file=sys.stderr)
+        return 1
+    print(summarize_sortie(result.manifest))
+    print(f"wrote {args.out} in {result.wall_s:.1f} s")
+    return 0
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -187,13 +223,21 @@ def _demo(args: argparse.Namespace) -> int:
 def _show(args: argparse.Namespace) -> int:
     from synth.campaign import summarize
     from synth.dataset import (
+        alpha_coverage,
         dataset_status,
         incomplete_message,
         load_dataset,
+        load_sortie,
         read_manifest_if_dataset,
+        read_sortie_manifest,
         written_entries,
     )
 
+    if read_sortie_manifest(args.dataset) is not None:
+        from synth.sortie import summarize_sortie
+
+        print(summarize_sortie(load_sortie(args.dataset).manifest))
+        return 0
     manifest = read_manifest_if_dataset(args.dataset)
     if manifest is not None and manifest.get("complete", True) is False:
         print(f"INCOMPLETE: {incomplete_message(args.dataset, dataset_status(args.dataset, manifest))}")
@@ -202,6 +246,10 @@ def _show(args: argparse.Namespace) -> int:
         return 1
     ds = load_dataset(args.dataset)
     print(summarize(ds.manifest))
+    coverage = alpha_coverage(ds)
+    if len(coverage):
+        print("true angle of attack at the CG per nominal Mach, deg:")
+        print(coverage.to_string(float_format=lambda v: f"{v:.2f}"))
     return 0
 
 

@@ -242,11 +242,16 @@ def resume_command(directory: str | Path) -> str:
 
 def read_manifest_if_dataset(directory: str | Path) -> dict | None:
     """The parsed manifest of an fpr dataset at ``directory`` (complete or not), else None."""
+    return _read_manifest_of_format(directory, FORMAT)
+
+
+def _read_manifest_of_format(directory: str | Path, fmt: str) -> dict | None:
+    """The parsed ``manifest.json`` at ``directory`` if it is of format ``fmt``, else None."""
     try:
         manifest = json.loads((Path(directory) / MANIFEST).read_text())
     except (OSError, ValueError):
         return None
-    return manifest if isinstance(manifest, dict) and manifest.get("format") == FORMAT else None
+    return manifest if isinstance(manifest, dict) and manifest.get("format") == fmt else None
 
 
 def planned_files(manifest: Mapping) -> list[str]:
@@ -600,7 +605,8 @@ def load_dataset(path: str | Path) -> Dataset:
                          ) from None
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         got = manifest.get("format") if isinstance(manifest, dict) else type(manifest).__name__
-        raise ValueError(f"{mpath}: format is {got!r}, expected {FORMAT!r}")
+        hint = "; it is a whole sortie: open it with load_sortie" if got == SORTIE_FORMAT else ""
+        raise ValueError(f"{mpath}: format is {got!r}, expected {FORMAT!r}{hint}")
     if manifest.get("format_version", 0) > FORMAT_VERSION:
         raise ValueError(
             f"{mpath}: format_version {manifest['format_version']} is newer than this software "
@@ -615,6 +621,27 @@ def load_dataset(path: str | Path) -> Dataset:
             f"{missing[0]}; the dataset is damaged (fly it again: `fpr fly ... --overwrite`)"
         )
     return Dataset(path=path, manifest=manifest)
+
+
+def alpha_coverage(dataset: Dataset) -> pd.DataFrame:
+    """The true angle of attack at the CG that each nominal Mach of ``dataset`` covers.
+
+    Reads only the truth column ``true_alpha_cg_rad`` of each maneuver file.
+
+    Returns
+    -------
+    One row per nominal Mach (index ``mach_nominal``, rounded to 0.01, ascending):
+    ``n_maneuvers`` (files), ``alpha_min_deg`` and ``alpha_max_deg`` over all of them.
+    """
+    rows = []
+    for m in dataset.manifest["maneuvers"]:
+        alpha_rad = pd.read_parquet(dataset.path / m["file"], columns=["true_alpha_cg_rad"])
+        a_deg = np.degrees(alpha_rad["true_alpha_cg_rad"].to_numpy())
+        rows.append((round(float(m["mach_nominal"]), 2), float(a_deg.min()), float(a_deg.max())))
+    per_file = pd.DataFrame(rows, columns=["mach_nominal", "alpha_min_deg", "alpha_max_deg"])
+    return per_file.groupby("mach_nominal").agg(
+        n_maneuvers=("alpha_min_deg", "size"), alpha_min_deg=("alpha_min_deg", "min"),
+        alpha_max_deg=("alpha_max_deg", "max"))
 
 
 def read_maneuver_metadata(path: str | Path) -> dict:
@@ -640,3 +667,164 @@ def read_maneuver_metadata(path: str | Path) -> dict:
     if not isinstance(entry, dict):
         raise ValueError(f"{path}: its fpr.maneuver metadata is not an entry; the file is damaged")
     return entry
+
+
+# ------------------------------------------------------------------ whole sorties
+
+#: The manifest format of a whole-sortie dataset (``fpr fly --sortie``; :mod:`synth.sortie`).
+SORTIE_FORMAT = "fpr-sortie"
+SORTIE_FORMAT_VERSION = 1
+#: Its files, relative to the directory: the preprocessed common time base (measured channels
+#: and truth, as a maneuver file has them), each recorder's raw stream, the maneuver boundaries.
+SORTIE_FILES = {
+    "data": "sortie.parquet",
+    "dru": "streams/dru.parquet",
+    "ins": "streams/ins.parquet",
+    "dgps": "streams/dgps.parquet",
+    "boundaries": "boundaries.csv",
+}
+#: The columns of a sortie's boundary table, in order.
+BOUNDARY_COLUMNS = ("id", "job_index", "segment", "kind", "mach", "altitude_m", "gear_down",
+                    "t_start_s", "t_end_s", "missed")
+
+
+def read_sortie_manifest(directory: str | Path) -> dict | None:
+    """The parsed manifest of a whole-sortie dataset at ``directory``, else None."""
+    return _read_manifest_of_format(directory, SORTIE_FORMAT)
+
+
+def prepare_sortie_directory(directory: Path, overwrite: bool = False) -> Path:
+    """Create a whole-sortie dataset directory; with ``overwrite``, remove an earlier sortie's own
+    files (:data:`SORTIE_FILES` and the manifest) and nothing else.
+
+    Raises
+    ------
+    FileExistsError
+        If ``directory`` is a file, holds a sortie and ``overwrite`` is false, or holds anything
+        else (listed), whatever ``overwrite``.
+    """
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        raise FileExistsError(f"{directory}: is a file, not a directory; --out names the sortie "
+                              "directory to create (a new or empty one)")
+    own = {directory / MANIFEST, *(directory / f for f in SORTIE_FILES.values())}
+    if directory.is_dir():
+        present = [p for p in directory.rglob("*") if not p.is_dir() or p.is_symlink()]
+        foreign = sorted(str(p.relative_to(directory)) for p in present if p not in own)
+        if foreign:
+            raise FileExistsError(
+                f"{directory}: holds {len(foreign)} item(s) a whole-sortie `fpr fly --sortie` did "
+                f"not write: {_listing(foreign)}; refusing to touch them. Choose an empty or new --out")
+        if present and read_sortie_manifest(directory) is None:
+            raise FileExistsError(f"{directory}: not a whole-sortie dataset (no {MANIFEST} of format "
+                                  f"{SORTIE_FORMAT!r}); choose an empty or new --out")
+        if present and not overwrite:
+            raise FileExistsError(f"{directory}: holds a whole-sortie dataset; pass --overwrite to "
+                                  "replace it (only its own files are removed), or choose another --out")
+        for p in sorted(present, key=lambda p: p.name == MANIFEST):  # the manifest last
+            p.unlink()
+    (directory / "streams").mkdir(parents=True, exist_ok=True)
+    return directory
+
+
+def write_sortie(directory: Path, manifest: Mapping, data: pd.DataFrame,
+                 streams: Mapping[str, pd.DataFrame]) -> Path:
+    """Write a whole-sortie dataset into a prepared directory (:func:`prepare_sortie_directory`).
+
+    Parameters
+    ----------
+    directory : the dataset directory.
+    manifest : format :data:`SORTIE_FORMAT`; ``manifest["sortie"]["boundaries"]`` the maneuver
+        boundaries (dicts with :data:`BOUNDARY_COLUMNS`), also written as ``boundaries.csv``.
+    data : the preprocessed common time base (``t_s`` first, measured and ``true_*`` columns).
+    streams : recorder (``dru``, ``ins``, ``dgps``) -> its raw stream (``t_s`` = its stamps).
+
+    Returns
+    -------
+    The manifest's path (written last: a directory with a manifest holds a whole sortie).
+    """
+    entry = {k: v for k, v in manifest["sortie"].items() if k != "boundaries"}
+    write_maneuver(directory / SORTIE_FILES["data"], data, entry)
+    for name, frame in streams.items():
+        write_maneuver(directory / SORTIE_FILES[name], frame, {"recorder": name, **entry})
+    table = pd.DataFrame(manifest["sortie"]["boundaries"], columns=list(BOUNDARY_COLUMNS))
+    atomic_write_bytes(directory / SORTIE_FILES["boundaries"],
+                       table.to_csv(index=False, float_format="%.6f").encode())
+    return write_manifest(directory, manifest)
+
+
+@dataclass(frozen=True)
+class Sortie:
+    """A whole-sortie dataset opened for reading (:func:`load_sortie`).
+
+    Attributes
+    ----------
+    path : the directory.
+    manifest : the parsed ``manifest.json`` (``manifest["sortie"]``: configuration, boundaries,
+        transitions, injected errors, channel units, ...).
+    """
+
+    path: Path
+    manifest: dict
+
+    @property
+    def boundaries(self) -> pd.DataFrame:
+        """The truth boundaries, one row per recorded maneuver piece, indexed by its id
+        (columns :data:`BOUNDARY_COLUMNS`; times in the sortie's ``t_s``, first and last sample)."""
+        return pd.DataFrame(self.manifest["sortie"]["boundaries"],
+                            columns=list(BOUNDARY_COLUMNS)).set_index("id")
+
+    @property
+    def transitions(self) -> pd.DataFrame:
+        """The transition legs between maneuvers: ``to``, ``t_start_s``, ``t_end_s``, ``stages``."""
+        return pd.DataFrame(self.manifest["sortie"]["transitions"],
+                            columns=["to", "t_start_s", "t_end_s", "stages"])
+
+    def load(self, stream: str = "data") -> pd.DataFrame:
+        """The common time base (``"data"``) or one recorder's raw stream (``"dru"``, ``"ins"``,
+        ``"dgps"``; ``t_s`` = its own stamps)."""
+        if stream not in SORTIE_FILES or stream == "boundaries":
+            raise KeyError(f"{self.path}: no stream {stream!r}; choose one of "
+                           f"{[k for k in SORTIE_FILES if k != 'boundaries']}")
+        return pd.read_parquet(self.path / SORTIE_FILES[stream])
+
+    def cut(self, maneuver_id: str, stream: str | pd.DataFrame = "data") -> pd.DataFrame:
+        """The samples of ``stream`` (a name for :meth:`load`, or a frame already loaded) within
+        the maneuver's truth boundaries: what a campaign's extraction cuts out of the recording.
+        ``t_s`` stays the sortie's time."""
+        bounds = self.boundaries
+        if maneuver_id not in bounds.index:
+            raise KeyError(f"{self.path}: no maneuver {maneuver_id!r} in the sortie; it has "
+                           f"{_listing(list(bounds.index))}")
+        row = bounds.loc[maneuver_id]
+        frame = self.load(stream) if isinstance(stream, str) else stream
+        t = frame["t_s"].to_numpy()
+        eps = 1e-9  # the boundaries are simulation-step times, the stamps grid times
+        keep = (t >= row["t_start_s"] - eps) & (t <= row["t_end_s"] + eps)
+        return frame.loc[keep].reset_index(drop=True)
+
+
+def load_sortie(path: str | Path) -> Sortie:
+    """Open a whole-sortie dataset written by ``fpr fly --sortie``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no sortie manifest, or one of its files is missing.
+    """
+    path = Path(path)
+    if path.name == MANIFEST:
+        path = path.parent
+    manifest = read_sortie_manifest(path)
+    if manifest is None:
+        raise FileNotFoundError(
+            f"{path / MANIFEST}: no whole-sortie manifest (format {SORTIE_FORMAT!r}); is {path} a "
+            "sortie written by `fpr fly --sortie`? (a per-maneuver dataset: load_dataset)")
+    if manifest.get("format_version", 0) > SORTIE_FORMAT_VERSION:
+        raise ValueError(f"{path / MANIFEST}: format_version {manifest['format_version']} is newer "
+                         f"than this software reads ({SORTIE_FORMAT_VERSION}); upgrade fpr-testbed")
+    missing = [f for f in SORTIE_FILES.values() if not (path / f).exists()]
+    if missing:
+        raise FileNotFoundError(f"{path}: the sortie's file(s) {', '.join(missing)} are missing; the "
+                                "dataset is damaged (fly it again: `fpr fly ... --sortie --overwrite`)")
+    return Sortie(path=path, manifest=manifest)

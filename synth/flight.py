@@ -219,13 +219,16 @@ def fly_controller(
     dt_s: float,
     advice: str,
     on_step=None,
+    *,
+    finish: bool = True,
 ) -> np.ndarray:
     """Let ``controller`` fly ``n`` samples (``n - 1`` steps) from the FDM's current state.
 
     Departures (:func:`_departure`) and the controller's own checks are tested on the way and on the
     whole record at the end, then ``controller.finish`` judges the run. ``on_step(i)`` (optional) is
     called at each sample before the inputs are set (the gust's onset). The FDM is left at the last
-    sample's state, so a following leg starts where this one ends.
+    sample's state, so a following leg starts where this one ends. ``finish=False`` leaves the
+    judgement to the caller (a sortie records a maneuver that missed its goal and flies on).
 
     Returns
     -------
@@ -264,8 +267,18 @@ def fly_controller(
     k = _first_departure(si)
     if k is not None:
         raise ManeuverFailure(_departure(si[k]) or "departed", float(t_s[k]), advice)
-    controller.finish(si, t_s)
+    if finish:
+        controller.finish(si, t_s)
     return si
+
+
+def segment_bounds(n: int, n_segments: int) -> list[tuple[int, int]]:
+    """The sample ranges ``[lo, hi)`` of the ``n_segments`` recorded pieces of an ``n``-sample run
+    (SHSS; one piece otherwise): equal lengths, neighbours sharing no sample, the last one ends
+    with the run."""
+    bounds = np.linspace(0, n - 1, n_segments + 1).round().astype(int)
+    return [(int(bounds[k]), int(bounds[k + 1]) + (1 if k == n_segments - 1 else 0))
+            for k in range(n_segments)]
 
 
 def fly_maneuver(
@@ -345,9 +358,7 @@ def fly_maneuver(
     }
     out = []
     n_seg = spec.n_segments
-    bounds = np.linspace(0, n - 1, n_seg + 1).round().astype(int)
-    for k in range(n_seg):
-        lo, hi = bounds[k], bounds[k + 1] + (1 if k == n_seg - 1 else 0)
+    for k, (lo, hi) in enumerate(segment_bounds(n, n_seg)):
         meta = dict(meta_common, segment=k, segment_start_s=float(t_s[lo]))
         out.append(io.to_truth(si[lo:hi], t_s[lo:hi] - t_s[lo], planet=env.planet, meta=meta))
     return out
