@@ -16,7 +16,8 @@ Kinds and what they excite (SPEC §7, paper §3):
 ``3211``                   3-2-1-1 load-factor multisteps -> alpha, q over a wide band
 ``pullup_pushover``        pull to ``nz_max``, push to ``nz_min``, twice -> large alpha range
 ``roller_coaster``         sinusoidal load factor -> repeated nz / alpha cycles
-``windup_turn``            alpha ramp to ``alpha_max_rad`` or g ramp to ``nz_max`` at constant Mach
+``windup_turn``            coordinated turn (rudder holds zero sideslip), alpha ramp to
+                           ``alpha_max_rad`` or g ramp to ``nz_max`` at constant Mach
 ``shss``                   steady-heading sideslip at ``beta_rad``, split into segments
 ``pullup_rudder_doublets`` slow pull-ups / push-overs with rudder doublets -> alpha x beta
 ``level_accel``            full dry power at constant altitude -> Mach sweep up, centred on
@@ -377,6 +378,7 @@ class Controller(ABC):
         self.psi_cmd_rad = trim.heading_rad
         self.mach_cmd = trim.mach
         self._mach_int = 0.0
+        self._rud_int = 0.0
         self.notes: dict = {}
 
     # building blocks -----------------------------------------------------------------------------
@@ -401,6 +403,17 @@ class Controller(ABC):
     def aileron_for_bank(phi_cmd_rad: float, x: np.ndarray, k_per_s: float = 2.0) -> float:
         """Roll-rate command holding a bank angle (0.318 normalizes rad/s for the f16 FCS)."""
         return _clip(0.31821 * k_per_s * _wrap(phi_cmd_rad - x[_PHI]), -0.6, 0.6)
+
+    def rudder_for_sideslip(self, beta_cmd_rad: float, x: np.ndarray, k_p: float = 10.0,
+                            k_i: float = 8.0) -> float:
+        """Rudder command holding the sideslip ``beta_cmd_rad``: proportional-integral on the
+        sideslip error (gains per rad and per rad s), the integral (the rudder trim) held while
+        the rudder is saturated."""
+        err_b = beta_cmd_rad - x[_BETA]
+        rud_raw = k_p * err_b + self._rud_int
+        if abs(rud_raw) < 1.0 or rud_raw * err_b < 0:
+            self._rud_int += k_i * err_b * self.dt_s
+        return _clip(rud_raw, -1.0, 1.0)
 
     def bank_for_heading(self, x: np.ndarray, limit_rad: float = 20 * _DEG) -> float:
         return _clip(2.5 * _wrap(self.psi_cmd_rad - x[_PSI]), -limit_rad, limit_rad)
@@ -553,6 +566,21 @@ class WindupTurn(Controller):
     reaching it early and holding it. Mach is held with throttle; once the throttle is at its
     limit the bank angle steepens beyond that of a level turn, trading altitude for speed, as a
     test pilot does.
+
+    The turn is coordinated: the rudder holds the sideslip at zero (within 0.1-0.25 deg in calm
+    air; without it the f16, its yaw damper removed, slipped 2.5-3.5 deg through the turn and
+    climbed 250-400 m below Mach 0.8). Coordinated, the level-turn bank holds altitude within
+    about 60 m up to Mach 0.7; above it the bank steepens to hold Mach and the turn descends up
+    to about 115 m.
+
+    The f16's FCS caps the alpha a wind-up reaches. Its pitch loop is proportional only (the
+    integrator of ``fcs/g-load-pid`` is held by its ``trigger``, which is 1 in flight) and adds
+    1.047 x alpha to the elevator while scheduling the stick's authority down from 1 at 0 deg to
+    0.11 at 28.6 deg; at the stick's aft stop the elevator balances where, roughly,
+    ``alpha = (1.3 + elevator_trim_norm - 1.86 q) / 3.36`` rad: about 17-20 deg wings level at
+    low speed (less with a forward CG) and less in a turn, whose pitch rate q grows with load
+    factor (at Mach 0.4-0.6 in the default campaign 14 deg, but 12.3-13.0 deg for PT1 and PT2,
+    whose CG is furthest forward). A turn to 20 deg or more is out of this FCS's reach.
     """
 
     mach_tolerance = 0.05
@@ -560,6 +588,10 @@ class WindupTurn(Controller):
     #: load-factor error -> alpha-error units of the pull loop, rad per g (loop gain in g: an
     #: integral of 25 x 0.08 = 2 per s)
     ALPHA_PER_G_RAD = 0.08
+    #: sideslip loop (:meth:`Controller.rudder_for_sideslip`), per rad and per rad s: stiffer
+    #: than the SHSS's, for the roll-in's adverse yaw and the rudder the turn rate needs, which
+    #: grow with the wind-up (10, 8 left 0.7-0.8 deg of sideslip at the roll-in; these, 0.1-0.25)
+    RUDDER_GAINS = (40.0, 80.0)
 
     def __init__(self, spec, trim, dt_s):
         super().__init__(spec, trim, dt_s)
@@ -607,7 +639,8 @@ class WindupTurn(Controller):
         # which need angular accelerations, prefer)
         step = self.bank_rate_rps * self.dt_s
         self._phi_cmd += _clip(phi_cmd - self._phi_cmd, -step, step)
-        return (self.stick(dnz, x), self.aileron_for_bank(self._phi_cmd, x), 0.0, thr, 0.0)
+        return (self.stick(dnz, x), self.aileron_for_bank(self._phi_cmd, x),
+                self.rudder_for_sideslip(0.0, x, *self.RUDDER_GAINS), thr, 0.0)
 
     def check(self, t_s, x):
         if t_s > self.lead_in_s and abs(x[_MACH] - self.mach_cmd) > self.mach_tolerance:
@@ -674,7 +707,6 @@ class SteadyHeadingSideslip(Controller):
         super().__init__(spec, trim, dt_s)
         self.seg_len_s = spec.duration_s / spec.n_segments
         self._beta_cmd = 0.0
-        self._rud_int = 0.0
         self._psi_int = 0.0
         self._ail_int = 0.0
         self._phi_ff = 0.0
@@ -694,11 +726,7 @@ class SteadyHeadingSideslip(Controller):
     def inputs(self, t_s, x):
         dt = self.dt_s
         self._beta_cmd, beta_rate = self.beta_cmd(t_s)
-        err_b = self._beta_cmd - x[_BETA]
-        rud_raw = 10.0 * err_b + self._rud_int
-        if abs(rud_raw) < 1.0 or rud_raw * err_b < 0:
-            self._rud_int += 8.0 * err_b * dt
-        rudder = _clip(rud_raw, -1.0, 1.0)
+        rudder = self.rudder_for_sideslip(self._beta_cmd, x)
         # the side force of the sideslip is balanced by bank: g cos(theta) sin(phi) = -a_y
         ay = x[_FY] / x[_MASS]
         phi_ff = math.asin(_clip(-ay / (x[_G] * math.cos(x[_THETA])), -0.6, 0.6))
