@@ -122,6 +122,10 @@ def _fly(args: argparse.Namespace) -> int:
         summarize,
     )
 
+    if args.sortie is not None and args.resume:
+        print("fpr fly: error: --sortie flies a whole sortie at once; --resume does not apply "
+              "(fly it again with --overwrite)", file=sys.stderr)
+        return 2
     flags_given = any(getattr(args, k) != v for k, v in args.campaign_flag_defaults.items())
     if args.campaign:
         campaign = load_campaign(args.campaign)
@@ -165,10 +169,6 @@ def _fly_sortie(args: argparse.Namespace, campaign) -> int:
     from synth.flight import FlightError
     from synth.sortie import fly_sortie_campaign, sortie_jobs, summarize_sortie
 
-    if args.resume:
-        print("fpr fly: error: --sortie flies a whole sortie at once; --resume does not apply "
-              "(fly it again with --overwrite)", file=sys.stderr)
-        return 2
     cid, jobs = sortie_jobs(campaign, args.sortie or None)
     print(f"campaign {campaign.name!r}: one sortie of configuration {cid}, {len(jobs)} maneuvers "
           f"-> {args.out}")

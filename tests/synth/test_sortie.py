@@ -146,3 +146,26 @@ def test_directory_rules(sortie, tmp_path):
     with pytest.raises(FileExistsError, match="mine.txt"):
         prepare_sortie_directory(tmp_path, overwrite=True)
     assert main(["fly", "--sortie", "NOPE", "--config", "PV1-NP", "--out", str(tmp_path / "n")]) == 2
+
+
+def test_same_campaign_same_bytes(sortie, tmp_path):
+    """Flown again (over a copy, with --overwrite), the sortie gives the same files, byte for byte."""
+    import shutil
+
+    campaign, _, s = sortie
+    again = tmp_path / "again"
+    shutil.copytree(s.path, again)
+    fly_sortie_campaign(campaign, again, overwrite=True)
+    for rel in ("manifest.json", *SORTIE_FILES.values()):
+        assert (again / rel).read_bytes() == (s.path / rel).read_bytes(), rel
+
+
+def test_fly_sortie_command(tmp_path, capsys):
+    out = tmp_path / "one"
+    assert main(["fly", "--sortie", "--config", "PV1-NP", "--mach", "0.5", "--maneuver",
+                 "pitch_doublet", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "one sortie of configuration PV1-NP, 1 maneuvers" in said and "wrote" in said
+    assert list(load_sortie(out).boundaries.index) == ["m0000"]
+    assert main(["fly", "--sortie", "--resume", "--out", str(out)]) == 2
+    assert "--resume does not apply" in capsys.readouterr().err
