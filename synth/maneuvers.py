@@ -335,6 +335,7 @@ _PHI, _THETA, _PSI = COL["phi_rad"], COL["theta_rad"], COL["psi_rad"]
 _ALPHA, _BETA = COL["alpha_rad"], COL["beta_rad"]
 _MACH, _TAS, _H = COL["mach"], COL["tas_mps"], COL["h_m"]
 _FY, _FZ, _MASS, _G = COL["fy_n"], COL["fz_n"], COL["mass_kg"], COL["g_mps2"]
+_ELEVATOR_CMD = COL["elevator_cmd_norm"]
 
 
 def _wrap(angle_rad: float) -> float:
@@ -580,7 +581,13 @@ class WindupTurn(Controller):
     ``alpha = (1.3 + elevator_trim_norm - 1.86 q) / 3.36`` rad: about 17-20 deg wings level at
     low speed (less with a forward CG) and less in a turn, whose pitch rate q grows with load
     factor (at Mach 0.4-0.6 in the default campaign 14 deg, but 12.3-13.0 deg for PT1 and PT2,
-    whose CG is furthest forward). A turn to 20 deg or more is out of this FCS's reach.
+    whose CG is furthest forward). A turn to 20 deg or more is out of this FCS's reach. So a
+    wind-up also ends, as a test pilot's does, at full aft stick (the pilot's command at or beyond
+    the stop, -1, through the final hold) when that is at most :attr:`FCS_LIMIT_MARGIN_RAD` short
+    of ``alpha_max_rad`` (``notes['aft_stop']``); further short, it fails. High-alpha turns
+    (``alpha_max_rad`` 17.5 deg in the default campaign) are flown where the dynamic pressure is
+    low, so the 1 g alpha is already near 14 deg: Mach 0.3 at 5500 m, Mach 0.4 at 9500 m, where
+    they climb 120-150 m at 1.1-1.2 g.
     """
 
     mach_tolerance = 0.05
@@ -592,6 +599,10 @@ class WindupTurn(Controller):
     #: than the SHSS's, for the roll-in's adverse yaw and the rudder the turn rate needs, which
     #: grow with the wind-up (10, 8 left 0.7-0.8 deg of sideslip at the roll-in; these, 0.1-0.25)
     RUDDER_GAINS = (40.0, 80.0)
+    #: how far short of ``alpha_max_rad`` a wind-up may end when the stick is at its aft stop
+    #: through the final hold (the FCS's alpha limit, class docstring): forward-CG aircraft stop
+    #: 1-1.7 deg short of the defaults at Mach 0.4-0.6, and of a high-alpha turn's target
+    FCS_LIMIT_MARGIN_RAD = 2.0 * _DEG
 
     def __init__(self, spec, trim, dt_s):
         super().__init__(spec, trim, dt_s)
@@ -656,13 +667,20 @@ class WindupTurn(Controller):
         reached = float(np.max(si[:, _ALPHA]))
         self.notes["alpha_peak_rad"] = reached
         self.notes["nz_peak"] = float(np.max(-si[:, _FZ] / (si[:, _MASS] * si[:, _G])))
-        # a wind-up turn ends at alpha_max or nz_max, whichever comes first
-        if (reached < self.spec.alpha_max_rad - 1.0 * _DEG
-                and self.notes["nz_peak"] < self.spec.nz_max - 0.3):
+        # the stick at the f16's aft stop (-1) through the final hold: the FCS gives no more
+        hold = t_s >= self.ramp_end_s
+        at_stop = bool(np.max(si[hold, _ELEVATOR_CMD]) <= -1.0)
+        self.notes["aft_stop"] = at_stop
+        # a wind-up turn ends at alpha_max or nz_max, whichever comes first, or at the FCS's
+        # limit when that is at most FCS_LIMIT_MARGIN_RAD short of alpha_max
+        short = (reached < self.spec.alpha_max_rad - 1.0 * _DEG
+                 and self.notes["nz_peak"] < self.spec.nz_max - 0.3)
+        if short and not (at_stop and reached >= self.spec.alpha_max_rad - self.FCS_LIMIT_MARGIN_RAD):
             raise ManeuverFailure(
                 f"reached neither alpha {math.degrees(self.spec.alpha_max_rad):.1f} deg (got "
                 f"{math.degrees(reached):.1f}) nor load factor {self.spec.nz_max:.1f} (got "
-                f"{self.notes['nz_peak']:.1f})",
+                f"{self.notes['nz_peak']:.1f})"
+                + (", the stick at its aft stop" if at_stop else ""),
                 float(t_s[-1]),
                 "lower alpha_max_rad or nz_max to what the f16's FCS gives at full aft stick: "
                 "about 12-17 deg of alpha at Mach 0.4-0.8 and 6000-8000 m (the least with a "

@@ -1,6 +1,7 @@
 """Wind-up turns as a test pilot flies them: coordinated (sideslip held near zero with rudder),
-winding up in bank and load factor at constant Mach and about constant altitude; the alpha they
-cover shows in `fpr show`."""
+winding up in bank and load factor at constant Mach and about constant altitude, to the alpha the
+f16's FCS allows (high-alpha turns at low dynamic pressure); the alpha they cover shows in
+`fpr show`."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from campaigns.cli import main
 from synth.campaign import load_campaign
 from synth.dataset import alpha_coverage, load_dataset
 from synth.environment import Environment
-from synth.flight import fly_maneuver
+from synth.flight import FlightError, fly_maneuver
 from synth.maneuvers import ManeuverSpec
 
 DEG = math.pi / 180.0
@@ -58,6 +59,57 @@ def test_windup_turn_is_coordinated_and_winds_up(aircraft, mach, altitude_m):
     assert np.max(np.abs(tr.h_m - tr.h_m[0])) <= MAX_ALTITUDE_DRIFT_M
 
 
+#: the default campaign's high-alpha turns (campaigns/default.toml): target, Mach, altitude
+HIGH_ALPHA_DEG = 17.5
+HIGH_ALPHA_POINTS = [(0.3, 5500.0), (0.4, 9500.0)]
+#: the f16's limits (its FCS limits load factor to 9 g; its alpha limiter acts towards 30 deg)
+F16_NZ_LIMIT = 9.0
+F16_ALPHA_LIMIT_RAD = 25.0 * DEG
+
+
+@pytest.mark.parametrize("mach, altitude_m", HIGH_ALPHA_POINTS)
+@pytest.mark.parametrize("aircraft", ["PV3", "PT1"])  # CG furthest aft / forward
+def test_high_alpha_windup_turn(aircraft, mach, altitude_m):
+    spec = ManeuverSpec.from_dict({"kind": "windup_turn", "mach": mach, "altitude_m": altitude_m,
+                                   "alpha_max_deg": HIGH_ALPHA_DEG})
+    (tr,) = fly_maneuver(spec, FLEET.airframe, FLEET.aircraft[aircraft], CAMPAIGN_AIR)
+    notes = tr.meta["controller"]
+    peak_rad = float(np.max(tr.alpha_rad))
+    # the target, or (PT1, forward CG) the FCS's limit with the stick at its aft stop
+    if aircraft == "PV3":
+        assert peak_rad >= (HIGH_ALPHA_DEG - 0.1) * DEG and not notes["aft_stop"]
+    else:
+        assert notes["aft_stop"] and 16.0 * DEG <= peak_rad < (HIGH_ALPHA_DEG - 0.5) * DEG
+    assert peak_rad < F16_ALPHA_LIMIT_RAD
+    nz = -tr.specific_force_cg_body_mps2[:, 2] / tr.g_mps2
+    assert nz.max() < F16_NZ_LIMIT
+    assert np.max(np.abs(tr.beta_rad)) <= MAX_COORDINATED_BETA_RAD
+    assert np.max(np.abs(tr.mach - mach)) <= 0.05
+    assert np.max(np.abs(tr.h_m - tr.h_m[0])) <= 200.0  # climbs 120-150 m
+    assert np.ptp(tr.alpha_rad) >= 2.0 * DEG
+
+
+def test_windup_turn_to_20_deg_is_beyond_the_fcs():
+    """The f16's FCS caps alpha (synth.maneuvers.WindupTurn): no turn reaches 20 deg, even where
+    the dynamic pressure is lowest; the failure says the stick was at its aft stop."""
+    spec = ManeuverSpec.from_dict({"kind": "windup_turn", "mach": 0.3, "altitude_m": 5500.0,
+                                   "alpha_max_deg": 22.0})
+    with pytest.raises(FlightError, match="reached neither alpha 22.0 deg .*aft stop"):
+        fly_maneuver(spec, FLEET.airframe, FLEET.aircraft["PV3"], CAMPAIGN_AIR)
+
+
+def test_forward_cg_windup_ends_at_the_fcs_limit():
+    """PT1 (forward CG) at the default campaign's Mach 0.4, 3000 m: the FCS stops the wind-up
+    short of the default 14 deg with the stick at its aft stop; that ends it, as it does a test
+    pilot's."""
+    (tr,) = fly_maneuver(ManeuverSpec(kind="windup_turn", mach=0.4, altitude_m=3000.0),
+                         FLEET.airframe, FLEET.aircraft["PT1"], CAMPAIGN_AIR)
+    spec, notes = tr.meta["maneuver"], tr.meta["controller"]
+    assert notes["aft_stop"]
+    assert (spec["alpha_max_rad"] - 2.0 * DEG <= notes["alpha_peak_rad"]
+            < spec["alpha_max_rad"] - 1.0 * DEG)
+
+
 def test_default_campaign_flies_a_windup_turn_at_every_clean_mach():
     camp = load_campaign("default")
     flown = {(j.configuration_id, j.maneuver["mach"]) for j in camp.jobs
@@ -65,6 +117,13 @@ def test_default_campaign_flies_a_windup_turn_at_every_clean_mach():
     machs = sorted({m for _, m in flown})
     assert machs == [0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9]
     assert len(flown) == len(FLEET.configurations) * len(machs)
+    high = {(j.configuration_id, j.maneuver["mach"], j.maneuver["altitude_m"]) for j in camp.jobs
+            if j.maneuver.get("alpha_max_deg") == HIGH_ALPHA_DEG}
+    assert high == {(c, m, h) for c in FLEET.configurations for m, h in HIGH_ALPHA_POINTS}
+    demo = load_campaign("demo")
+    assert {(j.configuration_id, j.maneuver["mach"]) for j in demo.jobs
+            if j.maneuver.get("alpha_max_deg") == HIGH_ALPHA_DEG} == {
+        (c, 0.4) for c in FLEET.configurations}
 
 
 def test_fpr_show_prints_the_alpha_coverage_per_mach(tmp_path, capsys):
