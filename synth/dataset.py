@@ -32,6 +32,13 @@ before that key existed) is a complete dataset.
 A directory is only ever cleared of what the tool wrote there (:func:`prepare_directory`):
 ``manifest.json``, the maneuver files its manifest names (``maneuvers/mNNNN[sK].parquet``) and the
 tool's own temporary files; a directory holding anything else is refused, the message listing it.
+
+A whole sortie (``fpr fly --sortie``, :mod:`synth.sortie`) is a directory of its own, format
+``fpr-sortie``: ``manifest.json`` (its ``sortie`` block: configuration, injected errors, the
+maneuver ``boundaries`` and the ``transitions``), ``sortie.parquet`` (the common time base with the
+truth, as a maneuver file has it), ``streams/{dru,ins,dgps}.parquet`` (each recorder's raw stream,
+``t_s`` its stamps) and ``boundaries.csv``; :func:`write_sortie` writes it, :func:`load_sortie`
+reads it and :meth:`Sortie.cut` cuts a maneuver out by its boundaries.
 """
 
 from __future__ import annotations

@@ -79,7 +79,15 @@ from synth.flight import (
 )
 from synth.instrument import instrument
 from synth.local_flow import load_adc_baseline, load_local_flow_truth
-from synth.maneuvers import Controller, ManeuverFailure, ManeuverSpec, TrimPoint, make_controller
+from synth.maneuvers import (
+    _DEG,
+    Controller,
+    ManeuverFailure,
+    ManeuverSpec,
+    TrimPoint,
+    _wrap,
+    make_controller,
+)
 from synth.truth import TruthTrajectory
 
 _C = io.COL
@@ -87,12 +95,8 @@ _C = io.COL
 PITCH_TRIM = "fcs/pitch-trim-cmd-norm"
 #: JSBSim's switch that stops the engines burning fuel
 FUEL_FREEZE = "propulsion/fuel_freeze"
-_DEG = math.pi / 180.0
-
-
-def _wrap(angle_rad: float) -> float:
-    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
-
+_TRANSITION_ADVICE = ("fly the test points in an order with smaller steps between them (the f16 "
+                      "flies Mach 0.3 only low down), or lower Transition.climb_rate_mps")
 
 class Transition(Controller):
     """The pilot between two test points: to ``spec``'s trim Mach, altitude, heading and gear.
@@ -164,11 +168,12 @@ class Transition(Controller):
         hdot_cmd = max(-self.climb_rate_mps,
                        min(self.climb_rate_mps, 0.2 * (self.h_cmd_m - x[_C["h_m"]])))
         err = hdot_cmd - self.hdot_mps(x)
-        # the FCS's load-factor law is a steady-state approximation: the integral removes the
-        # standing climb rate (and hence altitude) error it leaves
-        self._nz_int = max(-0.5, min(0.5, self._nz_int + 0.02 * err * self.dt_s))
-        dnz = max(-1.5, min(1.5, 0.05 * err + self._nz_int)) + (1.0 / math.cos(phi) - 1.0)
-        self.elevator_cmd_norm = self.stick(dnz, x)
+        # the stick trim, in load factor (integral of the climb-rate error, i.e. of the altitude
+        # error): the pitch trim was set at the previous test point, and the FCS's load-factor law
+        # is a steady-state approximation; without it a standing altitude error remains
+        self._nz_int = max(-1.5, min(1.5, self._nz_int + 0.02 * err * self.dt_s))
+        dnz = max(-1.5, min(1.5, 0.05 * err)) + self._nz_int + (1.0 / math.cos(phi) - 1.0)
+        self.elevator_cmd_norm = max(-1.0, min(1.0, self.stick(dnz, x)))
         return (self.elevator_cmd_norm, self.aileron_for_bank(phi_cmd, x), 0.0,
                 self.throttle_for_mach(x, 0.0, 1.0), 0.0)
 
@@ -266,7 +271,7 @@ def fly_sortie(
                 while not leg.done:
                     if leg.stage == "gear":
                         io.set_gear(fdm, True)
-                    record(fly_controller(fdm, reader, leg, chunk, dt_s, "see the transition"))
+                    record(fly_controller(fdm, reader, leg, chunk, dt_s, _TRANSITION_ADVICE))
             except ManeuverFailure as exc:
                 raise FlightError(
                     f"sortie (aircraft {aircraft.id}): transition to {mid0} ({_where(spec)}), "
