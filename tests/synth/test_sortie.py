@@ -21,8 +21,9 @@ from synth.flight import fly_maneuver
 from synth.maneuvers import ManeuverSpec
 from synth.sortie import fly_sortie_campaign, sortie_jobs
 
-# three short maneuvers at two test points: a speed change and a climb between them (the
-# level acceleration ends faster than the next point: a deceleration back to it)
+# four short maneuvers at three test points: a speed change and a climb between the first two (the
+# level acceleration ends faster than the next point: a deceleration back to it), then a descent,
+# a deceleration and the gear down
 SMALL = {
     "name": "sortie-small",
     "seed": 5,
@@ -34,6 +35,8 @@ SMALL = {
          "altitude_m": 4000.0, "maneuver": {"duration_s": 20.0}},
         {"configurations": ["PV1-NP"], "mach": [0.5], "maneuvers": ["pitch_doublet"],
          "altitude_m": 5000.0, "maneuver": {"duration_s": 20.0}},
+        {"configurations": ["PV1-NP"], "mach": [0.3], "maneuvers": ["pitch_doublet"],
+         "altitude_m": 1500.0, "gear_down": True, "maneuver": {"duration_s": 20.0}},
     ],
 }
 
@@ -58,6 +61,8 @@ def test_written_and_loadable_with_boundaries(sortie, capsys):
     assert list(b["kind"]) == [j.maneuver["kind"] for j in jobs]
     assert list(b["mach"]) == [j.maneuver["mach"] for j in jobs]
     assert list(b["altitude_m"]) == [j.maneuver["altitude_m"] for j in jobs]
+    assert list(b["gear_down"]) == [False, False, False, True]
+    assert list(s.transitions["stages"].iloc[-1]) == ["altitude", "mach", "gear", "settle"]
     assert (b["missed"] == "").all(), b["missed"]
     # in flight order, each as long as the maneuver, a transition between neighbours
     assert np.allclose(b["t_end_s"] - b["t_start_s"], 20.0)
@@ -119,6 +124,7 @@ def test_cut_maneuver_is_at_its_test_point(sortie):
         assert abs(cut["true_h_m"].iloc[0] - row["altitude_m"]) < 15.0, mid
         assert abs(cut["mach"].mean() - row["mach"]) < 0.02, mid  # measured, as extraction sees it
         assert abs(np.degrees(cut["true_phi_rad"].iloc[0])) < 1.5, mid
+        assert (cut["true_gear_pos_norm"] == float(row["gear_down"])).all(), mid
         # a recorder stream cut the same way
         ins = s.cut(mid, "ins")
         assert ins["t_s"].iloc[0] >= row["t_start_s"] - 1e-9 and ins["t_s"].iloc[-1] <= row["t_end_s"] + 1e-9
