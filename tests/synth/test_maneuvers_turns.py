@@ -123,7 +123,7 @@ def test_default_campaign_flies_a_windup_turn_at_every_clean_mach():
     demo = load_campaign("demo")
     assert {(j.configuration_id, j.maneuver["mach"]) for j in demo.jobs
             if j.maneuver.get("alpha_max_deg") == HIGH_ALPHA_DEG} == {
-        (c, 0.4) for c in FLEET.configurations}
+        (c, 0.5) for c in FLEET.configurations}
 
 
 def test_fpr_show_prints_the_alpha_coverage_per_mach(tmp_path, capsys):
