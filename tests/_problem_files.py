@@ -1,6 +1,6 @@
 """Problem files and flight frames the reader tests write: the constants and builders that
-tests/estimator/test_io.py, test_input_safety.py, test_problem_options.py and
-tests/aircraft_models/test_schema.py share."""
+tests/estimator_tests/test_io.py, test_input_safety.py, test_problem_options.py and
+tests/aircraft_models_tests/test_schema.py share."""
 
 from __future__ import annotations
 

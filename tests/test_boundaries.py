@@ -305,3 +305,12 @@ def test_a_forbidden_import_through_another_package_is_caught():
                                   "synth.flight.fly_maneuver: estimator/model.py:2: "), problems[0]
     assert "aircraft_models/__init__.py:2: `from synth.flight import fly_maneuver`" in problems[0]
     assert "rule: estimator/ never imports synth/" in problems[0]
+
+
+def test_no_folder_of_the_tests_shadows_a_package():
+    # tests/ is on the import path (pytest's pythonpath and its rootdir insertion for conftest.py):
+    # a folder tests/<package>/ would be a namespace package that `import <package>` finds before
+    # an editable install's finder does (plain `pytest`, a script adding tests/ to sys.path)
+    shadowing = sorted(p.name for p in (REPO / "tests").iterdir() if p.is_dir() and p.name in PACKAGES)
+    assert not shadowing, (f"tests/{shadowing[0]}/ shadows the package {shadowing[0]}: "
+                           f"name it {shadowing[0]}_tests/")
