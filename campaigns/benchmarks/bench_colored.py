@@ -34,7 +34,7 @@ The three coloured forms are the solver's (three estimations of the same data pe
 on the first replications of every point the all-lags forms (cross- and per-channel) and the
 Cramér-Rao deviations are checked against ``colored_mc.py``'s independent FFT evaluation of the
 sandwich (itself checked against the sandwich's definition by
-``tests/estimator/test_colored_uncertainty.py``).
+``tests/estimator_tests/test_colored_uncertainty.py``).
 
 Precision: the sample standard deviation of N Gaussian estimates has relative standard error
 1/sqrt(2N); the ratios' standard errors quoted are from a bootstrap over the replications (pooled

@@ -5,8 +5,9 @@ with coloured, cross-correlated noise (:class:`CorrelatedNoise`); a replication
 (:func:`replicate`) estimates it from the truth with fresh noise and reports the solver's
 deviations; :func:`sandwich_std` evaluates the Morelli-Klein sandwich independently of the solver
 (by FFT, also with the true noise covariance: :func:`oracle`); :func:`ratios` compares the scatter
-of the estimates with the reported deviations. ``tests/estimator/test_colored_uncertainty.py`` checks these
-against the sandwich's definition and runs a small Monte Carlo; ``bench_colored.py`` the full one.
+of the estimates with the reported deviations.
+``tests/estimator_tests/test_colored_uncertainty.py`` checks these against the sandwich's
+definition and runs a small Monte Carlo; ``bench_colored.py`` the full one.
 """
 
 from __future__ import annotations
