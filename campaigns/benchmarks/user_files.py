@@ -7,16 +7,23 @@ column names and units (:data:`USER_COLUMNS`), the problem file's layout (:func:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import pandas as pd
 
-DEG = 180.0 / math.pi
-KT = 1.0 / 0.514444
-FT = 1.0 / 0.3048
-G0 = 9.80665
+from estimator.io.units import UNITS
+
+
+def _per_si(unit: str) -> float:
+    """Written value per SI value in ``unit``: the reader's own factor (:data:`estimator.io.units.UNITS`),
+    so that a file written here reads back to the same SI values."""
+    return 1.0 / UNITS[unit].factor
+
+
+#: written unit per SI unit: deg per rad, kt per m/s, ft per m; and standard gravity, m/s^2 per g
+DEG, KT, FT = _per_si("deg"), _per_si("kt"), _per_si("ft")
+G0 = UNITS["g"].factor
 
 #: canonical name -> (CSV column, dataset column, factor from SI to the written unit, unit, extra spec)
 USER_COLUMNS = {
