@@ -335,7 +335,7 @@ def _job_files(job: Job) -> list[str]:
     return [maneuver_file(maneuver_id(job.index, k, n)) for k in range(n)]
 
 
-def _manifest_header(campaign: Campaign) -> dict:
+def manifest_header(campaign: Campaign) -> dict:
     """Everything of the manifest but the flown maneuvers: the same before and after the flight,
     and for an interrupted run and its resumption (no time, no timing)."""
     return _jsonable({
@@ -499,7 +499,7 @@ def fly_campaign(
         raise ValueError("overwrite and resume exclude each other: replace the dataset or complete it")
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
-    header = _manifest_header(campaign)
+    header = manifest_header(campaign)
     stored = read_manifest_if_dataset(out_dir) if resume and out_dir.is_dir() else None
     if resume and (damage := damaged_manifest(out_dir)) is not None:
         raise CampaignError(f"cannot resume: {damage}")

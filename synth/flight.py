@@ -40,7 +40,8 @@ class FlightError(RuntimeError):
     """The maneuver could not be flown as specified; the message says why and what to try."""
 
 
-def _where(spec: ManeuverSpec) -> str:
+def describe_spec(spec: ManeuverSpec) -> str:
+    """The maneuver and its test point in words, for messages: "windup_turn at Mach 0.40, 6000 m"."""
     start = f" (from Mach {spec.trim_mach:.2f})" if spec.trim_mach != spec.mach else ""
     return f"{spec.kind} at Mach {spec.mach:.2f}{start}, {spec.altitude_m:.0f} m" + (
         ", gear down" if spec.gear_down else ""
@@ -55,7 +56,7 @@ def _trim(fdm: jsbsim.FGFDMExec, spec: ManeuverSpec) -> dict[str, float]:
     try:
         res = io.trim(fdm)
     except RuntimeError as exc:
-        raise FlightError(f"{_where(spec)}: {exc}; {advice}") from None
+        raise FlightError(f"{describe_spec(spec)}: {exc}; {advice}") from None
     # do_trim can return without an exception on a trim that ended on a control limit; the
     # residual accelerations and the Mach tell whether the state really is an equilibrium
     if (
@@ -65,7 +66,7 @@ def _trim(fdm: jsbsim.FGFDMExec, spec: ManeuverSpec) -> dict[str, float]:
         or abs(res["mach"] - spec.trim_mach) > 0.005
     ):
         raise FlightError(
-            f"{_where(spec)}: trim did not converge (residuals {res}); {advice}"
+            f"{describe_spec(spec)}: trim did not converge (residuals {res}); {advice}"
         )
     return res
 
@@ -165,7 +166,7 @@ def start_flight(
     FlightError
         If the mass cannot be loaded or the trim fails.
     """
-    where = _where(spec)
+    where = describe_spec(spec)
     fdm, frame = io.create_fdm(airframe.jsbsim_model, env.planet, dt_s, airframe.reference_point)
     fdm["simulation/randomseed"] = env.turbulence_seed
     try:
@@ -310,7 +311,7 @@ def fly_maneuver(
     FlightError
         If the trim fails, the aircraft departs, or the controller cannot hold its target.
     """
-    where = _where(spec)
+    where = describe_spec(spec)
     fdm, reader, trim, trim_meta = start_flight(spec, airframe, aircraft, env, dt_s)
     controller = make_controller(spec, trim, dt_s)
     n = int(round(spec.duration_s / dt_s)) + 1
@@ -331,7 +332,7 @@ def fly_maneuver(
                                  duration_s=env.gust.duration_s)
 
     try:
-        si = fly_controller(fdm, reader, controller, n, dt_s, _advice(spec), start_gust)
+        si = fly_controller(fdm, reader, controller, n, dt_s, departure_advice(spec), start_gust)
     except ManeuverFailure as exc:
         raise FlightError(
             f"{where} (aircraft {aircraft.id}), t = {exc.t_s:.2f} s into "
@@ -364,7 +365,8 @@ def fly_maneuver(
     return out
 
 
-def _advice(spec: ManeuverSpec) -> str:
+def departure_advice(spec: ManeuverSpec) -> str:
+    """What to change when this kind of maneuver departs or loses its target (for messages)."""
     if spec.kind in ("pitch_doublet", "3211", "roller_coaster", "pullup_rudder_doublets"):
         return "lower delta_nz, or fly faster / higher"
     if spec.kind == "pullup_pushover":

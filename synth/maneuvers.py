@@ -56,7 +56,8 @@ MACH_RANGE = (0.3, 0.9)
 #: Requested altitude range, m.
 ALTITUDE_RANGE_M = (300.0, 12000.0)
 
-_DEG = math.pi / 180.0
+#: radians per degree
+DEG_TO_RAD = math.pi / 180.0
 
 #: Per-kind defaults of the optional fields; a field not listed for a kind does not apply to it.
 DEFAULTS: dict[str, dict[str, float]] = {
@@ -64,8 +65,8 @@ DEFAULTS: dict[str, dict[str, float]] = {
     "3211": {"duration_s": 30.0, "delta_nz": 0.8, "pulse_s": 0.6},
     "pullup_pushover": {"duration_s": 30.0, "nz_max": 2.5, "nz_min": 0.0, "pulse_s": 3.0},
     "roller_coaster": {"duration_s": 36.0, "delta_nz": 1.0, "period_s": 6.0},
-    "windup_turn": {"duration_s": 40.0, "alpha_max_rad": 14.0 * _DEG, "nz_max": 6.0},
-    "shss": {"duration_s": 105.0, "beta_rad": 4.5 * _DEG, "segment_s": 35.0},
+    "windup_turn": {"duration_s": 40.0, "alpha_max_rad": 14.0 * DEG_TO_RAD, "nz_max": 6.0},
+    "shss": {"duration_s": 105.0, "beta_rad": 4.5 * DEG_TO_RAD, "segment_s": 35.0},
     "pullup_rudder_doublets": {
         "duration_s": 30.0,
         "delta_nz": 1.0,
@@ -102,7 +103,7 @@ FULL_DEFAULTS_FROM_MACH = 0.5
 #: :data:`FULL_DEFAULTS_UP_TO_MACH`, below which DEFAULTS apply: at the default campaign's Mach 0.4-0.6
 #: points PT1 reaches 14 deg with 0.1-0.5 deg to spare.
 HIGH_SPEED_DEFAULTS: dict[str, dict[str, float]] = {
-    "windup_turn": {"alpha_max_rad": 12.0 * _DEG, "nz_max": 4.5},
+    "windup_turn": {"alpha_max_rad": 12.0 * DEG_TO_RAD, "nz_max": 4.5},
 }
 FULL_DEFAULTS_UP_TO_MACH = 0.6
 HIGH_SPEED_DEFAULTS_FROM_MACH = 0.7
@@ -240,8 +241,8 @@ class ManeuverSpec:
             need(25.0 <= self.segment_s, f"segment_s {self.segment_s} must be at least 25 s "
                  "(the paper splits SHSS runs into 30-40 s pieces)")
             need(self.segment_s <= d <= 300.0, f"duration_s {d} must be between segment_s and 300 s")
-            need(1.0 * _DEG <= abs(self.beta_rad) <= 8.0 * _DEG,
-                 f"|beta_rad| {self.beta_rad} must be 1-8 deg in radians (e.g. {4.5 * _DEG:.4f};"
+            need(1.0 * DEG_TO_RAD <= abs(self.beta_rad) <= 8.0 * DEG_TO_RAD,
+                 f"|beta_rad| {self.beta_rad} must be 1-8 deg in radians (e.g. {4.5 * DEG_TO_RAD:.4f};"
                  " negative for left sideslip)")
         else:
             need(10.0 <= d <= 60.0, f"duration_s {d} must be 10-60 s; FPR needs maneuvers of "
@@ -259,7 +260,7 @@ class ManeuverSpec:
         if self.nz_min is not None:
             need(-1.0 <= self.nz_min <= 0.8, f"nz_min {self.nz_min} must be -1 to 0.8")
         if self.alpha_max_rad is not None:
-            need(4.0 * _DEG <= self.alpha_max_rad <= 25.0 * _DEG,
+            need(4.0 * DEG_TO_RAD <= self.alpha_max_rad <= 25.0 * DEG_TO_RAD,
                  f"alpha_max_rad {self.alpha_max_rad} must be 4-25 deg in radians")
         if self.rudder_norm is not None:
             need(0.05 <= self.rudder_norm <= 1.0, f"rudder_norm {self.rudder_norm} must be 0.05-1")
@@ -338,7 +339,8 @@ _FY, _FZ, _MASS, _G = COL["fy_n"], COL["fz_n"], COL["mass_kg"], COL["g_mps2"]
 _ELEVATOR_CMD = COL["elevator_cmd_norm"]
 
 
-def _wrap(angle_rad: float) -> float:
+def wrap_angle_rad(angle_rad: float) -> float:
+    """``angle_rad`` wrapped into [-pi, pi), rad."""
     return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
 
 
@@ -403,7 +405,7 @@ class Controller(ABC):
     @staticmethod
     def aileron_for_bank(phi_cmd_rad: float, x: np.ndarray, k_per_s: float = 2.0) -> float:
         """Roll-rate command holding a bank angle (0.318 normalizes rad/s for the f16 FCS)."""
-        return _clip(0.31821 * k_per_s * _wrap(phi_cmd_rad - x[_PHI]), -0.6, 0.6)
+        return _clip(0.31821 * k_per_s * wrap_angle_rad(phi_cmd_rad - x[_PHI]), -0.6, 0.6)
 
     def rudder_for_sideslip(self, beta_cmd_rad: float, x: np.ndarray, k_p: float = 10.0,
                             k_i: float = 8.0) -> float:
@@ -416,8 +418,8 @@ class Controller(ABC):
             self._rud_int += k_i * err_b * self.dt_s
         return _clip(rud_raw, -1.0, 1.0)
 
-    def bank_for_heading(self, x: np.ndarray, limit_rad: float = 20 * _DEG) -> float:
-        return _clip(2.5 * _wrap(self.psi_cmd_rad - x[_PSI]), -limit_rad, limit_rad)
+    def bank_for_heading(self, x: np.ndarray, limit_rad: float = 20 * DEG_TO_RAD) -> float:
+        return _clip(2.5 * wrap_angle_rad(self.psi_cmd_rad - x[_PSI]), -limit_rad, limit_rad)
 
     def dnz_for_altitude(self, x: np.ndarray) -> float:
         """Load-factor increment holding ``h_cmd_m`` (omega_n ~0.3 rad/s, zeta ~0.8)."""
@@ -462,7 +464,7 @@ class _WingsLevel(Controller, ABC):
         return 0.0
 
     def inputs(self, t_s, x):
-        phi_cmd = self.bank_for_heading(x, limit_rad=5 * _DEG)
+        phi_cmd = self.bank_for_heading(x, limit_rad=5 * DEG_TO_RAD)
         return (
             self.stick(self.dnz(t_s), x),
             self.aileron_for_bank(phi_cmd, x),
@@ -591,7 +593,7 @@ class WindupTurn(Controller):
     """
 
     mach_tolerance = 0.05
-    bank_rate_rps = 15.0 * _DEG
+    bank_rate_rps = 15.0 * DEG_TO_RAD
     #: load-factor error -> alpha-error units of the pull loop, rad per g (loop gain in g: an
     #: integral of 25 x 0.08 = 2 per s)
     ALPHA_PER_G_RAD = 0.08
@@ -602,7 +604,7 @@ class WindupTurn(Controller):
     #: how far short of ``alpha_max_rad`` a wind-up may end when the stick is at its aft stop
     #: through the final hold (the FCS's alpha limit, class docstring): forward-CG aircraft stop
     #: 1-1.7 deg short of the defaults at Mach 0.4-0.6, and of a high-alpha turn's target
-    FCS_LIMIT_MARGIN_RAD = 2.0 * _DEG
+    FCS_LIMIT_MARGIN_RAD = 2.0 * DEG_TO_RAD
 
     def __init__(self, spec, trim, dt_s):
         super().__init__(spec, trim, dt_s)
@@ -637,7 +639,7 @@ class WindupTurn(Controller):
         err_m = self.mach_cmd - x[_MACH]
         # once the throttle is at its stop, speed is held by descending: integrate a dive angle
         if (thr >= 1.0 and err_m > 0) or self._gamma_int < 0:
-            self._gamma_int = _clip(self._gamma_int - 2.0 * err_m * self.dt_s, -40 * _DEG, 0.0)
+            self._gamma_int = _clip(self._gamma_int - 2.0 * err_m * self.dt_s, -40 * DEG_TO_RAD, 0.0)
         gamma_cmd = self._gamma_int - 3.0 * max(err_m, 0.0)
         gamma = math.asin(_clip(self.hdot_mps(x) / max(x[_TAS], 50.0), -1.0, 1.0))
         if t_s < self.lead_in_s:
@@ -645,7 +647,7 @@ class WindupTurn(Controller):
         else:
             # bank of a level turn at this load factor, steepened to fly the commanded path
             phi_lvl = math.acos(_clip(1.0 / max(nz, 1.0), 0.0, 1.0))
-            phi_cmd = _clip(phi_lvl + 2.0 * (gamma - gamma_cmd), 0.0, 85 * _DEG)
+            phi_cmd = _clip(phi_lvl + 2.0 * (gamma - gamma_cmd), 0.0, 85 * DEG_TO_RAD)
         # roll in and adjust bank smoothly, as a pilot does (and as IMU lever-arm corrections,
         # which need angular accelerations, prefer)
         step = self.bank_rate_rps * self.dt_s
@@ -673,7 +675,7 @@ class WindupTurn(Controller):
         self.notes["aft_stop"] = at_stop
         # a wind-up turn ends at alpha_max or nz_max, whichever comes first, or at the FCS's
         # limit when that is at most FCS_LIMIT_MARGIN_RAD short of alpha_max
-        short = (reached < self.spec.alpha_max_rad - 1.0 * _DEG
+        short = (reached < self.spec.alpha_max_rad - 1.0 * DEG_TO_RAD
                  and self.notes["nz_peak"] < self.spec.nz_max - 0.3)
         if short and not (at_stop and reached >= self.spec.alpha_max_rad - self.FCS_LIMIT_MARGIN_RAD):
             raise ManeuverFailure(
@@ -713,9 +715,9 @@ class SteadyHeadingSideslip(Controller):
     ``g tan(dphi) / V``, so they scale with the true airspeed to keep the loop's bandwidth.
     """
 
-    heading_tolerance_rad = 5.0 * _DEG
+    heading_tolerance_rad = 5.0 * DEG_TO_RAD
     altitude_tolerance_m = 150.0
-    beta_rate_rps = 1.0 * _DEG
+    beta_rate_rps = 1.0 * DEG_TO_RAD
     #: aileron command saturating the f16's ailerons in a steady bank (FCS: surface = 4 x command)
     AILERON_FULL = 0.25
     #: time constant of the side-force feedforward's low-pass filter, s
@@ -751,19 +753,19 @@ class SteadyHeadingSideslip(Controller):
         self._phi_ff += (phi_ff - self._phi_ff) * dt / self.ff_tau_s
         # heading: PI + heading-rate damping, gains scaled to turn rate (V / g)
         kv = max(x[_TAS], 50.0) / 100.0
-        err_psi = _wrap(self.psi_cmd_rad - x[_PSI])
+        err_psi = wrap_angle_rad(self.psi_cmd_rad - x[_PSI])
         sph, cph = math.sin(x[_PHI]), math.cos(x[_PHI])
         psidot = (x[_Q] * sph + x[_R] * cph) / math.cos(x[_THETA])
-        phi_fb = _clip(kv * (3.0 * err_psi - 4.0 * psidot), -12 * _DEG, 12 * _DEG)
+        phi_fb = _clip(kv * (3.0 * err_psi - 4.0 * psidot), -12 * DEG_TO_RAD, 12 * DEG_TO_RAD)
         phi_cmd = self._phi_ff + phi_fb + self._psi_int
-        if abs(phi_fb) < 12 * _DEG:
-            self._psi_int = _clip(self._psi_int + kv * 0.5 * err_psi * dt, -15 * _DEG, 15 * _DEG)
+        if abs(phi_fb) < 12 * DEG_TO_RAD:
+            self._psi_int = _clip(self._psi_int + kv * 0.5 * err_psi * dt, -15 * DEG_TO_RAD, 15 * DEG_TO_RAD)
         # track = heading + beta: a sideslip ramp at constant heading needs a turn
         phi_cmd += math.atan(x[_TAS] * beta_rate / x[_G])
         # bank: proportional roll-rate command plus the aileron trim (integral of the bank error,
         # 1 per s relative to the proportional 2 per s; held while the ailerons are saturated)
         aileron = self.aileron_for_bank(phi_cmd, x) + self._ail_int
-        err_phi = _wrap(phi_cmd - x[_PHI])
+        err_phi = wrap_angle_rad(phi_cmd - x[_PHI])
         if abs(aileron) < self.AILERON_FULL or aileron * err_phi < 0:
             self._ail_int = _clip(self._ail_int + 0.31821 * 1.0 * err_phi * dt,
                                   -self.AILERON_FULL, self.AILERON_FULL)
@@ -772,9 +774,9 @@ class SteadyHeadingSideslip(Controller):
         return (self.stick(dnz, x), aileron, rudder, self.throttle_for_mach(x), 0.0)
 
     def check(self, t_s, x):
-        if abs(_wrap(x[_PSI] - self.psi_cmd_rad)) > self.heading_tolerance_rad:
+        if abs(wrap_angle_rad(x[_PSI] - self.psi_cmd_rad)) > self.heading_tolerance_rad:
             raise ManeuverFailure(
-                f"heading drifted {math.degrees(_wrap(x[_PSI] - self.psi_cmd_rad)):.1f} deg "
+                f"heading drifted {math.degrees(wrap_angle_rad(x[_PSI] - self.psi_cmd_rad)):.1f} deg "
                 f"(sideslip {math.degrees(x[_BETA]):.1f} deg)",
                 t_s, "reduce beta_rad")
         if abs(x[_H] - self.h_cmd_m) > self.altitude_tolerance_m:
@@ -788,7 +790,7 @@ class SteadyHeadingSideslip(Controller):
             sl = (t_s >= i * self.seg_len_s) & (t_s < (i + 1) * self.seg_len_s)
             peak = float(np.max(np.abs(si[sl, _BETA])))
             peaks.append(peak)
-            if peak < abs(self.spec.beta_rad) - 0.5 * _DEG:
+            if peak < abs(self.spec.beta_rad) - 0.5 * DEG_TO_RAD:
                 raise ManeuverFailure(
                     f"segment {i} reached |beta| {math.degrees(peak):.2f} deg of the requested "
                     f"{math.degrees(abs(self.spec.beta_rad)):.2f} deg (rudder authority)",
@@ -825,7 +827,7 @@ class LevelSpeedChange(Controller):
         return x[_MACH] + 4.0 * self._mach_rate
 
     def inputs(self, t_s, x):
-        phi_cmd = self.bank_for_heading(x, limit_rad=5 * _DEG)
+        phi_cmd = self.bank_for_heading(x, limit_rad=5 * DEG_TO_RAD)
         speedbrake = 0.0
         if t_s < self.lead_in_s:
             thr = self.trim.throttle_cmd_norm

@@ -54,7 +54,7 @@ import pandas as pd
 
 from aircraft_models import Aircraft, Airframe
 from synth import jsbsim_io as io
-from synth.campaign import Campaign, CampaignError, Job, _manifest_header
+from synth.campaign import Campaign, CampaignError, Job, manifest_header
 from synth.dataset import (
     BOUNDARY_COLUMNS,
     SORTIE_FILES,
@@ -70,8 +70,8 @@ from synth.environment import Environment
 from synth.errors import ErrorConfig
 from synth.flight import (
     FlightError,
-    _advice,
-    _where,
+    departure_advice,
+    describe_spec,
     fly_controller,
     segment_bounds,
     start_flight,
@@ -80,13 +80,13 @@ from synth.flight import (
 from synth.instrument import instrument
 from synth.local_flow import load_adc_baseline, load_local_flow_truth
 from synth.maneuvers import (
-    _DEG,
+    DEG_TO_RAD,
     Controller,
     ManeuverFailure,
     ManeuverSpec,
     TrimPoint,
-    _wrap,
     make_controller,
+    wrap_angle_rad,
 )
 from synth.truth import TruthTrajectory
 
@@ -154,8 +154,8 @@ class Transition(Controller):
         if self.stage == "settle":
             steady = (abs(x[_C["mach"]] - self.target_mach) < 0.003
                       and abs(x[_C["h_m"]] - self.target_h_m) < 10.0
-                      and abs(_wrap(self.psi_cmd_rad - x[_C["psi_rad"]])) < 1.0 * _DEG
-                      and abs(x[_C["phi_rad"]]) < 1.0 * _DEG
+                      and abs(wrap_angle_rad(self.psi_cmd_rad - x[_C["psi_rad"]])) < 1.0 * DEG_TO_RAD
+                      and abs(x[_C["phi_rad"]]) < 1.0 * DEG_TO_RAD
                       and abs(self.hdot_mps(x)) < 0.5)
             self._steady_s = self._steady_s + self.dt_s if steady else 0.0
             self.done = self._steady_s >= self.steady_s
@@ -164,7 +164,7 @@ class Transition(Controller):
         self._advance(x)
         self.t_s += self.dt_s
         phi = x[_C["phi_rad"]]
-        phi_cmd = self.bank_for_heading(x, limit_rad=30 * _DEG)
+        phi_cmd = self.bank_for_heading(x, limit_rad=30 * DEG_TO_RAD)
         hdot_cmd = max(-self.climb_rate_mps,
                        min(self.climb_rate_mps, 0.2 * (self.h_cmd_m - x[_C["h_m"]])))
         err = hdot_cmd - self.hdot_mps(x)
@@ -274,7 +274,7 @@ def fly_sortie(
                     record(fly_controller(fdm, reader, leg, chunk, dt_s, _TRANSITION_ADVICE))
             except ManeuverFailure as exc:
                 raise FlightError(
-                    f"sortie (aircraft {aircraft.id}): transition to {mid0} ({_where(spec)}), "
+                    f"sortie (aircraft {aircraft.id}): transition to {mid0} ({describe_spec(spec)}), "
                     f"t = {t0 + exc.t_s:.1f} s into the sortie: {exc.what}. Try: {exc.advice}."
                 ) from None
             gear_down = spec.gear_down
@@ -287,11 +287,11 @@ def fly_sortie(
         controller = make_controller(spec, trim, dt_s)
         n = int(round(spec.duration_s / dt_s)) + 1
         try:
-            si = fly_controller(fdm, reader, controller, n, dt_s, _advice(spec), finish=False)
+            si = fly_controller(fdm, reader, controller, n, dt_s, departure_advice(spec), finish=False)
         except ManeuverFailure as exc:
             t_in = max(n_total - 1, 0) * dt_s
             raise FlightError(
-                f"sortie (aircraft {aircraft.id}): maneuver {mid0} ({_where(spec)}), t = "
+                f"sortie (aircraft {aircraft.id}): maneuver {mid0} ({describe_spec(spec)}), t = "
                 f"{exc.t_s:.2f} s into it ({t_in + exc.t_s:.1f} s into the sortie): {exc.what}. "
                 f"Try: {exc.advice}."
             ) from None
@@ -399,7 +399,7 @@ def fly_sortie_campaign(
                       common_rate_hz=rate,
                       truth_model=load_local_flow_truth(campaign.local_flow_truth),
                       adc_baseline=load_adc_baseline(campaign.adc_baseline))
-    header = _manifest_header(campaign)
+    header = manifest_header(campaign)
     truth = flown.truth
     manifest = {
         **header,
