@@ -434,6 +434,18 @@ def start_engines(fdm: jsbsim.FGFDMExec) -> None:
     fdm["propulsion/set-running"] = -1
 
 
+def freeze_fuel(fdm: jsbsim.FGFDMExec) -> None:
+    """Stop the engines burning fuel (``propulsion/fuel_freeze``): the mass stays the loaded one."""
+    fdm["propulsion/fuel_freeze"] = 1.0
+
+
+def add_pitch_trim(fdm: jsbsim.FGFDMExec, stick_norm: float) -> None:
+    """Move ``stick_norm`` (-1..1, the f16's ``fcs/elevator-cmd-norm`` units) into the pitch trim
+    (``fcs/pitch-trim-cmd-norm``, summed with the stick at the FCS input): the pilot trims the
+    stick force out, the stick returns to neutral with the same command."""
+    fdm["fcs/pitch-trim-cmd-norm"] = fdm["fcs/pitch-trim-cmd-norm"] + stick_norm
+
+
 def set_gear(fdm: jsbsim.FGFDMExec, down: bool) -> None:
     """Command the landing gear (the trim moves it to the commanded position at once)."""
     fdm["gear/gear-cmd-norm"] = 1.0 if down else 0.0

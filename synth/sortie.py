@@ -91,10 +91,6 @@ from synth.maneuvers import (
 from synth.truth import TruthTrajectory
 
 _C = io.COL
-#: the f16 FCS's pitch trim, summed with the stick (fcs/elevator-cmd-norm) at its input
-PITCH_TRIM = "fcs/pitch-trim-cmd-norm"
-#: JSBSim's switch that stops the engines burning fuel
-FUEL_FREEZE = "propulsion/fuel_freeze"
 _TRANSITION_ADVICE = ("fly the test points in an order with smaller steps between them (the f16 "
                       "flies Mach 0.3 only low down), or lower Transition.climb_rate_mps")
 
@@ -243,7 +239,7 @@ def fly_sortie(
     fdm, reader, trim, trim_meta = start_flight(specs[0], airframe, aircraft, env, dt_s)
     # the fuel load stays the aircraft's (as in a per-maneuver run): a whole campaign's
     # configuration is more flight than one tankful, and its engine would flame out
-    fdm[FUEL_FREEZE] = 1.0
+    io.freeze_fuel(fdm)
     pieces: list[np.ndarray] = []
     n_total = 0  # samples recorded so far; the next leg's first sample is the last one's end
 
@@ -282,7 +278,7 @@ def fly_sortie(
                                 "stages": list(leg.stages)})
             # the pilot trims the stick force out: the maneuvers' stick programmes are increments
             # from a trimmed stick (the f16 FCS adds stick and pitch trim before anything else)
-            fdm[PITCH_TRIM] = fdm[PITCH_TRIM] + leg.elevator_cmd_norm
+            io.add_pitch_trim(fdm, leg.elevator_cmd_norm)
             trim = trim_point(reader.read_si())
         controller = make_controller(spec, trim, dt_s)
         n = int(round(spec.duration_s / dt_s)) + 1
