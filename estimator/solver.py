@@ -28,8 +28,11 @@ before the iterations): parameters no sample depends on (a table breakpoint beyo
 range) and combinations the data cannot separate (a free table offset beside free biases: one
 member of each such set is held, the fewest that restore the rank) are held at their start
 values; at the solution, a parameter whose Cramér-Rao deviation exceeds half its allowed range is
-held too, and the estimation iterates again. Each held parameter keeps its reason
-(:attr:`EstimationResult.state`).
+held too, and the estimation iterates again. So it does where a round crawled to the iteration
+limit and the screen there holds a parameter it left free (a gain whose argument the iterations
+drove to zero, e.g. a sideslip gain in maneuvers without sideslip: Gauss-Newton crawls along the
+curved valley of the product); otherwise the iteration limit stays a failure. Each held parameter
+keeps its reason (:attr:`EstimationResult.state`).
 
 Standard deviations: Cramér-Rao, ``sqrt(diag(M^-1))``, with the correlations; and the honest ones
 (:mod:`estimator.uncertainty`): coloured and cross-correlated residuals with a modelled spectrum,
@@ -299,14 +302,28 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         theta, evals = it.theta, it.evals
         iterations += it.iterations
         history += it.history
-        if not it.status.converged or rnd == opt.screen_rounds:
+        crawled = it.status == Status.ITERATION_LIMIT
+        if not (it.status.converged or crawled) or rnd == opt.screen_rounds:
             break
         # identifiability at the solution: the whole screen again, from the requested free set
         st_new, holds_new = _screen(problem, Structure(problem, requested), evals,
                                     channel_variances(it.sse, it.cnt), opt, loose=True)
+        if crawled and not (st.free & ~st_new.free).any():
+            # the iteration limit stays a failure unless what the round crawled along is held now
+            break
         if np.array_equal(st_new.free, st.free):
             holds = holds_new
             break
+        # a round that crawled to the iteration limit along a direction the screen now holds (a
+        # bilinear gain whose argument the iterations drove to zero: f(alpha) * (beta + b) in
+        # maneuvers without sideslip, where the start's sideslip made the gain look determined)
+        # iterates again without it; the next round must converge on its own
+        if crawled:
+            keys = problem.parameters.keys
+            stage_notes.append(
+                f"round {rnd} reached the iteration limit ({it.message}); the identifiability screen "
+                f"there holds {', '.join(keys[i] for i in np.flatnonzero(st.free & ~st_new.free))}, "
+                "which the data do not determine: estimated again without them")
         stage_notes += _restore_held(model, theta, start, st.free & ~st_new.free)
         st, holds = st_new, holds_new
         evals = _evaluate(model, theta, True)

@@ -61,20 +61,6 @@ def workflow(fly_once):
         return run_workflow(problem, WorkflowOptions())
 
 
-#: Open (issue 13 follow-up): since the flaperon fix (1bb5560) the gear-down stage of this campaign
-#: crawls — each iteration lowers the cost by ~0.015 along v0 of the pitch-only gear-down maneuvers
-#: (a direction the data determine to second order only; undamped step ~22 deviations, the
-#: quadratic model poor there) — and stops at the iteration limit: the workflow says FAILURE,
-#: honestly. The crawl is no minimum: with 120 iterations the stage leaves it near iteration 60 and
-#: ends 190 lower in cost ("converged" at iteration 77), so stopping a crawl early and calling it
-#: converged would be a wrong minimum called converged. Before the fix the same stage needed 30 of
-#: its 40 iterations. To find out: why the pitch-only gear-down maneuvers' v0 crawls (second-order
-#: direction, a mirror minimum at -v0?) and how the solver gets across it in a few iterations.
-_GEAR_DOWN_CRAWL = pytest.mark.xfail(strict=True, reason="gear-down stage crawls along v0 to the iteration "
-                                     "limit since the flaperon fix (see _GEAR_DOWN_CRAWL)")
-
-
-@_GEAR_DOWN_CRAWL
 def test_bins_and_stages(workflow):
     used = workflow.maneuvers[workflow.maneuvers["used"]]
     assert sorted(used[~used["gear_down"]]["bin"].unique()) == [0.5, 0.6]
@@ -94,7 +80,6 @@ def test_installation_biases_recovered(workflow):
     assert abs(ir["truth_deg"].sum()) < 1e-9 and abs(ir["estimate_deg"].sum()) < 1e-9
 
 
-@_GEAR_DOWN_CRAWL
 def test_every_sensor_meets_its_accuracy_against_the_truth(workflow):
     acc, _ = true_accuracy(workflow)
     assert set(acc["gear"]) == {"up", "down"}
