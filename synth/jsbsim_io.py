@@ -31,6 +31,18 @@ It also
   as shipped. A flaperon reaching its stop when flap and aileron add is not modelled (the shipped
   roll terms ignore it too); ``fcs/left-`` and ``right-flaperon-norm`` are left as shipped (no aero
   term reads them);
+* lets the ``f16``'s pilot command reach the alpha limit of the real F-16. The shipped pitch channel
+  clips stick plus trim (``fcs/elevator-cmd-limiter``) to -1 nose up; its loop is proportional only
+  (the integrator of ``fcs/g-load-pid`` is held by its ``trigger``, 1 in flight) with an alpha
+  feedback of 1.047 per rad, so full aft stick balances at 17-20 deg of alpha wings level at low
+  dynamic pressure and at 12-14 deg in a Mach 0.4-0.6 wind-up turn, short of the real F-16's
+  25 deg limiter and of the 28-30 deg the FCS's own comments aim at; a calibration campaign needs
+  the nose probe and the tables' upper breakpoints above 20 deg (issue 13). The patch moves that
+  clip to :data:`F16_AFT_COMMAND_STOP_NORM` (-2.5): full aft command then balances at 22-24 deg in
+  a 1.5 g turn at Mach 0.3-0.4 and low dynamic pressure (20.9 deg for the most forward CG at Mach
+  0.3, 3000 m), still below 25 deg; the elevator's own stop (``fcs/pitch-scheduler`` clipped to
+  -1, 25 deg of surface) and every other gain are as shipped, so a command within the shipped
+  range -1..0.44 flies exactly as before;
 * writes a flat, non-rotating planet definition (a sphere so large that curvature and transport
   rate are negligible, with constant gravity) and builds an :class:`jsbsim.FGFDMExec` on it or on
   JSBSim's default rotating WGS84 earth;
@@ -73,6 +85,9 @@ F16_TEF_DOWN_RAD = 0.349
 F16_TEF_RAD_PER_NORM = 1.0 / 2.864789
 #: The condition the patch adds to the f16's flaps-down test: the landing-gear handle is down.
 F16_GEAR_HANDLE_DOWN_TEST = "gear/gear-cmd-norm ge 0.5"
+#: Nose-up stop of the f16's pilot command (stick plus trim), norm: -1 as shipped, extended so
+#: that full aft command reaches about the real F-16's alpha limit (module docstring).
+F16_AFT_COMMAND_STOP_NORM = -2.5
 
 #: Name of the point mass added to every patched model.
 BALLAST_NAME = "Ballast"
@@ -152,8 +167,23 @@ def _patch_f16_flaperons(root: ET.Element) -> None:
     ET.SubElement(mix, "gain").text = repr(F16_TEF_RAD_PER_NORM)
 
 
+def _patch_f16_pitch_authority(root: ET.Element) -> None:
+    """Nose-up stop of stick plus trim at :data:`F16_AFT_COMMAND_STOP_NORM` (module doc)."""
+    what = "pitch-authority"
+    lim = _f16_component(root, "summer", "fcs/elevator-cmd-limiter", what)
+    stop = lim.find("clipto/min")
+    if stop is None or float(stop.text or "nan") != -1.0:
+        raise RuntimeError(
+            f"JSBSim {JSBSIM_VERSION}: the f16's fcs/elevator-cmd-limiter no longer clips at -1; "
+            f"the {what} patch no longer applies - check the model's FCS and update "
+            "synth/jsbsim_io.py (_patch_model_xml)"
+        )
+    stop.text = repr(F16_AFT_COMMAND_STOP_NORM)
+
+
 def _patch_model_xml(model: str, text: bytes) -> bytes:
-    """Return the patched aircraft definition (f16: rudder and flaperon fixes; ballast point mass)."""
+    """Return the patched aircraft definition (f16: rudder, flaperon and pitch-authority fixes;
+    ballast point mass)."""
     root = ET.fromstring(text)
     if model == "f16":
         pid = _f16_component(root, "pid", "fcs/yaw-load-pid", "rudder (SPEC §7)")
@@ -165,6 +195,7 @@ def _patch_model_xml(model: str, text: bytes) -> bytes:
         for out in pid.findall("output"):
             pid.remove(out)
         _patch_f16_flaperons(root)
+        _patch_f16_pitch_authority(root)
     mass_balance = root.find("mass_balance")
     if mass_balance is None:
         raise RuntimeError(f"JSBSim model {model!r} has no <mass_balance>; cannot add ballast")

@@ -35,7 +35,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from aircraft_models.schema import check, field_keys
-from synth.jsbsim_io import COL
+from synth.jsbsim_io import COL, F16_AFT_COMMAND_STOP_NORM
 
 KINDS = (
     "pitch_doublet",
@@ -91,8 +91,11 @@ LOW_SPEED_DEFAULTS: dict[str, dict[str, float]] = {
 FULL_DEFAULTS_FROM_MACH = 0.5
 
 #: Defaults from Mach :data:`HIGH_SPEED_DEFAULTS_FROM_MACH` up where they differ: the wind-up turn
-#: winds up to 12 deg or 4.5 g, whichever comes first. The f16's FCS runs out of stick (command at
-#: its aft stop) at an alpha that falls with Mach, and sooner with a forward CG: PT1, whose nose
+#: winds up to 12 deg or 4.5 g, whichever comes first. Measured with the f16's shipped nose-up
+#: command stop (-1; the generated model's is -2.5, synth.jsbsim_io, which gives more, so these
+#: defaults keep the command within the shipped range, and the turns fly as they did before the
+#: stop moved): the FCS ran out of stick at an alpha that falls with Mach, and sooner with a
+#: forward CG: PT1, whose nose
 #: ballast puts its CG furthest forward in the fleet, reaches at most 12.9 deg (4.2 g) at Mach 0.7,
 #: 6000 m, 13.2 deg (4.9 g) at Mach 0.8, 8000 m and 4.8 g (9.4 deg) at Mach 0.9, 8000 m, the other
 #: aircraft 0.3-2 deg more (calm air); winding up more slowly does not help (12.8-12.9 deg at Mach
@@ -578,18 +581,19 @@ class WindupTurn(Controller):
 
     The f16's FCS caps the alpha a wind-up reaches. Its pitch loop is proportional only (the
     integrator of ``fcs/g-load-pid`` is held by its ``trigger``, which is 1 in flight) and adds
-    1.047 x alpha to the elevator while scheduling the stick's authority down from 1 at 0 deg to
-    0.11 at 28.6 deg; at the stick's aft stop the elevator balances where, roughly,
-    ``alpha = (1.3 + elevator_trim_norm - 1.86 q) / 3.36`` rad: about 17-20 deg wings level at
-    low speed (less with a forward CG) and less in a turn, whose pitch rate q grows with load
-    factor (at Mach 0.4-0.6 in the default campaign 14 deg, but 12.3-13.0 deg for PT1 and PT2,
-    whose CG is furthest forward). A turn to 20 deg or more is out of this FCS's reach. So a
-    wind-up also ends, as a test pilot's does, at full aft stick (the pilot's command at or beyond
-    the stop, -1, through the final hold) when that is at most :attr:`FCS_LIMIT_MARGIN_RAD` short
-    of ``alpha_max_rad`` (``notes['aft_stop']``); further short, it fails. High-alpha turns
-    (``alpha_max_rad`` 17.5 deg in the default campaign) are flown where the dynamic pressure is
-    low, so the 1 g alpha is already near 14 deg: Mach 0.3 at 5500 m, Mach 0.4 at 9500 m, where
-    they climb 120-150 m at 1.1-1.2 g.
+    1.047 x alpha to the elevator while scheduling the command's authority down from 1 at 0 deg to
+    0.11 at 28.6 deg. With the shipped nose-up stop of stick plus trim (-1) full aft stick balanced
+    at about 17-20 deg wings level at low speed and at 12-14 deg in Mach 0.4-0.6 turns, short of
+    the real F-16's 25 deg; the generated model moves that stop to
+    :data:`synth.jsbsim_io.F16_AFT_COMMAND_STOP_NORM` (-2.5), where full aft command balances at
+    22-24 deg in a 1.5 g turn at low dynamic pressure (less with a forward CG, and less in a
+    tighter turn, whose pitch rate feeds back). A wind-up ends, as a test pilot's does, at full aft
+    command (at or beyond the stop through the final hold) when that is at most
+    :attr:`FCS_LIMIT_MARGIN_RAD` short of ``alpha_max_rad`` (``notes['aft_stop']``); further short,
+    it fails. High-alpha turns (``alpha_max_rad`` 22 deg in the default campaign) are flown where
+    the dynamic pressure is low, so the 1 g alpha is already near 14 deg: Mach 0.3 at 5500 m,
+    Mach 0.4 at 9500 m, where every configuration of the default fleet reaches 22 deg at
+    1.4-1.5 g, climbing about 100 m, with its command at -1.3 to -1.9.
     """
 
     mach_tolerance = 0.05
@@ -669,9 +673,9 @@ class WindupTurn(Controller):
         reached = float(np.max(si[:, _ALPHA]))
         self.notes["alpha_peak_rad"] = reached
         self.notes["nz_peak"] = float(np.max(-si[:, _FZ] / (si[:, _MASS] * si[:, _G])))
-        # the stick at the f16's aft stop (-1) through the final hold: the FCS gives no more
+        # the command at the f16's nose-up stop through the final hold: the FCS gives no more
         hold = t_s >= self.ramp_end_s
-        at_stop = bool(np.max(si[hold, _ELEVATOR_CMD]) <= -1.0)
+        at_stop = bool(np.max(si[hold, _ELEVATOR_CMD]) <= F16_AFT_COMMAND_STOP_NORM)
         self.notes["aft_stop"] = at_stop
         # a wind-up turn ends at alpha_max or nz_max, whichever comes first, or at the FCS's
         # limit when that is at most FCS_LIMIT_MARGIN_RAD short of alpha_max
@@ -684,11 +688,12 @@ class WindupTurn(Controller):
                 f"{self.notes['nz_peak']:.1f})"
                 + (", the stick at its aft stop" if at_stop else ""),
                 float(t_s[-1]),
-                "lower alpha_max_rad or nz_max to what the f16's FCS gives at full aft stick: "
-                "about 12-17 deg of alpha at Mach 0.4-0.8 and 6000-8000 m (the least with a "
-                "forward CG; less lower down, where load factor binds first), near 5 g at Mach "
-                "0.9 and 8000 m and less higher up; a slower wind-up (longer duration_s) does not "
-                "raise them",
+                "lower alpha_max_rad or nz_max to what the f16's FCS gives at full aft "
+                "command: about 22-24 deg of alpha in a 1.5 g turn at Mach 0.3-0.4 and low "
+                "dynamic pressure, 20-22 deg at Mach 0.4-0.5 and 3000-6000 m (the least with a "
+                "forward CG); from Mach 0.6 the turn runs out of thrust first (Mach drifts) near "
+                "20 deg and 4.6 g at Mach 0.6, 15-18 deg and 5.5-6.5 g at Mach 0.7-0.9; a slower "
+                "wind-up (longer duration_s) does not raise them",
             )
 
 

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
+import jsbsim
 import numpy as np
 import pytest
 
@@ -125,6 +127,29 @@ def test_patched_f16_mixes_the_flaperons_from_the_flap_schedule():
     tef = xml.find(".//switch[@name='fcs/tef-pos-rad']")
     (down,) = [t for t in tef.findall("test") if float(t.get("value")) == FLAP_DOWN_RAD]
     assert io.F16_GEAR_HANDLE_DOWN_TEST in down.text and "vc-kts lt 250" in down.text
+
+
+def _pitch_channel(root: ET.Element) -> list[bytes]:
+    ch = root.find(".//flight_control/channel[@name='Pitch']")
+    return [ET.tostring(c) for c in ch]
+
+
+def test_patched_f16_pitch_channel_differs_only_in_its_nose_up_command_stop():
+    """The generated f16's pilot command (stick plus trim) stops at -2.5 nose up, not -1, so full
+    aft command reaches about the real F-16's 25 deg (synth.jsbsim_io); every other element of
+    the pitch channel is as shipped, so a command within -1..0.44 flies as before."""
+    shipped_file = Path(jsbsim.get_default_root_dir()) / "aircraft" / "f16" / "f16.xml"
+    shipped = ET.parse(shipped_file).getroot()
+    patched = ET.parse(io.patched_root_dir("f16") / "aircraft" / "f16" / "f16.xml").getroot()
+    name = "fcs/elevator-cmd-limiter"
+    lim = patched.find(f".//summer[@name='{name}']")
+    assert float(lim.find("clipto/min").text) == io.F16_AFT_COMMAND_STOP_NORM == -2.5
+    assert float(lim.find("clipto/max").text) == 0.44
+    assert float(shipped.find(f".//summer[@name='{name}']/clipto/min").text) == -1.0
+    differ = [i for i, (a, b) in enumerate(zip(_pitch_channel(shipped), _pitch_channel(patched),
+                                                strict=True)) if a != b]
+    assert [list(shipped.find(".//flight_control/channel[@name='Pitch']"))[i].get("name")
+            for i in differ] == [name]
 
 
 def test_cache_is_keyed_by_the_generated_definition(tmp_path, monkeypatch):

@@ -60,9 +60,12 @@ def test_windup_turn_is_coordinated_and_winds_up(aircraft, mach, altitude_m):
 
 
 #: the default campaign's high-alpha turns (campaigns/default.toml): target, Mach, altitude
-HIGH_ALPHA_DEG = 17.5
+HIGH_ALPHA_DEG = 22.0
 HIGH_ALPHA_POINTS = [(0.3, 5500.0), (0.4, 9500.0)]
-#: the f16's limits (its FCS limits load factor to 9 g; its alpha limiter acts towards 30 deg)
+#: issue 13: the high-alpha turn reaches at least this at Mach 0.3 and 0.4 (the paper's Tejas
+#: calibration went well past 20 deg at low Mach)
+REQUIRED_PEAK_ALPHA_RAD = 20.0 * DEG
+#: the f16's limits (its FCS limits load factor to 9 g; the real F-16's alpha limiter, 25 deg)
 F16_NZ_LIMIT = 9.0
 F16_ALPHA_LIMIT_RAD = 25.0 * DEG
 
@@ -75,35 +78,34 @@ def test_high_alpha_windup_turn(aircraft, mach, altitude_m):
     (tr,) = fly_maneuver(spec, FLEET.airframe, FLEET.aircraft[aircraft], CAMPAIGN_AIR)
     notes = tr.meta["controller"]
     peak_rad = float(np.max(tr.alpha_rad))
-    # the target, or (PT1, forward CG) the FCS's limit with the stick at its aft stop
-    if aircraft == "PV3":
-        assert peak_rad >= (HIGH_ALPHA_DEG - 0.1) * DEG and not notes["aft_stop"]
-    else:
-        assert notes["aft_stop"] and 16.0 * DEG <= peak_rad < (HIGH_ALPHA_DEG - 0.5) * DEG
+    # the target itself, with command to spare (forward CG too), within the f16's limits
+    assert peak_rad >= (HIGH_ALPHA_DEG - 0.1) * DEG and not notes["aft_stop"]
+    assert peak_rad >= REQUIRED_PEAK_ALPHA_RAD
     assert peak_rad < F16_ALPHA_LIMIT_RAD
     nz = -tr.specific_force_cg_body_mps2[:, 2] / tr.g_mps2
     assert nz.max() < F16_NZ_LIMIT
     assert np.max(np.abs(tr.beta_rad)) <= MAX_COORDINATED_BETA_RAD
     assert np.max(np.abs(tr.mach - mach)) <= 0.05
-    assert np.max(np.abs(tr.h_m - tr.h_m[0])) <= 200.0  # climbs 120-150 m
+    assert np.max(np.abs(tr.h_m - tr.h_m[0])) <= 200.0  # climbs about 100 m
     assert np.ptp(tr.alpha_rad) >= 2.0 * DEG
 
 
-def test_windup_turn_to_20_deg_is_beyond_the_fcs():
-    """The f16's FCS caps alpha (synth.maneuvers.WindupTurn): no turn reaches 20 deg, even where
-    the dynamic pressure is lowest; the failure says the stick was at its aft stop."""
-    spec = ManeuverSpec.from_dict({"kind": "windup_turn", "mach": 0.3, "altitude_m": 5500.0,
-                                   "alpha_max_deg": 22.0})
-    with pytest.raises(FlightError, match="reached neither alpha 22.0 deg .*aft stop"):
-        fly_maneuver(spec, FLEET.airframe, FLEET.aircraft["PV3"], CAMPAIGN_AIR)
+def test_windup_turn_beyond_the_fcs_limit_fails():
+    """The generated f16's FCS still caps alpha (synth.maneuvers.WindupTurn): PT1 (forward CG)
+    at Mach 0.3, 3000 m stops near 21 deg of a 25 deg target; the failure says the command was
+    at its stop."""
+    spec = ManeuverSpec.from_dict({"kind": "windup_turn", "mach": 0.3, "altitude_m": 3000.0,
+                                   "alpha_max_deg": 25.0})
+    with pytest.raises(FlightError, match="reached neither alpha 25.0 deg .*aft stop"):
+        fly_maneuver(spec, FLEET.airframe, FLEET.aircraft["PT1"], CAMPAIGN_AIR)
 
 
 def test_forward_cg_windup_ends_at_the_fcs_limit():
-    """PT1 (forward CG) at the default campaign's Mach 0.4, 3000 m: the FCS stops the wind-up
-    short of the default 14 deg with the stick at its aft stop; that ends it, as it does a test
-    pilot's."""
-    (tr,) = fly_maneuver(ManeuverSpec(kind="windup_turn", mach=0.4, altitude_m=3000.0),
-                         FLEET.airframe, FLEET.aircraft["PT1"], CAMPAIGN_AIR)
+    """PT1 (forward CG) at Mach 0.3, 5500 m asked for 23.5 deg: the FCS stops the wind-up 1-2 deg
+    short with the command at its stop; that ends it, as it does a test pilot's."""
+    spec = ManeuverSpec.from_dict({"kind": "windup_turn", "mach": 0.3, "altitude_m": 5500.0,
+                                   "alpha_max_deg": 23.5})
+    (tr,) = fly_maneuver(spec, FLEET.airframe, FLEET.aircraft["PT1"], CAMPAIGN_AIR)
     spec, notes = tr.meta["maneuver"], tr.meta["controller"]
     assert notes["aft_stop"]
     assert (spec["alpha_max_rad"] - 2.0 * DEG <= notes["alpha_peak_rad"]
