@@ -209,6 +209,33 @@ RATE_HZ = 40.0
 FLIGHT_SENSORS = {k: SENSORS[k] for k in ("imu", "vane_left", "vane_right", "side_probe", "nose_probe")}
 
 
+def ned_to_body(euler_rad: np.ndarray) -> np.ndarray:
+    """``C_bn`` (N, 3, 3), NED to body axes, from Euler angles (N, 3) (phi, theta, psi), rad."""
+    ph, th, ps = euler_rad[:, 0], euler_rad[:, 1], euler_rad[:, 2]
+    c1, s1, c2, s2, c3, s3 = np.cos(ps), np.sin(ps), np.cos(th), np.sin(th), np.cos(ph), np.sin(ph)
+    r3 = np.zeros((ph.size, 3, 3))  # psi about z
+    r3[:, 0, 0], r3[:, 0, 1], r3[:, 1, 0], r3[:, 1, 1], r3[:, 2, 2] = c1, s1, -s1, c1, 1.0
+    r2 = np.zeros((ph.size, 3, 3))  # theta about y
+    r2[:, 0, 0], r2[:, 0, 2], r2[:, 1, 1], r2[:, 2, 0], r2[:, 2, 2] = c2, -s2, 1.0, s2, c2
+    r1 = np.zeros((ph.size, 3, 3))  # phi about x
+    r1[:, 0, 0], r1[:, 1, 1], r1[:, 1, 2], r1[:, 2, 1], r1[:, 2, 2] = 1.0, c3, s3, -s3, c3
+    return r1 @ r2 @ r3
+
+
+def gauss_markov_wind(t_s: np.ndarray, sigma_mps: float, L_m: float, v_mps: float,
+                      rng: np.random.Generator) -> np.ndarray:
+    """Three independent first-order Gauss-Markov components (N, 3) on a uniform grid, stationary
+    from the start: ``x[k+1] = a x[k] + sigma sqrt(1 - a^2) n``, ``a = exp(-V dt / L)`` (exact)."""
+    a = np.exp(-v_mps * float(t_s[1] - t_s[0]) / L_m)
+    n = rng.standard_normal((t_s.size, 3))
+    x = np.empty((t_s.size, 3))
+    x[0] = sigma_mps * n[0]
+    q = sigma_mps * np.sqrt(1.0 - a * a)
+    for k in range(1, t_s.size):
+        x[k] = a * x[k - 1] + q * n[k]
+    return x
+
+
 def truth_values(rng: np.random.Generator) -> dict:
     """Injected parameter values of :class:`Flight` (SI); the tables from ``_table_noise``."""
     return {
@@ -230,9 +257,18 @@ class Flight:
     specs : the ``tejas`` model set's parameter specifications (their table breakpoints).
     T : maneuver length, s.
     tau_override : time delays replacing the truth's.
+    turbulence : ``(sigma_mps, L_m, seed)``: the flow sensors (and the airspeed) see the air moving
+        with a turbulent wind ``dW`` (NED, m/s; three independent first-order Gauss-Markov
+        components of intensity ``sigma`` and scale length ``L`` at the flight's 150 m/s, drawn
+        exactly on a 1 ms grid and interpolated), ``V_air = V - C_bn dW``, while the IMU and the
+        attitude and altitude channels follow the (ground-relative) flight; the draw of maneuver
+        ``k`` is :attr:`wind_ned_mps` ``[id]`` = (t_s, dW). None: calm air.
     """
 
-    def __init__(self, truth: dict, specs, T: float = 25.0, tau_override: dict | None = None):
+    def __init__(self, truth: dict, specs, T: float = 25.0, tau_override: dict | None = None,
+                 turbulence: tuple[float, float, int] | None = None):
+        self.turbulence = turbulence
+        self.wind_ned_mps: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.specs = {s.name: s for s in specs}
         tn = truth["_table_noise"]
         self.bp = {n: np.asarray(self.specs[n].breakpoints) for n in TABLES}
@@ -259,7 +295,22 @@ class Flight:
             x[:, 6] = np.interp(ts, t_fine, h_fine)
             return x
 
-        meas = tejas_channels(t, states_at, inputs, FLIGHT_SENSORS, R_CG, tr, tr, self.tables, self.bp)
+        flow_states = states_at
+        if self.turbulence is not None:
+            gust = gauss_markov_wind(t_fine, *self.turbulence[:2], 150.0,
+                                     np.random.default_rng([self.turbulence[2], int(mid[1:])]))
+            self.wind_ned_mps[mid] = (t, np.stack([np.interp(t, t_fine, d) for d in gust.T], 1))
+
+            def flow_states(ts):
+                # the air's velocity relative to the aircraft: V - C_bn dW
+                x = states_at(ts)
+                w_ned = np.stack([np.interp(ts, t_fine, d) for d in gust.T], 1)
+                x[:, :3] -= np.einsum("nij,nj->ni", ned_to_body(x[:, 3:6]), w_ned)
+                return x
+
+        # the attitude and altitude channels are the same either way (flow_states changes the
+        # velocity only)
+        meas = tejas_channels(t, flow_states, inputs, FLIGHT_SENSORS, R_CG, tr, tr, self.tables, self.bp)
         x0 = states_at(t[:1])[0]
         self_ic = dict(zip(("u0", "v0", "w0", "phi0", "theta0", "psi0", "h0"), x0, strict=True))
         return ManeuverData(

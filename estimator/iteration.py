@@ -55,16 +55,50 @@ def _evaluate(model: Model, theta: np.ndarray, jacobian: bool) -> Evaluation:
     return model.evaluate_all(theta, jacobian=jacobian, keep_jacobian=False)
 
 
+class OutputErrorLikelihood:
+    """The output-error cost of the iterations (module docstring of :mod:`estimator.solver`):
+    residual sums per channel, ``R`` in closed form between the steps.
+
+    The iterations see a likelihood through five methods, so that another one (the filter-error
+    method, :class:`estimator.filter_error.FilterErrorLikelihood`) runs the same Gauss-Newton
+    iterations: ``evaluate`` (the model at a parameter vector, with or without the Jacobian),
+    ``stats`` (what the cost needs of an evaluation), ``relax`` (the noise statistics at an
+    iterate, held through its step), ``cost`` and ``normal`` (the normal equations).
+    """
+
+    def __init__(self, model: Model):
+        self.model = model
+        self.n_channels = len(model.problem.channels)
+
+    def evaluate(self, theta: np.ndarray, jacobian: bool) -> Evaluation:
+        return _evaluate(self.model, theta, jacobian)
+
+    def stats(self, ev: Evaluation):
+        return residual_sums(ev, self.n_channels)
+
+    def relax(self, ev: Evaluation, stats):
+        return channel_variances(*stats)
+
+    def cost(self, stats, noise) -> float:
+        return ml_cost(*stats, noise)
+
+    def normal(self, st: Structure, ev: Evaluation, noise):
+        return build_normal(st, ev, noise)
+
+
 def _gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOptions,
-                  evals: Evaluation | None = None, label: str = "") -> _Iterated:
+                  evals: Evaluation | None = None, label: str = "", lik=None) -> _Iterated:
     """Levenberg-Marquardt-safeguarded Gauss-Newton iterations with relaxation of ``R`` (module
-    docstring) until the undamped step is negligible."""
+    docstring) until the undamped step is negligible; ``lik`` the likelihood (default: the
+    output-error one, :class:`OutputErrorLikelihood`)."""
     nch = len(model.problem.channels)
     keys = model.problem.parameters.keys
+    lik = OutputErrorLikelihood(model) if lik is None else lik
     theta = theta.copy()
     if evals is None:
-        evals = _evaluate(model, theta, True)
-    sse, cnt = residual_sums(evals, nch)
+        evals = lik.evaluate(theta, True)
+    stats = lik.stats(evals)
+    noise = None
     lam = opt.lm_lambda0
     history: list[float] = []
     status, message = Status.ITERATION_LIMIT, ""
@@ -73,10 +107,10 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpt
     it = 0
     order = np.concatenate([st.glob] + [v for v in st.local_of_arr if v.size]).astype(int)
     for it in range(1, opt.max_iterations + 1):
-        R = channel_variances(sse, cnt)
-        cost0 = ml_cost(sse, cnt, R)
+        noise = lik.relax(evals, stats)
+        cost0 = lik.cost(stats, noise)
         history.append(cost0)
-        N = build_normal(st, evals, R)
+        N = lik.normal(st, evals, noise)
         # the undamped Gauss-Newton step judges convergence: a damped one shrinks with the damping
         gn, _, _, Sinv, Ainv, _ = bounded_solve(N, st, theta, 0.0, opt.rank_rtol)
         sig = np.zeros(theta.size)
@@ -99,7 +133,7 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpt
                        f"{max(predicted, 0.0):.1e} (< {opt.decrease_tol}); largest step "
                        f"{moved_max:.1e} deviations")
             break
-        best = None  # (decrease, iterate, its evaluation, sse, cnt, evaluated with the Jacobian)
+        best = None  # (decrease, iterate, its evaluation, its stats, evaluated with the Jacobian)
         evaluated = 0  # trial points the model could be evaluated at
         for attempt in range(12):
             step = bounded_solve(N, st, theta, lam, opt.rank_rtol)[0]
@@ -107,17 +141,17 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpt
             try:
                 # the first trial is usually accepted and is then the next iterate: evaluate it
                 # with the Jacobian right away (the values are the same either way)
-                trial_ev = _evaluate(model, trial, attempt == 0)
+                trial_ev = lik.evaluate(trial, attempt == 0)
             except ModelEvaluationError:
                 # the step left the model's domain (e.g. a table steeper than 1:1 in an implicit
                 # model): a rejected step, damped further
                 lam = max(lam, 1e-6) * 10.0
                 continue
             evaluated += 1
-            sse_t, cnt_t = residual_sums(trial_ev, nch)
-            cost_t = ml_cost(sse_t, cnt_t, R)
+            stats_t = lik.stats(trial_ev)
+            cost_t = lik.cost(stats_t, noise)
             if np.isfinite(cost_t) and cost_t < cost0:
-                best = (cost0 - cost_t, trial, trial_ev, sse_t, cnt_t, attempt == 0)
+                best = (cost0 - cost_t, trial, trial_ev, stats_t, attempt == 0)
                 break
             lam = max(lam, 1e-6) * 10.0
         if best is None or best[0] < max(opt.decrease_tol, 0.1 * predicted):
@@ -128,14 +162,14 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpt
             for t in 10.0 ** -np.arange(0, 9):
                 trial = np.clip(theta + t * gn, st.lo, st.hi)
                 try:
-                    trial_ev = _evaluate(model, trial, False)
+                    trial_ev = lik.evaluate(trial, False)
                 except ModelEvaluationError:
                     continue
                 evaluated += 1
-                sse_t, cnt_t = residual_sums(trial_ev, nch)
-                cost_t = ml_cost(sse_t, cnt_t, R)
+                stats_t = lik.stats(trial_ev)
+                cost_t = lik.cost(stats_t, noise)
                 if np.isfinite(cost_t) and cost0 - cost_t > (best[0] if best else 0.0):
-                    best = (cost0 - cost_t, trial, trial_ev, sse_t, cnt_t, False)
+                    best = (cost0 - cost_t, trial, trial_ev, stats_t, False)
         if not evaluated:
             status = Status.STALLED
             message = ("stalled: the model cannot be evaluated at any step from here (each leaves its "
@@ -144,8 +178,8 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpt
             break
         if best is None or best[0] < opt.decrease_tol:
             if best is not None:  # take the little there is
-                theta, sse, cnt = best[1], best[3], best[4]
-                evals = _evaluate(model, theta, True)
+                theta, stats = best[1], best[3]
+                evals = lik.evaluate(theta, True)
             achieved = best[0] if best is not None else 0.0
             poor = tuple(keys[order[i]] for i in np.argsort(-moved) if moved[i] >= 1.0)
             if moved_max < 10.0 * opt.step_tol_sigma:
@@ -171,9 +205,9 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpt
                            f"({', '.join(poor[:4]) or keys[order[int(np.argmax(moved))]]}): the "
                            "quadratic model is poor there")
             break
-        decrease, theta, trial_ev, sse, cnt, with_jac = best
+        decrease, theta, trial_ev, stats, with_jac = best
         lam = max(lam * 0.1, 1e-9)
-        evals = trial_ev if with_jac else _evaluate(model, theta, True)
+        evals = trial_ev if with_jac else lik.evaluate(theta, True)
         if opt.verbose:
             rel = decrease / max(abs(cost0), 1e-300)
             print(f"{label}iteration {it:3d}: cost {cost0: .6e}, rel. decrease {rel:.2e}, undamped step "
@@ -181,6 +215,7 @@ def _gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpt
     else:
         message = (f"not converged: iteration limit ({opt.max_iterations}) reached; the undamped "
                    f"Gauss-Newton step is still {moved_max:.2g} deviations")
+    sse, cnt = residual_sums(evals, nch)
     return _Iterated(theta, evals, sse, cnt, status, message, it, history, moved_max, poor)
 
 

@@ -110,6 +110,13 @@ class ChannelEval:
         row ``s`` within block ``b`` is the derivative with respect to parameter ``colmap[b, s]``.
     colmap : (B, m) parameter index of each slot, per block.
     normal : per block ``J^T J``, ``J^T e`` and non-zero counts per slot (with the Jacobian).
+    dydv : (n, 3) ``dy / dV`` at the rows, the output's derivative with respect to the body-axis
+        velocity of the air at the sensors (a uniform change of the air's velocity relative to
+        the states' velocity, i.e. minus a wind in body axes), m/s -> SI of the channel; with the
+        Jacobian when asked for (``evaluate_all(..., wind=True)``), else None. The filter-error
+        method's wind sensitivity (:mod:`estimator.filter_error`).
+    shift_s : (n,) the channel's time shift ``tau`` at the rows, s (with ``dydv``): the row's
+        output is the flight at ``t - tau``.
     """
 
     channel: int
@@ -121,6 +128,8 @@ class ChannelEval:
     JT: np.ndarray | None
     colmap: np.ndarray
     normal: tuple | None = field(default=None, repr=False)
+    dydv: np.ndarray | None = field(default=None, repr=False)
+    shift_s: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def J(self) -> np.ndarray | None:
@@ -426,7 +435,7 @@ class Model:
 
     def evaluate_all(self, values: np.ndarray, jacobian: bool = True,
                      maneuvers: tuple[int, ...] | None = None, keep_jacobian: bool = True,
-                     on_channel=None) -> Evaluation:
+                     on_channel=None, wind: bool = False) -> Evaluation:
         """Outputs (and Jacobians) of every channel of the given maneuvers (default: all).
 
         Parameters
@@ -440,6 +449,8 @@ class Model:
         on_channel : called with each :class:`ChannelEval` as soon as it is complete (possibly
             on a worker thread, channels in any order): a caller that needs each channel's
             Jacobian once can use it and drop it (``ce.JT = None``) instead of holding all.
+        wind : with the Jacobian, also each channel's sensitivity to the air's velocity
+            (:attr:`ChannelEval.dydv`).
         """
         p = self.problem
         ks = tuple(range(len(p.maneuvers))) if maneuvers is None else tuple(int(k) for k in maneuvers)
@@ -502,7 +513,7 @@ class Model:
                        for cl in lay.channels for name in cl.state_names}.values())
 
         def channel(cl):
-            ce = self._evaluate_channel(cl, lay, values, S, state_signal, keep_jacobian)
+            ce = self._evaluate_channel(cl, lay, values, S, state_signal, keep_jacobian, wind)
             if on_channel is not None:
                 on_channel(ce)
             return ce
@@ -525,7 +536,7 @@ class Model:
         return Evaluation(ks, X, lay.seg, channels)
 
     def _evaluate_channel(self, cl: _ChannelLayout, lay: _Layout, values, S, state_signal,
-                          keep: bool) -> ChannelEval:
+                          keep: bool, wind: bool = False) -> ChannelEval:
         ch, expr = cl.ch, cl.expr
         jacobian = S is not None
         tau = cl.index_per_sample(cl.didx, values) if cl.didx is not None else 0.0
@@ -552,10 +563,30 @@ class Model:
         else:
             dual, value = None, expr.value(signals, params, tables)
         y = np.broadcast_to(value, cl.z.shape)[cl.rows]
-        J, normal = None, None
+        J, normal, dydv, shift = None, None, None, None
         if jacobian:
             J, normal = self._jacobian(cl, lay, dual, S, state_signal, w, P0, cl.z_rows - y, keep)
-        return ChannelEval(cl.c, cl.mans, cl.rseg, cl.local_rows, y, cl.z_rows, J, cl.colmap, normal)
+            if wind:
+                dydv = self._velocity_sensitivity(cl, lay, dual, state_signal, w, P0)
+                shift = np.broadcast_to(np.asarray(tau, dtype=float), (n_all,))[cl.rows].copy()
+        return ChannelEval(cl.c, cl.mans, cl.rseg, cl.local_rows, y, cl.z_rows, J, cl.colmap, normal,
+                           dydv, shift)
+
+    @staticmethod
+    def _velocity_sensitivity(cl: _ChannelLayout, lay: _Layout, dual, state_signal, w, P0):
+        """``dy/dV`` (n, 3) at the channel's rows: the model's derivatives with respect to its
+        flow signals times theirs with respect to the velocity (``lay.SA``), at the shifted time."""
+        rows = cl.rows
+        n_all = cl.z.size
+        out = np.zeros((rows.size, 3))
+        p0, wr = P0[rows], w[rows][:, None]
+        for name, d in dual.dsignal.items():
+            _, (q, sid, _) = state_signal(name, cl.ch.sensor)
+            if q >= 0 or name in _RATE_INDEX:
+                continue  # Euler angles, altitude and rates do not see the air
+            sa = lay.SA[sid]
+            out += np.broadcast_to(d, (n_all,))[rows][:, None] * ((1.0 - wr) * sa[p0] + wr * sa[p0 + 1])
+        return out
 
     @staticmethod
     def _jacobian(cl: _ChannelLayout, lay: _Layout, dual, S, state_signal, w, P0, e, keep: bool):

@@ -51,6 +51,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from estimator.filter_error import FilterErrorLikelihood, WindOptions
 from estimator.identifiability import (
     _covariance,
     _high_correlations,
@@ -58,7 +59,7 @@ from estimator.identifiability import (
     _parameter_states,
     _screen,
 )
-from estimator.iteration import _evaluate, _gauss_newton, _Iterated, _staged_start
+from estimator.iteration import OutputErrorLikelihood, _evaluate, _gauss_newton, _Iterated, _staged_start
 from estimator.model import Evaluation, Model, ModelEvaluationError
 from estimator.normal_equations import Structure, build_normal, channel_variances, ml_cost, residual_sums
 from estimator.problem import STATE_PARAMS, Problem
@@ -68,6 +69,8 @@ from estimator.verdict import Finding, Severity, Status, judge
 
 #: Start strategies: the staged, data-driven start (:mod:`estimator.start`) or the problem's values.
 STARTS = ("staged", "given")
+#: Estimation methods: output error (calm air) and filter error (turbulence; wind states).
+METHODS = ("output_error", "filter_error")
 
 
 @dataclass(frozen=True)
@@ -107,6 +110,12 @@ class SolverOptions:
     screen_rounds : estimations at most when the identifiability screen at the solution holds
         further parameters.
     verbose : print one line per iteration.
+    method : "output_error" (default; calm air) or "filter_error": the turbulent wind as estimated
+        Gauss-Markov states, the cost the likelihood of a Kalman filter's innovations
+        (:mod:`estimator.filter_error`). The start and the identifiability screen are the
+        output-error ones; the deviations are Cramér-Rao of the filter-error information matrix.
+    wind : the filter-error method's turbulence model (:class:`~estimator.filter_error.WindOptions`;
+        None: its defaults, the intensity estimated per maneuver).
     """
 
     max_iterations: int = 40
@@ -125,8 +134,15 @@ class SolverOptions:
     diagnose: bool = True
     screen_rounds: int = 3
     verbose: bool = False
+    method: str = "output_error"
+    wind: WindOptions | None = None
 
     def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"SolverOptions: method must be one of {METHODS}, got {self.method!r}")
+        if self.wind is not None and self.method != "filter_error":
+            raise ValueError("SolverOptions: wind options are for method='filter_error' (the "
+                             "output-error method has no wind states)")
         starts = (self.start,) if isinstance(self.start, str) else tuple(self.start)
         bad = [s for s in starts if s not in STARTS]
         if bad or not starts:
@@ -292,11 +308,13 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
                        Status.UNDETERMINED)
     held = requested & ~st.free
     stage_notes += _restore_held(model, theta, start, held)
-    evals = _evaluate(model, theta, True)
+    lik = (FilterErrorLikelihood(model, opt.wind) if opt.method == "filter_error"
+           else OutputErrorLikelihood(model))
+    evals = lik.evaluate(theta, True)
     iterations, history = 0, []
     for rnd in range(1, max(opt.screen_rounds, 1) + 1):
         try:
-            it = _gauss_newton(model, theta, st, opt, evals)
+            it = _gauss_newton(model, theta, st, opt, evals, lik=lik)
         except ModelEvaluationError as exc:  # cannot happen after a successful start: a safeguard
             return _failed(problem, theta, t0, str(exc), "report this as a bug, with the data")
         theta, evals = it.theta, it.evals
@@ -326,9 +344,9 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
                 "which the data do not determine: estimated again without them")
         stage_notes += _restore_held(model, theta, start, st.free & ~st_new.free)
         st, holds = st_new, holds_new
-        evals = _evaluate(model, theta, True)
+        evals = lik.evaluate(theta, True)
     return _finish(problem, model, theta, start, st, holds, evals, it, iterations, history, stage_notes,
-                   opt, t0)
+                   opt, t0, lik)
 
 
 def _restore_held(model: Model, theta: np.ndarray, start: np.ndarray, held: np.ndarray) -> list[str]:
@@ -367,16 +385,28 @@ def _failed(problem: Problem, theta: np.ndarray, t0: float, why: str, advice: st
     )
 
 
-def _finish(problem, model, theta, start, st, holds, evals, it, iterations, history, stage_notes, opt, t0
-            ) -> EstimationResult:
+def _finish(problem, model, theta, start, st, holds, evals, it, iterations, history, stage_notes, opt, t0,
+            lik=None) -> EstimationResult:
     """Covariances, diagnostics, findings and verdict at the estimate."""
     ps = problem.parameters
     keys = ps.keys
-    R = channel_variances(it.sse, it.cnt)
-    history = history + [ml_cost(it.sse, it.cnt, R)]
-    N = build_normal(st, evals, R)
+    filter_error = isinstance(lik, FilterErrorLikelihood)
+    wind_findings: list[Finding] = []
+    if filter_error:
+        noise = lik.relax(evals, lik.stats(evals))
+        R = noise.R
+        history = history + [lik.cost(evals, noise)]
+        N = lik.normal(st, evals, noise)
+        wind_findings = lik.findings(noise)
+    else:
+        R = channel_variances(it.sse, it.cnt)
+        history = history + [ml_cost(it.sse, it.cnt, R)]
+        N = build_normal(st, evals, R)
     cov_G, cov_L, unident, correlated = _covariance(N, st, problem, opt)
-    dev = _deviations(model, theta, N, st, R, cov_G, cov_L, unident, opt)
+    # the coloured-residual and IMU-noise deviations are the output-error residuals' (not yet the
+    # innovations'): the filter-error method reports Cramér-Rao deviations and says so
+    dev = _deviations(model, theta, N, st, R, cov_G, cov_L, unident,
+                      replace(opt, colored=False) if filter_error else opt)
     correlated = correlated + _high_correlations(dev.correlation, [keys[i] for i in st.glob],
                                                  opt.correlation_warn)
     # a set still unidentifiable here (the screen's rounds ran out) is reported with the holds
@@ -389,9 +419,10 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
                for j, g in enumerate(st.glob)}
     findings = (_imu_noise_unknown(dev.imu_psd)
                 + _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs)
-                + _imu_noise_note(dev, st, keys, opt) + _iteration_findings(it, stage_notes))
+                + _imu_noise_note(dev, st, keys, opt) + _iteration_findings(it, stage_notes)
+                + wind_findings)
     diagnosis_table, outliers = None, {}
-    if opt.diagnose:
+    if opt.diagnose and not filter_error:
         findings, diagnosis_table, outliers = _diagnosed(problem, evals, st, state, findings)
     verdict = judge(it.status, findings)
     message = it.message

@@ -1,0 +1,372 @@
+r"""The filter-error method: flight path reconstruction in turbulence, the wind as estimated states.
+
+Why (Jategaonkar 2006, ch. 5; Maine & Iliff 1981): the output-error method integrates the IMU into
+the ground-relative motion and asks the flow sensors to see it. In a steady wind that is exact
+(the air-relative body velocity obeys the same equation as the ground-relative one, so the free
+initial velocities absorb it), but a wind that changes within a maneuver is a disturbance no
+parameter models: the flow residuals become coloured, common to every sensor, and the estimates
+biased with deviations far too small. Here the turbulent wind is a random process the estimation
+tracks.
+
+**The model.** With ``X`` the states the output-error model integrates (initial velocities free),
+the air's velocity at a sensor is, exactly in a steady wind ``W0``::
+
+    V_s = X_v + omega x (r_s - r_cg) - C_bn dW(t),      dW = W(t) - W0 (north, east, down)
+
+(``C_bn`` the rotation from NED to body axes), and ``dW`` has three independent first-order
+Gauss-Markov components (the Dryden form of MIL-F-8785C, isotropic above 2000 ft)::
+
+    d(dW)/dt = -(V/L) dW + sigma sqrt(2 V / L) eta
+
+``L`` the scale length (1750 ft = 533.4 m above 2000 ft), ``sigma`` the turbulence intensity
+(estimated per maneuver), ``V`` the maneuver's mean true airspeed. The IMU senses what the gusts
+do to the aircraft, so the attitude, altitude and inertial channels do not see ``dW``.
+Linearised at the current parameters, a channel's output moves by ``h . dW`` with
+``h = -(dy/dV) C_bn`` (``dy/dV``: :attr:`estimator.model.ChannelEval.dydv`), so each maneuver's
+residuals ``e = z - y(theta)`` obey a linear state-space model in ``dW`` with the measurement
+noise ``R`` (one variance per channel, as in the output-error method).
+
+**The cost** is the negative log-likelihood of the innovations ``nu`` of a Kalman filter on that
+model (sequential scalar updates, :mod:`estimator.core.wind_filter`)::
+
+    J(theta) = 1/2 sum_k sum_i (nu_ki^2 / s_ki + ln s_ki),        d nu / d theta = -L_f J
+
+with ``s`` the innovation variances and ``L_f`` the filter acting on the Jacobian's columns, its
+gains held at the linearisation (the usual filter-error approximation). The Gauss-Newton
+iterations are the output-error ones (:func:`estimator.iteration._gauss_newton`); between their
+steps the noise statistics are relaxed (as ``R`` is for output error, Jategaonkar §5.5): ``sigma``
+of each maneuver maximises the likelihood with ``R`` held (golden-section search on ``ln sigma``),
+and ``R`` of each channel takes its expectation-maximisation update from the fixed-interval
+(Rauch-Tung-Striebel) smoother, ``R_c = mean((e - h dW_s)^2 + h P_s h^T)``. With ``sigma`` -> 0
+the filter passes the residuals through unchanged and the cost is the output-error one.
+
+What separates the wind from the flow-sensor calibration: the same ``dW`` is seen by every flow
+sensor and by the airspeed, each through its own geometry, while a calibration error belongs to
+one sensor and is a function of its flow angle; a constant error of every angle sensor alike is
+told from a steady wind only by the heading and attitude changes across the maneuvers (the
+Gauss-Markov wind has zero mean: it absorbs a constant only as much as its prior allows).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimator.iteration import _evaluate
+from estimator.model import Evaluation, Model
+from estimator.normal_equations import NormalEquations, Structure, residual_sums
+from estimator.verdict import Finding, Severity
+
+#: MIL-F-8785C scale length above 2000 ft (1750 ft), m.
+DRYDEN_SCALE_LENGTH_M = 533.4
+#: Golden-section bounds of the turbulence intensity, m/s: from next to nothing to severe.
+SIGMA_SEARCH_MPS = (1e-3, 15.0)
+#: Golden-section iterations on ln(sigma) (the bracket shrinks to 0.618^n of its width): the
+#: first relaxation searches all of SIGMA_SEARCH_MPS (to 1e-4 of ln 15000), the later ones a factor
+#: of 3 either side of the last value (to 2e-4)
+SIGMA_SEARCH_ITERATIONS = 25
+SIGMA_REFINE_FACTOR = 3.0
+SIGMA_REFINE_ITERATIONS = 18
+
+
+@dataclass(frozen=True)
+class WindOptions:
+    """The turbulence model of the filter-error method.
+
+    Attributes
+    ----------
+    scale_length_m : Dryden scale length ``L``, m (1750 ft above 2000 ft).
+    sigma_mps : turbulence intensity, m/s; None: estimated per maneuver.
+    calm_sigma_mps : a maneuver whose estimated intensity is below this is taken as flown in calm
+        air (no wind states: its innovations are its residuals, as in the output-error method).
+        Calm data still give a small intensity — the wind states then follow what the calibration
+        model cannot (0.006-0.19 m/s in the JSBSim calm-air maneuvers, against 0.9-1.2 m/s in
+        light turbulence) — and would move the estimates by a few deviations away from the
+        output-error ones for no gain.
+    """
+
+    scale_length_m: float = DRYDEN_SCALE_LENGTH_M
+    sigma_mps: float | None = None
+    calm_sigma_mps: float = 0.3
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.scale_length_m) and self.scale_length_m > 0):
+            raise ValueError(f"WindOptions.scale_length_m must be a positive length in m, got "
+                             f"{self.scale_length_m!r}")
+        if self.sigma_mps is not None and not (math.isfinite(self.sigma_mps) and self.sigma_mps > 0):
+            raise ValueError(f"WindOptions.sigma_mps must be positive (m/s) or None to estimate it, got "
+                             f"{self.sigma_mps!r}")
+
+
+def rotation_ned_to_body(euler_rad: np.ndarray) -> np.ndarray:
+    """``C_bn`` (N, 3, 3) from Euler angles (N, 3) (phi, theta, psi; 3-2-1), rad."""
+    ph, th, ps = euler_rad[:, 0], euler_rad[:, 1], euler_rad[:, 2]
+    cph, sph, cth, sth, cps, sps = np.cos(ph), np.sin(ph), np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
+    C = np.empty((euler_rad.shape[0], 3, 3))
+    C[:, 0, 0] = cth * cps
+    C[:, 0, 1] = cth * sps
+    C[:, 0, 2] = -sth
+    C[:, 1, 0] = sph * sth * cps - cph * sps
+    C[:, 1, 1] = sph * sth * sps + cph * cps
+    C[:, 1, 2] = sph * cth
+    C[:, 2, 0] = cph * sth * cps + sph * sps
+    C[:, 2, 1] = cph * sth * sps - sph * cps
+    C[:, 2, 2] = cph * cth
+    return C
+
+
+@dataclass
+class _Maneuver:
+    """One maneuver's observations at a linearisation point, sorted by sample."""
+
+    k: int
+    n_samples: int
+    pieces: list[tuple[int, int, int]]  # (channel-eval index, first row, last row + 1) in ce order
+    order: np.ndarray  # permutation of the concatenated pieces into sample order
+    sample: np.ndarray  # (n,) sample index of each observation
+    channel: np.ndarray  # (n,) channel index of each observation
+    h: np.ndarray  # (n, 3) wind sensitivity
+    v_mps: float  # mean true airspeed
+
+
+@dataclass
+class FilterNoise:
+    """The noise statistics of a filter-error iterate: ``R`` per channel, ``sigma`` per maneuver,
+    and the linearisation (wind sensitivities, observation order) they go with."""
+
+    R: np.ndarray
+    sigma_mps: np.ndarray
+    maneuvers: list[_Maneuver]
+    dt_s: np.ndarray
+
+
+class FilterErrorLikelihood:
+    """The filter-error cost for :func:`estimator.iteration._gauss_newton` (module docstring)."""
+
+    def __init__(self, model: Model, wind: WindOptions | None = None):
+        self.model = model
+        self.wind = WindOptions() if wind is None else wind
+        p = model.problem
+        self.n_channels = len(p.channels)
+        self.dt_s = np.array([float(np.median(np.diff(m.t_s))) for m in p.maneuvers])
+        self._R: np.ndarray | None = None
+        self._sigma: np.ndarray | None = None
+        # the compiled filter is loaded (and compiled) only when the method is used
+        from estimator.core import wind_filter
+
+        self._wf = wind_filter
+
+    # --- the five methods the iterations use ------------------------------------------------
+    def evaluate(self, theta: np.ndarray, jacobian: bool) -> Evaluation:
+        if not jacobian:
+            return _evaluate(self.model, theta, False)
+        return self.model.evaluate_all(theta, jacobian=True, keep_jacobian=True, wind=True)
+
+    def stats(self, ev: Evaluation) -> Evaluation:
+        return ev
+
+    def relax(self, ev: Evaluation, stats) -> FilterNoise:
+        """Linearise at ``ev`` (an evaluation with the Jacobian) and relax ``sigma`` and ``R``."""
+        mans = self._linearise(ev)
+        if self._R is None:
+            sse, cnt = residual_sums(ev, self.n_channels)
+            R = np.maximum(np.where(cnt > 0, sse / np.maximum(cnt, 1), 1.0), 1e-16)
+        else:
+            R = self._R.copy()
+        sigma = (np.full(len(self.model.problem.maneuvers), 1.0) if self._sigma is None
+                 else self._sigma.copy())
+        for _ in range(2):
+            for m in mans:
+                e = self._residuals(ev, m)
+                if self.wind.sigma_mps is not None:
+                    sigma[m.k] = self.wind.sigma_mps
+                elif self._sigma is None or sigma[m.k] == 0.0:
+                    sigma[m.k] = self._best_sigma(m, e, R, *SIGMA_SEARCH_MPS, SIGMA_SEARCH_ITERATIONS)
+                else:
+                    lo = max(sigma[m.k] / SIGMA_REFINE_FACTOR, SIGMA_SEARCH_MPS[0])
+                    hi = min(sigma[m.k] * SIGMA_REFINE_FACTOR, SIGMA_SEARCH_MPS[1])
+                    sigma[m.k] = self._best_sigma(m, e, R, lo, hi, SIGMA_REFINE_ITERATIONS)
+                if self.wind.sigma_mps is None and sigma[m.k] < self.wind.calm_sigma_mps:
+                    sigma[m.k] = 0.0
+            R = self._em_variances(ev, mans, R, sigma)
+        self._R, self._sigma = R, sigma
+        return FilterNoise(R, sigma, mans, self.dt_s)
+
+    def cost(self, stats: Evaluation, noise: FilterNoise) -> float:
+        total = 0.0
+        for m in noise.maneuvers:
+            e = self._residuals(stats, m)
+            total += self._nll(m, e, noise.R, noise.sigma_mps[m.k])
+        return total
+
+    def normal(self, st: Structure, ev: Evaluation, noise: FilterNoise) -> NormalEquations:
+        N = NormalEquations(st)
+        for m in noise.maneuvers:
+            e = self._residuals(ev, m)
+            cols, J = self._jacobian(ev, m, st)
+            nu, s, dnu = self._innovations(m, e, noise.R, noise.sigma_mps[m.k], J)
+            w = dnu / np.sqrt(s)[:, None]
+            H = w.T @ w
+            g = -(w.T @ (nu / np.sqrt(s)))
+            N.add_blocks(H[None], g[None], cols[None], np.array([m.k]), 1.0)
+            np.add.at(N.support, cols, np.count_nonzero(J, axis=0))
+        return N
+
+    def findings(self, noise: FilterNoise) -> list[Finding]:
+        """What the method estimated of the air, and what it does not yet give."""
+        p = self.model.problem
+        sig = noise.sigma_mps
+        calm = [p.maneuvers[k].id for k in np.flatnonzero(sig == 0.0)]
+        if len(calm) == sig.size:
+            air = (f"every maneuver calm (turbulence intensity below {self.wind.calm_sigma_mps:g} "
+                   "m/s): the estimates are the output-error ones")
+        else:
+            lo, hi = int(np.argmin(np.where(sig > 0, sig, np.inf))), int(np.argmax(sig))
+            air = (f"turbulence intensity estimated per maneuver, {sig[lo]:.2g} m/s "
+                   f"({p.maneuvers[lo].id}) to {sig[hi]:.2g} m/s ({p.maneuvers[hi].id}) (Dryden, L = "
+                   f"{self.wind.scale_length_m:g} m)"
+                   + (f"; calm (below {self.wind.calm_sigma_mps:g} m/s, no wind states): "
+                      f"{', '.join(calm[:8])}{' ...' if len(calm) > 8 else ''}" if calm else ""))
+        return [
+            Finding("turbulence", Severity.INFO, f"filter-error method: {air}"),
+            Finding("filter_error_partial", Severity.WARNING,
+                    "filter-error method: the deviations are Cramér-Rao bounds of its information "
+                    "matrix, without the coloured-innovation correction, and the fit-quality "
+                    "diagnostics are not run on the innovations yet; check the estimates against "
+                    "a calm-air calibration or the truth before use",
+                    "use the output-error method where the air is calm; treat these deviations "
+                    "as lower bounds"),
+        ]
+
+    # --- the pieces ---------------------------------------------------------------------------
+    def _linearise(self, ev: Evaluation) -> list[_Maneuver]:
+        seg = ev.seg
+        pos = {k: i for i, k in enumerate(ev.maneuvers)}
+        per: dict[int, list] = {k: [] for k in ev.maneuvers}
+        for ci, ce in enumerate(ev.channels):
+            if ce.dydv is None:
+                raise ValueError("the filter-error method needs the evaluation's wind sensitivities "
+                                 "(Model.evaluate_all(..., wind=True))")
+            for b, k in enumerate(ce.mans):
+                per[int(k)].append((ci, int(ce.rseg[b]), int(ce.rseg[b + 1])))
+        out = []
+        for k, pieces in per.items():
+            i = pos[k]
+            X = ev.X[seg[i]:seg[i + 1]]
+            C = rotation_ned_to_body(X[:, 3:6])
+            samples, chans, hs = [], [], []
+            dt = float(self.dt_s[k])
+            for ci, r0, r1 in pieces:
+                ce = ev.channels[ci]
+                # a channel recorded with a delay tau shows the air at t - tau: its observation
+                # belongs to the wind of that sample (to the nearest sample: the wind's increments
+                # over half a sample are a few per cent of its intensity)
+                rows = np.clip(ce.rows[r0:r1] - np.rint(ce.shift_s[r0:r1] / dt).astype(np.int64),
+                               0, seg[i + 1] - seg[i] - 1)
+                samples.append(rows)
+                chans.append(np.full(rows.size, ce.channel))
+                # h = -(dy/dV) C_bn: the output's change per unit NED wind
+                hs.append(-np.einsum("ni,nij->nj", ce.dydv[r0:r1], C[rows]))
+            sample = np.concatenate(samples)
+            order = np.argsort(sample, kind="stable")
+            out.append(_Maneuver(k, int(seg[i + 1] - seg[i]), pieces, order, sample[order],
+                                 np.concatenate(chans)[order], np.concatenate(hs)[order],
+                                 float(np.mean(np.linalg.norm(X[:, :3], axis=1)))))
+        return out
+
+    @staticmethod
+    def _residuals(ev: Evaluation, m: _Maneuver) -> np.ndarray:
+        return np.concatenate([ev.channels[ci].e[r0:r1] for ci, r0, r1 in m.pieces])[m.order]
+
+    @staticmethod
+    def _jacobian(ev: Evaluation, m: _Maneuver, st: Structure) -> tuple[np.ndarray, np.ndarray]:
+        """The maneuver's Jacobian (n, c) over the free parameters ``cols`` it depends on."""
+        blocks = []
+        for ci, r0, r1 in m.pieces:
+            ce = ev.channels[ci]
+            b = int(np.searchsorted(ce.rseg, r0))
+            blocks.append((ce, b, r0, r1))
+        used = np.unique(np.concatenate([ce.colmap[b] for ce, b, _, _ in blocks]))
+        cols = used[st.free[used]]
+        where = np.full(st.free.size, -1)
+        where[cols] = np.arange(cols.size)
+        n = m.order.size
+        J = np.zeros((n, cols.size))
+        at = 0
+        for ce, b, r0, r1 in blocks:
+            nb = r1 - r0
+            for s, col in enumerate(ce.colmap[b]):
+                j = where[col]
+                if j >= 0:
+                    J[at:at + nb, j] += ce.JT[s, r0:r1]
+            at += nb
+        return cols, J[m.order]
+
+    def wind_history(self, m: _Maneuver, e: np.ndarray, R: np.ndarray, sigma: float):
+        """The smoothed turbulent wind (n_samples, 3), NED, m/s, and its covariance
+        (n_samples, 3, 3) of one maneuver (zero in calm air)."""
+        if sigma == 0.0:
+            return np.zeros((m.n_samples, 3)), np.zeros((m.n_samples, 3, 3))
+        Phi, Qd, P0 = self._process(m, sigma)
+        return self._wf.smooth(m.sample, e, m.h, R[m.channel], Phi, Qd, P0, m.n_samples)
+
+    def _process(self, m: _Maneuver, sigma: float):
+        return self._wf.gauss_markov(m.v_mps, self.wind.scale_length_m, sigma, float(self.dt_s[m.k]))
+
+    def _innovations(self, m: _Maneuver, e: np.ndarray, R: np.ndarray, sigma: float,
+                     J: np.ndarray | None = None):
+        """Innovations, their variances and (with ``J``) their Jacobian; a calm maneuver's are its
+        residuals, ``R`` and ``-J``."""
+        if J is None:
+            J = np.zeros((e.size, 0))
+        r = R[m.channel]
+        if sigma == 0.0:
+            return e, r, -J
+        Phi, Qd, P0 = self._process(m, sigma)
+        nu, s, dnu, _ = self._wf.innovations(m.sample, e, m.h, r, J, Phi, Qd, P0, m.n_samples)
+        return nu, s, dnu
+
+    def _nll(self, m: _Maneuver, e: np.ndarray, R: np.ndarray, sigma: float) -> float:
+        nu, s, _ = self._innovations(m, e, R, sigma)
+        return 0.5 * float(np.sum(nu * nu / s + np.log(s)))
+
+    def _best_sigma(self, m: _Maneuver, e: np.ndarray, R: np.ndarray, lo_mps: float, hi_mps: float,
+                    iterations: int) -> float:
+        """Golden-section search of ``ln sigma`` in ``[lo, hi]`` for the least negative
+        log-likelihood."""
+        a, b = math.log(lo_mps), math.log(hi_mps)
+        gr = (math.sqrt(5.0) - 1.0) / 2.0
+        c, d = b - gr * (b - a), a + gr * (b - a)
+        fc = self._nll(m, e, R, math.exp(c))
+        fd = self._nll(m, e, R, math.exp(d))
+        for _ in range(iterations):
+            if fc < fd:
+                b, d, fd = d, c, fc
+                c = b - gr * (b - a)
+                fc = self._nll(m, e, R, math.exp(c))
+            else:
+                a, c, fc = c, d, fd
+                d = a + gr * (b - a)
+                fd = self._nll(m, e, R, math.exp(d))
+        return math.exp(0.5 * (a + b))
+
+    def _em_variances(self, ev: Evaluation, mans: list[_Maneuver], R: np.ndarray,
+                      sigma: np.ndarray) -> np.ndarray:
+        """``R_c = mean((e - h dW_s)^2 + h P_s h^T)`` over the channel's observations (smoother)."""
+        num = np.zeros(self.n_channels)
+        cnt = np.zeros(self.n_channels)
+        for m in mans:
+            e = self._residuals(ev, m)
+            if sigma[m.k] == 0.0:
+                np.add.at(num, m.channel, e * e)
+            else:
+                xs, Ps = self.wind_history(m, e, R, sigma[m.k])
+                x = xs[m.sample]
+                P = Ps[m.sample]
+                r = e - np.einsum("ni,ni->n", m.h, x)
+                v = np.einsum("ni,nij,nj->n", m.h, P, m.h)
+                np.add.at(num, m.channel, r * r + v)
+            np.add.at(cnt, m.channel, 1.0)
+        return np.maximum(np.where(cnt > 0, num / np.maximum(cnt, 1), R), 1e-16)
