@@ -315,6 +315,9 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--robust", action="store_true",
                    help="exclude the residual outliers the diagnostics find and estimate again (each "
                    "excluded sample is reported)")
+    p.add_argument("--method", choices=["output_error", "filter_error"], default=None,
+                   help="output_error (calm air; the default) or filter_error: the turbulent wind as "
+                   "estimated states (Kalman-filter innovations; for flights in turbulence)")
     p.add_argument("--start", choices=["staged", "given", "both"], default=None,
                    help="start: staged (attitude, then speed and height, then flow channels; the "
                    "default), given (the problem's start values), or both (the better verdict kept)")
@@ -443,7 +446,8 @@ def _calibration_options(args: argparse.Namespace) -> dict:
     given = {"max_mach_variation": args.max_mach_variation, "reference_mach": args.reference_mach,
              "max_iterations": args.max_iterations, "start": args.start,
              "colored": False if args.no_colored else None, "verbose": True if args.verbose else None,
-             "robust": True if args.robust else None, "plots": False if args.no_plots else None}
+             "robust": True if args.robust else None, "plots": False if args.no_plots else None,
+             "method": args.method}
     return {k: v for k, v in given.items() if v is not None}
 
 

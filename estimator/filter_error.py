@@ -65,10 +65,14 @@ DRYDEN_SCALE_LENGTH_M = 533.4
 SIGMA_SEARCH_MPS = (1e-3, 15.0)
 #: Golden-section iterations on ln(sigma) (the bracket shrinks to 0.618^n of its width): the
 #: first relaxation searches all of SIGMA_SEARCH_MPS (to 1e-4 of ln 15000), the later ones a factor
-#: of 3 either side of the last value (to 2e-4)
+#: of 1.5 either side of the last value (to 1e-3)
 SIGMA_SEARCH_ITERATIONS = 25
-SIGMA_REFINE_FACTOR = 3.0
-SIGMA_REFINE_ITERATIONS = 18
+SIGMA_REFINE_FACTOR = 1.5
+SIGMA_REFINE_ITERATIONS = 14
+#: Rounds at most of the noise relaxation, and the relative change of R and the intensities that
+#: ends it
+RELAX_ROUNDS = 12
+RELAX_TOL = 1e-3
 
 
 @dataclass(frozen=True)
@@ -177,20 +181,32 @@ class FilterErrorLikelihood:
             R = self._R.copy()
         sigma = (np.full(len(self.model.problem.maneuvers), 1.0) if self._sigma is None
                  else self._sigma.copy())
-        for _ in range(2):
+        # alternate the intensities (R held) and R's EM update (the intensities held) until neither
+        # moves: the Gauss-Newton step that follows sees a settled noise model, not one that is
+        # still drifting (an EM update alone converges only linearly)
+        wide = self._sigma is None
+        for _ in range(RELAX_ROUNDS):
+            before = sigma.copy()
             for m in mans:
                 e = self._residuals(ev, m)
                 if self.wind.sigma_mps is not None:
                     sigma[m.k] = self.wind.sigma_mps
-                elif self._sigma is None or sigma[m.k] == 0.0:
+                    continue
+                if wide or sigma[m.k] == 0.0:
                     sigma[m.k] = self._best_sigma(m, e, R, *SIGMA_SEARCH_MPS, SIGMA_SEARCH_ITERATIONS)
                 else:
                     lo = max(sigma[m.k] / SIGMA_REFINE_FACTOR, SIGMA_SEARCH_MPS[0])
                     hi = min(sigma[m.k] * SIGMA_REFINE_FACTOR, SIGMA_SEARCH_MPS[1])
                     sigma[m.k] = self._best_sigma(m, e, R, lo, hi, SIGMA_REFINE_ITERATIONS)
-                if self.wind.sigma_mps is None and sigma[m.k] < self.wind.calm_sigma_mps:
+                if sigma[m.k] < self.wind.calm_sigma_mps:
                     sigma[m.k] = 0.0
-            R = self._em_variances(ev, mans, R, sigma)
+            wide = False
+            R_new = self._em_variances(ev, mans, R, sigma)
+            moved = max(float(np.max(np.abs(R_new / R - 1.0))),
+                        float(np.max(np.abs(sigma - before) / np.maximum(before, 1e-3))))
+            R = R_new
+            if moved < RELAX_TOL:
+                break
         self._R, self._sigma = R, sigma
         return FilterNoise(R, sigma, mans, self.dt_s)
 
