@@ -35,7 +35,7 @@ with ``s`` the innovation variances and ``L_f`` the filter acting on the Jacobia
 gains held at the linearisation (the usual filter-error approximation). The Gauss-Newton
 iterations are the output-error ones (:func:`estimator.iteration._gauss_newton`); between their
 steps the noise statistics are relaxed (as ``R`` is for output error, Jategaonkar §5.5): ``sigma``
-of each maneuver maximises the likelihood with ``R`` held (golden-section search on ``ln sigma``),
+of each maneuver maximises the likelihood with ``R`` held (Brent's search on ``ln sigma``),
 and ``R`` of each channel takes its expectation-maximisation update from the fixed-interval
 (Rauch-Tung-Striebel) smoother, ``R_c = mean((e - h dW_s)^2 + h P_s h^T)``. With ``sigma`` -> 0
 the filter passes the residuals through unchanged and the cost is the output-error one.
@@ -53,6 +53,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from estimator.iteration import _evaluate
 from estimator.model import Evaluation, Model
@@ -61,14 +62,12 @@ from estimator.verdict import Finding, Severity
 
 #: MIL-F-8785C scale length above 2000 ft (1750 ft), m.
 DRYDEN_SCALE_LENGTH_M = 533.4
-#: Golden-section bounds of the turbulence intensity, m/s: from next to nothing to severe.
+#: Search bounds of the turbulence intensity, m/s: from next to nothing to severe.
 SIGMA_SEARCH_MPS = (1e-3, 15.0)
-#: Golden-section iterations on ln(sigma) (the bracket shrinks to 0.618^n of its width): the
-#: first relaxation searches all of SIGMA_SEARCH_MPS (to 1e-4 of ln 15000), the later ones a factor
-#: of 1.5 either side of the last value (to 1e-3)
-SIGMA_SEARCH_ITERATIONS = 25
+#: The first relaxation searches all of SIGMA_SEARCH_MPS, the later ones a factor of
+#: SIGMA_REFINE_FACTOR either side of the last value, to SIGMA_XTOL in ln(sigma)
 SIGMA_REFINE_FACTOR = 1.5
-SIGMA_REFINE_ITERATIONS = 14
+SIGMA_XTOL = 1e-3
 #: Rounds at most of the noise relaxation, and the relative change of R and the intensities that
 #: ends it
 RELAX_ROUNDS = 12
@@ -181,32 +180,43 @@ class FilterErrorLikelihood:
             R = self._R.copy()
         sigma = (np.full(len(self.model.problem.maneuvers), 1.0) if self._sigma is None
                  else self._sigma.copy())
-        # alternate the intensities (R held) and R's EM update (the intensities held) until neither
-        # moves: the Gauss-Newton step that follows sees a settled noise model, not one that is
-        # still drifting (an EM update alone converges only linearly)
+        # the intensities (R held), then R's EM update (the intensities held) until R settles, then
+        # the intensities again, until neither moves: the Gauss-Newton step that follows sees a
+        # settled noise model, not one still drifting (an EM update converges only linearly, and
+        # each intensity search costs a dozen filter runs, an EM update one smoother run)
         wide = self._sigma is None
+        search, settled = True, False
         for _ in range(RELAX_ROUNDS):
-            before = sigma.copy()
-            for m in mans:
-                e = self._residuals(ev, m)
-                if self.wind.sigma_mps is not None:
-                    sigma[m.k] = self.wind.sigma_mps
-                    continue
-                if wide or sigma[m.k] == 0.0:
-                    sigma[m.k] = self._best_sigma(m, e, R, *SIGMA_SEARCH_MPS, SIGMA_SEARCH_ITERATIONS)
-                else:
-                    lo = max(sigma[m.k] / SIGMA_REFINE_FACTOR, SIGMA_SEARCH_MPS[0])
-                    hi = min(sigma[m.k] * SIGMA_REFINE_FACTOR, SIGMA_SEARCH_MPS[1])
-                    sigma[m.k] = self._best_sigma(m, e, R, lo, hi, SIGMA_REFINE_ITERATIONS)
-                if sigma[m.k] < self.wind.calm_sigma_mps:
-                    sigma[m.k] = 0.0
-            wide = False
+            if search:
+                moved = 0.0
+                for m in mans:
+                    before = sigma[m.k]
+                    if self.wind.sigma_mps is not None:
+                        sigma[m.k] = self.wind.sigma_mps
+                        continue
+                    e = self._residuals(ev, m)
+                    if wide:
+                        lo, hi = SIGMA_SEARCH_MPS
+                    elif before == 0.0:  # calm before: is it still?
+                        lo, hi = SIGMA_SEARCH_MPS[0], SIGMA_REFINE_FACTOR * self.wind.calm_sigma_mps
+                    else:
+                        lo = max(before / SIGMA_REFINE_FACTOR, SIGMA_SEARCH_MPS[0])
+                        hi = min(before * SIGMA_REFINE_FACTOR, SIGMA_SEARCH_MPS[1])
+                    sigma[m.k] = self._best_sigma(m, e, R, lo, hi)
+                    if not wide and sigma[m.k] > hi / (1.0 + 10.0 * SIGMA_XTOL):
+                        # at the edge of the narrow bracket: the optimum is beyond it
+                        sigma[m.k] = self._best_sigma(m, e, R, *SIGMA_SEARCH_MPS)
+                    if sigma[m.k] < self.wind.calm_sigma_mps:
+                        sigma[m.k] = 0.0
+                    moved = max(moved, abs(sigma[m.k] - before) / max(before, 1e-3))
+                wide, search, settled = False, False, moved < RELAX_TOL
             R_new = self._em_variances(ev, mans, R, sigma)
-            moved = max(float(np.max(np.abs(R_new / R - 1.0))),
-                        float(np.max(np.abs(sigma - before) / np.maximum(before, 1e-3))))
+            moved_R = float(np.max(np.abs(R_new / R - 1.0)))
             R = R_new
-            if moved < RELAX_TOL:
-                break
+            if moved_R < RELAX_TOL:
+                if settled:
+                    break
+                search = True  # R has settled: the intensities once more
         self._R, self._sigma = R, sigma
         return FilterNoise(R, sigma, mans, self.dt_s)
 
@@ -348,25 +358,14 @@ class FilterErrorLikelihood:
         nu, s, _ = self._innovations(m, e, R, sigma)
         return 0.5 * float(np.sum(nu * nu / s + np.log(s)))
 
-    def _best_sigma(self, m: _Maneuver, e: np.ndarray, R: np.ndarray, lo_mps: float, hi_mps: float,
-                    iterations: int) -> float:
-        """Golden-section search of ``ln sigma`` in ``[lo, hi]`` for the least negative
-        log-likelihood."""
-        a, b = math.log(lo_mps), math.log(hi_mps)
-        gr = (math.sqrt(5.0) - 1.0) / 2.0
-        c, d = b - gr * (b - a), a + gr * (b - a)
-        fc = self._nll(m, e, R, math.exp(c))
-        fd = self._nll(m, e, R, math.exp(d))
-        for _ in range(iterations):
-            if fc < fd:
-                b, d, fd = d, c, fc
-                c = b - gr * (b - a)
-                fc = self._nll(m, e, R, math.exp(c))
-            else:
-                a, c, fc = c, d, fd
-                d = a + gr * (b - a)
-                fd = self._nll(m, e, R, math.exp(d))
-        return math.exp(0.5 * (a + b))
+    def _best_sigma(self, m: _Maneuver, e: np.ndarray, R: np.ndarray, lo_mps: float,
+                    hi_mps: float) -> float:
+        """The intensity in ``[lo, hi]`` of the least negative log-likelihood: Brent's bounded
+        search on ``ln sigma`` (to 1e-3 in ``ln sigma``, about ten filter runs)."""
+        res = minimize_scalar(lambda s: self._nll(m, e, R, math.exp(s)),
+                              bounds=(math.log(lo_mps), math.log(hi_mps)), method="bounded",
+                              options={"xatol": SIGMA_XTOL})
+        return math.exp(float(res.x))
 
     def _em_variances(self, ev: Evaluation, mans: list[_Maneuver], R: np.ndarray,
                       sigma: np.ndarray) -> np.ndarray:
