@@ -72,6 +72,12 @@ SIGMA_XTOL = 1e-3
 #: ends it
 RELAX_ROUNDS = 12
 RELAX_TOL = 1e-3
+#: The noise model is held where the residuals moved by less than this fraction of each channel's
+#: noise (rms) since it was relaxed (FilterErrorLikelihood.relax)
+HOLD_NOISE_BELOW = 0.01
+#: ... and after SETTLE_AFTER relaxations, where they moved by less than SETTLED_BELOW
+SETTLE_AFTER = 4
+SETTLED_BELOW = 0.1
 
 
 @dataclass(frozen=True)
@@ -156,6 +162,10 @@ class FilterErrorLikelihood:
         self.dt_s = np.array([float(np.median(np.diff(m.t_s))) for m in p.maneuvers])
         self._R: np.ndarray | None = None
         self._sigma: np.ndarray | None = None
+        self._placement: dict[tuple[int, int], np.ndarray] = {}
+        self._last: FilterNoise | None = None
+        self._relaxed = 0
+        self._last_e: list[np.ndarray] = []
         # the compiled filter is loaded (and compiled) only when the method is used
         from estimator.core import wind_filter
 
@@ -171,7 +181,19 @@ class FilterErrorLikelihood:
         return ev
 
     def relax(self, ev: Evaluation, stats) -> FilterNoise:
-        """Linearise at ``ev`` (an evaluation with the Jacobian) and relax ``sigma`` and ``R``."""
+        """Linearise at ``ev`` (an evaluation with the Jacobian) and relax ``sigma`` and ``R``.
+
+        Where the residuals moved by less than :data:`HOLD_NOISE_BELOW` of each channel's noise
+        since the last relaxation (:data:`SETTLED_BELOW` after :data:`SETTLE_AFTER` relaxations),
+        its noise model is kept: relaxing again there only moves the noise statistics within
+        their own tolerance, and the Gauss-Newton iterations would chase that (a two-cycle of the
+        cost, 2 in 9e5, along a weakly determined table node) instead of converging on a fixed
+        cost.
+        """
+        if self._last is not None and self._moved_little(
+                ev, self._last, HOLD_NOISE_BELOW if self._relaxed < SETTLE_AFTER else SETTLED_BELOW):
+            return self._last
+        self._relaxed += 1
         mans = self._linearise(ev)
         if self._R is None:
             sse, cnt = residual_sums(ev, self.n_channels)
@@ -218,7 +240,21 @@ class FilterErrorLikelihood:
                     break
                 search = True  # R has settled: the intensities once more
         self._R, self._sigma = R, sigma
-        return FilterNoise(R, sigma, mans, self.dt_s)
+        self._last = FilterNoise(R, sigma, mans, self.dt_s)
+        self._last_e = [ce.e.copy() for ce in ev.channels]
+        return self._last
+
+    def _moved_little(self, ev: Evaluation, noise: FilterNoise, below: float) -> bool:
+        """Did every channel's residuals move by less than ``below`` of its noise (rms)?"""
+        if len(ev.channels) != len(self._last_e):
+            return False
+        for ce, e0 in zip(ev.channels, self._last_e, strict=True):
+            if ce.e.shape != e0.shape:
+                return False
+            d = ce.e - e0
+            if d.size and np.sqrt(np.mean(d * d) / noise.R[ce.channel]) >= below:
+                return False
+        return True
 
     def cost(self, stats: Evaluation, noise: FilterNoise) -> float:
         total = 0.0
@@ -288,9 +324,13 @@ class FilterErrorLikelihood:
                 ce = ev.channels[ci]
                 # a channel recorded with a delay tau shows the air at t - tau: its observation
                 # belongs to the wind of that sample (to the nearest sample: the wind's increments
-                # over half a sample are a few per cent of its intensity)
-                rows = np.clip(ce.rows[r0:r1] - np.rint(ce.shift_s[r0:r1] / dt).astype(np.int64),
-                               0, seg[i + 1] - seg[i] - 1)
+                # over half a sample are a few per cent of its intensity). The placement is taken
+                # at the first linearisation and kept: a delay estimate crossing half a sample
+                # would otherwise move observations between iterations and the cost with them
+                key = (int(ce.channel), int(k))
+                if key not in self._placement:
+                    self._placement[key] = np.rint(ce.shift_s[r0:r1] / dt).astype(np.int64)
+                rows = np.clip(ce.rows[r0:r1] - self._placement[key], 0, seg[i + 1] - seg[i] - 1)
                 samples.append(rows)
                 chans.append(np.full(rows.size, ce.channel))
                 # h = -(dy/dV) C_bn: the output's change per unit NED wind
