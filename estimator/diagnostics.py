@@ -804,6 +804,7 @@ def diagnose(channels: Sequence[ChannelFit], inputs: Sequence[ManeuverInputs] = 
             findings.append(fnd)
             done[i] = True
     turb = _turbulence(st, done, opt)
+    findings = _beside_turbulence(findings, turb[0])
     findings += turb[0]
     done |= turb[1]
     for i in range(R):
@@ -1196,14 +1197,31 @@ def _turbulence(st: _Stats, done: np.ndarray, opt: DiagnosticOptions
             f"autocorrelation >= {min(st.rho1[i] for i in group):.2f}) and common to {len(group)} sensors "
             f"(residual correlation up to {corr:.2f}) while the inertial channels fit ({kin}): turbulence or "
             "other unmodelled air motion",
-            "calibrate from maneuvers flown in calm air, or leave this maneuver out: the output-error method "
-            "models no process noise, so gusts bias the flow-angle estimates and make their deviations "
-            "optimistic",
+            "calibrate from maneuvers flown in calm air, or estimate with the wind as states (the "
+            "filter-error method: fpr calibrate --method filter_error, SolverOptions(method="
+            "'filter_error'); experimental, read its warnings), or leave this maneuver out: the "
+            "output-error method models no process noise, so gusts bias the flow-angle estimates and "
+            "make their deviations optimistic",
             channel=", ".join(st.fits[i].channel for i in group), maneuver=man,
             parameters=tuple(dict.fromkeys(p for i in group for p in st.fits[i].parameters)),
             value=float(max(st.ratio[i] for i in group))))
         used[group] = True
     return out, used
+
+
+def _beside_turbulence(findings: list[Finding], turbulence: list[Finding]) -> list[Finding]:
+    """A flow channel's scale error in a maneuver the turbulence finding covers says so: gusts
+    correlated with the maneuver's own flow-angle changes make a channel look rescaled (light
+    turbulence in planning study (c): 1.33 x on the boom's sideslip vanes of one maneuver)."""
+    turbulent = {f.maneuver for f in turbulence}
+    out = []
+    for f in findings:
+        if f.code == "scale_error" and f.maneuver in turbulent:
+            f = replace(f, message=f"{f.message}; this maneuver's flow residuals show turbulence too, "
+                        "whose gusts can make a channel look rescaled",
+                        advice="read the turbulence finding of this maneuver first; " + f.advice)
+        out.append(f)
+    return out
 
 
 def _input_findings(inputs: Sequence[ManeuverInputs], opt: DiagnosticOptions) -> list[Finding]:

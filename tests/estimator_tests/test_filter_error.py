@@ -146,3 +146,27 @@ def test_options_are_checked():
         WindOptions(scale_length_m=0.0)
     with pytest.raises(ValueError, match="sigma_mps"):
         WindOptions(sigma_mps=-1.0)
+
+
+def test_output_error_verdict_points_to_the_filter_error_method(turbulent):
+    """The output-error fit of the turbulent flight fails with a turbulence finding whose advice
+    names the filter-error method (issue 14: the turbulence diagnosis suggests it)."""
+    _, prob = turbulent
+    res = estimate(prob, SolverOptions(start="given"))
+    turb = [f for f in res.findings if f.code == "turbulence"]
+    assert turb and res.verdict.name == "FAILURE", [f.code for f in res.findings]
+    assert all("--method filter_error" in f.advice for f in turb)
+
+
+def test_a_scale_error_beside_turbulence_says_so():
+    from estimator.diagnostics import _beside_turbulence
+    from estimator.verdict import Finding, Severity
+
+    scale = Finding("scale_error", Severity.FAILURE, "beta_zbu in maneuver m7: the measurement is 1.33 x "
+                    "its model output", "check the channel's scale factor", channel="beta_zbu", maneuver="m7")
+    other = Finding("scale_error", Severity.FAILURE, "beta_zbu in maneuver m8: ...", "check",
+                    channel="beta_zbu", maneuver="m8")
+    turb = Finding("turbulence", Severity.FAILURE, "maneuver m7: ...", "...", maneuver="m7")
+    out = _beside_turbulence([scale, other], [turb])
+    assert "show turbulence too" in out[0].message and out[0].advice.startswith("read the turbulence")
+    assert out[1] == other, "a maneuver without turbulence keeps its finding as it was"
