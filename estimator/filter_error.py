@@ -53,6 +53,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 from scipy.optimize import minimize_scalar
 
 from estimator.iteration import _evaluate
@@ -275,6 +276,19 @@ class FilterErrorLikelihood:
             N.add_blocks(H[None], g[None], cols[None], np.array([m.k]), 1.0)
             np.add.at(N.support, cols, np.count_nonzero(J, axis=0))
         return N
+
+    def wind_table(self, ev: Evaluation, noise: FilterNoise) -> pd.DataFrame:
+        """The smoothed turbulent wind of every maneuver at ``ev`` (:attr:`EstimationResult.wind`)."""
+        parts = []
+        for m in noise.maneuvers:
+            man = self.model.problem.maneuvers[m.k]
+            xs, Ps = self.wind_history(m, self._residuals(ev, m), noise.R, noise.sigma_mps[m.k])
+            sd = np.sqrt(np.maximum(np.diagonal(Ps, axis1=1, axis2=2), 0.0))
+            parts.append(pd.DataFrame({
+                "maneuver": man.id, "t_s": man.t_s[:m.n_samples],
+                "wind_n_mps": xs[:, 0], "wind_e_mps": xs[:, 1], "wind_d_mps": xs[:, 2],
+                "std_n_mps": sd[:, 0], "std_e_mps": sd[:, 1], "std_d_mps": sd[:, 2]}))
+        return pd.concat(parts, ignore_index=True)
 
     def findings(self, noise: FilterNoise) -> list[Finding]:
         """What the method estimated of the air, and what it does not yet give."""

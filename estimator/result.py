@@ -214,6 +214,7 @@ class EstimationResult:
     outliers: Mapping[tuple[str, str], np.ndarray] = field(default_factory=dict, repr=False)
     std_imu_noise: np.ndarray | None = field(default=None, repr=False)
     imu_noise_psd: Mapping[str, np.ndarray] | None = field(default=None, repr=False)
+    wind: ReadOnlyTable | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         # every way of making a result (build, replace, the constructor, from_json) freezes it:
@@ -237,6 +238,8 @@ class EstimationResult:
             put("imu_noise_psd", MappingProxyType(psd))
         if self.fit_quality is not None:
             put("fit_quality", ReadOnlyTable.of(self.fit_quality))
+        if self.wind is not None:
+            put("wind", ReadOnlyTable.of(self.wind))
 
     @classmethod
     def build(cls, problem: Problem, values: np.ndarray, **kw) -> EstimationResult:
@@ -248,6 +251,14 @@ class EstimationResult:
             channel_display={c.name: (c.display_scale, c.display_unit) for c in problem.channels},
             **kw,
         )
+
+    @property
+    def wind_history(self) -> pd.DataFrame | None:
+        """The filter-error method's smoothed turbulent wind per maneuver (a new DataFrame each
+        time): ``maneuver``, ``t_s`` (the maneuver's time base, s), ``wind_{n,e,d}_mps`` (NED, m/s,
+        the departure from the maneuver's steady wind, which its free initial velocities absorb)
+        and their smoothed deviations ``std_{n,e,d}_mps``; None for output error."""
+        return None if self.wind is None else self.wind.to_pandas()
 
     @property
     def diagnostics(self) -> pd.DataFrame | None:
@@ -417,6 +428,8 @@ class EstimationResult:
             # what from_json needs beyond the tables above to give back this very result
             "format": JSON_FORMAT,
             "fit_quality_columns": None if self.fit_quality is None else list(self.fit_quality.columns),
+            "wind": None if self.wind is None else {"columns": list(self.wind.columns),
+                                                    "rows": self.wind_history.to_dict(orient="list")},
             "state": list(self.state), "state_reason": list(self.state_reason),
             "free_estimated": self.free_estimated, "std_imu_noise": self.std_imu_noise,
             "channel_display": {k: list(v) for k, v in self.channel_display.items()},
@@ -511,6 +524,8 @@ class EstimationResult:
         if fq_cols is None and fq_rows:
             fq_cols = list(fq_rows[0])
         fit_quality = None if fq_cols is None else _frame(fq_rows, fq_cols)
+        wd = doc.get("wind")
+        wind = None if wd is None else pd.DataFrame({c: wd["rows"][c] for c in wd["columns"]})
         corr = doc["correlation"]
         keys = tuple(corr["keys"])
         psd = doc.get("imu_noise_psd")
@@ -537,10 +552,12 @@ class EstimationResult:
             verdict=Verdict[doc["verdict"]], fit_quality=fit_quality, outliers=outliers,
             std_imu_noise=std_imu,
             imu_noise_psd=None if psd is None else {k: _array(v) for k, v in psd.items()},
+            wind=wind,
         )
 
     def to_csv(self, directory: str | Path, record: Callable[[Path], object] | None = None) -> None:
-        """parameters.csv, residuals.csv, correlation.csv, findings.csv and fit_quality.csv.
+        """parameters.csv, residuals.csv, correlation.csv, findings.csv, fit_quality.csv and (filter
+        error) wind.csv.
 
         ``record`` is called with each file's path before it is written (e.g.
         :meth:`estimator.io.outdir.OutputFolder.record`, so the output folder lists what it holds).
@@ -559,6 +576,8 @@ class EstimationResult:
         self.findings_table().to_csv(at("findings.csv"), index=False)
         if self.fit_quality is not None:
             self.diagnostics.to_csv(at("fit_quality.csv"), index=False)
+        if self.wind is not None:
+            self.wind_history.to_csv(at("wind.csv"), index=False)
 
 
 # ------------------------------------------------------------------------------ JSON helpers

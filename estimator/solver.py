@@ -392,12 +392,14 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     keys = ps.keys
     filter_error = isinstance(lik, FilterErrorLikelihood)
     wind_findings: list[Finding] = []
+    wind = None
     if filter_error:
         noise = lik.relax(evals, lik.stats(evals))
         R = noise.R
         history = history + [lik.cost(evals, noise)]
         N = lik.normal(st, evals, noise)
         wind_findings = lik.findings(noise)
+        wind = lik.wind_table(evals, noise)
     else:
         R = channel_variances(it.sse, it.cnt)
         history = history + [ml_cost(it.sse, it.cnt, R)]
@@ -436,7 +438,7 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         status=it.status, message=message, confounding=tuple(confounding),
         elapsed_s=time.perf_counter() - t0, free_estimated=st.free.copy(), state=tuple(state),
         state_reason=tuple(reason), findings=tuple(findings), verdict=verdict,
-        fit_quality=diagnosis_table, outliers=outliers,
+        fit_quality=diagnosis_table, outliers=outliers, wind=wind,
     )
 
 

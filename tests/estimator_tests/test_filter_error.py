@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from campaigns.analytic_flight import NOISE_SIGMA, Flight, truth_values
-from estimator.filter_error import FilterErrorLikelihood, WindOptions
+from estimator.filter_error import WindOptions
 from estimator.io.modelset import load_model_set
 from estimator.model import Model
 from estimator.problem import STATE_PARAMS
@@ -122,19 +122,35 @@ def test_smoothed_wind_follows_the_true_wind(turbulent):
     nine tenths of the wind's variance)."""
     fl, prob = turbulent
     res = estimate(prob, SolverOptions(method="filter_error", diagnose=False, start="given"))
-    lik = FilterErrorLikelihood(Model(prob))
-    ev = lik.evaluate(res.parameters.values, True)
-    noise = lik.relax(ev, ev)
-    for m in noise.maneuvers:
-        man = prob.maneuvers[m.k]
-        xs, Ps = lik.wind_history(m, lik._residuals(ev, m), noise.R, noise.sigma_mps[m.k])
+    table = res.wind_history
+    assert list(table["maneuver"].unique()) == [m.id for m in prob.maneuvers]
+    for man in prob.maneuvers:
+        rows = table[table["maneuver"] == man.id]
+        xs = rows[["wind_n_mps", "wind_e_mps", "wind_d_mps"]].to_numpy()
+        sd = rows[["std_n_mps", "std_e_mps", "std_d_mps"]].to_numpy()
         t, w = fl.wind_ned_mps[man.id]
-        assert np.array_equal(t, man.t_s)
+        assert np.array_equal(rows["t_s"].to_numpy(), t)
         err = (xs - xs.mean(0)) - (w - w.mean(0))
         rms = np.sqrt(np.mean(err ** 2, axis=0))
-        post = np.sqrt(np.mean(np.diagonal(Ps, axis1=1, axis2=2), axis=0))
+        post = np.sqrt(np.mean(sd ** 2, axis=0))
         assert np.all(rms <= 3.0 * post), f"{man.id}: rms error {rms} against deviation {post}"
         assert np.all(rms <= 0.35 * SIGMA_MPS), f"{man.id}: rms error {rms} m/s"
+
+
+def test_wind_history_survives_json_and_csv(turbulent, tmp_path):
+    """The wind history is part of the result: written to wind.csv, read back from JSON."""
+    from estimator.result import EstimationResult
+
+    _, prob = turbulent
+    res = estimate(prob, SolverOptions(method="filter_error", diagnose=False, start="given",
+                                       max_iterations=3))
+    res.to_json(tmp_path / "r.json")
+    back = EstimationResult.from_json(tmp_path / "r.json")
+    assert back.wind_history.equals(res.wind_history)
+    res.to_csv(tmp_path / "csv")
+    assert (tmp_path / "csv" / "wind.csv").exists()
+    oem = estimate(prob, SolverOptions(diagnose=False, start="given", max_iterations=3))
+    assert oem.wind_history is None
 
 
 def test_options_are_checked():
