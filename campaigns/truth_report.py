@@ -9,6 +9,8 @@ section), the calibrated-minus-true cross-plots and the recovery of every estima
 
 from __future__ import annotations
 
+import numpy as np
+
 from estimator.calibration import TruthSections
 from estimator.report import Section, accuracy_table_html, figure_crossplot
 from estimator.workflow import RAD2DEG, WorkflowResult
@@ -63,6 +65,45 @@ def truth_sections(wf: WorkflowResult) -> TruthSections | None:
                          "per kind; every estimate in recovery.csv.",
                          tables=[("Within 3 sigma", summ.reset_index()), ("All", rec.reset_index())],
                          csv=[("recovery.csv", rec.reset_index())]),)
+    final = final + _wind_sections(wf)
     return TruthSections(after_table2=after, apportionment_tables=inst_tables, apportionment_csv=inst_csv,
                          crossplots=crossplots, final=final,
                          tables={"true_accuracy": tacc, "installation_recovery": inst, "recovery": rec})
+
+
+#: Maneuvers whose wind history the report draws, per estimation.
+WIND_FIGURES = 3
+
+
+def _wind_sections(wf: WorkflowResult) -> tuple[Section, ...]:
+    """The filter-error wind against the truth (nothing for output-error results)."""
+    import pandas as pd
+
+    from campaigns.workflow_truth import wind_errors
+    from estimator.report import figure_wind_history
+
+    tables, figures = [], []
+    for st in (*wf.final, *wf.gear_down):
+        if st.problem is None or st.result.wind_history is None:
+            continue
+        table, series = wind_errors(st.problem, st.result)
+        if not len(table):
+            continue
+        tables.append(table.assign(mach=st.mach, gear="down" if st.gear_down else "up", stage=st.name))
+        for mid in list(series)[:WIND_FIGURES]:
+            s = series[mid]
+            figures.append((f"{mid} (Mach {st.mach:.2f}, {st.name}): estimated wind against the truth, "
+                            "means removed", figure_wind_history(mid, s["t_s"], s["estimated"], s["std"],
+                                                                 s["truth"])))
+    if not tables:
+        return ()
+    allt = pd.concat(tables, ignore_index=True)
+    pooled = allt.groupby("axis")[["rms_error_mps", "true_std_mps", "est_std_mps"]].apply(
+        lambda g: np.sqrt((g ** 2).mean())).reindex(["north", "east", "down"])
+    return (Section(
+        "Wind: the filter-error method's turbulence against the truth",
+        "Each maneuver's smoothed turbulent wind against JSBSim's, both with the maneuver's mean "
+        "removed (the free initial velocities absorb the mean wind). rms per axis over every "
+        "maneuver (pooled), beside the true wind's own rms and the smoother's deviation.",
+        tables=[("Pooled over the maneuvers, m/s", pooled.reset_index()), ("Per maneuver", allt)],
+        figures=figures, csv=[("wind_recovery.csv", allt)]),)

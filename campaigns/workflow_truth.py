@@ -9,6 +9,9 @@
 - **Installation biases**: the apportioned per-aircraft installation biases against the injected
   ones minus the fleet mean (the only part the data can tell apart from a correction-model bias).
 - **Recovery**: every final estimate against its truth (:mod:`campaigns.truth`).
+- **Wind** (filter-error method): each maneuver's smoothed turbulent wind against JSBSim's, both
+  with their maneuver mean removed (the free initial velocities absorb the mean wind), rms per
+  axis.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from campaigns.truth import (
+    IMU_REFERENCE,
     SENSOR_SIGNAL_KINDS,
     _sensor_col,
     channel_values,
@@ -159,3 +163,39 @@ def recovery(wf: WorkflowResult) -> pd.DataFrame:
         t.insert(0, "mach", st.mach)
         frames.append(t)
     return pd.concat(frames) if frames else pd.DataFrame()
+
+
+def wind_errors(problem: Problem, result: EstimationResult) -> tuple[pd.DataFrame, dict[str, dict]]:
+    """The filter-error wind history of ``result`` against the truth, per maneuver.
+
+    Returns
+    -------
+    A table (maneuver, axis, rms_error_mps, true_std_mps, est_std_mps: the rms of the smoother's
+    deviation) and, per maneuver, the series for a figure (``t_s``, ``estimated``, ``std``,
+    ``truth``: (N, 3) each, means removed). Empty for an output-error result.
+    """
+    wh = result.wind_history
+    rows, series = [], {}
+    if wh is None:
+        return pd.DataFrame(rows), series
+    for m in problem.maneuvers:
+        part = wh[wh["maneuver"] == m.id]
+        if not len(part):
+            continue
+        tr = load_truth(problem, m.id)
+        inj = m.meta.get("injected", {})
+        # the model's clock is the IMU's: its sample at t shows the flight at t - (IMU lag)
+        t = part["t_s"].to_numpy() - float(inj.get(f"time_shift_s.{IMU_REFERENCE}", 0.0))
+        truth = np.stack([np.interp(t, tr["t_s"].to_numpy(), tr[f"true_wind_{a}_mps"].to_numpy())
+                          for a in "ned"], axis=1)
+        est = part[["wind_n_mps", "wind_e_mps", "wind_d_mps"]].to_numpy()
+        std = part[["std_n_mps", "std_e_mps", "std_d_mps"]].to_numpy()
+        truth = truth - truth.mean(axis=0)
+        est = est - est.mean(axis=0)
+        for i, axis in enumerate(("north", "east", "down")):
+            rows.append({"maneuver": m.id, "kind": m.meta.get("kind", ""), "axis": axis,
+                         "rms_error_mps": float(np.sqrt(np.mean((est[:, i] - truth[:, i]) ** 2))),
+                         "true_std_mps": float(np.std(truth[:, i])),
+                         "est_std_mps": float(np.sqrt(np.mean(std[:, i] ** 2)))})
+        series[m.id] = {"t_s": part["t_s"].to_numpy(), "estimated": est, "std": std, "truth": truth}
+    return pd.DataFrame(rows), series

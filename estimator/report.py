@@ -169,6 +169,45 @@ def figure_time_history(
     return fig
 
 
+def figure_wind_history(maneuver_id: str, t_s: np.ndarray, wind_ned_mps: np.ndarray,
+                        std_ned_mps: np.ndarray, reference_ned_mps: np.ndarray | None = None,
+                        reference_label: str = "truth") -> Figure:
+    """The filter-error method's smoothed turbulent wind of one maneuver, north, east and down.
+
+    Parameters
+    ----------
+    maneuver_id : the maneuver's name, shown in the title.
+    t_s : (N,) time, s.
+    wind_ned_mps : (N, 3) the smoothed wind (the departure from the maneuver's steady wind), NED, m/s.
+    std_ned_mps : (N, 3) its smoothed standard deviations, m/s (a +- 1 sigma band).
+    reference_ned_mps : (N, 3) a wind to compare with (the truth of a synthetic flight), on the same
+        footing (the same mean removed), or None; each axis' title gives the rms difference.
+    reference_label : its legend label.
+    """
+    t = np.asarray(t_s, dtype=float)
+    w = np.asarray(wind_ned_mps, dtype=float)
+    s = np.asarray(std_ned_mps, dtype=float)
+    if w.shape != (t.size, 3) or s.shape != (t.size, 3):
+        raise ValueError(f"{maneuver_id}: wind {w.shape} and std {s.shape} must be ({t.size}, 3)")
+    fig = _new_figure(10.0, 5.2)
+    axes = fig.subplots(3, 1, sharex=True, squeeze=False)[:, 0]
+    for i, (ax, axis) in enumerate(zip(axes, ("north", "east", "down"), strict=True)):
+        ax.fill_between(t, w[:, i] - s[:, i], w[:, i] + s[:, i], color=_MODEL_COLOR, alpha=0.2, lw=0)
+        ax.plot(t, w[:, i], color=_MODEL_COLOR, lw=0.9, label="estimated (+- 1 sigma)")
+        if reference_ned_mps is not None:
+            r = np.asarray(reference_ned_mps, dtype=float)[:, i]
+            ax.plot(t, r, color=_MEASURED_COLOR, lw=0.9, label=reference_label)
+            rms = float(np.sqrt(np.mean((w[:, i] - r) ** 2)))
+            ax.set_title(f"rms(estimated - {reference_label}) = {rms:.3g} m/s", loc="right",
+                         fontsize=7.5)
+        ax.set_ylabel(f"wind {axis}\n[m/s]", fontsize=8.5)
+        _style_axes(ax)
+    axes[0].legend(loc="upper left", fontsize=7.5, ncol=2, framealpha=0.8)
+    axes[-1].set_xlabel("time [s]", fontsize=9)
+    fig.suptitle(f"{maneuver_id}: turbulent wind, filter-error method", fontsize=10)
+    return fig
+
+
 #: Fig. 3 shows a maneuver of these kinds if there is one (the paper's is a pitch doublet). Maneuver
 #: kinds are the flight-test programme's vocabulary (a dataset entry's ``kind``), not the aircraft's.
 TIME_HISTORY_KINDS = ("pitch_doublet", "3211")
