@@ -83,7 +83,8 @@ STUDY_SPEC = scaffold.Study(
     "turbulence one at a time; Monte Carlo accuracy of the calibrated channels against the truth "
     "and pass/fail against the desired accuracy. Resumable: run the same command again.",
     workers_help="points run at once, one process each (default: 2)",
-    size_help="full: the study; tiny: one configuration, two maneuvers, two levels per factor",
+    size_help="full: the study; tiny: one configuration, two maneuvers, two levels per factor; "
+              "filter_error: the turbulence rows (none, light, moderate) by the filter-error method",
     run=run.run,
     analyse=lambda config, out_dir, n, errors: collect(study_points(config, out_dir), n, errors),
     report=report.report,

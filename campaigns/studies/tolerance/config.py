@@ -192,7 +192,16 @@ FULL = StudyConfig(FULL_BASE, make_factors(
 TINY = StudyConfig(TINY_BASE, make_factors(
     imu_scales=(1.0, 3.0), imu_started_scales=(3.0,), flow_delays_ms=("typical", 100.0),
     ins_delays_ms=(0.0, 100.0), winds_mps=(0.0, 10.0), turbulence=("none", "light")), replications=1)
-SIZES = {"full": FULL, "tiny": TINY}
+#: Issue 14: the turbulence rows again, estimated by the filter-error method (the wind as states;
+#: estimator/filter_error.py): calm, light and moderate, 8 replications each, on the full base
+FILTER_ERROR_BASE: Mapping[str, Any] = {
+    **FULL_BASE, "name": "tolerance_filter_error",
+    "estimator": {**FULL_BASE["estimator"], "solver": {"method": "filter_error"}}}
+FILTER_ERROR = StudyConfig(FILTER_ERROR_BASE, tuple(
+    f for f in make_factors(imu_scales=(1.0,), imu_started_scales=(), flow_delays_ms=("typical",),
+                            ins_delays_ms=(0.0,), winds_mps=(0.0,), turbulence=("none", "light", "moderate"))
+    if f.name == "turbulence"), replications=8)
+SIZES = {"full": FULL, "tiny": TINY, "filter_error": FILTER_ERROR}
 
 
 @dataclass(frozen=True)

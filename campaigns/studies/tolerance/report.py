@@ -191,8 +191,10 @@ def _why_lost_text(factor: Factor, r: pd.Series, base: Mapping[str, Any], bad: S
                  f"vane residual 3-sigma {base_res:.2f} -> {res:.2f} deg, {int(r.get('n_ok', 0))} of {n} "
                  "reported as a success)")
     elif not factor.swept and grown:
-        text += (f"; the vane residual 3-sigma grows from {base_res:.2f} to {res:.2f} deg: the model "
-                 "(no process noise) no longer fits the data")
+        text += (f"; the vane residual 3-sigma grows from {base_res:.2f} to {res:.2f} deg: the data carry "
+                 "air motion the calibration model alone does not follow (all of it misfit for the "
+                 "output-error method, no process noise; the filter-error method's wind states take "
+                 "it up)")
     elif np.isfinite(res) and lost:  # (a loss by failure verdicts alone was seen in the residuals)
         text += (f"; the vane residual 3-sigma stays near {res:.2f} deg (base {base_res:.2f}): an error "
                  "the fit does not see in its residuals")
@@ -302,7 +304,9 @@ def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: st
               f"of accuracy is the swept factor's); {base['environment']['planet']} earth, calm air; IMU "
               f"biases drawn per maneuver (std {IMU_SPREAD_ACCEL_MPS2:g} m/s^2, {IMU_SPREAD_GYRO_DEG_S:g} "
               f"deg/s at scale 1). Estimator: {est.get('model', 'tejas')} model set, channels "
-              f"{est.get('channels', 'all')}, at most {est.get('max_iterations', 40)} iterations."),
+              f"{est.get('channels', 'all')}, at most {est.get('max_iterations', 40)} iterations"
+              + (f", the {est['solver']['method'].replace('_', '-')} method" if est.get('solver', {}).get(
+                  'method') else "") + "."),
         *paragraph(f"levels: IMU biases x typical (accel {accel_mps2} m/s^2, gyro "
               f"{[round(g, 3) for g in gyro_deg_s]} deg/s; the per-maneuver spread scaled too); flow delay "
               f"= the delay of every flow sensor (typical: {_typical_delays_text()}); INS latency on the "
