@@ -46,6 +46,7 @@ states :mod:`estimator.identifiability`, the deviations :mod:`estimator.uncertai
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -140,6 +141,15 @@ class SolverOptions:
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise ValueError(f"SolverOptions: method must be one of {METHODS}, got {self.method!r}")
+        if isinstance(self.wind, Mapping):  # a problem file's or scenario's [solver] table
+            try:
+                object.__setattr__(self, "wind", WindOptions(**dict(self.wind)))
+            except TypeError as exc:
+                raise ValueError(f"SolverOptions: wind = {dict(self.wind)!r}: {exc}; its keys are "
+                                 "scale_length_m, sigma_mps, calm_sigma_mps") from None
+        if self.wind is not None and not isinstance(self.wind, WindOptions):
+            raise ValueError(f"SolverOptions: wind must be WindOptions or a table of its keys, got "
+                             f"{self.wind!r}")
         if self.wind is not None and self.method != "filter_error":
             raise ValueError("SolverOptions: wind options are for method='filter_error' (the "
                              "output-error method has no wind states)")

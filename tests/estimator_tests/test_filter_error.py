@@ -162,6 +162,11 @@ def test_options_are_checked():
         WindOptions(scale_length_m=0.0)
     with pytest.raises(ValueError, match="sigma_mps"):
         WindOptions(sigma_mps=-1.0)
+    # a problem file's [solver] table gives the wind model as a table
+    opt = SolverOptions(method="filter_error", wind={"scale_length_m": 300.0})
+    assert opt.wind == WindOptions(scale_length_m=300.0)
+    with pytest.raises(ValueError, match="its keys are scale_length_m"):
+        SolverOptions(method="filter_error", wind={"scale": 300.0})
 
 
 def test_output_error_verdict_points_to_the_filter_error_method(turbulent):
