@@ -1,6 +1,8 @@
 """Benchmark: the estimator at the paper's scale — time to converge, iterations, peak memory.
 
     python campaigns/benchmarks/bench_estimate.py [--sizes 10 20 40 70 140] [--repeat 2]
+                                                  [--method output_error|filter_error|both]
+                                                  [--turbulence SIGMA_MPS]
                                                   [--out campaigns/benchmarks/results/estimate.txt]
 
 The paper estimates 60-70 maneuvers of 30-40 s at once (~80,000 samples, ~1000 free parameters
@@ -20,13 +22,25 @@ diagnostics included. Reported:
 - per problem size: maneuvers, samples, channel samples (residuals), free parameters, iterations,
   wall time to converge (everything ``estimate`` does: staged start, screening, iterations,
   Cramér-Rao and honest deviations, diagnostics, result), time per iteration, time per maneuver,
-  the time spent in the honest deviations (:func:`estimator.uncertainty.honest_std`), the first
+  the time spent in the honest deviations (:func:`estimator.uncertainty.honest_std`; "-": none), the first
   run's wall time, the CPU time
   (the estimator uses two threads on a two-core machine), and the process's peak resident
   memory (problem data included).
 
 Wall times are the best of ``--repeat`` runs in the same process (the machine may be shared),
 with the first run reported beside them.
+
+``--method`` chooses the estimation method (``SolverOptions.method``): the output-error one
+(default), the filter-error one (the turbulent wind as Gauss-Markov states,
+:mod:`estimator.filter_error`), or ``both``: each size then runs both methods, each in its own
+process, on the same problem, and a line gives the filter-error / output-error wall-time ratio per
+size against the target of issue 14 (at most 3x). ``--turbulence SIGMA`` flies the campaign in
+turbulence of that intensity (m/s per NED component, Dryden scale length 533.4 m; each maneuver its
+own draw, seeded by ``--seed`` and the maneuver's number; :func:`synthetic_fpr.synthetic_problem`);
+the status line then records what each fit found of the turbulence (the filter-error fit's
+estimated intensities). The filter-error fit reports Cramér-Rao deviations only (a WARNING
+finding says so): its "coloured s" column is empty.
+
 Timing never decides a test; the result table is committed so changes in speed are visible in
 review.
 """
@@ -53,7 +67,26 @@ def _peak_rss_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def _run_one(n: int, repeat: int, seed: int) -> dict:
+#: Dryden scale length above 2000 ft (1750 ft), m: the turbulence of ``--turbulence``
+DRYDEN_L_M = 533.4
+METHODS = ("output_error", "filter_error")
+
+
+def _turbulence(sigma_mps: float | None, seed: int) -> tuple[float, float, int] | None:
+    return None if sigma_mps is None else (sigma_mps, DRYDEN_L_M, seed)
+
+
+def _turbulence_note(result) -> str:
+    """The fit's turbulence finding (the filter-error fit's estimated intensities), or ''."""
+    msgs = [f.message for f in result.findings if f.code == "turbulence"]
+    if not msgs:
+        return ""
+    more = f" (+{len(msgs) - 1} more turbulence findings)" if len(msgs) > 1 else ""
+    return msgs[0] + more
+
+
+def _run_one(n: int, repeat: int, seed: int, method: str = "output_error",
+             turbulence_mps: float | None = None) -> dict:
     """One problem size, in this process: warm up, then time ``estimate`` (best of ``repeat``)."""
     sys.path.insert(0, str(HERE))
     import numpy as np
@@ -62,8 +95,11 @@ def _run_one(n: int, repeat: int, seed: int) -> dict:
     import estimator.solver as solver
     import estimator.uncertainty as uncertainty
 
-    solver.estimate(synthetic_problem(2, seed=seed + 1), solver.SolverOptions())  # load kernels
-    problem = synthetic_problem(n, seed=seed)
+    options = solver.SolverOptions(method=method)
+    # load the kernels (a turbulent warm-up problem when the timed one is: the wind filter's too)
+    solver.estimate(synthetic_problem(2, seed=seed + 1, turbulence=_turbulence(turbulence_mps, seed + 1)),
+                    options)
+    problem = synthetic_problem(n, seed=seed, turbulence=_turbulence(turbulence_mps, seed))
     rss_data = _peak_rss_mib()
     colored_s: list[float] = []
     inner = uncertainty.honest_std  # the name the solver's deviations (uncertainty._deviations) call
@@ -79,12 +115,16 @@ def _run_one(n: int, repeat: int, seed: int) -> dict:
     for _ in range(repeat):
         r0 = resource.getrusage(resource.RUSAGE_SELF)
         t0 = time.perf_counter()
-        result = solver.estimate(problem, solver.SolverOptions())
+        n_colored = len(colored_s)
+        result = solver.estimate(problem, options)
+        if len(colored_s) == n_colored:  # no honest deviations (the filter-error method)
+            colored_s.append(float("nan"))
         walls.append(time.perf_counter() - t0)
         r1 = resource.getrusage(resource.RUSAGE_SELF)
         cpus.append(r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime)
     best = int(np.argmin(walls))
     return {
+        "method": method,
         "maneuvers": n,
         "samples": int(sum(m.n for m in problem.maneuvers)),
         "residuals": int(sum(r.n for r in result.residuals)),
@@ -97,12 +137,14 @@ def _run_one(n: int, repeat: int, seed: int) -> dict:
         "colored_s": colored_s[best],
         "status": result.status,
         "message": result.message,
+        "verdict": result.verdict.name,
+        "turbulence": _turbulence_note(result),
         "rss_data_mib": rss_data,
         "rss_peak_mib": _peak_rss_mib(),
     }
 
 
-def _compile_probe() -> dict:
+def _compile_probe(method: str = "output_error", turbulence_mps: float | None = None) -> dict:
     """Time the first ``estimate`` of a tiny problem (kernels compiled or loaded) and a second."""
     sys.path.insert(0, str(HERE))
     t0 = time.perf_counter()
@@ -111,12 +153,13 @@ def _compile_probe() -> dict:
     import estimator.solver as solver
 
     t_import = time.perf_counter() - t0
-    problem = synthetic_problem(2, seed=3)
+    problem = synthetic_problem(2, seed=3, turbulence=_turbulence(turbulence_mps, 3))
+    options = solver.SolverOptions(method=method)
     t0 = time.perf_counter()
-    solver.estimate(problem, solver.SolverOptions())
+    solver.estimate(problem, options)
     first = time.perf_counter() - t0
     t0 = time.perf_counter()
-    solver.estimate(problem, solver.SolverOptions())
+    solver.estimate(problem, options)
     second = time.perf_counter() - t0
     return {"import_s": t_import, "first_s": first, "second_s": second}
 
@@ -159,28 +202,47 @@ def main() -> None:
     ap.add_argument("--sizes", type=int, nargs="+", default=[10, 20, 40, 70, 140])
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--method", choices=[*METHODS, "both"], default="output_error",
+                    help="estimation method (SolverOptions.method); both: each size with each, on "
+                         "the same problem, and their wall-time ratio")
+    ap.add_argument("--turbulence", type=float, metavar="SIGMA", default=None,
+                    help="fly the campaign in turbulence of this intensity, m/s (Dryden, L = 533.4 m); "
+                         "default: calm air")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "estimate.txt")
     ap.add_argument("--one", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--compile-probe", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
+    if a.turbulence is not None and not a.turbulence > 0:
+        ap.error(f"--turbulence must be a positive intensity in m/s, got {a.turbulence}")
+    methods = list(METHODS) if a.method == "both" else [a.method]
     if a.one is not None:
-        print(json.dumps(_run_one(a.one, a.repeat, a.seed)))
+        print(json.dumps(_run_one(a.one, a.repeat, a.seed, methods[0], a.turbulence)))
         return
     if a.compile_probe:
-        print(json.dumps(_compile_probe()))
+        print(json.dumps(_compile_probe(methods[0], a.turbulence)))
         return
+    turb_args = [] if a.turbulence is None else ["--turbulence", repr(a.turbulence)]
+    # the compile probe runs the method that uses the most kernels (filter error: the output-error
+    # ones for its start and screen, and the wind filter's)
+    probe_method = methods[-1]
 
     lines = ["Estimator benchmark (campaigns/benchmarks/bench_estimate.py)", ""]
     lines += _machine()
+    air = ("calm air" if a.turbulence is None else
+           f"turbulence: sigma {a.turbulence:g} m/s per NED component, Dryden L = {DRYDEN_L_M:g} m, "
+           f"first-order Gauss-Markov, each maneuver its own draw (seed [{a.seed}, k]); the flow channels "
+           "and the airspeed see V - C_bn dW, the IMU, attitude and altitudes the flight")
     lines.append("data: synthetic analytic flights (campaigns/benchmarks/synthetic_fpr.py), 32 Hz, "
-                 "30-40 s per maneuver, all tejas channels, white noise; default SolverOptions "
-                 "(staged start, honest deviations, diagnostics)")
+                 f"30-40 s per maneuver, all tejas channels, white noise, {air}; SolverOptions "
+                 f"(method={' and '.join(methods)}; otherwise default: staged start, honest "
+                 "deviations, diagnostics)")
+    probe = ["--compile-probe", "--method", probe_method, *turb_args]
     with tempfile.TemporaryDirectory() as cache:
-        cold = _child(["--compile-probe"], {"NUMBA_CACHE_DIR": cache})
-        warm = _child(["--compile-probe"], {"NUMBA_CACHE_DIR": cache})
+        cold = _child(probe, {"NUMBA_CACHE_DIR": cache})
+        warm = _child(probe, {"NUMBA_CACHE_DIR": cache})
     lines += [
         "",
-        "numba kernels (first estimate of a 2-maneuver problem minus the second one):",
+        f"numba kernels (first estimate of a 2-maneuver problem minus the second one; {probe_method}):",
         f"  cold, empty cache: {cold['first_s'] - cold['second_s']:6.2f} s   (once per machine and "
         "estimator version: cache=True keeps the machine code on disk)",
         f"  from the cache:    {warm['first_s'] - warm['second_s']:6.2f} s   (once per process)",
@@ -189,24 +251,37 @@ def main() -> None:
         f"per size: best of {a.repeat} runs, each size in its own process after a warm-up (no "
         "compilation in the timings)",
     ]
-    head = (f"{'maneuvers':>9}{'samples':>9}{'residuals':>10}{'free':>6}{'iter':>5}{'wall s':>8}"
-            f"{'s/iter':>8}{'ms/maneuver':>12}{'coloured s':>11}{'first s':>8}{'CPU s':>7}"
+    head = (f"{'method':<13}{'maneuvers':>9}{'samples':>9}{'residuals':>10}{'free':>6}{'iter':>5}"
+            f"{'wall s':>8}{'s/iter':>8}{'ms/maneuver':>12}{'coloured s':>11}{'first s':>8}{'CPU s':>7}"
             f"{'peak RSS MiB':>13}{'data MiB':>9}")
     lines += [head, "-" * len(head)]
     rows = []
-    for n in a.sizes:
-        r = _child(["--one", str(n), "--repeat", str(a.repeat), "--seed", str(a.seed)])
+    for n, method in [(n, m) for n in a.sizes for m in methods]:
+        r = _child(["--one", str(n), "--repeat", str(a.repeat), "--seed", str(a.seed), "--method", method,
+                    *turb_args])
         rows.append(r)
+        colored = "-" if r["colored_s"] != r["colored_s"] else f"{r['colored_s']:.2f}"  # NaN: none
         lines.append(
-            f"{r['maneuvers']:>9}{r['samples']:>9}{r['residuals']:>10}{r['free']:>6}{r['iterations']:>5}"
-            f"{r['wall_s']:>8.2f}{r['wall_s'] / r['iterations']:>8.3f}{1e3 * r['wall_s'] / n:>12.1f}"
-            f"{r['colored_s']:>11.2f}{r['first_s']:>8.2f}{r['cpu_s']:>7.2f}{r['rss_peak_mib']:>13.0f}"
+            f"{r['method']:<13}{r['maneuvers']:>9}{r['samples']:>9}{r['residuals']:>10}{r['free']:>6}"
+            f"{r['iterations']:>5}{r['wall_s']:>8.2f}{r['wall_s'] / r['iterations']:>8.3f}"
+            f"{1e3 * r['wall_s'] / n:>12.1f}"
+            f"{colored:>11}{r['first_s']:>8.2f}{r['cpu_s']:>7.2f}{r['rss_peak_mib']:>13.0f}"
             f"{r['rss_data_mib']:>9.0f}"
         )
         print(lines[-1], flush=True)
     lines += ["", "status per size: " + "; ".join(
-        f"{r['maneuvers']}: {r['message'].split(';')[0]} ({r['estimated']} of {r['free']} free "
-        "parameters estimated, the rest held as undetermined)" for r in rows)]
+        f"{r['maneuvers']}{'' if len(methods) == 1 and a.method == 'output_error' else ' ' + r['method']}: "
+        f"{r['message'].split(';')[0]} ({r['estimated']} of {r['free']} free "
+        "parameters estimated, the rest held as undetermined)"
+        + (f"; verdict {r['verdict']}; turbulence finding: {r['turbulence'] or 'none'}"
+           if a.turbulence is not None or r["method"] == "filter_error" else "")
+        for r in rows)]
+    if len(methods) == 2:
+        wall = {(r["maneuvers"], r["method"]): r["wall_s"] for r in rows}
+        ratios = [(n, wall[n, "filter_error"] / wall[n, "output_error"]) for n in a.sizes]
+        lines += ["", "filter-error / output-error wall time (target of issue 14: at most 3x): " + "; ".join(
+            f"{n} maneuvers: {q:.2f}x ({'met' if q <= 3.0 else f'{q / 3.0:.2f} x the target'})"
+            for n, q in ratios)]
     lines += ["", "wall s: best of the runs, everything estimate() does (screening, iterations, "
               "Cramér-Rao and honest deviations, diagnostics, result; the staged start's iterations "
               "not counted in iter); s/iter, ms/maneuver: from it; coloured s: the honest deviations' "

@@ -15,6 +15,16 @@ A fleet of five aircraft: three with the nose probe, two with the flight-test bo
 each with its own CG and installation biases. Data are generated in memory in about a second for
 70 maneuvers, independently of the estimator's code: the kinematics, the lever arms and the channel
 models are those of :mod:`campaigns.analytic_flight`, the estimator tests' analytic flight.
+
+Optionally the campaign is flown in turbulence (``turbulence=(sigma_mps, L_m, seed)``), as
+:class:`campaigns.analytic_flight.Flight` flies it: a turbulent wind ``dW`` (NED; three independent
+first-order Gauss-Markov components, :func:`~campaigns.analytic_flight.gauss_markov_wind`, at the
+maneuver's mean airspeed) moves the air, so the flow channels (vanes, probes, boom) and the
+airspeed see ``V - C_bn dW``, while the IMU, the attitude, the altitude and the DGPS height follow
+the (ground-relative) flight. Each maneuver has its own draw from its own generator, seeded by
+``(seed, maneuver number)``: the main generator's stream (trajectories, truth, noise) is the
+calm campaign's, so a turbulent campaign differs from the calm one by the wind alone, and without
+turbulence the data are those generated before the option existed.
 """
 
 from __future__ import annotations
@@ -31,9 +41,11 @@ from campaigns.analytic_flight import (
     TABLES,
     G,
     Sinus,
+    gauss_markov_wind,
     imu_inputs,
     kinematic_flight,
     local_flow,
+    ned_to_body,
     tejas_channels,
     truth_tables,
 )
@@ -73,7 +85,8 @@ def _tables(specs: dict, rng: np.random.Generator) -> dict[str, np.ndarray]:
 
 
 def _maneuver(mid: str, aircraft: str, duration_s: float, rate_hz: float, truth: dict,
-              rng: np.random.Generator) -> ManeuverData:
+              rng: np.random.Generator, turbulence: tuple[float, float, int] | None = None,
+              number: int = 0) -> ManeuverData:
     inputs, states = _trajectory(rng)
     boom = FLEET[aircraft]
     r_cg = np.array([0.33, 0.0, 0.13]) + rng.normal(0.0, [0.05, 0.005, 0.01])
@@ -92,11 +105,34 @@ def _maneuver(mid: str, aircraft: str, duration_s: float, rate_hz: float, truth:
     def states_at(ts):
         return np.column_stack([states(ts), np.interp(ts, t_fine, h_fine)])
 
+    meta = {}
+    flow_states = states_at
+    if turbulence is not None:
+        sigma_mps, L_m, seed = turbulence
+        # the Dryden correlation at the maneuver's mean airspeed; drawn exactly on the fine grid,
+        # from a generator of its own (the main stream stays the calm campaign's)
+        v_mean_mps = float(np.linalg.norm(x[:, :3], axis=1).mean())
+        gust = gauss_markov_wind(t_fine, sigma_mps, L_m, v_mean_mps,
+                                 np.random.default_rng([int(seed), number]))
+
+        def wind_at(ts):
+            return np.stack([np.interp(ts, t_fine, d) for d in gust.T], 1)
+
+        def flow_states(ts):
+            # the air's velocity relative to the aircraft, V - C_bn dW; attitude and altitude as flown
+            xs = states_at(ts)
+            xs[:, :3] -= np.einsum("nij,nj->ni", ned_to_body(xs[:, 3:6]), wind_at(ts))
+            return xs
+
+        meta = {"wind_ned_mps": wind_at(t), "turbulence": (float(sigma_mps), float(L_m), int(seed))}
+
     def flow(ts, sensor):
-        return local_flow(states_at(ts), inputs(ts)[1], SENSORS[sensor] - r_cg)
+        return local_flow(flow_states(ts), inputs(ts)[1], SENSORS[sensor] - r_cg)
 
     ac = truth["aircraft"][aircraft]
-    meas = tejas_channels(t, states_at, inputs, SENSORS, r_cg, TAUS, ac, truth["tables"],
+    # the attitude and altitude channels are the same either way (flow_states changes the
+    # velocity only)
+    meas = tejas_channels(t, flow_states, inputs, SENSORS, r_cg, TAUS, ac, truth["tables"],
                           truth["breakpoints"], nose_probe=not boom)
     # DGPS height: geometric (pressure altitude here is geometric too: k_h = 0), its own offset;
     # listed after h (the noise below is drawn in this order)
@@ -116,12 +152,13 @@ def _maneuver(mid: str, aircraft: str, duration_s: float, rate_hz: float, truth:
     return ManeuverData(
         id=mid, t_s=t, accel_imu_mps2=a_imu + da, omega_rps=om + dw, measurements=meas,
         r_cg_body_m=r_cg, aircraft=aircraft, configuration=aircraft, source=f"synthetic {mid}",
-        meta={"imu_bias": np.concatenate([da, dw])},
+        meta={"imu_bias": np.concatenate([da, dw]), **meta},
     )
 
 
 def synthetic_problem(n_maneuvers: int, seed: int = 1, rate_hz: float = 32.0,
-                      duration_s: tuple[float, float] = (30.0, 40.0)) -> Problem:
+                      duration_s: tuple[float, float] = (30.0, 40.0),
+                      turbulence: tuple[float, float, int] | None = None) -> Problem:
     """A campaign of ``n_maneuvers`` analytic maneuvers as an estimation problem.
 
     Parameters
@@ -130,14 +167,18 @@ def synthetic_problem(n_maneuvers: int, seed: int = 1, rate_hz: float = 32.0,
     seed : random seed (trajectories, truth, noise); the same seed gives the same problem.
     rate_hz : sample rate, Hz.
     duration_s : maneuver lengths are uniform in this range, s.
+    turbulence : ``(sigma_mps, L_m, seed)``: the campaign flown in turbulence of intensity
+        ``sigma_mps`` (m/s, each NED component) and scale length ``L_m`` (m; Dryden above 2000 ft:
+        533.4), maneuver ``k``'s wind drawn from ``default_rng([seed, k])`` (module docstring);
+        the draw at the samples is ``meta["wind_ned_mps"]`` (n, 3). None: calm air.
 
     Returns
     -------
     The problem with every channel of the ``tejas`` model set that has data, the default free
     parameters plus ``h0`` (so each maneuver has 13 free initial conditions and IMU biases), start
     values as a user gets them (initial conditions from the first samples, everything else at the
-    model set's start values), and the truth in ``problem.maneuvers[k].meta`` and
-    :func:`truth_values`.
+    model set's start values), and the truth (the IMU biases, with turbulence the wind) in
+    ``problem.maneuvers[k].meta``.
     """
     rng = np.random.default_rng(seed)
     channels, specs = load_model_set("tejas")
@@ -149,7 +190,8 @@ def synthetic_problem(n_maneuvers: int, seed: int = 1, rate_hz: float = 32.0,
                          ("b_l", "b_r", "b_sa", "b_sb", "b_n", "b_ba", "b_bu", "b_bl")} for a in FLEET},
     }
     fleet = list(FLEET)
-    mans = [_maneuver(f"m{k:04d}", fleet[k % len(fleet)], rng.uniform(*duration_s), rate_hz, truth, rng)
+    mans = [_maneuver(f"m{k:04d}", fleet[k % len(fleet)], rng.uniform(*duration_s), rate_hz, truth, rng,
+                      turbulence, k)
             for k in range(n_maneuvers)]
     specs = [replace(s, free=True) if s.name == "h0" else s for s in specs]
     present = {c for m in mans for c in m.measurements}
