@@ -50,12 +50,14 @@ Gauss-Markov wind has zero mean: it absorbs a constant only as much as its prior
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 from scipy.optimize import minimize_scalar
 
+from estimator.core.sensitivity import worker_threads
 from estimator.iteration import _evaluate
 from estimator.model import Evaluation, Model
 from estimator.normal_equations import NormalEquations, Structure, residual_sums
@@ -207,17 +209,16 @@ class FilterErrorLikelihood:
         # the intensities again, until neither moves: the Gauss-Newton step that follows sees a
         # settled noise model, not one still drifting (an EM update converges only linearly, and
         # each intensity search costs a dozen filter runs, an EM update one smoother run)
+        es = [ce.e for ce in ev.channels]
         wide = self._sigma is None
         search, settled = True, False
         for _ in range(RELAX_ROUNDS):
             if search:
-                moved = 0.0
-                for m in mans:
+                def best(m: _Maneuver, R=R, wide=wide) -> float:
                     before = sigma[m.k]
                     if self.wind.sigma_mps is not None:
-                        sigma[m.k] = self.wind.sigma_mps
-                        continue
-                    e = self._residuals(ev, m)
+                        return self.wind.sigma_mps
+                    e = self._residuals(ev, m, es)
                     if wide:
                         lo, hi = SIGMA_SEARCH_MPS
                     elif before == 0.0:  # calm before: is it still?
@@ -225,13 +226,17 @@ class FilterErrorLikelihood:
                     else:
                         lo = max(before / SIGMA_REFINE_FACTOR, SIGMA_SEARCH_MPS[0])
                         hi = min(before * SIGMA_REFINE_FACTOR, SIGMA_SEARCH_MPS[1])
-                    sigma[m.k] = self._best_sigma(m, e, R, lo, hi)
-                    if not wide and sigma[m.k] > hi / (1.0 + 10.0 * SIGMA_XTOL):
+                    s = self._best_sigma(m, e, R, lo, hi)
+                    if not wide and s > hi / (1.0 + 10.0 * SIGMA_XTOL):
                         # at the edge of the narrow bracket: the optimum is beyond it
-                        sigma[m.k] = self._best_sigma(m, e, R, *SIGMA_SEARCH_MPS)
-                    if sigma[m.k] < self.wind.calm_sigma_mps:
-                        sigma[m.k] = 0.0
-                    moved = max(moved, abs(sigma[m.k] - before) / max(before, 1e-3))
+                        s = self._best_sigma(m, e, R, *SIGMA_SEARCH_MPS)
+                    return 0.0 if s < self.wind.calm_sigma_mps else s
+
+                before = sigma.copy()
+                for m, s in zip(mans, self._map(best, mans), strict=True):
+                    sigma[m.k] = s
+                moved = max((abs(sigma[m.k] - before[m.k]) / max(before[m.k], 1e-3) for m in mans),
+                            default=0.0)
                 wide, search, settled = False, False, moved < RELAX_TOL
             R_new = self._em_variances(ev, mans, R, sigma)
             moved_R = float(np.max(np.abs(R_new / R - 1.0)))
@@ -258,31 +263,34 @@ class FilterErrorLikelihood:
         return True
 
     def cost(self, stats: Evaluation, noise: FilterNoise) -> float:
-        total = 0.0
-        for m in noise.maneuvers:
-            e = self._residuals(stats, m)
-            total += self._nll(m, e, noise.R, noise.sigma_mps[m.k])
-        return total
+        es = [ce.e for ce in stats.channels]
+        parts = self._map(lambda m: self._nll(m, self._residuals(stats, m, es), noise.R,
+                                              noise.sigma_mps[m.k]), noise.maneuvers)
+        return float(sum(parts))
 
     def normal(self, st: Structure, ev: Evaluation, noise: FilterNoise) -> NormalEquations:
-        N = NormalEquations(st)
-        for m in noise.maneuvers:
-            e = self._residuals(ev, m)
+        es = [ce.e for ce in ev.channels]
+
+        def blocks(m: _Maneuver):
             cols, J = self._jacobian(ev, m, st)
-            nu, s, dnu = self._innovations(m, e, noise.R, noise.sigma_mps[m.k], J)
+            nu, s, dnu = self._innovations(m, self._residuals(ev, m, es), noise.R,
+                                           noise.sigma_mps[m.k], J)
             w = dnu / np.sqrt(s)[:, None]
-            H = w.T @ w
-            g = -(w.T @ (nu / np.sqrt(s)))
+            return cols, w.T @ w, -(w.T @ (nu / np.sqrt(s))), np.count_nonzero(J, axis=0)
+
+        N = NormalEquations(st)
+        for m, (cols, H, g, nz) in zip(noise.maneuvers, self._map(blocks, noise.maneuvers), strict=True):
             N.add_blocks(H[None], g[None], cols[None], np.array([m.k]), 1.0)
-            np.add.at(N.support, cols, np.count_nonzero(J, axis=0))
+            np.add.at(N.support, cols, nz)
         return N
 
     def wind_table(self, ev: Evaluation, noise: FilterNoise) -> pd.DataFrame:
         """The smoothed turbulent wind of every maneuver at ``ev`` (:attr:`EstimationResult.wind`)."""
         parts = []
+        es = [ce.e for ce in ev.channels]
         for m in noise.maneuvers:
             man = self.model.problem.maneuvers[m.k]
-            xs, Ps = self.wind_history(m, self._residuals(ev, m), noise.R, noise.sigma_mps[m.k])
+            xs, Ps = self.wind_history(m, self._residuals(ev, m, es), noise.R, noise.sigma_mps[m.k])
             sd = np.sqrt(np.maximum(np.diagonal(Ps, axis1=1, axis2=2), 0.0))
             parts.append(pd.DataFrame({
                 "maneuver": man.id, "t_s": man.t_s[:m.n_samples],
@@ -357,8 +365,21 @@ class FilterErrorLikelihood:
         return out
 
     @staticmethod
-    def _residuals(ev: Evaluation, m: _Maneuver) -> np.ndarray:
-        return np.concatenate([ev.channels[ci].e[r0:r1] for ci, r0, r1 in m.pieces])[m.order]
+    def _residuals(ev: Evaluation, m: _Maneuver, channel_e: list[np.ndarray] | None = None
+                   ) -> np.ndarray:
+        """The maneuver's residuals in observation order (``channel_e``: every channel's ``e``,
+        computed once for all maneuvers: ``ChannelEval.e`` computes ``z - y`` on each access)."""
+        es = channel_e if channel_e is not None else [ce.e for ce in ev.channels]
+        return np.concatenate([es[ci][r0:r1] for ci, r0, r1 in m.pieces])[m.order]
+
+    @staticmethod
+    def _map(fn, items: list) -> list:
+        """``fn`` over ``items`` (maneuvers: independent), on the estimator's worker threads when
+        there are several (the filter and smoother kernels release the GIL); results in order."""
+        if worker_threads() > 1 and len(items) > 1:
+            with ThreadPoolExecutor(worker_threads()) as ex:
+                return list(ex.map(fn, items))
+        return [fn(x) for x in items]
 
     @staticmethod
     def _jacobian(ev: Evaluation, m: _Maneuver, st: Structure) -> tuple[np.ndarray, np.ndarray]:
@@ -424,18 +445,19 @@ class FilterErrorLikelihood:
     def _em_variances(self, ev: Evaluation, mans: list[_Maneuver], R: np.ndarray,
                       sigma: np.ndarray) -> np.ndarray:
         """``R_c = mean((e - h dW_s)^2 + h P_s h^T)`` over the channel's observations (smoother)."""
+        es = [ce.e for ce in ev.channels]
+
+        def expected_square(m: _Maneuver) -> np.ndarray:
+            e = self._residuals(ev, m, es)
+            if sigma[m.k] == 0.0:
+                return e * e
+            xs, Ps = self.wind_history(m, e, R, sigma[m.k])
+            r = e - np.einsum("ni,ni->n", m.h, xs[m.sample])
+            return r * r + np.einsum("ni,nij,nj->n", m.h, Ps[m.sample], m.h)
+
         num = np.zeros(self.n_channels)
         cnt = np.zeros(self.n_channels)
-        for m in mans:
-            e = self._residuals(ev, m)
-            if sigma[m.k] == 0.0:
-                np.add.at(num, m.channel, e * e)
-            else:
-                xs, Ps = self.wind_history(m, e, R, sigma[m.k])
-                x = xs[m.sample]
-                P = Ps[m.sample]
-                r = e - np.einsum("ni,ni->n", m.h, x)
-                v = np.einsum("ni,nij,nj->n", m.h, P, m.h)
-                np.add.at(num, m.channel, r * r + v)
+        for m, sq in zip(mans, self._map(expected_square, mans), strict=True):
+            np.add.at(num, m.channel, sq)
             np.add.at(cnt, m.channel, 1.0)
         return np.maximum(np.where(cnt > 0, num / np.maximum(cnt, 1), R), 1e-16)
