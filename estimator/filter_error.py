@@ -40,6 +40,13 @@ and ``R`` of each channel takes its expectation-maximisation update from the fix
 (Rauch-Tung-Striebel) smoother, ``R_c = mean((e - h dW_s)^2 + h P_s h^T)``. With ``sigma`` -> 0
 the filter passes the residuals through unchanged and the cost is the output-error one.
 
+Which maneuvers get wind states: by default those whose residuals after an output-error fit
+the diagnostics call turbulent (:mod:`estimator.diagnostics`: flow residuals far above their
+floors, coloured and common to several sensors while the inertial channels fit), the others
+none: a wind state would otherwise take up one sensor's model-structure error too (on calm
+JSBSim data the 22-deg wind-up turns came out at 0.9-1.25 m/s from the nose probe's high-alpha
+error, and their bin did not converge).
+
 What separates the wind from the flow-sensor calibration: the same ``dW`` is seen by every flow
 sensor and by the airspeed, each through its own geometry, while a calibration error belongs to
 one sensor and is a function of its flow angle; a constant error of every angle sensor alike is
@@ -91,6 +98,13 @@ class WindOptions:
     ----------
     scale_length_m : Dryden scale length ``L``, m (1750 ft above 2000 ft).
     sigma_mps : turbulence intensity, m/s; None: estimated per maneuver.
+    where : which maneuvers get wind states: "diagnosed" (default) — those whose output-error
+        residuals the diagnostics call turbulent (flow residuals far above their floors, coloured
+        and common to several sensors while the inertial channels fit: air motion, not a sensor's
+        model-structure error); the others are calm; "all" — every maneuver, its intensity
+        estimated (a structure error of one sensor is then taken for wind: on the demo's calm
+        data the 22-deg wind-up turns came out at 0.9-1.25 m/s from the nose probe's high-alpha
+        error, and that bin did not converge).
     calm_sigma_mps : a maneuver whose estimated intensity is below this is taken as flown in calm
         air (no wind states: its innovations are its residuals, as in the output-error method).
         Calm data still give a small intensity — the wind states then follow what the calibration
@@ -102,11 +116,14 @@ class WindOptions:
     scale_length_m: float = DRYDEN_SCALE_LENGTH_M
     sigma_mps: float | None = None
     calm_sigma_mps: float = 0.3
+    where: str = "diagnosed"
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.scale_length_m) and self.scale_length_m > 0):
             raise ValueError(f"WindOptions.scale_length_m must be a positive length in m, got "
                              f"{self.scale_length_m!r}")
+        if self.where not in ("diagnosed", "all"):
+            raise ValueError(f"WindOptions.where must be 'diagnosed' or 'all', got {self.where!r}")
         if self.sigma_mps is not None and not (math.isfinite(self.sigma_mps) and self.sigma_mps > 0):
             raise ValueError(f"WindOptions.sigma_mps must be positive (m/s) or None to estimate it, got "
                              f"{self.sigma_mps!r}")
@@ -157,9 +174,14 @@ class FilterNoise:
 class FilterErrorLikelihood:
     """The filter-error cost for :func:`estimator.iteration._gauss_newton` (module docstring)."""
 
-    def __init__(self, model: Model, wind: WindOptions | None = None):
+    def __init__(self, model: Model, wind: WindOptions | None = None,
+                 turbulent: frozenset[str] | None = None):
+        """``turbulent``: the ids of the maneuvers that get wind states (None: every one); the
+        others are calm throughout."""
         self.model = model
         self.wind = WindOptions() if wind is None else wind
+        ids = [m.id for m in model.problem.maneuvers]
+        self.windy = np.array([turbulent is None or i in turbulent for i in ids])
         p = model.problem
         self.n_channels = len(p.channels)
         self.dt_s = np.array([float(np.median(np.diff(m.t_s))) for m in p.maneuvers])
@@ -203,8 +225,7 @@ class FilterErrorLikelihood:
             R = np.maximum(np.where(cnt > 0, sse / np.maximum(cnt, 1), 1.0), 1e-16)
         else:
             R = self._R.copy()
-        sigma = (np.full(len(self.model.problem.maneuvers), 1.0) if self._sigma is None
-                 else self._sigma.copy())
+        sigma = (np.where(self.windy, 1.0, 0.0) if self._sigma is None else self._sigma.copy())
         # the intensities (R held), then R's EM update (the intensities held) until R settles, then
         # the intensities again, until neither moves: the Gauss-Newton step that follows sees a
         # settled noise model, not one still drifting (an EM update converges only linearly, and
@@ -216,6 +237,8 @@ class FilterErrorLikelihood:
             if search:
                 def best(m: _Maneuver, R=R, wide=wide) -> float:
                     before = sigma[m.k]
+                    if not self.windy[m.k]:
+                        return 0.0
                     if self.wind.sigma_mps is not None:
                         return self.wind.sigma_mps
                     e = self._residuals(ev, m, es)
@@ -302,17 +325,26 @@ class FilterErrorLikelihood:
         """What the method estimated of the air, and what it does not yet give."""
         p = self.model.problem
         sig = noise.sigma_mps
-        calm = [p.maneuvers[k].id for k in np.flatnonzero(sig == 0.0)]
-        if len(calm) == sig.size:
+        calm = [p.maneuvers[k].id for k in np.flatnonzero((sig == 0.0) & self.windy)]
+        quiet = [p.maneuvers[k].id for k in np.flatnonzero(~self.windy)]
+        if quiet:
+            more = " ..." if len(quiet) > 6 else ""
+            calm_note = (f"{len(quiet)} maneuver(s) without wind states (the output-error diagnostics "
+                         f"found no turbulence there: {', '.join(quiet[:6])}{more})")
+        if not self.windy.any():
+            air = f"no maneuver shows turbulence: the estimates are the output-error ones ({calm_note})"
+        elif len(calm) + len(quiet) == sig.size and not (sig > 0).any():
             air = (f"every maneuver calm (turbulence intensity below {self.wind.calm_sigma_mps:g} "
-                   "m/s): the estimates are the output-error ones")
+                   "m/s): the estimates are the output-error ones"
+                   + (f"; {calm_note}" if quiet else ""))
         else:
             lo, hi = int(np.argmin(np.where(sig > 0, sig, np.inf))), int(np.argmax(sig))
             air = (f"turbulence intensity estimated per maneuver, {sig[lo]:.2g} m/s "
                    f"({p.maneuvers[lo].id}) to {sig[hi]:.2g} m/s ({p.maneuvers[hi].id}) (Dryden, L = "
                    f"{self.wind.scale_length_m:g} m)"
                    + (f"; calm (below {self.wind.calm_sigma_mps:g} m/s, no wind states): "
-                      f"{', '.join(calm[:8])}{' ...' if len(calm) > 8 else ''}" if calm else ""))
+                      f"{', '.join(calm[:8])}{' ...' if len(calm) > 8 else ''}" if calm else "")
+                   + (f"; {calm_note}" if quiet else ""))
         return [
             Finding("turbulence", Severity.INFO, f"filter-error method: {air}"),
             Finding("filter_error_partial", Severity.WARNING,

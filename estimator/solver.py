@@ -113,8 +113,10 @@ class SolverOptions:
     verbose : print one line per iteration.
     method : "output_error" (default; calm air) or "filter_error": the turbulent wind as estimated
         Gauss-Markov states, the cost the likelihood of a Kalman filter's innovations
-        (:mod:`estimator.filter_error`). The start and the identifiability screen are the
-        output-error ones; the deviations are Cramér-Rao of the filter-error information matrix.
+        (:mod:`estimator.filter_error`). The start, the identifiability screen and a first
+        output-error fit are the output-error method's; the maneuvers whose residuals there the
+        diagnostics call turbulent get wind states (``wind.where``); the deviations are
+        Cramér-Rao of the filter-error information matrix.
     wind : the filter-error method's turbulence model (:class:`~estimator.filter_error.WindOptions`;
         None: its defaults, the intensity estimated per maneuver).
     """
@@ -318,10 +320,19 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
                        Status.UNDETERMINED)
     held = requested & ~st.free
     stage_notes += _restore_held(model, theta, start, held)
-    lik = (FilterErrorLikelihood(model, opt.wind) if opt.method == "filter_error"
-           else OutputErrorLikelihood(model))
-    evals = lik.evaluate(theta, True)
     iterations, history = 0, []
+    if opt.method == "filter_error":
+        theta, turbulent, n_oem = _turbulent_maneuvers(problem, model, theta, st, opt)
+        lik = FilterErrorLikelihood(model, opt.wind, turbulent)
+        iterations += n_oem
+        if turbulent is not None:
+            stage_notes.append(
+                f"filter-error method: the output-error fit first ({n_oem} iterations); the "
+                f"diagnostics found turbulence in {len(turbulent)} of {len(problem.maneuvers)} "
+                "maneuvers, which get wind states; the filter-error iterations start from that fit")
+    else:
+        lik = OutputErrorLikelihood(model)
+    evals = lik.evaluate(theta, True)
     for rnd in range(1, max(opt.screen_rounds, 1) + 1):
         try:
             it = _gauss_newton(model, theta, st, opt, evals, lik=lik)
@@ -357,6 +368,28 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         evals = lik.evaluate(theta, True)
     return _finish(problem, model, theta, start, st, holds, evals, it, iterations, history, stage_notes,
                    opt, t0, lik)
+
+
+def _turbulent_maneuvers(problem: Problem, model: Model, theta: np.ndarray, st: Structure,
+                         opt: SolverOptions) -> tuple[np.ndarray, frozenset[str] | None, int]:
+    """The filter-error method's start, the maneuvers that get its wind states and the
+    iterations spent finding them.
+
+    With :class:`~estimator.filter_error.WindOptions` ``where = "diagnosed"`` (the default) the
+    output-error fit runs first; the maneuvers whose residuals there the diagnostics call
+    turbulent get wind states, and the filter-error iterations start from that fit (at the
+    staged start the diagnostics missed some of the turbulent maneuvers: its residuals still
+    carry what the full fit removes). ``"all"``: every maneuver, from ``theta``.
+    """
+    if opt.wind is not None and opt.wind.where == "all":
+        return theta, None, 0
+    from estimator.diagnostics import DiagnosticOptions, diagnose
+
+    it = _gauss_newton(model, theta, st, opt)
+    start = it.theta if np.all(np.isfinite(it.theta)) else theta
+    diagnosis = diagnose(*_fit_traces(problem, it.evals, st), DiagnosticOptions(g_mps2=problem.g_mps2))
+    return (start, frozenset(f.maneuver for f in diagnosis.findings if f.code == "turbulence"),
+            it.iterations)
 
 
 def _restore_held(model: Model, theta: np.ndarray, start: np.ndarray, held: np.ndarray) -> list[str]:
