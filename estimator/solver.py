@@ -72,6 +72,8 @@ from estimator.verdict import Finding, Severity, Status, judge
 STARTS = ("staged", "given")
 #: Estimation methods: output error (calm air) and filter error (turbulence; wind states).
 METHODS = ("output_error", "filter_error")
+#: Output-error iterations at most before the filter-error method's turbulence diagnosis.
+PREFIT_ITERATIONS = 10
 
 
 @dataclass(frozen=True)
@@ -385,7 +387,11 @@ def _turbulent_maneuvers(problem: Problem, model: Model, theta: np.ndarray, st: 
         return theta, None, 0
     from estimator.diagnostics import DiagnosticOptions, diagnose
 
-    it = _gauss_newton(model, theta, st, opt)
+    # the diagnostics need the residuals' pattern, not a converged fit: in turbulence the
+    # output-error iterations crawl (planning study (c): 3 of 8 light-turbulence fits then started
+    # the filter-error iterations from a fit stopped at the 40-iteration limit, and failed)
+    it = _gauss_newton(model, theta, st, replace(opt, max_iterations=min(opt.max_iterations,
+                                                                         PREFIT_ITERATIONS)))
     start = it.theta if np.all(np.isfinite(it.theta)) else theta
     diagnosis = diagnose(*_fit_traces(problem, it.evals, st), DiagnosticOptions(g_mps2=problem.g_mps2))
     return (start, frozenset(f.maneuver for f in diagnosis.findings if f.code == "turbulence"),
