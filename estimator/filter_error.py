@@ -52,13 +52,21 @@ sensor and by the airspeed, each through its own geometry, while a calibration e
 one sensor and is a function of its flow angle; a constant error of every angle sensor alike is
 told from a steady wind only by the heading and attitude changes across the maneuvers (the
 Gauss-Markov wind has zero mean: it absorbs a constant only as much as its prior allows).
+
+**The deviations**: Cramér-Rao from the information matrix ``sum J~^T J~`` of the normalised
+innovations (``J~ = (d nu / d theta) / sqrt(s)``), and the honest ones the Morelli-Klein sandwich
+on the innovations (:func:`estimator.uncertainty.innovation_honest_std`): the Cramér-Rao bound
+where the innovations are white, larger where the model leaves them coloured (a scale length ten
+times too short: 2.5 times, ``tests/estimator_tests/test_filter_error.py``). Neither sees an error
+the innovations do not show: a systematic one the filter fits away as white (on JSBSim's
+turbulence, the sideslip biases; README).
 """
 
 from __future__ import annotations
 
 import math
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -68,6 +76,7 @@ from estimator.core.sensitivity import worker_threads
 from estimator.iteration import _evaluate
 from estimator.model import Evaluation, Model
 from estimator.normal_equations import NormalEquations, Structure, residual_sums
+from estimator.uncertainty import innovation_honest_std
 from estimator.verdict import Finding, Severity
 
 #: MIL-F-8785C scale length above 2000 ft (1750 ft), m.
@@ -88,6 +97,8 @@ HOLD_NOISE_BELOW = 0.01
 #: ... and after SETTLE_AFTER relaxations, where they moved by less than SETTLED_BELOW
 SETTLE_AFTER = 4
 SETTLED_BELOW = 0.1
+#: ... and after HOLD_AFTER relaxations, held whatever the residuals do
+HOLD_AFTER = 6
 
 
 @dataclass(frozen=True)
@@ -213,11 +224,39 @@ class FilterErrorLikelihood:
         its noise model is kept: relaxing again there only moves the noise statistics within
         their own tolerance, and the Gauss-Newton iterations would chase that (a two-cycle of the
         cost, 2 in 9e5, along a weakly determined table node) instead of converging on a fixed
-        cost.
+        cost. After :data:`HOLD_AFTER` relaxations they are held for good: the iterations then
+        converge on a fixed cost, as in the alternating scheme of Jategaonkar (2006, §5.5)
+        (relaxing at every step, 3 of 8 light-turbulence fits of planning study (c) ran into the
+        iteration limit, the cost two-cycling by 1e-5 with each new ``R``); :meth:`noise_drift`
+        measures what the hold left.
         """
-        if self._last is not None and self._moved_little(
-                ev, self._last, HOLD_NOISE_BELOW if self._relaxed < SETTLE_AFTER else SETTLED_BELOW):
+        if self._last is not None and (self._relaxed >= HOLD_AFTER or self._moved_little(
+                ev, self._last, HOLD_NOISE_BELOW if self._relaxed < SETTLE_AFTER else SETTLED_BELOW)):
             return self._last
+        return self._relax_now(ev)
+
+    def noise_drift(self, ev: Evaluation) -> tuple[float, float]:
+        """How far the noise statistics would move if relaxed at ``ev`` once more: the largest
+        relative change of a maneuver's intensity and of a channel's ``R`` (the likelihood's state
+        left as it was). After :data:`HOLD_AFTER` relaxations the iterations run on held noise
+        statistics; this says how far from their own optimum the estimate left them."""
+        if self._last is None:
+            return 0.0, 0.0
+        saved = (self._R, self._sigma, self._last, self._last_e, self._relaxed)
+        try:
+            new = self._relax_now(ev)
+        finally:
+            self._R, self._sigma, self._last, self._last_e, self._relaxed = saved
+        old = saved[2]
+        windy = (old.sigma_mps > 0) | (new.sigma_mps > 0)
+        ds = 0.0
+        if windy.any():
+            ds = float(np.max(np.abs(new.sigma_mps[windy] - old.sigma_mps[windy])
+                              / np.maximum(old.sigma_mps[windy], self.wind.calm_sigma_mps)))
+        return ds, float(np.max(np.abs(new.R / old.R - 1.0)))
+
+    def _relax_now(self, ev: Evaluation) -> FilterNoise:
+        """:meth:`relax` without the hold: linearise at ``ev`` and relax ``sigma`` and ``R``."""
         self._relaxed += 1
         mans = self._linearise(ev)
         if self._R is None:
@@ -307,6 +346,44 @@ class FilterErrorLikelihood:
             np.add.at(N.support, cols, nz)
         return N
 
+    def honest_deviations(self, st: Structure, ev: Evaluation, noise: FilterNoise, N: NormalEquations,
+                          dev, opt):
+        """``dev`` (the Cramér-Rao :class:`estimator.uncertainty._Deviations`) with the
+        coloured-innovation deviations and correlations (:func:`innovation_honest_std`)."""
+        p = self.model.problem
+        mans = {m.k: m for m in noise.maneuvers}
+        std, cov = innovation_honest_std(
+            N, st, lambda k: (self.innovation_series(st, ev, noise, mans[k]) if k in mans
+                              else (np.zeros(0, dtype=np.intp), [])),
+            np.array([m.n for m in p.maneuvers]), self.dt_s, dev.std_crb, rank_rtol=opt.rank_rtol,
+            cross_channel=opt.colored_cross_channel,
+            map_fn=lambda fn, ks: self._map(fn, list(ks)))
+        std[dev.unresolved] = np.nan
+        dh = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+        return replace(dev, std_colored=std, correlation_colored=cov / np.outer(dh, dh))
+
+    def innovation_series(self, st: Structure, ev: Evaluation, noise: FilterNoise, m: _Maneuver
+                          ) -> tuple[np.ndarray, list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]]:
+        """One maneuver's normalised innovations and their Jacobian, per channel, for the
+        coloured-innovation deviations (:func:`estimator.uncertainty.innovation_honest_std`).
+
+        Returns the free parameters ``cols`` the maneuver depends on and, per channel, ``(channel,
+        samples, nu / sqrt(s), (d nu / d theta) / sqrt(s))`` on the maneuver's sample grid, in time
+        order; an observation placed (by its delay) on a sample another of the channel's
+        observations already holds (a few at a maneuver's edge) is left out.
+        """
+        es = [ce.e for ce in ev.channels]
+        cols, J = self._jacobian(ev, m, st)
+        nu, s, dnu = self._innovations(m, self._residuals(ev, m, es), noise.R, noise.sigma_mps[m.k], J)
+        root = np.sqrt(s)
+        out = []
+        for c in np.unique(m.channel):
+            idx = np.flatnonzero(m.channel == c)
+            rows, first = np.unique(m.sample[idx], return_index=True)
+            idx = idx[first]
+            out.append((int(c), rows, nu[idx] / root[idx], dnu[idx] / root[idx, None]))
+        return cols, out
+
     def wind_table(self, ev: Evaluation, noise: FilterNoise) -> pd.DataFrame:
         """The smoothed turbulent wind of every maneuver at ``ev`` (:attr:`EstimationResult.wind`)."""
         parts = []
@@ -321,8 +398,16 @@ class FilterErrorLikelihood:
                 "std_n_mps": sd[:, 0], "std_e_mps": sd[:, 1], "std_d_mps": sd[:, 2]}))
         return pd.concat(parts, ignore_index=True)
 
-    def findings(self, noise: FilterNoise) -> list[Finding]:
-        """What the method estimated of the air, and what it does not yet give."""
+    @property
+    def held(self) -> bool:
+        """Are the noise statistics held for good (:data:`HOLD_AFTER` relaxations done)?"""
+        return self._relaxed >= HOLD_AFTER
+
+    def findings(self, noise: FilterNoise, colored: bool = True,
+                 drift: tuple[float, float] | None = None) -> list[Finding]:
+        """What the method estimated of the air, and what it does not yet give (``colored``: the
+        deviations are the coloured innovations'; ``drift``: :meth:`noise_drift` at the estimate
+        when the noise statistics were held)."""
         p = self.model.problem
         sig = noise.sigma_mps
         calm = [p.maneuvers[k].id for k in np.flatnonzero((sig == 0.0) & self.windy)]
@@ -345,13 +430,20 @@ class FilterErrorLikelihood:
                    + (f"; calm (below {self.wind.calm_sigma_mps:g} m/s, no wind states): "
                       f"{', '.join(calm[:8])}{' ...' if len(calm) > 8 else ''}" if calm else "")
                    + (f"; {calm_note}" if quiet else ""))
+        if drift is not None:
+            air += (f"; the noise statistics held after {HOLD_AFTER} relaxations (at the estimate "
+                    f"they would move by {100 * drift[0]:.1f} % (intensity) and {100 * drift[1]:.1f} % "
+                    "(measurement noise variance) at most)")
         return [
             Finding("turbulence", Severity.INFO, f"filter-error method: {air}"),
             Finding("filter_error_partial", Severity.WARNING,
-                    "filter-error method: the deviations are Cramér-Rao bounds of its information "
-                    "matrix, without the coloured-innovation correction, and the fit-quality "
-                    "diagnostics are not run on the innovations yet; check the estimates against "
-                    "a calm-air calibration or the truth before use",
+                    "filter-error method: "
+                    + ("the honest deviations are the coloured innovations' sandwich, without the "
+                       "IMU noise as process noise" if colored else
+                       "the deviations are Cramér-Rao bounds of its information matrix, without the "
+                       "coloured-innovation correction")
+                    + ", and the fit-quality diagnostics are not run on the innovations yet; check "
+                    "the estimates against a calm-air calibration or the truth before use",
                     "use the output-error method where the air is calm; treat these deviations "
                     "as lower bounds"),
         ]

@@ -117,8 +117,9 @@ class SolverOptions:
         Gauss-Markov states, the cost the likelihood of a Kalman filter's innovations
         (:mod:`estimator.filter_error`). The start, the identifiability screen and a first
         output-error fit are the output-error method's; the maneuvers whose residuals there the
-        diagnostics call turbulent get wind states (``wind.where``); the deviations are
-        Cramér-Rao of the filter-error information matrix.
+        diagnostics call turbulent get wind states (``wind.where``); the deviations are those
+        of the filter-error information matrix, Cramér-Rao and (``colored``) the coloured
+        innovations' sandwich (:func:`estimator.uncertainty.innovation_honest_std`).
     wind : the filter-error method's turbulence model (:class:`~estimator.filter_error.WindOptions`;
         None: its defaults, the intensity estimated per maneuver).
     """
@@ -454,17 +455,19 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         R = noise.R
         history = history + [lik.cost(evals, noise)]
         N = lik.normal(st, evals, noise)
-        wind_findings = lik.findings(noise)
+        wind_findings = lik.findings(noise, opt.colored, lik.noise_drift(evals) if lik.held else None)
         wind = lik.wind_table(evals, noise)
     else:
         R = channel_variances(it.sse, it.cnt)
         history = history + [ml_cost(it.sse, it.cnt, R)]
         N = build_normal(st, evals, R)
     cov_G, cov_L, unident, correlated = _covariance(N, st, problem, opt)
-    # the coloured-residual and IMU-noise deviations are the output-error residuals' (not yet the
-    # innovations'): the filter-error method reports Cramér-Rao deviations and says so
+    # the filter-error method's honest deviations are the coloured innovations' (without the IMU
+    # noise as process noise, which the output-error residuals' sandwich carries)
     dev = _deviations(model, theta, N, st, R, cov_G, cov_L, unident,
                       replace(opt, colored=False) if filter_error else opt)
+    if filter_error and opt.colored:
+        dev = lik.honest_deviations(st, evals, noise, N, dev, opt)
     correlated = correlated + _high_correlations(dev.correlation, [keys[i] for i in st.glob],
                                                  opt.correlation_warn)
     # a set still unidentifiable here (the screen's rounds ran out) is reported with the holds

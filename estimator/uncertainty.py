@@ -19,6 +19,7 @@ the Cramér-Rao bound. Entry point: :func:`honest_std`.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -229,6 +230,74 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
     raise_to = np.maximum(1.0, floor[g] / np.where(std_mk[g] > 0, std_mk[g], np.inf))
     cov_g = raise_to[:, None] * cov_mk * raise_to[None, :] + cov_imu
     return honest, std_imu, cov_g
+
+
+def innovation_honest_std(N: NormalEquations, st: Structure, series: Callable[[int], tuple],
+                          n_of: np.ndarray, dt_of: np.ndarray, std_crb: np.ndarray, *,
+                          rank_rtol: float, cross_channel: bool = True,
+                          map_fn: Callable = map) -> tuple[np.ndarray, np.ndarray]:
+    r"""Coloured-innovation deviations of the filter-error method (Jategaonkar 2006, §5.8; the
+    Morelli-Klein sandwich of :func:`honest_std` on the innovations).
+
+    The filter-error cost is ``1/2 sum nu~^2`` of the normalised innovations ``nu~ = nu /
+    sqrt(s)``, its information matrix ``M = sum J~^T J~`` with ``J~ = (d nu / d theta) / sqrt(s)``
+    (gains held). Innovations of the right model are white and ``M^-1`` is their covariance; where
+    the model misses something (the turbulence model's form or scale length, a delay, the
+    aircraft's response to the gusts) they are coloured, and the sandwich
+    ``M^-1 [sum_k J~_k^T Sigma_k J~_k] M^-1`` with ``Sigma_k`` the innovations' modelled spectrum
+    (autoregressive per channel, corrected for the fit's leverage, channels coupled through a
+    smoothed coherence: :func:`_ar_factor`) is the covariance to quote. Floored at the Cramér-Rao
+    bound. The IMU noise as process noise is not included (the output-error method's
+    :func:`honest_std` has it).
+
+    Parameters
+    ----------
+    N, st : the filter-error normal equations at the estimate and which parameters are free.
+    series : maneuver index -> (free parameter indices ``cols``, per channel ``(channel, samples,
+        nu~, J~ (n_c, cols))``), SI (:meth:`estimator.filter_error.FilterErrorLikelihood.innovation_series`).
+    n_of, dt_of : (K,) each maneuver's samples and sample interval, s.
+    std_crb : (P,) the Cramér-Rao deviations (the floor).
+    rank_rtol : relative eigenvalue threshold of the inverses.
+    cross_channel : with the cross-channel coherence.
+    map_fn : ``map`` or a thread pool's (the maneuvers are independent).
+
+    Returns
+    -------
+    (P,) honest deviations (NaN where not estimated) and the globals' honest covariance (G, G).
+    """
+    nparam = std_crb.size
+    _, _, Sinv, Ainv = lm_solve(N, 0.0, rank_rtol)
+
+    def middle(k: int):
+        cols, chans = series(k)
+        if not cols.size or not chans:
+            return k, cols, None
+        n, Lk = int(n_of[k]), sfft.next_fast_len(max(2 * int(n_of[k]) - 1, 1), real=True)
+        pos = np.arange(cols.size)
+        items = []
+        for c, rows, e, Jn in chans:
+            Jp = np.zeros((cols.size, Lk))
+            Jp[:, rows] = Jn.T
+            ep = np.zeros(Lk)
+            ep[rows] = e
+            items.append((c, pos, sfft.rfft(Jp, axis=-1), sfft.rfft(ep), rows, e, 1.0))
+        cov_u = _union_covariance(st, Sinv, Ainv, N, k, cols)
+        Yk = _ar_factor(items, cov_u, cols.size, n, Lk, float(dt_of[k]), cross_channel)
+        Yk = Yk * np.sqrt(_one_sided_weights(Lk) / Lk)[None, :, None]
+        Yr = np.ascontiguousarray(Yk).view(np.float64).reshape(cols.size, -1)
+        return k, cols, Yr @ Yr.T
+
+    C = NormalEquations(st)
+    for k, cols, Ck in map_fn(middle, range(len(n_of))):
+        if Ck is not None:
+            C.add_blocks(Ck[None], np.zeros((1, cols.size)), np.ascontiguousarray(cols[None, :]),
+                         np.array([k]), 1.0)
+    std_mk, cov_mk = sandwich_std(N, st, C, Sinv, Ainv, nparam)
+    floor = np.where(np.isfinite(std_crb), std_crb, 0.0)
+    honest = np.where(np.isfinite(std_mk), np.maximum(std_mk, floor), np.nan)
+    g = st.glob
+    raise_to = np.maximum(1.0, floor[g] / np.where(std_mk[g] > 0, std_mk[g], np.inf))
+    return honest, raise_to[:, None] * cov_mk * raise_to[None, :]
 
 
 def _union_covariance(st: Structure, Sinv: np.ndarray, Ainv: list[np.ndarray], N: NormalEquations, k: int,

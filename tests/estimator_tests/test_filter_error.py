@@ -116,9 +116,37 @@ def test_light_turbulence_is_recovered_within_its_deviations(turbulent):
     sig = [float(s.split(" m/s")[0]) for s in air.message.split("per maneuver, ")[1].split(" to ")]
     # two minutes of data per maneuver fix the intensity to a few per cent
     assert all(abs(s - SIGMA_MPS) < 0.15 for s in sig), air.message
+    # the filter's wind model is the truth's: the innovations are white and the coloured-
+    # innovation deviations are the Cramér-Rao ones (up to the autoregressive fits' own scatter)
+    est = fem.free_estimated
+    ratio = fem.std_colored[est] / fem.std_crb[est]
+    assert np.all(ratio >= 1.0), "the honest deviations are floored at the Cramér-Rao bound"
+    assert np.median(ratio) < 1.05 and ratio.max() < 1.3, f"honest / CRB: {np.median(ratio):.3f} median, " \
+        f"{ratio.max():.3f} max, on white innovations"
     oem = estimate(prob, SolverOptions(diagnose=False, start="given"))
     z_oem = _calibration_z(prob, oem)
     assert np.abs(z_oem).max() > 8.0, "the output-error method cannot follow the wind"
+
+
+def test_a_wrong_wind_model_shows_in_the_honest_deviations(turbulent):
+    """Fitted with a scale length ten times too short (50 m against 533.4 m), the filter's wind
+    decorrelates too fast, its innovations stay coloured, and the Cramér-Rao deviations are too
+    small (about a fifth of the calibration estimates beyond 3 of them); the coloured-innovation
+    sandwich sees the colour and covers the truth as a Gaussian deviation should (measured: 0.79
+    within 3 Cramér-Rao, 0.94 within 3 honest deviations, honest / CRB 2.5 median)."""
+    _, prob = turbulent
+    fem = estimate(prob, SolverOptions(method="filter_error", diagnose=False, start="given",
+                                       wind={"scale_length_m": 50.0}))
+    assert fem.status.converged, fem.message
+    est = fem.free_estimated
+    err = np.abs(fem.parameters.values[est] - prob.parameters.values[est])
+    within_crb = np.mean(err <= 3.0 * fem.std_crb[est])
+    within_honest = np.mean(err <= 3.0 * fem.std_colored[est])
+    assert within_crb < 0.9, f"the wrong wind model should bias the Cramér-Rao coverage ({within_crb:.2f})"
+    assert within_honest >= 0.9, f"honest deviations cover {within_honest:.2f} of the estimates"
+    assert np.median(fem.std_colored[est] / fem.std_crb[est]) > 1.5
+    (partial,) = [f for f in fem.findings if f.code == "filter_error_partial"]
+    assert "coloured innovations' sandwich" in partial.message
 
 
 def test_smoothed_wind_follows_the_true_wind(turbulent):
@@ -199,3 +227,29 @@ def test_a_scale_error_beside_turbulence_says_so():
     out = _beside_turbulence([scale, other], [turb])
     assert "show turbulence too" in out[0].message and out[0].advice.startswith("read the turbulence")
     assert out[1] == other, "a maneuver without turbulence keeps its finding as it was"
+
+
+def test_noise_statistics_are_held_after_a_few_relaxations(turbulent):
+    """After HOLD_AFTER relaxations the noise statistics stay as they are whatever the residuals do
+    (the Gauss-Newton iterations then converge on a fixed cost), and noise_drift says how far a
+    new relaxation would move them, leaving the likelihood's state untouched."""
+    from estimator.filter_error import HOLD_AFTER, FilterErrorLikelihood
+
+    _, prob = turbulent
+    model = Model(prob)
+    lik = FilterErrorLikelihood(model)
+    theta = prob.parameters.values.copy()
+    tau = [i for i, k in enumerate(prob.parameters.keys) if prob.parameters[k].kind == "time_delay"]
+    noise = None
+    for step in range(HOLD_AFTER + 2):
+        theta[tau] += 0.004  # residuals moving by far more than the hold thresholds
+        ev = lik.evaluate(theta, True)
+        new = lik.relax(ev, lik.stats(ev))
+        assert (new is not noise) == (step < HOLD_AFTER), f"relaxation {step + 1}"
+        assert lik.held == (step >= HOLD_AFTER - 1)
+        noise = new
+    drift = lik.noise_drift(ev)
+    assert lik.relax(ev, lik.stats(ev)) is noise, "noise_drift must not change what is held"
+    assert all(np.isfinite(drift)) and drift[1] > 0.0
+    (air,) = [f for f in lik.findings(noise, drift=drift) if f.code == "turbulence"]
+    assert f"held after {HOLD_AFTER} relaxations" in air.message
