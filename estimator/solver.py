@@ -483,8 +483,10 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
                 + _imu_noise_note(dev, st, keys, opt) + _iteration_findings(it, stage_notes)
                 + wind_findings)
     diagnosis_table, outliers = None, {}
-    if opt.diagnose and not filter_error:
-        findings, diagnosis_table, outliers = _diagnosed(problem, evals, st, state, findings)
+    if opt.diagnose:
+        # the filter-error method's measurements against its one-step predictions: the innovations
+        findings, diagnosis_table, outliers = _diagnosed(
+            problem, evals, st, state, findings, lik.predictions(evals, noise) if filter_error else None)
     verdict = judge(it.status, findings)
     message = it.message
     return EstimationResult.build(
@@ -521,14 +523,14 @@ def _iteration_findings(it: _Iterated, stage_notes: list[str]) -> list[Finding]:
     return findings
 
 
-def _diagnosed(problem: Problem, evals: Evaluation, st: Structure, state: list[str], findings: list[Finding]
-               ) -> tuple[list[Finding], object, dict]:
+def _diagnosed(problem: Problem, evals: Evaluation, st: Structure, state: list[str], findings: list[Finding],
+               y: list[np.ndarray] | None = None) -> tuple[list[Finding], object, dict]:
     """The fit-quality diagnostics at the estimate: their findings before ``findings``, the table
-    and the outliers found."""
+    and the outliers found (``y``: :func:`_fit_traces`)."""
     from estimator.diagnostics import DiagnosticOptions, diagnose
 
     ps = problem.parameters
-    diagnosis = diagnose(*_fit_traces(problem, evals, st), DiagnosticOptions(g_mps2=problem.g_mps2))
+    diagnosis = diagnose(*_fit_traces(problem, evals, st, y), DiagnosticOptions(g_mps2=problem.g_mps2))
     # the data's findings first: a fault in the data explains the parameters' findings, not the
     # other way round (findings are shown by severity, in this order within one)
     # parameters on a bound that can cause a residual finding rather than follow from it: a
@@ -572,15 +574,16 @@ def _beside_bounds(f: Finding, on_bound: dict[str, list[str]]) -> Finding:
         f"pattern too); if it stays: {f.advice}")
 
 
-def _fit_traces(problem: Problem, ev: Evaluation, st: Structure):
+def _fit_traces(problem: Problem, ev: Evaluation, st: Structure, y: list[np.ndarray] | None = None):
     """The diagnostics' inputs: every channel of every maneuver at the estimate, and each
-    maneuver's IMU inputs and reconstructed states."""
+    maneuver's IMU inputs and reconstructed states (``y``: per channel, what to judge the
+    measurements against instead of the model output; the filter-error method's predictions)."""
     from estimator.diagnostics import ChannelFit, ManeuverInputs
 
     ps = problem.parameters
     keys = ps.keys
     fits = []
-    for ce in ev.channels:
+    for ce_i, ce in enumerate(ev.channels):
         ch = problem.channels[ce.channel]
         for b, k in enumerate(ce.mans):
             m = problem.maneuvers[int(k)]
@@ -593,7 +596,8 @@ def _fit_traces(problem: Problem, ev: Evaluation, st: Structure):
                                          if st.free[i] and ps.parameters[i].name not in STATE_PARAMS))
             fits.append(ChannelFit(
                 maneuver=m.id, channel=ch.name, flow=ch.sensor is not None, t_s=m.t_s[rows],
-                z=ce.z[r0:r1], y=ce.y[r0:r1], measured_t_s=m.t_s[fin], measured=meas[fin], unit=ch.unit,
+                z=ce.z[r0:r1], y=(ce.y if y is None else y[ce_i])[r0:r1], measured_t_s=m.t_s[fin],
+                measured=meas[fin], unit=ch.unit,
                 display_scale=ch.display_scale, display_unit=ch.display_unit, parameters=params))
     pos = {int(k): i for i, k in enumerate(ev.maneuvers)}
     col = {c.name: c.column for c in problem.channels}

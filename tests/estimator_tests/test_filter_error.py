@@ -253,3 +253,37 @@ def test_noise_statistics_are_held_after_a_few_relaxations(turbulent):
     assert all(np.isfinite(drift)) and drift[1] > 0.0
     (air,) = [f for f in lik.findings(noise, drift=drift) if f.code == "turbulence"]
     assert f"held after {HOLD_AFTER} relaxations" in air.message
+
+
+def test_the_diagnostics_judge_the_innovations(turbulent):
+    """The fit-quality diagnostics run on the innovations (scaled to the measurement noise): on the
+    turbulent flight they find nothing to say about the air (the wind states follow it) and no
+    outlier at the maneuvers' starts (where the wind's prior uncertainty widens the raw
+    innovations); a 1-deg spike in one vane sample (13 noise deviations) is an outlier at its
+    time, which the robust option excludes."""
+    import dataclasses
+
+    _, prob = turbulent
+    res = estimate(prob, SolverOptions(method="filter_error", start="given"))
+    assert res.fit_quality is not None
+    codes = {f.code for f in res.findings if f.severity.name != "INFO"}
+    assert codes == {"filter_error_partial"}, codes
+    fq = res.fit_quality.to_pandas()
+    flow = fq[fq["flow"]]
+    # white innovations at the measurement noise: the output-error residuals here are 3-5x it
+    assert flow["ratio"].max() < 1.5 and flow["rho1"].abs().max() < 0.2, flow[["channel", "ratio", "rho1"]]
+
+    m0 = prob.maneuvers[0]
+    col = next(c.column for c in prob.channels if c.name == "alpha_zl")
+    meas = dict(m0.measurements)
+    z = np.array(meas[col], dtype=float)
+    z[700] += np.radians(1.0)
+    meas[col] = z
+    spiked = dataclasses.replace(prob, maneuvers=(dataclasses.replace(m0, measurements=meas),)
+                                 + tuple(prob.maneuvers[1:]))
+    res = estimate(spiked, SolverOptions(method="filter_error", start="given"))
+    (out,) = [f for f in res.findings if f.code == "outlier"]
+    assert out.channel == "alpha_zl" and out.maneuver == m0.id and f"{m0.t_s[700]:.3f} s" in out.message
+    robust = estimate(spiked, SolverOptions(method="filter_error", start="given", robust=True))
+    assert not [f for f in robust.findings if f.code == "outlier"]
+    assert any(f.code == "excluded" and "alpha_zl" in f.message for f in robust.findings)
