@@ -79,7 +79,7 @@ from estimator.core.sensitivity import worker_threads
 from estimator.iteration import _evaluate
 from estimator.model import Evaluation, Model
 from estimator.normal_equations import NormalEquations, Structure, residual_sums
-from estimator.uncertainty import innovation_honest_std
+from estimator.uncertainty import honest_std, imu_noise_psd, innovation_honest_std
 from estimator.verdict import Finding, Severity
 
 #: MIL-F-8785C scale length above 2000 ft (1750 ft), m.
@@ -350,10 +350,17 @@ class FilterErrorLikelihood:
         return N
 
     def honest_deviations(self, st: Structure, ev: Evaluation, noise: FilterNoise, N: NormalEquations,
-                          dev, opt):
-        """``dev`` (the Cramér-Rao :class:`estimator.uncertainty._Deviations`) with the
-        coloured-innovation deviations and correlations (:func:`innovation_honest_std`)."""
+                          dev, opt, theta: np.ndarray):
+        """``dev`` (the Cramér-Rao :class:`estimator.uncertainty._Deviations`) with the honest
+        deviations and correlations: the coloured innovations' (:func:`innovation_honest_std`)
+        and the IMU noise as process noise, the latter propagated through the output-error
+        sensitivities (:func:`honest_std`, ``imu_only``): exact for the maneuvers without wind
+        states, an upper bound for the others, whose wind states take up part of the slow
+        drift the IMU noise integrates to."""
         p = self.model.problem
+        imu_psd = imu_noise_psd(p, opt.imu_noise)
+        std_imu, _, cov_imu = honest_std(self.model, theta, N, st, noise.R, dev.std_crb, imu_psd,
+                                         rank_rtol=opt.rank_rtol, imu_only=True)
         mans = {m.k: m for m in noise.maneuvers}
         std, cov = innovation_honest_std(
             N, st, lambda k: (self.innovation_series(st, ev, noise, mans[k]) if k in mans
@@ -361,9 +368,13 @@ class FilterErrorLikelihood:
             np.array([m.n for m in p.maneuvers]), self.dt_s, dev.std_crb, rank_rtol=opt.rank_rtol,
             cross_channel=opt.colored_cross_channel,
             map_fn=lambda fn, ks: self._map(fn, list(ks)))
+        std = np.sqrt(std ** 2 + std_imu ** 2)
+        cov = cov + cov_imu
         std[dev.unresolved] = np.nan
+        std_imu[dev.unresolved] = np.nan
         dh = np.sqrt(np.maximum(np.diag(cov), 1e-300))
-        return replace(dev, std_colored=std, correlation_colored=cov / np.outer(dh, dh))
+        return replace(dev, std_colored=std, correlation_colored=cov / np.outer(dh, dh), std_imu=std_imu,
+                       imu_psd=imu_psd)
 
     def predictions(self, ev: Evaluation, noise: FilterNoise) -> list[np.ndarray]:
         """Every channel's measurement less its innovation scaled to the measurement noise,
@@ -464,8 +475,8 @@ class FilterErrorLikelihood:
             Finding("turbulence", Severity.INFO, f"filter-error method: {air}"),
             Finding("filter_error_partial", Severity.WARNING,
                     "filter-error method: "
-                    + ("the honest deviations are the coloured innovations' sandwich, without the "
-                       "IMU noise as process noise" if colored else
+                    + ("the honest deviations are the coloured innovations' sandwich and the IMU "
+                       "noise as process noise (through the output-error sensitivities)" if colored else
                        "the deviations are Cramér-Rao bounds of its information matrix, without the "
                        "coloured-innovation correction")
                     + "; the method is experimental: on JSBSim's simulated turbulence the flow "

@@ -54,7 +54,7 @@ def _one_sided_weights(L: int) -> np.ndarray:
 
 def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structure, R: np.ndarray,
                std_crb: np.ndarray, imu_psd: dict[str, np.ndarray] | None, *, rank_rtol: float,
-               cross_channel: bool = True, spectrum: str = "ar"
+               cross_channel: bool = True, spectrum: str = "ar", imu_only: bool = False
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r"""Honest standard deviations: coloured, cross-correlated residuals and the IMU's noise.
 
@@ -99,6 +99,7 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
     rank_rtol : relative eigenvalue threshold of the inverses.
     cross_channel : with the cross-channel terms.
     spectrum : "ar" (modelled) or "periodogram" (the all-lags plug-in).
+    imu_only : the IMU noise's share alone (the first two returns equal; the covariance its own).
 
     Returns
     -------
@@ -169,6 +170,8 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
                         Vc = suffix_middle_factor(bb, dEq[k])
                         with lock:
                             _scatter_add(V[k], pos, Vc, axis=1)
+                    if imu_only:
+                        continue
                     Lk = int(L_of[k])
                     Jp = np.zeros((Jb.shape[0], Lk))
                     Jp[:, rows] = Jb
@@ -222,6 +225,8 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
         std_imu, cov_imu = sandwich_std(N, st, Cp, Sinv, Ainv, nparam)
     else:
         std_imu, cov_imu = np.where(np.isfinite(std_mk), 0.0, np.nan), np.zeros_like(cov_mk)
+    if imu_only:
+        return std_imu, std_imu, cov_imu
     floor = np.where(np.isfinite(std_crb), std_crb, 0.0)
     honest = np.sqrt(np.maximum(std_mk, floor) ** 2 + std_imu ** 2)
     # the globals' honest covariance: the coloured one with each deviation raised to its floor
@@ -247,8 +252,9 @@ def innovation_honest_std(N: NormalEquations, st: Structure, series: Callable[[i
     ``M^-1 [sum_k J~_k^T Sigma_k J~_k] M^-1`` with ``Sigma_k`` the innovations' modelled spectrum
     (autoregressive per channel, corrected for the fit's leverage, channels coupled through a
     smoothed coherence: :func:`_ar_factor`) is the covariance to quote. Floored at the Cramér-Rao
-    bound. The IMU noise as process noise is not included (the output-error method's
-    :func:`honest_std` has it).
+    bound. The IMU noise as process noise is not in it: the filter-error method adds
+    :func:`honest_std`'s ``imu_only`` share
+    (:meth:`estimator.filter_error.FilterErrorLikelihood.honest_deviations`).
 
     Parameters
     ----------
