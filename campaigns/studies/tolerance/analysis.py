@@ -95,6 +95,7 @@ def point_metrics(results: Sequence[ReplicationResult], factor: Factor,
     |error|, unit, bound hits, undetermined estimates)), ``vane_bias_err_deg`` (rms),
     ``ratio_crb`` (median over the calibration parameters of scatter / mean CRB std),
     ``within_3sigma`` (fraction of calibration estimates within 3 CRB sigmas of the truth),
+    ``ratio_colored``, ``within_3sigma_colored`` (the same against the honest deviations),
     ``resid_vane_deg`` (median vane residual 3-sigma).
     """
     ok = [r for r in results if r.ok]
@@ -115,9 +116,13 @@ def point_metrics(results: Sequence[ReplicationResult], factor: Factor,
     summary = summarize_results(list(results))
     cal = summary.parameters[summary.parameters["kind"].isin(CALIBRATION_KINDS)]
     m["ratio_crb"] = float(np.nanmedian(cal["ratio_crb"])) if len(cal) and len(ok) > 1 else math.nan
-    z = params.loc[params["kind"].isin(CALIBRATION_KINDS), "z_crb"].to_numpy(dtype=float)
-    z = z[np.isfinite(z)]
-    m["within_3sigma"] = float(np.mean(np.abs(z) < 3.0)) if z.size else math.nan
+    m["ratio_colored"] = (float(np.nanmedian(cal["ratio_colored"])) if len(cal) and len(ok) > 1
+                          and np.isfinite(cal["ratio_colored"]).any() else math.nan)
+    for key, col in (("within_3sigma", "z_crb"), ("within_3sigma_colored", "z_colored")):
+        z = (params.loc[params["kind"].isin(CALIBRATION_KINDS), col].to_numpy(dtype=float)
+             if col in params else np.zeros(0))
+        z = z[np.isfinite(z)]
+        m[key] = float(np.mean(np.abs(z) < 3.0)) if z.size else math.nan
     res = [float(r.channels.loc[(r.channels["kind"] == "residual")
                                 & r.channels["name"].isin(SENSOR_GROUPS["vane AOA"]), "three_sigma"].max())
            for r in ok if len(r.channels)]

@@ -241,7 +241,8 @@ def table_text(df: pd.DataFrame) -> str:
     """The study's table, one line per point."""
     head = (f"{'factor':<11} {'level':>8} {'ok/fail':>7} {'pass':>4} "
             + " ".join(f"{SHORT_TITLE[g]:>6}" for g in SENSOR_GROUPS)
-            + f" {'fails':<16} {'b_l,b_r err':>11} {'scat/CRB':>8} {'in3sig':>6} {'res_vane':>8}"
+            + f" {'fails':<16} {'b_l,b_r err':>11} {'scat/CRB':>8} {'in3sig':>6} {'scat/hon':>8}"
+            f" {'in3hon':>6} {'res_vane':>8}"
             "  swept parameter error rms (max)")
     lines = [head, "-" * len(head)]
     for _, r in df.iterrows():
@@ -252,6 +253,8 @@ def table_text(df: pd.DataFrame) -> str:
             + f" {str(r.get('fails', '')):<16} {_fmt(r.get('vane_bias_err_deg', math.nan), '.4f'):>11}"
             f" {_fmt(r.get('ratio_crb', math.nan), '.2f'):>8}"
             f" {_fmt(r.get('within_3sigma', math.nan), '.2f'):>6}"
+            f" {_fmt(r.get('ratio_colored', math.nan), '.2f'):>8}"
+            f" {_fmt(r.get('within_3sigma_colored', math.nan), '.2f'):>6}"
             f" {_fmt(r.get('resid_vane_deg', math.nan)):>8}  {r.get('swept', '-')}"
             + (f"  [{r['failures']}]" if isinstance(r.get("failures"), str) and r.get("failures") else ""))
     return "\n".join(lines)
@@ -323,10 +326,11 @@ def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: st
               "accuracy; b_l,b_r err = rms of estimate - truth of the vane biases, deg; scat/CRB = median "
               "over the calibration parameters (delays, biases, scales, tables) of the Monte Carlo "
               "scatter / mean Cramer-Rao std; in3sig = fraction of calibration estimates within 3 CRB "
-              "sigmas of the truth; res_vane = vane residual 3-sigma (measurement - model, the paper's "
-              "Table 2), deg; swept parameter error = rms (max |.|) of estimate - truth of the swept "
-              "parameter's estimates that the data determine, the largest |truth|, the number of "
-              "estimates on a bound; [..] = failed estimations."),
+              "sigmas of the truth; scat/hon, in3hon = the same against the honest (coloured-residual "
+              "or -innovation) deviations the result reports; res_vane = vane residual 3-sigma "
+              "(measurement - model, the paper's Table 2), deg; swept parameter error = rms (max |.|) "
+              "of estimate - truth of the swept parameter's estimates that the data determine, the "
+              "largest |truth|, the number of estimates on a bound; [..] = failed estimations."),
         table_text(df),
         "",
         "conclusions:",
