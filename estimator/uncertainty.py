@@ -54,8 +54,8 @@ def _one_sided_weights(L: int) -> np.ndarray:
 
 def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structure, R: np.ndarray,
                std_crb: np.ndarray, imu_psd: dict[str, np.ndarray] | None, *, rank_rtol: float,
-               cross_channel: bool = True, spectrum: str = "ar", imu_only: bool = False
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               cross_channel: bool = True, spectrum: str = "ar", imu_only: bool = False,
+               imu_maneuvers: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r"""Honest standard deviations: coloured, cross-correlated residuals and the IMU's noise.
 
     **Coloured residuals** (Morelli & Klein 1997, matrix form). The middle matrix of maneuver ``k``
@@ -100,6 +100,7 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
     cross_channel : with the cross-channel terms.
     spectrum : "ar" (modelled) or "periodogram" (the all-lags plug-in).
     imu_only : the IMU noise's share alone (the first two returns equal; the covariance its own).
+    imu_maneuvers : (K,) bool, the maneuvers whose IMU noise is counted (None: every one).
 
     Returns
     -------
@@ -140,8 +141,9 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
              if cross and not ar else {})
         V: dict[int, np.ndarray] = {}
         dEq: dict[int, np.ndarray] = {}
-        if Cp is not None:
-            for k, Sk in zip(chunk, model.state_sensitivities(theta, chunk), strict=True):
+        imu_chunk = tuple(k for k in chunk if imu_maneuvers is None or imu_maneuvers[k])
+        if Cp is not None and imu_chunk:
+            for k, Sk in zip(imu_chunk, model.state_sensitivities(theta, imu_chunk), strict=True):
                 m = p.maneuvers[k]
                 q = np.sqrt(np.nan_to_num(imu_psd[m.aircraft]) / m.dt_s)  # unknown: left out
                 dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]

@@ -149,7 +149,7 @@ def test_a_wrong_wind_model_shows_in_the_honest_deviations(turbulent):
     assert within_honest >= 0.9, f"honest deviations cover {within_honest:.2f} of the estimates"
     assert np.median(fem.std_colored[est] / fem.std_crb[est]) > 1.5
     (partial,) = [f for f in fem.findings if f.code == "filter_error_partial"]
-    assert "coloured innovations' sandwich and the IMU noise" in partial.message
+    assert "coloured innovations' sandwich, the IMU noise" in partial.message
 
 
 def test_smoothed_wind_follows_the_true_wind(turbulent):
