@@ -100,10 +100,15 @@ def _wind_sections(wf: WorkflowResult) -> tuple[Section, ...]:
     allt = pd.concat(tables, ignore_index=True)
     pooled = allt.groupby("axis")[["rms_error_mps", "true_std_mps", "est_std_mps"]].apply(
         lambda g: np.sqrt((g ** 2).mean())).reindex(["north", "east", "down"])
+    over = pooled["rms_error_mps"] / pooled["est_std_mps"]
+    worst = over.idxmax()
     return (Section(
         "Wind: the filter-error method's turbulence against the truth",
         "Each maneuver's smoothed turbulent wind against JSBSim's, both with the maneuver's mean "
         "removed (the free initial velocities absorb the mean wind). rms per axis over every "
-        "maneuver (pooled), beside the true wind's own rms and the smoother's deviation.",
+        "maneuver (pooled), beside the true wind's own rms and the smoother's deviation. The "
+        "smoother's deviation is conditional on the estimated parameters and the wind model; here "
+        f"the rms error is {over[worst]:.1f} times it at most ({worst})"
+        + (": read the wind history's deviations as lower bounds." if over[worst] > 2.0 else "."),
         tables=[("Pooled over the maneuvers, m/s", pooled.reset_index()), ("Per maneuver", allt)],
         figures=figures, csv=[("wind_recovery.csv", allt)]),)
