@@ -91,9 +91,10 @@ SIGMA_SEARCH_MPS = (1e-3, 15.0)
 SIGMA_REFINE_FACTOR = 1.5
 SIGMA_XTOL = 1e-3
 #: Rounds at most of the noise relaxation, and the relative change of R and the intensities that
-#: ends it
+#: ends it (1 %: the weights within 1 % move the estimates by far less than their deviations;
+#: 0.1 % cost the 70-maneuver benchmark 3.4 s more, R's EM updates converging only linearly)
 RELAX_ROUNDS = 12
-RELAX_TOL = 1e-3
+RELAX_TOL = 1e-2
 #: The noise model is held where the residuals moved by less than this fraction of each channel's
 #: noise (rms) since it was relaxed (FilterErrorLikelihood.relax)
 HOLD_NOISE_BELOW = 0.01
@@ -205,10 +206,23 @@ class FilterErrorLikelihood:
         self._last: FilterNoise | None = None
         self._relaxed = 0
         self._last_e: list[np.ndarray] = []
+        self._fresh = np.zeros(len(ids), dtype=bool)
         # the compiled filter is loaded (and compiled) only when the method is used
         from estimator.core import wind_filter
 
         self._wf = wind_filter
+
+    def widened(self, turbulent: frozenset[str]) -> FilterErrorLikelihood:
+        """A likelihood with wind states in ``turbulent`` maneuvers too, starting from this one's
+        noise statistics and observation placement (the new maneuvers' intensities searched over
+        the whole range at its first relaxation; relaxed again from there, not held)."""
+        out = FilterErrorLikelihood(self.model, self.wind, turbulent)
+        out._placement = dict(self._placement)
+        if self._R is not None:
+            out._R = self._R.copy()
+            out._sigma = np.where(out.windy & ~self.windy, 1.0, self._sigma)
+            out._fresh = out.windy & ~self.windy
+        return out
 
     # --- the five methods the iterations use ------------------------------------------------
     def evaluate(self, theta: np.ndarray, jacobian: bool) -> Evaluation:
@@ -273,12 +287,17 @@ class FilterErrorLikelihood:
         # settled noise model, not one still drifting (an EM update converges only linearly, and
         # each intensity search costs a dozen filter runs, an EM update one smoother run)
         es = [ce.e for ce in ev.channels]
-        wide = self._sigma is None
+        # the whole search range at the first relaxation, and for maneuvers new to the wind states
+        wide_of = np.full(self.windy.size, self._sigma is None) | self._fresh
+        self._fresh = np.zeros(self.windy.size, dtype=bool)
         search, settled = True, False
         for _ in range(RELAX_ROUNDS):
             if search:
-                def best(m: _Maneuver, R=R, wide=wide) -> float:
+                wide_now = wide_of.copy()
+
+                def best(m: _Maneuver, R=R, wide_of=wide_now) -> float:
                     before = sigma[m.k]
+                    wide = bool(wide_of[m.k])
                     if not self.windy[m.k]:
                         return 0.0
                     if self.wind.sigma_mps is not None:
@@ -302,7 +321,8 @@ class FilterErrorLikelihood:
                     sigma[m.k] = s
                 moved = max((abs(sigma[m.k] - before[m.k]) / max(before[m.k], 1e-3) for m in mans),
                             default=0.0)
-                wide, search, settled = False, False, moved < RELAX_TOL
+                wide_of[:] = False
+                search, settled = False, moved < RELAX_TOL
             R_new = self._em_variances(ev, mans, R, sigma)
             moved_R = float(np.max(np.abs(R_new / R - 1.0)))
             R = R_new
