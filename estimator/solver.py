@@ -390,8 +390,10 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         st, holds = st_new, holds_new
         evals = lik.evaluate(theta, True)
     # a safety net: the check after the first filter-error iterations (above) can miss a maneuver
-    lik, evals, missed = _widened(problem, st, theta, evals, lik, opt)
-    if missed and (it.status.converged or it.status == Status.ITERATION_LIMIT):
+    missed = frozenset()
+    if it.status.converged or it.status == Status.ITERATION_LIMIT:
+        lik, evals, missed = _widened(problem, st, theta, evals, lik, opt)
+    if missed:
         try:
             it = _gauss_newton(model, theta, st, opt, evals, lik=lik)
         except ModelEvaluationError as exc:  # as above: a safeguard
