@@ -290,3 +290,29 @@ def test_the_diagnostics_judge_the_innovations(turbulent):
     robust = estimate(spiked, SolverOptions(method="filter_error", start="given", robust=True))
     assert not [f for f in robust.findings if f.code == "outlier"]
     assert any(f.code == "excluded" and "alpha_zl" in f.message for f in robust.findings)
+
+
+def test_turbulent_maneuvers_without_wind_states_are_found_on_their_innovations(turbulent):
+    """A filter-error likelihood that gave no maneuver wind states (as if the output-error fit had
+    missed them): the diagnostics of its innovations (here its residuals) find both turbulent
+    maneuvers, and the widened likelihood keeps R and the observation placement and searches the
+    new maneuvers' intensities over the whole range (1 m/s here, to 0.15)."""
+    from estimator.filter_error import FilterErrorLikelihood
+    from estimator.normal_equations import Structure
+    from estimator.solver import _widened
+
+    _, prob = turbulent
+    model = Model(prob)
+    theta = prob.parameters.values.copy()
+    lik = FilterErrorLikelihood(model, turbulent=frozenset())
+    ev = lik.evaluate(theta, True)
+    st = Structure(prob, prob.parameters.free_mask)
+    wide, ev2, missed = _widened(prob, st, theta, ev, lik, SolverOptions(method="filter_error"))
+    assert missed == {m.id for m in prob.maneuvers}
+    assert wide is not lik and wide.windy.all() and not lik.windy.any()
+    assert np.array_equal(wide._R, lik._R) and wide._placement == lik._placement
+    noise = wide.relax(ev2, wide.stats(ev2))
+    assert np.all(np.abs(noise.sigma_mps - SIGMA_MPS) < 0.15), noise.sigma_mps
+    # nothing left to find: the same likelihood back
+    again, _, none = _widened(prob, st, theta, ev2, wide, SolverOptions(method="filter_error"))
+    assert again is wide and not none
