@@ -55,7 +55,8 @@ def _one_sided_weights(L: int) -> np.ndarray:
 def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structure, R: np.ndarray,
                std_crb: np.ndarray, imu_psd: dict[str, np.ndarray] | None, *, rank_rtol: float,
                cross_channel: bool = True, spectrum: str = "ar", imu_only: bool = False,
-               imu_maneuvers: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               imu_maneuvers: np.ndarray | None = None, imu_channels: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r"""Honest standard deviations: coloured, cross-correlated residuals and the IMU's noise.
 
     **Coloured residuals** (Morelli & Klein 1997, matrix form). The middle matrix of maneuver ``k``
@@ -101,6 +102,8 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
     spectrum : "ar" (modelled) or "periodogram" (the all-lags plug-in).
     imu_only : the IMU noise's share alone (the first two returns equal; the covariance its own).
     imu_maneuvers : (K,) bool, the maneuvers whose IMU noise is counted (None: every one).
+    imu_channels : (K, C) bool, the (maneuver, channel) pairs whose sensitivities carry it (None:
+        every one).
 
     Returns
     -------
@@ -166,7 +169,8 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
                     ok = st.free[pidx]
                     Jb = JT[keep[ok], r0:r1]
                     pos = np.searchsorted(union[k], pidx[ok])
-                    if k in V:  # the IMU noise: J^T W J_IC on the grid, its suffix sums times dE Q^1/2
+                    if k in V and (imu_channels is None or imu_channels[k, ce.channel]):
+                        # the IMU noise: J^T W J_IC on the grid, its suffix sums times dE Q^1/2
                         bb = np.zeros((int(n_of[k]), Jb.shape[0], 7))
                         bb[rows] = np.einsum("sn,cn->nsc", Jb, JT[:7, r0:r1]) * w
                         Vc = suffix_middle_factor(bb, dEq[k])
