@@ -510,7 +510,7 @@ def _workflow(problem, out: Path, options: dict, *, overwrite: bool, tool: str =
         if ir is not None and len(ir):
             colored = (f"{int((ir['z_colored'].abs() < 3).sum())} within 3 coloured-residual sigma"
                        if ir["z_colored"].notna().any() else
-                       "no coloured-residual sigma (not computed: --no-colored)")
+                       "no coloured-residual sigma (not computed: --no-colored, or undetermined)")
             print(f"\ninstallation biases vs truth: {int((ir['z'].abs() < 3).sum())} of {len(ir)} within "
                   f"3 Cramer-Rao sigma, {colored}; largest error {ir['error_deg'].abs().max():.4f} deg")
             print(ir[["aircraft", "vane", "estimate_deg", "truth_deg", "std_deg", "z", "std_colored_deg",

@@ -100,15 +100,20 @@ def _wind_sections(wf: WorkflowResult) -> tuple[Section, ...]:
     allt = pd.concat(tables, ignore_index=True)
     pooled = allt.groupby("axis")[["rms_error_mps", "true_std_mps", "est_std_mps"]].apply(
         lambda g: np.sqrt((g ** 2).mean())).reindex(["north", "east", "down"])
-    over = pooled["rms_error_mps"] / pooled["est_std_mps"]
-    worst = over.idxmax()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        over = (pooled["rms_error_mps"] / pooled["est_std_mps"]).replace([np.inf, -np.inf], np.nan)
+    # calm maneuvers (no wind states: estimate and deviation zero) leave nothing to compare
+    ratio_text = ""
+    if over.notna().any():
+        worst = over.idxmax()
+        ratio_text = (" The smoother's deviation is conditional on the estimated parameters and the "
+                      f"wind model; here the rms error is {over[worst]:.1f} times it at most ({worst})"
+                      + (": read the wind history's deviations as lower bounds." if over[worst] > 2.0
+                         else "."))
     return (Section(
         "Wind: the filter-error method's turbulence against the truth",
         "Each maneuver's smoothed turbulent wind against JSBSim's, both with the maneuver's mean "
         "removed (the free initial velocities absorb the mean wind). rms per axis over every "
-        "maneuver (pooled), beside the true wind's own rms and the smoother's deviation. The "
-        "smoother's deviation is conditional on the estimated parameters and the wind model; here "
-        f"the rms error is {over[worst]:.1f} times it at most ({worst})"
-        + (": read the wind history's deviations as lower bounds." if over[worst] > 2.0 else "."),
+        "maneuver (pooled), beside the true wind's own rms and the smoother's deviation." + ratio_text,
         tables=[("Pooled over the maneuvers, m/s", pooled.reset_index()), ("Per maneuver", allt)],
         figures=figures, csv=[("wind_recovery.csv", allt)]),)

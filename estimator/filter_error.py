@@ -61,8 +61,11 @@ times too short: 2.5 times, ``tests/estimator_tests/test_filter_error.py``). Nei
 the innovations do not show: a systematic one the filter fits away as white (on JSBSim's
 turbulence, the sideslip biases; README). The fit-quality diagnostics judge the innovations
 scaled to the measurement noise, ``nu sqrt(R / s)`` (:meth:`FilterErrorLikelihood.predictions`):
-outliers, stuck channels, scale errors and misfits are found as in the output-error residuals,
-and air motion the wind states do not follow still reads as turbulence.
+outliers, stuck channels, unit errors and gross misfits are found as in the output-error
+residuals, and air motion the wind states do not follow still reads as turbulence; a moderate
+scale error the wind states partly take up (a vane scaled 1.1: innovations at the noise, where the
+output-error residuals are 1.5-1.9x it), and it shows instead as an estimate that each fresh
+linearisation of the wind sensitivities moves (the "unsettled" warning of the solver).
 """
 
 from __future__ import annotations
@@ -254,6 +257,18 @@ class FilterErrorLikelihood:
             return self._last
         return self._relax_now(ev)
 
+    def refresh(self, ev: Evaluation) -> None:
+        """The held noise statistics (``R``, the intensities) relinearised at ``ev``: the wind
+        sensitivities ``h`` (which move with the table slopes and scale factors) and the flight
+        speed taken anew, the observation placement kept. After the iterations on the held
+        linearisation the estimate is the optimum of that linearisation's cost, not of the
+        current one's (a vane scaled 1.1: 11.6 deviations apart; review of 7897c6e); the solver
+        iterates again from there until a fresh linearisation no longer moves it."""
+        if self._last is None:
+            return
+        self._last = FilterNoise(self._last.R, self._last.sigma_mps, self._linearise(ev), self.dt_s)
+        self._last_e = [ce.e.copy() for ce in ev.channels]
+
     def noise_drift(self, ev: Evaluation) -> tuple[float, float]:
         """How far the noise statistics would move if relaxed at ``ev`` once more: the largest
         relative change of a maneuver's intensity and of a channel's ``R`` (the likelihood's state
@@ -261,11 +276,11 @@ class FilterErrorLikelihood:
         statistics; this says how far from their own optimum the estimate left them."""
         if self._last is None:
             return 0.0, 0.0
-        saved = (self._R, self._sigma, self._last, self._last_e, self._relaxed)
+        saved = (self._R, self._sigma, self._last, self._last_e, self._relaxed, self._fresh)
         try:
             new = self._relax_now(ev)
         finally:
-            self._R, self._sigma, self._last, self._last_e, self._relaxed = saved
+            self._R, self._sigma, self._last, self._last_e, self._relaxed, self._fresh = saved
         old = saved[2]
         windy = (old.sigma_mps > 0) | (new.sigma_mps > 0)
         ds = 0.0
@@ -485,8 +500,9 @@ class FilterErrorLikelihood:
         quiet = [p.maneuvers[k].id for k in np.flatnonzero(~self.windy)]
         if quiet:
             more = " ..." if len(quiet) > 6 else ""
-            calm_note = (f"{len(quiet)} maneuver(s) without wind states (the output-error diagnostics "
-                         f"found no turbulence there: {', '.join(quiet[:6])}{more})")
+            calm_note = (f"{len(quiet)} maneuver(s) without wind states (the diagnostics found no "
+                         f"turbulence there, in the output-error residuals nor in the innovations: "
+                         f"{', '.join(quiet[:6])}{more})")
         if not self.windy.any():
             air = f"no maneuver shows turbulence: the estimates are the output-error ones ({calm_note})"
         elif len(calm) + len(quiet) == sig.size and not (sig > 0).any():

@@ -77,6 +77,8 @@ METHODS = ("output_error", "filter_error")
 PREFIT_ITERATIONS = 10
 #: Filter-error iterations at most before the maneuvers without wind states are diagnosed again.
 PROBE_ITERATIONS = 5
+#: Fresh linearisations at most once the filter-error noise statistics are held.
+REFRESH_ROUNDS = 3
 
 
 @dataclass(frozen=True)
@@ -122,7 +124,8 @@ class SolverOptions:
         output-error fit are the output-error method's; the maneuvers whose residuals there the
         diagnostics call turbulent get wind states (``wind.where``); the deviations are those
         of the filter-error information matrix, Cramér-Rao and (``colored``) the coloured
-        innovations' sandwich (:func:`estimator.uncertainty.innovation_honest_std`).
+        innovations' sandwich (:func:`estimator.uncertainty.innovation_honest_std`; always the
+        autoregressive spectrum model, whatever ``colored_spectrum``).
     wind : the filter-error method's turbulence model (:class:`~estimator.filter_error.WindOptions`;
         None: its defaults, the intensity estimated per maneuver).
     """
@@ -353,7 +356,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         theta, evals = probe.theta, probe.evals
         iterations += probe.iterations
         history += probe.history
-        lik, evals, missed = _widened(problem, st, theta, evals, lik, opt)
+        lik, evals, missed = _widened(problem, st, theta, evals, lik)
         if missed:
             stage_notes.append(_missed_note(missed, f"after {probe.iterations} filter-error iterations"))
     for rnd in range(1, max(opt.screen_rounds, 1) + 1):
@@ -389,10 +392,27 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         stage_notes += _restore_held(model, theta, start, st.free & ~st_new.free)
         st, holds = st_new, holds_new
         evals = lik.evaluate(theta, True)
+    # the noise held for good: its linearisation (the wind sensitivities) is the one of the 6th
+    # relaxation; iterate again on fresh ones until they no longer move the estimate
+    refresh_move = None
+    if isinstance(lik, FilterErrorLikelihood) and lik.held and it.status.converged:
+        for _ in range(REFRESH_ROUNDS):
+            lik.refresh(evals)
+            before = theta
+            try:
+                it = _gauss_newton(model, theta, st, opt, lik.evaluate(theta, True), lik=lik)
+            except ModelEvaluationError as exc:  # as above: a safeguard
+                return _failed(problem, theta, t0, str(exc), "report this as a bug, with the data")
+            theta, evals = it.theta, it.evals
+            iterations += it.iterations
+            history += it.history
+            refresh_move = theta - before
+            if it.iterations <= 1 or not it.status.converged:
+                break
     # a safety net: the check after the first filter-error iterations (above) can miss a maneuver
     missed = frozenset()
     if it.status.converged or it.status == Status.ITERATION_LIMIT:
-        lik, evals, missed = _widened(problem, st, theta, evals, lik, opt)
+        lik, evals, missed = _widened(problem, st, theta, evals, lik)
     if missed:
         try:
             it = _gauss_newton(model, theta, st, opt, evals, lik=lik)
@@ -403,10 +423,10 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         history += it.history
         stage_notes.append(_missed_note(missed, "at its solution") + f" ({it.iterations} iterations)")
     return _finish(problem, model, theta, start, st, holds, evals, it, iterations, history, stage_notes,
-                   opt, t0, lik)
+                   opt, t0, lik, refresh_move)
 
 
-def _widened(problem: Problem, st: Structure, theta: np.ndarray, evals: Evaluation, lik, opt: SolverOptions):
+def _widened(problem: Problem, st: Structure, theta: np.ndarray, evals: Evaluation, lik):
     """``(lik, evals, missed)``: the likelihood with wind states also in the maneuvers without them
     whose innovations (their residuals) the diagnostics call turbulent at ``evals``, the
     evaluation for it and those maneuvers (unchanged, and empty, for the output-error method,
@@ -511,8 +531,9 @@ def _failed(problem: Problem, theta: np.ndarray, t0: float, why: str, advice: st
 
 
 def _finish(problem, model, theta, start, st, holds, evals, it, iterations, history, stage_notes, opt, t0,
-            lik=None) -> EstimationResult:
-    """Covariances, diagnostics, findings and verdict at the estimate."""
+            lik=None, refresh_move=None) -> EstimationResult:
+    """Covariances, diagnostics, findings and verdict at the estimate (``refresh_move``: how far
+    the filter-error method's last fresh linearisation moved it, SI)."""
     ps = problem.parameters
     keys = ps.keys
     filter_error = isinstance(lik, FilterErrorLikelihood)
@@ -548,7 +569,7 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     findings = (_imu_noise_unknown(dev.imu_psd)
                 + _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs)
                 + _imu_noise_note(dev, st, keys, opt) + _iteration_findings(it, stage_notes)
-                + wind_findings)
+                + wind_findings + _unsettled(refresh_move, dev.std_crb, keys))
     diagnosis_table, outliers = None, {}
     if opt.diagnose:
         # the filter-error method's measurements against its one-step predictions: the innovations
@@ -568,6 +589,29 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         state_reason=tuple(reason), findings=tuple(findings), verdict=verdict,
         fit_quality=diagnosis_table, outliers=outliers, wind=wind,
     )
+
+
+def _unsettled(move: np.ndarray | None, std: np.ndarray, keys: list[str]) -> list[Finding]:
+    """A warning when the filter-error method's last fresh linearisation of the wind
+    sensitivities (:meth:`estimator.filter_error.FilterErrorLikelihood.refresh`) still moved the
+    estimate by more than a deviation (nothing otherwise)."""
+    if move is None:
+        return []
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = np.abs(move) / std
+    z = np.where(np.isfinite(z), z, 0.0)
+    if z.max() <= 1.0:
+        return []
+    worst = [keys[i] for i in np.argsort(-z)[:6] if z[i] > 1.0]
+    return [Finding(
+        "unsettled", Severity.WARNING,
+        f"filter-error method: with the noise statistics held, each fresh linearisation of the wind "
+        f"sensitivities still moves the estimate, the last by up to {z.max():.1f} Cramér-Rao "
+        f"deviations ({', '.join(worst)}): the estimate is the optimum of the last linearisation, "
+        "and uncertain by about that much beyond its deviations",
+        "look for a model-structure error the wind states partly take up (a scale factor or table "
+        "the model set lacks: fit the calm maneuvers by output error and read its diagnostics)",
+        parameters=tuple(worst), value=float(z.max()))]
 
 
 def _iteration_findings(it: _Iterated, stage_notes: list[str]) -> list[Finding]:
