@@ -90,7 +90,8 @@ def point_metrics(results: Sequence[ReplicationResult], factor: Factor,
     Returns
     -------
     dict with ``n_ok``, ``n_failed``, ``failures`` (status text counts), ``n_pass`` (converged
-    replications meeting every desired accuracy), per group ``acc_<group>``
+    replications meeting every desired accuracy), ``n_unjudged`` (converged replications whose
+    accuracy could not be computed where the others' could: not passing), per group ``acc_<group>``
     (median over replications, deg), ``acc_max_<group>``, ``swept`` (label -> (rms error, max
     |error|, unit, bound hits, undetermined estimates)), ``vane_bias_err_deg`` (rms),
     ``ratio_crb`` (median over the calibration parameters of scatter / mean CRB std),
@@ -102,9 +103,14 @@ def point_metrics(results: Sequence[ReplicationResult], factor: Factor,
     failed = [r for r in results if not r.ok]
     m: dict[str, Any] = {"n_ok": len(ok), "n_failed": len(failed), "failures": _failure_reasons(failed)}
     acc = pd.DataFrame([group_accuracy(r) for r in ok], columns=list(SENSOR_GROUPS))
-    # replications whose every requirement group meets its desired accuracy (NaN: no such sensor)
-    m["n_pass"] = int(sum(all(not acc.at[i, g] > req for g, req in DESIRED_3SIGMA_DEG.items())
+    # replications whose every requirement group meets its desired accuracy; a group no
+    # replication has (NaN throughout: no such sensor) is not asked for, but a replication whose
+    # accuracy could not be computed where the others' could (a calibration that cannot be
+    # applied: a table flat somewhere) does not pass
+    present = [g for g in DESIRED_3SIGMA_DEG if len(acc) and acc[g].notna().any()]
+    m["n_pass"] = int(sum(all(acc.at[i, g] <= DESIRED_3SIGMA_DEG[g] for g in present)
                           for i in acc.index))
+    m["n_unjudged"] = int(sum(any(pd.isna(acc.at[i, g]) for g in present) for i in acc.index))
     for g in SENSOR_GROUPS:
         col = acc[g].dropna() if len(acc) else pd.Series(dtype=float)
         m[f"acc_{g}"] = float(col.median()) if len(col) else math.nan

@@ -256,7 +256,9 @@ def table_text(df: pd.DataFrame) -> str:
             f" {_fmt(r.get('ratio_colored', math.nan), '.2f'):>8}"
             f" {_fmt(r.get('within_3sigma_colored', math.nan), '.2f'):>6}"
             f" {_fmt(r.get('resid_vane_deg', math.nan)):>8}  {r.get('swept', '-')}"
-            + (f"  [{r['failures']}]" if isinstance(r.get("failures"), str) and r.get("failures") else ""))
+            + (f"  [{r['failures']}]" if isinstance(r.get("failures"), str) and r.get("failures") else "")
+            + (f"  [{int(r['n_unjudged'])} converged without a calibration that can be applied]"
+               if r.get("n_unjudged", 0) and np.isfinite(r.get("n_unjudged")) else ""))
     return "\n".join(lines)
 
 
@@ -322,7 +324,8 @@ def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: st
               "requirement; np_b pools every AOA flown). The calibrated channel is compared with the "
               "truth at the channel's true lag: the columns measure the error in value, not in timing. "
               "ok/fail = converged / failed estimations; pass = converged replications meeting every "
-              "desired accuracy; fails = groups whose median misses the desired "
+              "desired accuracy (one whose calibrated channels cannot be computed, a table flat "
+              "somewhere, does not pass: counted in [..]); fails = groups whose median misses the desired "
               "accuracy; b_l,b_r err = rms of estimate - truth of the vane biases, deg; scat/CRB = median "
               "over the calibration parameters (delays, biases, scales, tables) of the Monte Carlo "
               "scatter / mean Cramer-Rao std; in3sig = fraction of calibration estimates within 3 CRB "
