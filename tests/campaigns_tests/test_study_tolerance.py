@@ -163,3 +163,20 @@ def test_swept_truth_is_the_truth_the_replication_compared_with(tiny_run):
     assert len(values) == len(rep) >= 2 and sorted(families) == sorted(rep["family"])
     np.testing.assert_allclose(np.sort(values), np.sort(rep["truth"].to_numpy()), rtol=1e-9)
     assert np.all(values > 80.0) and np.all(values < 100.0)  # 100 ms, less the IMU's lag
+
+
+def test_a_replication_without_computed_accuracy_does_not_pass():
+    """NaN accuracy where another replication has one (a calibration that cannot be applied) is
+    not a pass, and is counted apart; a group no replication has (no such sensor) is not asked."""
+    from campaigns.studies.tolerance.analysis import DESIRED_3SIGMA_DEG, passing
+
+    groups = list(DESIRED_3SIGMA_DEG)
+    good = {g: 0.5 * DESIRED_3SIGMA_DEG[g] for g in groups}
+    bad = dict(good, **{groups[0]: 2.0 * DESIRED_3SIGMA_DEG[groups[0]]})
+    unknown = dict.fromkeys(groups, math.nan)
+    acc = pd.DataFrame([good, bad, unknown])
+    assert passing(acc) == (1, 1)
+    # a sensor no replication flew is not asked for
+    acc[groups[-1]] = math.nan
+    assert passing(acc) == (1, 1)
+    assert passing(pd.DataFrame([good, good])) == (2, 0)

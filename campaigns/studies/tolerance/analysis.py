@@ -49,6 +49,21 @@ def group_accuracy(result: ReplicationResult) -> dict[str, float]:
     return out
 
 
+def passing(acc: pd.DataFrame) -> tuple[int, int]:
+    """``(passing, unjudged)`` replications of a point from their group accuracies (one row per
+    converged replication, one column per requirement group, deg, NaN: not computed).
+
+    A replication passes when every group meets its desired accuracy. A group no replication has
+    (NaN throughout: no such sensor) is not asked for; a replication whose accuracy could not be
+    computed where another's could (a calibration that cannot be applied: a table estimated flat
+    somewhere) does not pass, and is counted as unjudged.
+    """
+    present = [g for g in DESIRED_3SIGMA_DEG if g in acc and acc[g].notna().any()]
+    ok = [all(acc.at[i, g] <= DESIRED_3SIGMA_DEG[g] for g in present) for i in acc.index]
+    unjudged = [any(pd.isna(acc.at[i, g]) for g in present) for i in acc.index]
+    return int(sum(ok)), int(sum(unjudged))
+
+
 def _failure_reasons(failed: Sequence[ReplicationResult]) -> str:
     """"2 turbulence, 1 not converged": what failed the replications, counted."""
     why: dict[str, int] = {}
@@ -103,14 +118,7 @@ def point_metrics(results: Sequence[ReplicationResult], factor: Factor,
     failed = [r for r in results if not r.ok]
     m: dict[str, Any] = {"n_ok": len(ok), "n_failed": len(failed), "failures": _failure_reasons(failed)}
     acc = pd.DataFrame([group_accuracy(r) for r in ok], columns=list(SENSOR_GROUPS))
-    # replications whose every requirement group meets its desired accuracy; a group no
-    # replication has (NaN throughout: no such sensor) is not asked for, but a replication whose
-    # accuracy could not be computed where the others' could (a calibration that cannot be
-    # applied: a table flat somewhere) does not pass
-    present = [g for g in DESIRED_3SIGMA_DEG if len(acc) and acc[g].notna().any()]
-    m["n_pass"] = int(sum(all(acc.at[i, g] <= DESIRED_3SIGMA_DEG[g] for g in present)
-                          for i in acc.index))
-    m["n_unjudged"] = int(sum(any(pd.isna(acc.at[i, g]) for g in present) for i in acc.index))
+    m["n_pass"], m["n_unjudged"] = passing(acc)
     for g in SENSOR_GROUPS:
         col = acc[g].dropna() if len(acc) else pd.Series(dtype=float)
         m[f"acc_{g}"] = float(col.median()) if len(col) else math.nan
