@@ -117,6 +117,9 @@ class ChannelEval:
         method's wind sensitivity (:mod:`estimator.filter_error`).
     shift_s : (n,) the channel's time shift ``tau`` at the rows, s (with ``dydv``): the row's
         output is the flight at ``t - tau``.
+    slope : (n,) ``dy / dx`` at the rows, the output's derivative with respect to the flow signal
+        the channel measures (``ChannelSpec.measures``; with the Jacobian, else None): where it
+        vanishes or changes sign the calibration cannot be applied (inverted).
     """
 
     channel: int
@@ -130,6 +133,7 @@ class ChannelEval:
     normal: tuple | None = field(default=None, repr=False)
     dydv: np.ndarray | None = field(default=None, repr=False)
     shift_s: np.ndarray | None = field(default=None, repr=False)
+    slope: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def J(self) -> np.ndarray | None:
@@ -563,14 +567,16 @@ class Model:
         else:
             dual, value = None, expr.value(signals, params, tables)
         y = np.broadcast_to(value, cl.z.shape)[cl.rows]
-        J, normal, dydv, shift = None, None, None, None
+        J, normal, dydv, shift, slope = None, None, None, None, None
         if jacobian:
             J, normal = self._jacobian(cl, lay, dual, S, state_signal, w, P0, cl.z_rows - y, keep)
+            if ch.measures is not None and ch.measures in dual.dsignal:
+                slope = np.broadcast_to(dual.dsignal[ch.measures], (n_all,))[cl.rows].copy()
             if wind:
                 dydv = self._velocity_sensitivity(cl, lay, dual, state_signal, w, P0)
                 shift = np.broadcast_to(np.asarray(tau, dtype=float), (n_all,))[cl.rows].copy()
         return ChannelEval(cl.c, cl.mans, cl.rseg, cl.local_rows, y, cl.z_rows, J, cl.colmap, normal,
-                           dydv, shift)
+                           dydv, shift, slope)
 
     @staticmethod
     def _velocity_sensitivity(cl: _ChannelLayout, lay: _Layout, dual, state_signal, w, P0):

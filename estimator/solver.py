@@ -79,6 +79,9 @@ PREFIT_ITERATIONS = 10
 PROBE_ITERATIONS = 5
 #: Fresh linearisations at most once the filter-error noise statistics are held.
 REFRESH_ROUNDS = 3
+#: A calibration model's slope (reading per unit flow angle) below which it cannot be applied:
+#: estimator.calibrated's own threshold (Newton's step divides by it)
+MIN_CALIBRATION_SLOPE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -569,7 +572,8 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     findings = (_imu_noise_unknown(dev.imu_psd)
                 + _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs)
                 + _imu_noise_note(dev, st, keys, opt) + _iteration_findings(it, stage_notes)
-                + wind_findings + _unsettled(refresh_move, dev.std_crb, keys))
+                + wind_findings + _unsettled(refresh_move, dev.std_crb, keys)
+                + _not_invertible(problem, evals, st))
     diagnosis_table, outliers = None, {}
     if opt.diagnose:
         # the filter-error method's measurements against its one-step predictions: the innovations
@@ -589,6 +593,47 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         state_reason=tuple(reason), findings=tuple(findings), verdict=verdict,
         fit_quality=diagnosis_table, outliers=outliers, wind=wind,
     )
+
+
+def _not_invertible(problem: Problem, evals: Evaluation, st: Structure) -> list[Finding]:
+    """A failure per flow channel whose estimated calibration cannot be applied: where the model's
+    slope with respect to the flow angle it measures vanishes (below :data:`MIN_CALIBRATION_SLOPE`)
+    or has the other sign than over most of the flight, two flow angles give one reading and the
+    measurement cannot be turned back into a flow angle (a table estimated flat or folded between
+    two nodes; planning study (c), light turbulence: a filter-error fit converged so, with only a
+    poor-model warning)."""
+    out = []
+    keys = problem.parameters.keys
+    for ce in evals.channels:
+        if ce.slope is None or not ce.slope.size:
+            continue
+        ch = problem.channels[ce.channel]
+        sign = 1.0 if np.median(ce.slope) >= 0.0 else -1.0
+        bad = ce.slope * sign < MIN_CALIBRATION_SLOPE
+        if not bad.any():
+            continue
+        where = []
+        for b, k in enumerate(ce.mans):
+            r0, r1 = int(ce.rseg[b]), int(ce.rseg[b + 1])
+            hit = np.flatnonzero(bad[r0:r1])
+            if hit.size:
+                m = problem.maneuvers[int(k)]
+                t = m.t_s[ce.rows[r0:r1][hit]]
+                where.append(f"{m.id} {t[0]:.2f}-{t[-1]:.2f} s ({hit.size} samples)")
+        params = tuple(dict.fromkeys(keys[i] for b in range(len(ce.mans)) for i in ce.colmap[b]
+                                     if st.free[i] and problem.parameters.parameters[i].kind == "table"))
+        out.append(Finding(
+            "not_invertible", Severity.FAILURE,
+            f"{ch.name}: its estimated calibration cannot be applied - the model's slope with respect "
+            f"to {ch.measures} is {float(np.min(ce.slope * sign)):.3g} at the least (below "
+            f"{MIN_CALIBRATION_SLOPE:g}, or of the wrong sign) in {int(bad.sum())} of {bad.size} "
+            f"samples: {'; '.join(where[:4])}{' ...' if len(where) > 4 else ''}; there two flow angles "
+            "give one reading",
+            "a table estimated flat or folded between nodes: read the fit's other findings (a poor "
+            "model, turbulence), bound or regularise the table, or fly maneuvers that cover that "
+            "range of the flow angle",
+            channel=ch.name, parameters=params[:12], value=float(np.min(ce.slope * sign))))
+    return out
 
 
 def _unsettled(move: np.ndarray | None, std: np.ndarray, keys: list[str]) -> list[Finding]:
