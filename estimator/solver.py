@@ -79,9 +79,12 @@ PREFIT_ITERATIONS = 10
 PROBE_ITERATIONS = 5
 #: Fresh linearisations at most once the filter-error noise statistics are held.
 REFRESH_ROUNDS = 3
-#: A calibration model's slope (reading per unit flow angle) below which it cannot be applied:
-#: estimator.calibrated's own threshold (Newton's step divides by it)
-MIN_CALIBRATION_SLOPE = 1e-6
+#: A calibration model's slope (reading per unit flow angle) below which it cannot be applied: a
+#: quarter, half the lowest the model sets allow a sensor (tejas: the nose probe's gain f5 >= 0.5);
+#: below it the calibrated channel amplifies the reading's noise and errors more than 4x, and
+#: Newton's inversion (estimator.calibrated) leaves the table's range (study (c): a vane table
+#: segment estimated at slope 0.04, 12-16 deg, with only a poor-model warning)
+MIN_CALIBRATION_SLOPE = 0.25
 
 
 @dataclass(frozen=True)
@@ -597,11 +600,11 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
 
 def _not_invertible(problem: Problem, evals: Evaluation, st: Structure) -> list[Finding]:
     """A failure per flow channel whose estimated calibration cannot be applied: where the model's
-    slope with respect to the flow angle it measures vanishes (below :data:`MIN_CALIBRATION_SLOPE`)
-    or has the other sign than over most of the flight, two flow angles give one reading and the
-    measurement cannot be turned back into a flow angle (a table estimated flat or folded between
-    two nodes; planning study (c), light turbulence: a filter-error fit converged so, with only a
-    poor-model warning)."""
+    slope with respect to the flow angle it measures is nearly flat (below
+    :data:`MIN_CALIBRATION_SLOPE`) or has the other sign than over most of the flight, flow angles
+    far apart give nearly one reading and the measurement cannot be turned back into a flow angle
+    (a table estimated flat or folded between two nodes; planning study (c), light turbulence: a
+    filter-error fit converged so, with only a poor-model warning)."""
     out = []
     keys = problem.parameters.keys
     for ce in evals.channels:
@@ -627,8 +630,8 @@ def _not_invertible(problem: Problem, evals: Evaluation, st: Structure) -> list[
             f"{ch.name}: its estimated calibration cannot be applied - the model's slope with respect "
             f"to {ch.measures} is {float(np.min(ce.slope * sign)):.3g} at the least (below "
             f"{MIN_CALIBRATION_SLOPE:g}, or of the wrong sign) in {int(bad.sum())} of {bad.size} "
-            f"samples: {'; '.join(where[:4])}{' ...' if len(where) > 4 else ''}; there two flow angles "
-            "give one reading",
+            f"samples: {'; '.join(where[:4])}{' ...' if len(where) > 4 else ''}; there flow angles far "
+            "apart give nearly one reading",
             "a table estimated flat or folded between nodes: read the fit's other findings (a poor "
             "model, turbulence), bound or regularise the table, or fly maneuvers that cover that "
             "range of the flow angle",

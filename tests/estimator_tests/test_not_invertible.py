@@ -1,9 +1,10 @@
 """A calibration that cannot be applied fails the verdict (solver._not_invertible).
 
-Where a channel model's slope with respect to the flow angle it measures vanishes or changes sign,
-two flow angles give one reading and the flight-control computer cannot turn the measurement back
-into a flow angle (estimator.calibrated raises there). Planning study (c) saw a filter-error fit
-converge so, a vane table flat between two nodes, with only a poor-model warning.
+Where a channel model's slope with respect to the flow angle it measures nearly vanishes (below a
+quarter) or changes sign, flow angles far apart give nearly one reading and the flight-control
+computer cannot turn the measurement back into a flow angle (estimator.calibrated raises there).
+Planning study (c) saw a filter-error fit converge so, a vane table segment at slope 0.04, with
+only a poor-model warning.
 """
 
 from __future__ import annotations
@@ -41,3 +42,17 @@ def test_a_flat_table_segment_where_the_vanes_fly_fails_the_verdict(calm):
     assert "alpha_s" in f.message and "m0 " in f.message and f.value < 1e-6
     good = estimate(calm, SolverOptions(start="given", diagnose=False, colored=False))
     assert not [f for f in good.findings if f.code == "not_invertible"]
+
+
+def test_a_nearly_flat_segment_fails_too(calm):
+    """A slope of 0.1 between 4 and 8 deg (f1[3] 0.4 deg below f1[4]): a reading error of 1 deg
+    would be 10 deg of flow angle there - a failure; the model sets' lowest sensor gain (0.5) is
+    not."""
+    ps = calm.parameters
+    f4 = float(ps.values[ps.index("f1[4]")])
+    for gap_deg, fails in ((0.4, True), (4.0 * 0.6, False)):
+        bent = dataclasses.replace(calm, parameters=ps.with_values({"f1[3]": f4 - np.radians(gap_deg)})
+                                   .with_free({"f1[3]": False, "f1[4]": False}))
+        res = estimate(bent, SolverOptions(start="given", diagnose=False, colored=False))
+        found = [f for f in res.findings if f.code == "not_invertible"]
+        assert bool(found) == fails, (gap_deg, [f.message for f in found])
