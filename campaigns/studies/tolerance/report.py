@@ -160,11 +160,15 @@ def _lost_text(factor: Factor, r: pd.Series, bad: Sequence[str]) -> str:
         return f"{r['level']} every estimation ended with a failure verdict ({r.get('failures', '')})"
     text = f"{r['level']}{_swept_size(factor, r)} "
     if "verdict" in bad:
+        n_ok, n_pass = int(r["n_ok"]), int(r.get("n_pass", r["n_ok"]))
+        # the medians meet every requirement; each replication need not
+        met = (("meets" if n_ok == 1 else "meet") + " every requirement" if n_pass == n_ok else
+               f"{n_pass} meet every requirement (the medians do)")
         text += (f"{int(r['n_failed'])} of {n} estimations ended with a failure verdict "
                  f"({r.get('failures', '')})" + (", and " if lost else
-                                                 f"; the {int(r['n_ok'])} that succeeded "
-                                                 + ("meets" if r["n_ok"] == 1 else "meet")
-                                                 + " every requirement"))
+                                                 f"; of the {n_ok} that succeeded " + met
+                                                 if n_pass != n_ok else
+                                                 f"; the {n_ok} that succeeded " + met))
     if lost:
         text += "it is lost for " + ", ".join(
             f"{g} ({r[f'acc_{g}']:.2f} > {DESIRED_3SIGMA_DEG[g]:g} deg)" for g in lost)
