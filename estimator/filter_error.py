@@ -82,11 +82,10 @@ from estimator.core.sensitivity import worker_threads
 from estimator.iteration import _evaluate
 from estimator.model import Evaluation, Model
 from estimator.normal_equations import NormalEquations, Structure, residual_sums
+from estimator.problem import AIR_RELATIVE_SIGNALS
 from estimator.uncertainty import honest_std, imu_noise_psd, innovation_honest_std
 from estimator.verdict import Finding, Severity
 
-#: The signals that see the air (a channel using none of them does not see the wind).
-AIR_RELATIVE_SIGNALS = frozenset({"alpha_s", "beta_s", "flank_s", "alpha_t", "beta_t", "tas_t"})
 #: MIL-F-8785C scale length above 2000 ft (1750 ft), m.
 DRYDEN_SCALE_LENGTH_M = 533.4
 #: Search bounds of the turbulence intensity, m/s: from next to nothing to severe.

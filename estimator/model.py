@@ -49,12 +49,12 @@ from estimator.core.expressions import Table
 from estimator.core.kinematics import smoothed_derivative
 from estimator.core.observations import flow_signal_batch
 from estimator.core.sensitivity import LEVER_ARMS, N_SENS, Inputs, integrate_many, worker_threads
-from estimator.problem import STATE_PARAMS, STATE_SIGNALS, Problem
+from estimator.problem import AIR_RELATIVE_SIGNALS, STATE_PARAMS, STATE_SIGNALS, Problem
 
 _EULER_INDEX = {"phi": 3, "theta": 4, "psi": 5, "h": 6}
 _RATE_INDEX = {"p": 0, "q": 1, "r": 2}
 _FLOW_KIND = {"alpha_s": "alpha", "beta_s": "beta", "flank_s": "flank",
-              "alpha_t": "alpha", "beta_t": "beta", "tas_t": "tas"}
+              "alpha_t": "alpha", "beta_t": "beta", "tas_t": "tas", "u_s": "u", "v_s": "v", "w_s": "w"}
 _ORIGIN = np.zeros(3)
 #: Problems with at least this many samples evaluate their channels on two threads.
 _THREADED_SAMPLES = 20000
@@ -587,9 +587,11 @@ class Model:
         out = np.zeros((rows.size, 3))
         p0, wr = P0[rows], w[rows][:, None]
         for name, d in dual.dsignal.items():
+            if name not in AIR_RELATIVE_SIGNALS:
+                # Euler angles, altitude, rates and the velocity relative to the steady air mass
+                # (an inertial velocity's) do not see the turbulent wind
+                continue
             _, (q, sid, _) = state_signal(name, cl.ch.sensor)
-            if q >= 0 or name in _RATE_INDEX:
-                continue  # Euler angles, altitude and rates do not see the air
             sa = lay.SA[sid]
             out += np.broadcast_to(d, (n_all,))[rows][:, None] * ((1.0 - wr) * sa[p0] + wr * sa[p0 + 1])
         return out

@@ -13,6 +13,11 @@ Channel models are text (:mod:`estimator.core.expressions`) over these signals:
 ``alpha_t``         angle of attack at the CG, rad
 ``beta_t``          sideslip at the CG, rad
 ``tas_t``           true airspeed at the CG, m/s
+``u_s``, ``v_s``, ``w_s``  body-axis velocity of the sensor's point relative to the maneuver's *steady*
+                    air mass, m/s: ``V_s`` itself. Its NED form plus the steady wind is the point's
+                    ground velocity (an INS velocity: ``estimator/models/tejas_ins.toml``); the
+                    turbulent wind does not move it (the filter-error method gives these signals no
+                    wind sensitivity)
 ``phi``, ``theta``, ``psi``, ``h``  reconstructed Euler angles (rad) and altitude (m)
 ``p``, ``q``, ``r``   body rates, gyro biases removed, rad/s (for rate-dependent sensor terms)
 ``z``               the channel's own measurement (SPEC §5: f3, f4 take a measured argument)
@@ -40,10 +45,15 @@ from estimator.parameters import ParameterSet, ParameterSpec, instance_of
 #: Signals computed from the reconstructed states (their derivatives are chained to the states).
 STATE_SIGNALS = frozenset(
     {"alpha_s", "beta_s", "flank_s", "alpha_t", "beta_t", "tas_t", "phi", "theta", "psi", "h",
-     "p", "q", "r"}
+     "p", "q", "r", "u_s", "v_s", "w_s"}
 )
-#: Signals that need a sensor position.
+#: Flow-angle signals: they need a sensor position, and a channel using one is a flow channel.
 SENSOR_SIGNALS = frozenset({"alpha_s", "beta_s", "flank_s"})
+#: The sensor point's velocity components (relative to the steady air mass); they need a position.
+VELOCITY_SIGNALS = frozenset({"u_s", "v_s", "w_s"})
+#: The signals that see the air: the turbulent wind moves them (a channel using none of them does
+#: not see it; the filter-error method, estimator.filter_error).
+AIR_RELATIVE_SIGNALS = frozenset({"alpha_s", "beta_s", "flank_s", "alpha_t", "beta_t", "tas_t"})
 #: Names of the 13 state-equation parameter families, in kernel order.
 STATE_PARAMS = ("u0", "v0", "w0", "phi0", "theta0", "psi0", "h0",
                 "dax", "day", "daz", "dp", "dq", "dr")
@@ -58,7 +68,8 @@ class ChannelSpec:
     name : channel name (``alpha_zl``).
     column : the data column holding its measurement, SI (``alpha_zl_rad``).
     model : observation model text, e.g. ``"f1(alpha_s) - f2(alpha_t) * beta_s + b_l"``.
-    sensor : sensor name whose position defines ``alpha_s``/``beta_s``/``flank_s`` (flow channels).
+    sensor : sensor name whose position defines ``alpha_s``/``beta_s``/``flank_s`` (flow channels)
+        and ``u_s``/``v_s``/``w_s`` (an inertial velocity's point).
     delay : parameter family of the channel's time shift ``y(t - tau)``, or None.
     recorder : recorder the channel comes from (for recorder-scoped parameters).
     unit : SI unit of the measurement.
@@ -83,10 +94,11 @@ class ChannelSpec:
     def __post_init__(self) -> None:
         expr = parse(self.model, where=f"channel {self.name}")
         object.__setattr__(self, "expression", expr)
-        if (expr.names & SENSOR_SIGNALS) and not self.sensor:
+        positioned = expr.names & (SENSOR_SIGNALS | VELOCITY_SIGNALS)
+        if positioned and not self.sensor:
             raise ValueError(
                 f"channel {self.name}: model {self.model!r} uses a sensor signal "
-                f"({sorted(expr.names & SENSOR_SIGNALS)}) but declares no sensor; add sensor = \"...\""
+                f"({sorted(positioned)}) but declares no sensor; add sensor = \"...\""
             )
         if not self.display_unit:
             object.__setattr__(self, "display_unit", self.unit)

@@ -64,7 +64,7 @@ from estimator.identifiability import (
 from estimator.iteration import OutputErrorLikelihood, _evaluate, _gauss_newton, _Iterated, _staged_start
 from estimator.model import Evaluation, Model, ModelEvaluationError
 from estimator.normal_equations import Structure, build_normal, channel_variances, ml_cost, residual_sums
-from estimator.problem import STATE_PARAMS, Problem
+from estimator.problem import SENSOR_SIGNALS, STATE_PARAMS, Problem
 from estimator.result import EstimationResult, ResidualStats
 from estimator.uncertainty import _deviations, _imu_noise_note, _imu_noise_unknown
 from estimator.verdict import Finding, Severity, Status, judge
@@ -754,7 +754,8 @@ def _fit_traces(problem: Problem, ev: Evaluation, st: Structure, y: list[np.ndar
             params = tuple(dict.fromkeys(keys[i] for i in ce.colmap[b]
                                          if st.free[i] and ps.parameters[i].name not in STATE_PARAMS))
             fits.append(ChannelFit(
-                maneuver=m.id, channel=ch.name, flow=ch.sensor is not None, t_s=m.t_s[rows],
+                maneuver=m.id, channel=ch.name, flow=bool(ch.expression.names & SENSOR_SIGNALS),
+                t_s=m.t_s[rows],
                 z=ce.z[r0:r1], y=(ce.y if y is None else y[ce_i])[r0:r1], measured_t_s=m.t_s[fin],
                 measured=meas[fin], unit=ch.unit,
                 display_scale=ch.display_scale, display_unit=ch.display_unit, parameters=params))

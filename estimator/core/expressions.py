@@ -185,9 +185,11 @@ class Expression:
 
 
 def parse(text: str, where: str = "model") -> Expression:
-    """Parse a channel model; raises :class:`ExpressionError` naming ``where`` on bad syntax."""
+    """Parse a channel model; raises :class:`ExpressionError` naming ``where`` on bad syntax.
+
+    Line breaks are spaces (a long model may span lines of a TOML multi-line string)."""
     try:
-        tree = ast.parse(text, mode="eval").body
+        tree = ast.parse(" ".join(text.split()), mode="eval").body
     except SyntaxError as exc:
         raise ExpressionError(f"{where}: cannot parse {text!r}: {exc.msg}") from None
     names: set[str] = set()

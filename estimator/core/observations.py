@@ -12,7 +12,9 @@ and the angles a sensor can sense are::
     beta_s  = asin(v_s / |V_s|)        aerodynamic sideslip
     flank_s = atan2(v_s, u_s)          flank angle (what a sideslip vane senses)
 
-At the CG (``r_s = r_cg``) these are ``alpha_t``, ``beta_t`` and ``tas_t = |V|``.
+At the CG (``r_s = r_cg``) these are ``alpha_t``, ``beta_t`` and ``tas_t = |V|``. The components
+of ``V_s`` themselves (``u_s, v_s, w_s``) are what an inertial velocity at the sensor is, less the
+steady wind (:mod:`estimator.problem`).
 
 Each function returns the signal and its derivatives with respect to ``(u, v, w)`` and to
 ``omega`` (so the estimator can chain them to the state sensitivities and to the gyro biases).
@@ -23,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-_KIND_CODE = {"alpha": 0, "beta": 1, "flank": 2, "tas": 3}
+_KIND_CODE = {"alpha": 0, "beta": 1, "flank": 2, "tas": 3, "u": 4, "v": 5, "w": 6}
 
 
 def flow_signal_batch(X: np.ndarray, omega: np.ndarray | None, r_cg: np.ndarray | None,
@@ -35,7 +37,7 @@ def flow_signal_batch(X: np.ndarray, omega: np.ndarray | None, r_cg: np.ndarray 
     ----------
     X : (N, 7) states; omega : (N, 3) bias-corrected rates; r_cg : (N, 3) CG of each sample's
         maneuver; sensor : (3,) sensor position, or None for the CG (then ``omega``, ``r_cg`` unused).
-    kind : "alpha", "beta", "flank" or "tas".
+    kind : "alpha", "beta", "flank", "tas", or "u", "v", "w" (a component of ``V_s`` itself).
     derivatives : also the derivatives.
     dv_out, b_out : (N, 3) arrays to write the derivatives into (else new ones).
 
@@ -63,8 +65,10 @@ def flow_signal_batch(X: np.ndarray, omega: np.ndarray | None, r_cg: np.ndarray 
         val = np.arctan2(v, u)
     elif kind == "tas":
         val = np.sqrt(u * u + w * w + v * v)
+    elif kind in ("u", "v", "w"):
+        val = vs[:, "uvw".index(kind)].copy()
     else:
-        raise ValueError(f"unknown flow signal {kind!r}; one of alpha, beta, flank, tas")
+        raise ValueError(f"unknown flow signal {kind!r}; one of alpha, beta, flank, tas, u, v, w")
     if not derivatives:
         return val, None, None
     dv = np.empty((n, 3)) if dv_out is None else dv_out
@@ -103,9 +107,13 @@ def _flow_derivatives(vs, kind, r_cg, sensor, dv, b):
         elif kind == 2:
             uv2 = u * u + v * v
             d0, d1, d2 = -v / uv2, u / uv2, 0.0
-        else:
+        elif kind == 3:
             V = np.sqrt(u * u + w * w + v * v)
             d0, d1, d2 = u / V, v / V, w / V
+        else:  # a velocity component: 4, 5, 6 for u, v, w
+            d0 = 1.0 if kind == 4 else 0.0
+            d1 = 1.0 if kind == 5 else 0.0
+            d2 = 1.0 if kind == 6 else 0.0
         dv[i, 0] = d0
         dv[i, 1] = d1
         dv[i, 2] = d2

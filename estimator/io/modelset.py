@@ -321,7 +321,7 @@ def declarations_of(problem_or_channels) -> Declarations:
 
 
 _SECTIONS = ("channel", "parameter", "requirements", "workflow", "initial_conditions", "report",
-             "sensor_midpoints")
+             "sensor_midpoints", "extends")
 _REQUIREMENT_KEYS = ("sensor", "desired_3sigma_deg", "low_alpha_only")
 _WORKFLOW_KEYS = ("reference_mach", "apportion_biases", "correction_model", "identity_table",
                   "alpha_limit_channel")
@@ -465,14 +465,61 @@ def model_set_path(name_or_path: str | Path, base_dir: Path | None = None) -> Pa
     return path
 
 
-def read_model_set(name_or_path: str | Path, base_dir: Path | None = None) -> tuple[dict, str]:
-    """Raw TOML of a model set (:func:`model_set_path`) and the path it was read from."""
+def read_model_set(name_or_path: str | Path, base_dir: Path | None = None,
+                   _chain: tuple[str, ...] = ()) -> tuple[dict, str]:
+    """Raw TOML of a model set (:func:`model_set_path`) and the path it was read from.
+
+    A model set with ``extends = "NAME"`` (a shipped name, or a path relative to its own file) is
+    that model set with its own additions (:func:`extend_model_set`), so that a variant (the
+    paper's models plus the INS velocities: ``tejas_ins``) states only what it adds.
+    """
     path = model_set_path(name_or_path, base_dir)
     try:
         with open(path, "rb") as fh:
-            return tomllib.load(fh), str(path)
+            raw = tomllib.load(fh)
     except tomllib.TOMLDecodeError as exc:
         raise DataError(f"{path}: not valid TOML: {exc}; fix the syntax there") from None
+    if "extends" not in raw:
+        return raw, str(path)
+    base_name = raw["extends"]
+    if not isinstance(base_name, str) or not base_name:
+        raise DataError(f"{path}: extends must name a model set (a shipped name such as \"tejas\", "
+                        f"or a path relative to this file); got {base_name!r}")
+    if str(path) in _chain:
+        raise DataError(f"{path}: model sets extend each other in a circle "
+                        f"({' -> '.join((*_chain, str(path)))}); break the circle")
+    base, base_path = read_model_set(base_name, path.parent, (*_chain, str(path)))
+    return extend_model_set(base, raw, f"{path} (extends {base_path})"), str(path)
+
+
+def extend_model_set(base: Mapping, own: Mapping, where: str) -> dict:
+    """A model set's raw TOML on top of the one it ``extends``.
+
+    ``[[channel]]`` entries are added, or replace the base's channel of the same name;
+    ``[parameter.NAME]`` tables are added, or replace the base's table of that name (whole, so
+    that nothing of the base's declaration lingers unseen); in the other tables (``[requirements]``,
+    ``[workflow]``, ``[report]``, ...) each key replaces the base's.
+    """
+    out = {k: v for k, v in base.items() if k != "extends"}
+    for key, val in own.items():
+        if key == "extends":
+            continue
+        if key == "channel":
+            chans = [dict(c) for c in base.get("channel", [])]
+            for c in val:
+                if not isinstance(c, Mapping) or "name" not in c:
+                    raise DataError(f"{where}: each [[channel]] needs name = ... and model = ...")
+                same = [i for i, old in enumerate(chans) if old.get("name") == c["name"]]
+                if same:
+                    chans[same[0]] = dict(c)
+                else:
+                    chans.append(dict(c))
+            out["channel"] = chans
+        elif isinstance(val, Mapping) and isinstance(base.get(key), Mapping):
+            out[key] = {**base[key], **val}
+        else:
+            out[key] = val
+    return out
 
 
 def load_model_set(name_or_path: str | Path = DEFAULT_MODEL_SET
