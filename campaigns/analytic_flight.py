@@ -39,12 +39,13 @@ SENSORS = {
     "boom_alpha_vane": np.array([9.40, 0.0, 0.22]),
     "boom_beta_upper_vane": np.array([9.55, 0.0, 0.12]),
     "boom_beta_lower_vane": np.array([9.55, 0.0, 0.32]),
+    "ins": np.array([2.40, -0.10, 0.25]),
 }
 TABLES = ("f1", "f2", "f3", "f4", "f5")
 #: White measurement noise of the channels, standard deviations (SI).
 NOISE_SIGMA = {"phi": 0.03 * DEG, "theta": 0.03 * DEG, "psi": 0.03 * DEG, "tas": 0.3, "h": 1.0,
                "alpha_zl": 0.07 * DEG, "alpha_zr": 0.07 * DEG, "alpha_zsp": 0.1 * DEG,
-               "beta_zsp": 0.1 * DEG, "beta_znp": 0.1 * DEG}
+               "beta_zsp": 0.1 * DEG, "beta_znp": 0.1 * DEG, "vn": 0.05, "ve": 0.05, "vd": 0.05}
 
 #: A trajectory: inputs(t) -> (specific force at the CG, body rates), states(t) -> (N, 6 or 7).
 Inputs = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -204,6 +205,9 @@ def tejas_channels(t_s: np.ndarray, states_at: States, inputs: Inputs, sensors: 
 # ----------------------------------------------------------------------------- the tests' flight
 R_CG = np.array([0.33, 0.0, 0.13])
 CHANNELS = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr", "alpha_zsp", "beta_zsp", "beta_znp"]
+#: The INS velocity channels (model set ``tejas_ins``) and their delays in :class:`Flight` with ``ins``.
+INS_CHANNELS = ("vn", "ve", "vd")
+INS_DELAYS_S = {"tau_vn": 0.012, "tau_ve": 0.012, "tau_vd": 0.012}
 RATE_HZ = 40.0
 #: The sensors of :class:`Flight` (no boom).
 FLIGHT_SENSORS = {k: SENSORS[k] for k in ("imu", "vane_left", "vane_right", "side_probe", "nose_probe")}
@@ -263,11 +267,20 @@ class Flight:
         exactly on a 1 ms grid and interpolated), ``V_air = V - C_bn dW``, while the IMU and the
         attitude and altitude channels follow the (ground-relative) flight; the draw of maneuver
         ``k`` is :attr:`wind_ned_mps` ``[id]`` = (t_s, dW). None: calm air.
+    steady_wind_ned_mps : a steady wind ``W0`` (NED, m/s) the air moves with besides: the flow
+        sees ``V - C_bn (W0 + dW)``, and the initial velocities the estimator recovers are the
+        air-relative ones.
+    ins : also the INS ground velocities at the INS point (``vn, ve, vd``, delays
+        :data:`INS_DELAYS_S`), and the problem uses the ``tejas_ins`` model set (whose steady wind
+        ``wind_n, wind_e, wind_d`` is ``W0``).
     """
 
     def __init__(self, truth: dict, specs, T: float = 25.0, tau_override: dict | None = None,
-                 turbulence: tuple[float, float, int] | None = None):
+                 turbulence: tuple[float, float, int] | None = None,
+                 steady_wind_ned_mps=(0.0, 0.0, 0.0), ins: bool = False):
         self.turbulence = turbulence
+        self.steady_wind_ned_mps = np.asarray(steady_wind_ned_mps, dtype=float)
+        self.ins = ins
         self.wind_ned_mps: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.specs = {s.name: s for s in specs}
         tn = truth["_table_noise"]
@@ -275,7 +288,7 @@ class Flight:
         # slices of one draw: the tables keep their values when a breakpoint count changes elsewhere
         start = {"f1": 0, "f2": 10, "f3": 20, "f4": 25, "f5": 30}
         self.tables = truth_tables(self.bp, {n: tn[start[n]:start[n] + self.bp[n].size] for n in TABLES})
-        self.truth = dict(truth, **(tau_override or {}))
+        self.truth = dict(truth, **(INS_DELAYS_S if ins else {}), **(tau_override or {}))
         self.maneuvers = [self._maneuver(f"m{k}", T, params) for k, params in
                           enumerate([dict(au=8.0, aphi=0.4, ath=0.15), dict(av=6.0, aw=6.0, aphi=0.8)])]
 
@@ -295,24 +308,42 @@ class Flight:
             x[:, 6] = np.interp(ts, t_fine, h_fine)
             return x
 
-        flow_states = states_at
+        w0 = self.steady_wind_ned_mps
+
+        def flow_states(ts):
+            # the air's velocity relative to the aircraft in the steady wind: V - C_bn W0
+            x = states_at(ts)
+            x[:, :3] -= np.einsum("nij,j->ni", ned_to_body(x[:, 3:6]), w0)
+            return x
+
         if self.turbulence is not None:
             gust = gauss_markov_wind(t_fine, *self.turbulence[:2], 150.0,
                                      np.random.default_rng([self.turbulence[2], int(mid[1:])]))
             self.wind_ned_mps[mid] = (t, np.stack([np.interp(t, t_fine, d) for d in gust.T], 1))
 
             def flow_states(ts):
-                # the air's velocity relative to the aircraft: V - C_bn dW
+                # the air's velocity relative to the aircraft: V - C_bn (W0 + dW)
                 x = states_at(ts)
-                w_ned = np.stack([np.interp(ts, t_fine, d) for d in gust.T], 1)
+                w_ned = w0 + np.stack([np.interp(ts, t_fine, d) for d in gust.T], 1)
                 x[:, :3] -= np.einsum("nij,nj->ni", ned_to_body(x[:, 3:6]), w_ned)
                 return x
 
         # the attitude and altitude channels are the same either way (flow_states changes the
         # velocity only)
         meas = tejas_channels(t, flow_states, inputs, FLIGHT_SENSORS, R_CG, tr, tr, self.tables, self.bp)
-        x0 = states_at(t[:1])[0]
-        self_ic = dict(zip(("u0", "v0", "w0", "phi0", "theta0", "psi0", "h0"), x0, strict=True))
+        if self.ins:
+            r_ins = SENSORS["ins"] - R_CG
+            for name in INS_CHANNELS:
+                ts = t - tr[f"tau_{name}"]
+                x = states_at(ts)
+                v_ins = x[:, :3] + np.cross(inputs(ts)[1], r_ins)  # ground-relative, body axes
+                v_ned = np.einsum("nji,nj->ni", ned_to_body(x[:, 3:6]), v_ins)
+                meas[name] = v_ned[:, INS_CHANNELS.index(name)]
+        # the initial conditions relative to the steady air (a turbulent dW is the wind states')
+        x0 = states_at(t[:1])
+        x0[:, :3] -= ned_to_body(x0[:, 3:6])[0] @ w0
+        self_ic = dict(zip(("u0", "v0", "w0", "phi0", "theta0", "psi0", "h0"), x0[0], strict=True))
+        self_ic.update(zip(("wind_n", "wind_e", "wind_d"), w0, strict=True))
         return ManeuverData(
             id=mid, t_s=t, accel_imu_mps2=a_imu + da, omega_rps=om + dw, measurements=meas,
             r_cg_body_m=R_CG, aircraft="AC1", configuration="AC1", meta={"ic": self_ic},
@@ -331,8 +362,8 @@ class Flight:
             mans = [replace(m, measurements={
                 c: v + rng.normal(0.0, noise[c], v.size) for c, v in m.measurements.items()})
                 for m in mans]
-        channels, specs = load_model_set("tejas")
-        channels = [c for c in channels if c.name in CHANNELS]
+        channels, specs = load_model_set("tejas_ins" if self.ins else "tejas")
+        channels = [c for c in channels if c.name in CHANNELS or (self.ins and c.name in INS_CHANNELS)]
         out = []
         used = {"u0", "v0", "w0", "phi0", "theta0", "psi0", "h0", "dax", "day", "daz", "dp", "dq", "dr"}
         for c in channels:
@@ -352,4 +383,5 @@ class Flight:
         ps = expand_parameters(out, mans, channels)
         if start != "truth":
             ps = ps.with_values(start(ps))
-        return Problem(tuple(mans), tuple(channels), FLIGHT_SENSORS, FLIGHT_SENSORS["imu"], ps, G, "analytic")
+        sensors = {**FLIGHT_SENSORS, "ins": SENSORS["ins"]} if self.ins else FLIGHT_SENSORS
+        return Problem(tuple(mans), tuple(channels), sensors, FLIGHT_SENSORS["imu"], ps, G, "analytic")

@@ -220,8 +220,8 @@ def _demo(args: argparse.Namespace) -> int:
         problem = problem_from_dataset(out)
     # the workflow's defaults (the model set's reference Mach), as `fpr calibrate DATASET` runs it
     code = _workflow(problem, report_dir, {}, overwrite=True, tool="fpr demo", source=out)
-    # the light-turbulence block (issue 14): the filter-error method, as `fpr calibrate DATASET
-    # --method filter_error` runs it
+    # the light-turbulence block (issue 14): the filter-error method with the INS velocities, as
+    # `fpr calibrate DATASET --method filter_error --model tejas_ins` runs it
     turbulent = load_campaign("demo_turbulence")
     print(f"\nfpr demo: the light-turbulence block: {len(turbulent.jobs)} maneuvers of two configurations "
           f"in light turbulence into {turb_out}, calibrated by the filter-error method (the wind as "
@@ -237,7 +237,7 @@ def _demo(args: argparse.Namespace) -> int:
         return 1
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        tproblem = problem_from_dataset(turb_out)
+        tproblem = problem_from_dataset(turb_out, model="tejas_ins")
     tcode = _workflow(tproblem, turb_report, {"method": "filter_error"}, overwrite=True, tool="fpr demo",
                       source=turb_out)
     print(f"fpr demo: {time.perf_counter() - t0:.0f} s in all")
@@ -363,6 +363,9 @@ def _add_calibrate(sub: argparse._SubParsersAction) -> None:
                    help="free these parameter families (e.g. h0)")
     g.add_argument("--fix", nargs="+", default=[], metavar="PARAM",
                    help="fix these parameter families at their start values")
+    g.add_argument("--model", default=None, metavar="MODEL_SET",
+                   help="model set: a shipped name (tejas, the default; tejas_ins: with the INS ground "
+                   "velocities and the steady wind per maneuver) or a TOML path")
 
 
 def _calibrate(args: argparse.Namespace) -> int:
@@ -383,11 +386,12 @@ def _calibrate(args: argparse.Namespace) -> int:
                 "mach_min": args.mach_min, "mach_max": args.mach_max,
                 "gear_down": None if args.gear is None else args.gear == "down",
             }.items() if v is not None}
-            problem = problem_from_dataset(src, select=select or None, overrides=overrides or None)
+            problem = problem_from_dataset(src, select=select or None, overrides=overrides or None,
+                                           **({"model": args.model} if args.model else {}))
         else:
-            if overrides:
-                print("fpr calibrate: --free/--fix apply to datasets; edit the problem file's "
-                      "[parameter.*] tables instead", file=sys.stderr)
+            if overrides or args.model:
+                print("fpr calibrate: --free/--fix/--model apply to datasets; edit the problem file's "
+                      "model = ... and [parameter.*] tables instead", file=sys.stderr)
                 return 2
             problem = load_problem(src)
     for w in caught:
