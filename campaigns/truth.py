@@ -88,6 +88,14 @@ def true_parameters(problem: Problem, estimated: np.ndarray | None = None) -> Tr
         for name, col in ic.items():
             if name in specs:
                 values[ps.key_of(name, m)] = float(_interp_truth(tr, col, t_imu)[0])
+        # the steady wind of the INS-velocity model (tejas_ins): the maneuver's mean true wind (the
+        # turbulent part is the wind states', zero-mean) plus the INS velocity bias, which a
+        # steady wind cannot be told from
+        vbias = inj.get("ins.velocity_bias_mps")
+        for i, name in enumerate(("wind_n", "wind_e", "wind_d")):
+            col = f"true_{name}_mps"
+            if name in specs and col in tr:
+                values[ps.key_of(name, m)] = float(np.mean(tr[col])) + (float(vbias[i]) if vbias else 0.0)
         acc = inj.get("imu.accel_bias_mps2")
         gyr = inj.get("imu.gyro_bias_rps")
         for i, name in enumerate(("dax", "day", "daz")):

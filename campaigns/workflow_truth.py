@@ -154,11 +154,13 @@ def _sensor_of(problem: Problem, family: str) -> str | None:
 
 
 def recovery(wf: WorkflowResult) -> pd.DataFrame:
-    """Every final estimate with a truth (calibration parameters, time delays, IMU biases)."""
+    """Every final estimate with a truth (calibration parameters, time delays, IMU biases, and the
+    steady wind of a model set with the INS velocities)."""
     frames = []
     for st in wf.usable:
         t = recovery_table(st.result, true_parameters(st.problem, st.result.free_estimated))
-        t = t[t["kind"].isin(["imu_bias", "time_delay", "bias", "scale", "table"])].copy()
+        wind = t.index.str.startswith(("wind_n[", "wind_e[", "wind_d["))
+        t = t[t["kind"].isin(["imu_bias", "time_delay", "bias", "scale", "table"]) | wind].copy()
         t.insert(0, "gear", "down" if st.gear_down else "up")
         t.insert(0, "mach", st.mach)
         frames.append(t)
