@@ -288,7 +288,7 @@ class Flight:
         # slices of one draw: the tables keep their values when a breakpoint count changes elsewhere
         start = {"f1": 0, "f2": 10, "f3": 20, "f4": 25, "f5": 30}
         self.tables = truth_tables(self.bp, {n: tn[start[n]:start[n] + self.bp[n].size] for n in TABLES})
-        self.truth = dict(truth, **(INS_DELAYS_S if ins else {}), **(tau_override or {}))
+        self.truth = {**truth, **(INS_DELAYS_S if ins else {}), **(tau_override or {})}
         self.maneuvers = [self._maneuver(f"m{k}", T, params) for k, params in
                           enumerate([dict(au=8.0, aphi=0.4, ath=0.15), dict(av=6.0, aw=6.0, aphi=0.8)])]
 

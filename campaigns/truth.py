@@ -28,7 +28,7 @@ import pandas as pd
 
 from estimator.core.expressions import Table
 from estimator.io import dataset_column, load_truth
-from estimator.problem import Problem
+from estimator.problem import SENSOR_SIGNALS, Problem
 from estimator.result import EstimationResult
 
 IMU_REFERENCE = "ax_imu_mps2"
@@ -167,7 +167,7 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
     tables = problem_tables(problem)
     cases = []  # (channel, maneuver, signals, clean target)
     for ch in problem.channels:
-        if ch.sensor is None:
+        if not ch.expression.names & SENSOR_SIGNALS:  # no flow angle: attitude, air data, INS
             continue
         for m in problem.maneuvers:
             tr = truths[m.id]

@@ -392,7 +392,7 @@ class FilterErrorLikelihood:
         and the IMU noise as process noise (:func:`honest_std`, ``imu_only``), propagated through
         every channel of the maneuvers without wind states (their innovations are their
         residuals) and, in the others, through the channels that do not see the air (Euler
-        angles, altitudes): the gyro noise integrates into the attitude, which no wind state
+        angles, altitudes, INS velocities): the gyro noise integrates into the attitude, which no wind state
         follows. Not through the air-relative channels there: with the output-error
         sensitivities and the filter-error information matrix that is meaningless (the initial
         velocities, which the wind states leave nearly free, came out at 150-1300 m/s on study
@@ -525,8 +525,8 @@ class FilterErrorLikelihood:
             Finding("filter_error_partial", Severity.WARNING,
                     "filter-error method: "
                     + ("the honest deviations are the coloured innovations' sandwich and the IMU "
-                       "noise as process noise (in turbulent maneuvers through the attitude and "
-                       "altitude channels only)" if colored else
+                       "noise as process noise (in turbulent maneuvers through the channels that do "
+                       "not see the air only: attitude, altitude, INS velocities)" if colored else
                        "the deviations are Cramér-Rao bounds of its information matrix, without the "
                        "coloured-innovation correction")
                     + "; the method is experimental: on JSBSim's simulated turbulence the flow "

@@ -176,8 +176,9 @@ class Evaluation:
 
 
 def _signal_key(name: str, sensor: str | None) -> tuple[str, str | None]:
-    """A state signal's identity: sensor signals differ per sensor, the others do not."""
-    return name, (sensor if name in ("alpha_s", "beta_s", "flank_s") else None)
+    """A state signal's identity: a sensor signal (``*_s``: flow angles, velocity components)
+    differs per sensor, the others do not."""
+    return name, (sensor if name.endswith("_s") else None)
 
 
 class ModelEvaluationError(ValueError):

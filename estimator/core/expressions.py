@@ -187,7 +187,11 @@ class Expression:
 def parse(text: str, where: str = "model") -> Expression:
     """Parse a channel model; raises :class:`ExpressionError` naming ``where`` on bad syntax.
 
-    Line breaks are spaces (a long model may span lines of a TOML multi-line string)."""
+    Line breaks are spaces (a long model may span lines of a TOML multi-line string); a ``#``
+    is refused (joined into one line, a comment would silently drop every term after it)."""
+    if "#" in text:
+        raise ExpressionError(f"{where}: {text!r} holds a '#': a model has no comments; put them in "
+                              "TOML comments outside the model string")
     try:
         tree = ast.parse(" ".join(text.split()), mode="eval").body
     except SyntaxError as exc:

@@ -321,7 +321,7 @@ def declarations_of(problem_or_channels) -> Declarations:
 
 
 _SECTIONS = ("channel", "parameter", "requirements", "workflow", "initial_conditions", "report",
-             "sensor_midpoints", "extends")
+             "sensor_midpoints")
 _REQUIREMENT_KEYS = ("sensor", "desired_3sigma_deg", "low_alpha_only")
 _WORKFLOW_KEYS = ("reference_mach", "apportion_biases", "correction_model", "identity_table",
                   "alpha_limit_channel")
@@ -473,7 +473,7 @@ def read_model_set(name_or_path: str | Path, base_dir: Path | None = None,
     that model set with its own additions (:func:`extend_model_set`), so that a variant (the
     paper's models plus the INS velocities: ``tejas_ins``) states only what it adds.
     """
-    path = model_set_path(name_or_path, base_dir)
+    path = model_set_path(name_or_path, base_dir).resolve()
     try:
         with open(path, "rb") as fh:
             raw = tomllib.load(fh)
@@ -488,7 +488,19 @@ def read_model_set(name_or_path: str | Path, base_dir: Path | None = None,
     if str(path) in _chain:
         raise DataError(f"{path}: model sets extend each other in a circle "
                         f"({' -> '.join((*_chain, str(path)))}); break the circle")
-    base, base_path = read_model_set(base_name, path.parent, (*_chain, str(path)))
+    # relative to the extending file only (never the working directory), or a shipped name
+    cand = Path(base_name)
+    local = cand if cand.is_absolute() else path.parent / cand
+    bare = len(cand.parts) == 1 and not cand.suffix
+    if local.is_file():
+        target = local
+    elif bare and (MODELS_DIR / f"{cand.name}.toml").is_file():
+        target = MODELS_DIR / f"{cand.name}.toml"
+    else:
+        shipped = sorted(q.stem for q in MODELS_DIR.glob("*.toml"))
+        raise DataError(f"{path}: extends = {base_name!r}: no such file beside it ({local}) and no "
+                        f"shipped model set of that name (shipped: {shipped}); fix the name")
+    base, base_path = read_model_set(target, None, (*_chain, str(path)))
     return extend_model_set(base, raw, f"{path} (extends {base_path})"), str(path)
 
 

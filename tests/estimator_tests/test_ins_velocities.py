@@ -156,3 +156,54 @@ def test_filter_error_with_the_ins_velocities_recovers_wind_and_calibration():
     cal = [i for i, k in enumerate(keys)
            if est[i] and prob.parameters[k].kind in ("bias", "time_delay", "scale", "table")]
     assert np.mean(np.abs(z[cal]) < 3.0) >= 0.95, sorted((abs(z[i]), keys[i]) for i in cal)[-5:]
+
+
+def test_velocity_signals_at_two_sensors_are_two_signals(windy):
+    """``u_s`` at the INS and at the nose probe are different signals (a cache keyed on the name
+    alone gave both channels one sensor's velocity)."""
+    from estimator.problem import ChannelSpec, Problem
+    prob = windy.problem()
+    vn = next(c for c in prob.channels if c.name == "vn")
+    other = ChannelSpec(name="vn_np", column="vn", model=vn.model, sensor="nose_probe", delay=vn.delay,
+                        unit="m/s")
+    p2 = Problem(prob.maneuvers, (*prob.channels, other), prob.sensors, prob.imu_position_body_m,
+                 prob.parameters, prob.g_mps2, "two sensors")
+    ev = Model(p2).evaluate_all(p2.parameters.values, jacobian=False)
+    y = {p2.channels[ce.channel].name: ce for ce in ev.channels}
+    assert np.abs(y["vn"].y - y["vn"].z).max() < 0.05 * NOISE_SIGMA["vn"]
+    # the nose probe is 6 m ahead of the INS: its NED velocity differs by omega x r
+    assert np.abs(y["vn_np"].y - y["vn"].y).max() > 0.05
+
+
+def test_a_comment_inside_a_model_is_refused():
+    from estimator.core.expressions import ExpressionError, parse
+    with pytest.raises(ExpressionError, match="#"):
+        parse("cos(theta) * u_s  # the x term\n + wind_n", where="channel vn")
+    assert parse("cos(theta) * u_s\n   + wind_n").names == {"theta", "u_s", "wind_n"}
+
+
+def test_extends_is_relative_to_the_extending_file(tmp_path, monkeypatch):
+    d = tmp_path / "d"
+    d.mkdir()
+    (d / "base.toml").write_text('[[channel]]\nname = "phi"\nmodel = "phi"\nunit = "rad"\n')
+    (d / "child.toml").write_text('extends = "base.toml"\n')
+    # a base.toml in the working directory is not the one meant
+    (tmp_path / "base.toml").write_text('[[channel]]\nname = "theta"\nmodel = "theta"\nunit = "rad"\n')
+    monkeypatch.chdir(tmp_path)
+    raw, _ = read_model_set(d / "child.toml")
+    assert [c["name"] for c in raw["channel"]] == ["phi"]
+    (d / "typo.toml").write_text('extends = "tejass"\n')
+    with pytest.raises(DataError, match=r"typo\.toml: extends = 'tejass'"):
+        read_model_set(d / "typo.toml")
+    (d / "self.toml").write_text('extends = "../d/self.toml"\n')
+    with pytest.raises(DataError, match="circle"):
+        read_model_set(d / "self.toml")
+
+
+def test_the_ins_channels_are_not_flow_channels_in_the_fit_quality(windy):
+    from estimator.solver import SolverOptions as Opt
+    prob = windy.problem(noise=NOISE_SIGMA, rng=np.random.default_rng(7))
+    res = estimate(prob, Opt(max_iterations=5, colored=False))
+    d = res.diagnostics
+    flows = dict(zip(d["channel"], d["flow"], strict=False))
+    assert not flows["vn"] and not flows["vd"] and flows["alpha_zl"]
