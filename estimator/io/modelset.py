@@ -517,21 +517,27 @@ def extend_model_set(base: Mapping, own: Mapping, where: str) -> dict:
         if key == "extends":
             continue
         if key == "channel":
-            chans = [dict(c) for c in base.get("channel", [])]
-            for c in val:
-                if not isinstance(c, Mapping) or "name" not in c:
-                    raise DataError(f"{where}: each [[channel]] needs name = ... and model = ...")
-                same = [i for i, old in enumerate(chans) if old.get("name") == c["name"]]
-                if same:
-                    chans[same[0]] = dict(c)
-                else:
-                    chans.append(dict(c))
-            out["channel"] = chans
+            out["channel"] = _merged_channels(base.get("channel", []), val, where)
         elif isinstance(val, Mapping) and isinstance(base.get(key), Mapping):
             out[key] = {**base[key], **val}
         else:
             out[key] = val
     return out
+
+
+def _merged_channels(base: Sequence, extra: Sequence, where: str) -> list[dict]:
+    """``[[channel]]`` tables of ``base`` with ``extra`` added, each replacing the base's channel
+    of the same name."""
+    channels = [dict(c) for c in base]
+    for c in extra:
+        if not isinstance(c, Mapping) or "name" not in c:
+            raise DataError(f"{where}: each [[channel]] needs name = ... and model = ...")
+        same = [i for i, old in enumerate(channels) if old.get("name") == c["name"]]
+        if same:
+            channels[same[0]] = dict(c)
+        else:
+            channels.append(dict(c))
+    return channels
 
 
 def load_model_set(name_or_path: str | Path = DEFAULT_MODEL_SET
@@ -560,15 +566,7 @@ def merge_model_set(raw: Mapping, parameter_overrides: Mapping | None, extra_cha
                 cur.pop(stem, None)
                 cur.pop(stem + "_deg", None)
             cur[key] = val
-    channels = [dict(c) for c in raw.get("channel", [])]
-    for c in extra_channels or ():
-        if not isinstance(c, Mapping) or "name" not in c:
-            raise DataError(f"{where}: each [[channel]] needs name = ... and model = ...")
-        same = [i for i, old in enumerate(channels) if old.get("name") == c["name"]]
-        if same:
-            channels[same[0]] = dict(c)
-        else:
-            channels.append(dict(c))
+    channels = _merged_channels(raw.get("channel", []), extra_channels or (), where)
     try:
         chans, specs = parse_model_set({**raw, "channel": channels, "parameter": params},
                                        f"{where} (model set {source})", origin=source)
