@@ -339,17 +339,82 @@ def _rts(obs_sample, e, h, r, Phi, Qd, P0, n_samples, xs, Ps):
             i += 1
         xs[k] = x  # filtered, overwritten by the backward pass below
         Ps[k] = P
+    # the backward pass in place, without allocations (one small solve per sample)
     dxk = np.zeros(ns)
-    dP = np.zeros((ns, ns))
+    A = np.zeros((ns, ns))
+    M = np.zeros((ns, ns))
+    Gt = np.zeros((ns, ns))
+    W = np.zeros((ns, ns))
     for k in range(n_samples - 2, -1, -1):
         # G^T = P_k+1|k^-1 Phi P_k|k  (P_k+1|k symmetric)
-        Gt = np.linalg.solve(Pp[k + 1], Phi @ Ps[k])
-        G = np.ascontiguousarray(Gt.T)
-        dxk[:] = xs[k + 1] - xp[k + 1]
-        xs[k] += G @ dxk
-        dP[:, :] = Ps[k + 1] - Pp[k + 1]
-        Pk = Ps[k] + G @ dP @ Gt
-        Ps[k] = 0.5 * (Pk + Pk.T)
+        for a in range(ns):
+            for b in range(ns):
+                acc = 0.0
+                for c in range(ns):
+                    acc += Phi[a, c] * Ps[k, c, b]
+                A[a, b] = acc
+                M[a, b] = Pp[k + 1, a, b]
+        _solve_in_place(M, A, Gt)
+        # x_k += G (x_k+1|N - x_k+1|k);  P_k += G (P_k+1|N - P_k+1|k) G^T
+        for a in range(ns):
+            dxk[a] = xs[k + 1, a] - xp[k + 1, a]
+        for a in range(ns):
+            acc = 0.0
+            for b in range(ns):
+                acc += Gt[b, a] * dxk[b]
+            xs[k, a] += acc
+        for a in range(ns):  # W = (P_k+1|N - P_k+1|k) G^T
+            for b in range(ns):
+                acc = 0.0
+                for c in range(ns):
+                    acc += (Ps[k + 1, a, c] - Pp[k + 1, a, c]) * Gt[c, b]
+                W[a, b] = acc
+        for a in range(ns):
+            for b in range(a + 1):
+                acc = 0.0
+                for c in range(ns):
+                    acc += Gt[c, a] * W[c, b]
+                # symmetrised: the mean of (a, b) and (b, a) of P_k + G dP G^T
+                acc2 = 0.0
+                for c in range(ns):
+                    acc2 += Gt[c, b] * W[c, a]
+                v = 0.5 * (Ps[k, a, b] + Ps[k, b, a] + acc + acc2)
+                Ps[k, a, b] = v
+                Ps[k, b, a] = v
+
+
+@njit(cache=True, nogil=True)
+def _solve_in_place(M, B, X):
+    """``X = M^-1 B`` for a small non-singular ``M`` (Gaussian elimination with partial pivoting;
+    ``M`` and ``B`` are overwritten)."""
+    n = M.shape[0]
+    m = B.shape[1]
+    for col in range(n):
+        piv = col
+        big = abs(M[col, col])
+        for i in range(col + 1, n):
+            if abs(M[i, col]) > big:
+                big = abs(M[i, col])
+                piv = i
+        if piv != col:
+            for j in range(n):
+                M[col, j], M[piv, j] = M[piv, j], M[col, j]
+            for j in range(m):
+                B[col, j], B[piv, j] = B[piv, j], B[col, j]
+        d = M[col, col]
+        for i in range(col + 1, n):
+            f = M[i, col] / d
+            if f != 0.0:
+                for j in range(col, n):
+                    M[i, j] -= f * M[col, j]
+                for j in range(m):
+                    B[i, j] -= f * B[col, j]
+    for i in range(n - 1, -1, -1):
+        for j in range(m):
+            acc = B[i, j]
+            for c in range(i + 1, n):
+                acc -= M[i, c] * X[c, j]
+            X[i, j] = acc / M[i, i]
 
 
 # ----------------------------------------------------------------------------------------------
