@@ -78,6 +78,7 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import minimize_scalar
 
+from estimator.core.kinematics import rotation_ned_to_body
 from estimator.core.sensitivity import worker_threads
 from estimator.iteration import _evaluate
 from estimator.model import Evaluation, Model
@@ -150,23 +151,6 @@ class WindOptions:
         if self.sigma_mps is not None and not (math.isfinite(self.sigma_mps) and self.sigma_mps > 0):
             raise ValueError(f"WindOptions.sigma_mps must be positive (m/s) or None to estimate it, got "
                              f"{self.sigma_mps!r}")
-
-
-def rotation_ned_to_body(euler_rad: np.ndarray) -> np.ndarray:
-    """``C_bn`` (N, 3, 3) from Euler angles (N, 3) (phi, theta, psi; 3-2-1), rad."""
-    ph, th, ps = euler_rad[:, 0], euler_rad[:, 1], euler_rad[:, 2]
-    cph, sph, cth, sth, cps, sps = np.cos(ph), np.sin(ph), np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
-    C = np.empty((euler_rad.shape[0], 3, 3))
-    C[:, 0, 0] = cth * cps
-    C[:, 0, 1] = cth * sps
-    C[:, 0, 2] = -sth
-    C[:, 1, 0] = sph * sth * cps - cph * sps
-    C[:, 1, 1] = sph * sth * sps + cph * cps
-    C[:, 1, 2] = sph * cth
-    C[:, 2, 0] = cph * sth * cps + sph * sps
-    C[:, 2, 1] = cph * sth * sps - sph * cps
-    C[:, 2, 2] = cph * cth
-    return C
 
 
 @dataclass

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from estimator.core.kinematics import rotation_ned_to_body
 from estimator.model import Evaluation
 from estimator.normal_equations import NormalEquations, Structure, build_normal, lm_solve, sym_inverse
 from estimator.problem import Problem
@@ -26,6 +27,21 @@ from estimator.verdict import Finding, Severity
 
 if TYPE_CHECKING:
     from estimator.solver import SolverOptions
+
+#: A steady crosswind and a sideslip offset common to an aircraft's sensors. A steady wind ``W``
+#: (per maneuver, or hidden in its free initial velocities) adds ``-W . e_y / V`` to every sensor's
+#: sideslip (``e_y`` the body y-axis in NED), an offset ``b`` adds ``b``. Within a maneuver the
+#: two are told apart by how far ``e_y`` turns in the horizontal plane (heading changes; bank
+#: only shortens it) and by the airspeed's changes (``W . e_y / V`` varies with ``V``, a few per
+#: cent in a pitch doublet), a weak coupling that any error in the airspeed's model (its delay, the
+#: along-body gusts) turns into an offset. Below this rms turn of ``e_y``'s horizontal part about
+#: its mean (rad; about a heading sweep of +-10 deg) in every maneuver that informs them, only that
+#: coupling separates them. Measured: wind-up turns 27 deg rms; pitch doublets, 3211s, roller
+#: coasters, rudder doublets and steady-heading sideslips 0.02-1.1 deg (calm air and light
+#: turbulence). On two aircraft's pitch doublets and 3211s in a 7-m/s wind the sideslip offsets
+#: came out 0.15-0.3 deg off at 3-5 Cramér-Rao deviations in calm air, and at 13-20 by the
+#: filter-error method in light turbulence (the review of 34822f8).
+CROSSWIND_TURN_MIN_RAD = 0.1
 
 
 def _confounded_sets(null: np.ndarray, idx: np.ndarray, problem: Problem, where: str
@@ -323,4 +339,63 @@ def _parameter_findings(problem, holds, unident, correlated, state, reason, opt,
             "fly maneuvers that vary that flow angle (a steady-heading sideslip for a sideslip bias, "
             "a pull-up for an angle-of-attack bias), or fix it at a known value",
             parameters=(key, *partners)))
+    return out
+
+
+def lateral_axis_turn_rad(euler_rad: np.ndarray) -> float:
+    """How far the body y-axis turns in the horizontal plane over a maneuver: the rms distance of
+    its horizontal part (north, east) from their mean, rad (about the rms heading change about
+    the mean heading, wings level).
+
+    Parameters
+    ----------
+    euler_rad : (n, 3) roll, pitch, heading (3-2-1), rad.
+    """
+    if euler_rad.shape[0] < 2:
+        return 0.0
+    e_y = rotation_ned_to_body(euler_rad)[:, 1, :2]  # row 1 of C_bn: the body y-axis in NED
+    return float(np.sqrt(np.mean(np.sum((e_y - e_y.mean(axis=0)) ** 2, axis=1))))
+
+
+def _crosswind_findings(problem: Problem, evals: Evaluation, st: Structure,
+                        informs: dict[str, set[str]]) -> list[Finding]:
+    """A WARNING per aircraft whose free sideslip offsets (biases of the channels that measure
+    ``beta_s`` or ``flank_s``) only maneuvers of nearly constant heading inform
+    (:data:`CROSSWIND_TURN_MIN_RAD`): they are confounded with each maneuver's steady crosswind."""
+    ps = problem.parameters
+    lateral = [c for c in problem.channels if c.measures in ("beta_s", "flank_s")]
+    by_instance: dict[str, list[str]] = {}
+    for i, prm in enumerate(ps):
+        if (st.free[i] and prm.kind == "bias" and prm.scope != "maneuver"
+                and any(prm.name in c.expression.names for c in lateral) and informs.get(prm.key)):
+            by_instance.setdefault(prm.instance, []).append(prm.key)
+    if not by_instance:
+        return []
+    pos = {problem.maneuvers[k].id: i for i, k in enumerate(evals.maneuvers)}
+    turn: dict[str, float] = {}
+    out = []
+    for instance, keys in by_instance.items():
+        mans = sorted(set().union(*(informs[k] for k in keys)) & set(pos))
+        for m in mans:
+            if m not in turn:
+                i = pos[m]
+                turn[m] = lateral_axis_turn_rad(evals.X[evals.seg[i]:evals.seg[i + 1], 3:6])
+        if not mans or max(turn[m] for m in mans) >= CROSSWIND_TURN_MIN_RAD:
+            continue
+        widest = max(mans, key=turn.__getitem__)
+        who = f" of {instance}" if instance else ""
+        out.append(Finding(
+            "crosswind_confounded", Severity.WARNING,
+            f"the sideslip offsets{who} ({', '.join(keys)}) are told from each maneuver's steady "
+            f"crosswind only through weak couplings: in none of the {len(mans)} maneuver(s) that "
+            f"inform them does the aircraft's lateral axis turn by more than "
+            f"{np.degrees(CROSSWIND_TURN_MIN_RAD):.1f} deg rms in the horizontal plane (the most: "
+            f"{widest}, {np.degrees(turn[widest]):.2f} deg), so a steady crosswind of 1 m/s reads as "
+            "a common sideslip offset of about 0.3 deg at 200 m/s and only the airspeed's changes "
+            "within the maneuvers tell the two apart; an error in the airspeed's model (its delay, "
+            "turbulence along the body axis) then goes into the offsets, which their deviations "
+            "do not include",
+            "fly a maneuver that turns the heading (a windup turn, a heading change of 20 deg or "
+            "more) on this aircraft, or fix the sideslip offsets at known values",
+            parameters=tuple(keys), value=float(np.degrees(turn[widest]))))
     return out

@@ -56,6 +56,7 @@ from threadpoolctl import threadpool_limits
 from estimator.filter_error import FilterErrorLikelihood, WindOptions
 from estimator.identifiability import (
     _covariance,
+    _crosswind_findings,
     _high_correlations,
     _parameter_findings,
     _parameter_states,
@@ -574,6 +575,7 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
                for j, g in enumerate(st.glob)}
     findings = (_imu_noise_unknown(dev.imu_psd)
                 + _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs)
+                + _crosswind_findings(problem, evals, st, informs)
                 + _imu_noise_note(dev, st, keys, opt) + _iteration_findings(it, stage_notes)
                 + wind_findings + _unsettled(refresh_move, dev.std_crb, keys)
                 + _not_invertible(problem, evals, st))

@@ -6,7 +6,8 @@ A small, good input is made once, the way an engineer brings one: a problem file
 CSV of flight data in engineering units (deg, kt, ft, g, deg/s; a 10 Hz GPS height among the
 40 Hz channels, declared ``own_rate``), two maneuvers at Mach 0.5 flown by the testbed (``synth``;
 the shipped campaign ``campaigns/faults_base.toml``, a pitch doublet and a pull-up with rudder
-doublets, also the base of tests/campaigns_tests/test_faults.py; its calibration is a clean success). The
+doublets, also the base of tests/campaigns_tests/test_faults.py; its calibration is a success
+whose one warning is that these maneuvers turn no heading, ``crosswind_confounded``). The
 dataset and the base files are cached in ``--out`` (default ``fpr-out/bad_inputs``).
 
 Each case copies the base and changes one thing (a unit, the time base, the header, the

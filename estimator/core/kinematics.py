@@ -88,3 +88,20 @@ def smoothed_derivative(
     if window > len(t_s):
         window = len(t_s) if len(t_s) % 2 else len(t_s) - 1
     return savgol_filter(y, window, polyorder, deriv=1, delta=dt, axis=0, mode="interp")
+
+
+def rotation_ned_to_body(euler_rad: np.ndarray) -> np.ndarray:
+    """``C_bn`` (N, 3, 3) from Euler angles (N, 3) (phi, theta, psi; 3-2-1), rad."""
+    ph, th, ps = euler_rad[:, 0], euler_rad[:, 1], euler_rad[:, 2]
+    cph, sph, cth, sth, cps, sps = np.cos(ph), np.sin(ph), np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
+    C = np.empty((euler_rad.shape[0], 3, 3))
+    C[:, 0, 0] = cth * cps
+    C[:, 0, 1] = cth * sps
+    C[:, 0, 2] = -sth
+    C[:, 1, 0] = sph * sth * cps - cph * sps
+    C[:, 1, 1] = sph * sth * sps + cph * cps
+    C[:, 1, 2] = sph * cth
+    C[:, 2, 0] = cph * sth * cps + sph * sps
+    C[:, 2, 1] = cph * sth * sps - sph * cps
+    C[:, 2, 2] = cph * cth
+    return C

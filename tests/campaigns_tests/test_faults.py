@@ -4,8 +4,11 @@ One small, good dataset is flown once: PV1-NP at Mach 0.5, a pitch doublet (m000
 with rudder doublets (m0001; rudder 0.4 keeps the sideslip within about +-1.3 deg, so that
 sideslip written in degrees but declared as radians passes the import's 1.6 rad range check),
 typical errors, a steady wind, calm air, and the linear local-flow truth and airdata-computer
-baseline, which the model set represents exactly: the base fit is a clean SUCCESS (asserted
-first, on both routes in; a fault test on a base that is already warned about proves nothing).
+baseline, which the model set represents exactly: the base fit is a success whose one warning is
+that its maneuvers turn no heading, so that only the airspeed's changes tell the sideslip offsets
+from the steady crosswind (``crosswind_confounded``: true of these maneuvers; asserted first, on
+both routes in, and nothing else). Every fault below is judged by its own findings beyond that one
+(:data:`BASE_WARNINGS`), which the ranking the tests read leaves out.
 The same maneuvers are flown once more in light turbulence.
 
 Each fault is injected into a copy, the way a user meets it:
@@ -54,7 +57,7 @@ from synth.dataset import load_dataset, write_maneuver
 #: The shipped campaign campaigns/faults_base.toml, which the bad-input corpus
 #: (campaigns/benchmarks/bad_inputs.py) flies too: the nose probe's irregularity and high-AOA noise
 #: are off there (model-structure errors of the linear pair, which the verdict warns about): the
-#: base must be a clean success.
+#: base must be a success with no warning but its own (BASE_WARNINGS).
 CAMPAIGN = tomllib.loads(resolve_campaign_path("faults_base").read_text(encoding="utf-8"))
 DOUBLET, RUDDER = "m0000", "m0001"
 
@@ -108,10 +111,28 @@ def _times(base: Path, mid: str) -> np.ndarray:
     return load_dataset(base).load(mid)["t_s"].to_numpy()
 
 
+#: The base's own warning: its pitch doublet and rudder doublets turn no heading, so the sideslip
+#: offsets are told from the steady crosswind only through the airspeed's changes (true of the
+#: maneuvers, whatever the data's faults)
+BASE_WARNINGS = frozenset({"crosswind_confounded"})
+
+
 def _ranked(result) -> list[Finding]:
-    """Warnings and failures in the order the user reads them (summary(), findings.csv)."""
+    """Warnings and failures in the order the user reads them (summary(), findings.csv), without
+    the base's own (:data:`BASE_WARNINGS`)."""
     ranked = sorted(result.findings, key=lambda f: -int(f.severity))
-    return [f for f in ranked if f.severity >= Severity.WARNING]
+    return [f for f in ranked if f.severity >= Severity.WARNING and f.code not in BASE_WARNINGS]
+
+
+def _assert_base(result) -> None:
+    """A success whose only warnings are the base's own, each naming the sideslip offsets."""
+    text = result.summary(max_findings=40)
+    assert result.verdict == Verdict.SUCCESS_WITH_WARNINGS, text
+    assert not _ranked(result), text
+    own = [f for f in result.findings if f.code in BASE_WARNINGS]
+    # the side probe's offset, and the nose probe's where the data have it (not in the user file)
+    assert len(own) == 1 and "b_sb[PV1]" in own[0].parameters, text
+    assert set(own[0].parameters) <= {"b_sb[PV1]", "b_n[PV1]"}, text
 
 
 def _first(result) -> Finding:
@@ -143,10 +164,9 @@ def _assert_named(result, code: str, severity: Severity, channel: str, maneuver:
 # the base
 
 
-def test_the_base_is_a_clean_success(clean):
-    # no warning at all: every fault below is then the cause of what the verdict says
-    assert clean.verdict == Verdict.SUCCESS, clean.summary()
-    assert not _ranked(clean)
+def test_the_base_is_a_success_with_only_its_own_warning(clean):
+    # no other warning: every fault below is then the cause of what its findings say
+    _assert_base(clean)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -223,8 +243,8 @@ def test_single_sample_spike(spiked):
 def test_robust_option_excludes_the_spike(spiked, clean):
     t_spike, dt, problem, res = spiked
     robust = estimate(problem, SolverOptions(robust=True))
-    # nothing left to warn about once the sample is out (the base is a clean success)
-    assert robust.verdict == Verdict.SUCCESS, robust.summary()
+    # nothing left to warn about once the sample is out but the base's own warning
+    _assert_base(robust)
     excluded = [f for f in robust.findings if f.code == "excluded"]
     assert len(excluded) == 1, robust.summary()
     f = excluded[0]
@@ -326,9 +346,8 @@ def _write_user_files(ds_dir: Path, out: Path, wrong: tuple[str, float, str] | N
     return write_user_files(ds_dir, out, cols, USER_CHANNELS, "fault injection: units")
 
 
-def test_the_base_user_file_is_a_clean_success(base, tmp_path):
-    res = estimate(load_problem(_write_user_files(base, tmp_path / "user")))
-    assert res.verdict == Verdict.SUCCESS, res.summary()
+def test_the_base_user_file_is_a_success_with_only_its_own_warning(base, tmp_path):
+    _assert_base(estimate(load_problem(_write_user_files(base, tmp_path / "user"))))
 
 
 @pytest.mark.parametrize("wrong, phrase, maneuver", [

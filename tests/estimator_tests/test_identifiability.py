@@ -195,3 +195,54 @@ def test_a_residual_finding_beside_a_delay_on_its_bound_names_the_bound():
     others = [f for f in res.findings if "tau_sp" in f.message and f.code != "on_bound"
               and f.channel not in ("alpha_zsp", "beta_zsp")]
     assert not others, [f.text() for f in others]
+
+
+# ----------------------------------------------------------------------------------------------
+# a steady crosswind and the sideslip offsets (issue 14: "make identifiability say so")
+
+
+def test_lateral_axis_turn_is_the_rms_heading_change():
+    """Wings level, a heading sweep of +-a turns the lateral axis by a / sqrt(3) rms (small a);
+    pitch does not turn it at all (the y-axis is the pitch axis); a constant heading, 0."""
+    from estimator.identifiability import lateral_axis_turn_rad
+
+    n = 2001
+    sweep = np.zeros((n, 3))
+    sweep[:, 2] = 1.0 + np.linspace(-0.05, 0.05, n)
+    assert lateral_axis_turn_rad(sweep) == pytest.approx(0.05 / np.sqrt(3.0), rel=2e-3)
+    pitch = np.zeros((n, 3))
+    pitch[:, 1] = 0.3 * np.sin(np.linspace(0.0, 6.0, n))
+    pitch[:, 2] = 2.0
+    assert lateral_axis_turn_rad(pitch) < 1e-12
+    assert lateral_axis_turn_rad(np.tile([0.1, 0.05, -1.0], (n, 1))) < 1e-12
+
+
+def test_sideslip_offsets_on_maneuvers_of_constant_heading_are_flagged(flight):
+    """The same problem, its maneuvers' headings and bank flattened (a pitch doublet's attitude):
+    every free sideslip offset of the aircraft (biases of the channels measuring beta_s) is
+    named, a WARNING with the most the lateral axis turned; on the flight's own attitude (a roll
+    to 0.8 rad and its heading changes) nothing is said."""
+    from estimator.identifiability import CROSSWIND_TURN_MIN_RAD, _crosswind_findings, lateral_axis_turn_rad
+
+    prob = flight.problem(noise=NOISE, rng=np.random.default_rng(3))
+    model = Model(prob)
+    ev = _evaluate(model, prob.parameters.values, False)
+    st = Structure(prob, prob.parameters.free_mask)
+    ids = [m.id for m in prob.maneuvers]
+    free = prob.parameters.free_mask
+    keys = [p.key for i, p in enumerate(prob.parameters) if p.name in ("b_sb", "b_n") and free[i]]
+    assert keys, "the tejas model set's sideslip offsets are free"
+    informs = {k: set(ids) for k in keys}
+    turns = [lateral_axis_turn_rad(ev.X[ev.seg[i]:ev.seg[i + 1], 3:6]) for i in range(len(ids))]
+    assert max(turns) > CROSSWIND_TURN_MIN_RAD, "the analytic flight turns its heading"
+    assert not _crosswind_findings(prob, ev, st, informs)
+    X = ev.X.copy()
+    X[:, 3] = 0.0
+    X[:, 5] = 0.3
+    (f,) = _crosswind_findings(prob, replace(ev, X=X), st, informs)
+    assert f.code == "crosswind_confounded" and f.severity == Severity.WARNING
+    assert set(f.parameters) == set(keys)
+    assert f.value == pytest.approx(0.0, abs=1e-9)
+    assert "airspeed" in f.message and "heading" in f.advice
+    # a calibration parameter that no lateral channel carries is never named
+    assert not _crosswind_findings(prob, replace(ev, X=X), st, {"b_l": set(ids)})
