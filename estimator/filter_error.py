@@ -98,7 +98,6 @@ SIGMA_XTOL = 1e-3
 #: ... starting from the last value with a parabola through it and SIGMA_STEP (in ln sigma) either
 #: side: the negative log-likelihood is smooth in ln sigma, and near its optimum nearly a parabola
 SIGMA_STEP = 0.02
-SIGMA_WIDE_STEP = 0.5
 #: Rounds at most of the noise relaxation, and the relative change of R and the intensities that
 #: ends it (1 %: the weights within 1 % move the estimates by far less than their deviations;
 #: 0.1 % cost the 70-maneuver benchmark 3.4 s more, R's EM updates converging only linearly)
@@ -295,7 +294,6 @@ class FilterErrorLikelihood:
         wide_of = np.full(self.windy.size, self._sigma is None) | self._fresh
         self._fresh = np.zeros(self.windy.size, dtype=bool)
         search, settled = True, False
-        chain: list[np.ndarray] = [np.log(R)]  # ln R of the EM updates since the intensities moved
         for _ in range(RELAX_ROUNDS):
             if search:
                 wide_now = wide_of.copy()
@@ -328,15 +326,9 @@ class FilterErrorLikelihood:
                             default=0.0)
                 wide_of[:] = False
                 search, settled = False, moved < RELAX_TOL
-                chain = [np.log(R)]
             R_new = self._em_variances(ev, mans, R, sigma)
             moved_R = float(np.max(np.abs(R_new / R - 1.0)))
             R = R_new
-            chain.append(np.log(R))
-            if len(chain) == 3 and moved_R >= RELAX_TOL:
-                # two EM updates at the same intensities: one squared-extrapolation step
-                R = np.exp(_squarem_step(*chain))
-                chain = [np.log(R)]
             if moved_R < RELAX_TOL:
                 if settled:
                     break
@@ -653,8 +645,6 @@ class FilterErrorLikelihood:
         x = None
         if start_mps is not None and lo_mps < start_mps < hi_mps:
             x = _parabolic_minimum(f, math.log(start_mps), a, b, SIGMA_STEP, SIGMA_XTOL)
-        elif (lo_mps, hi_mps) == SIGMA_SEARCH_MPS:
-            x = _parabolic_minimum(f, 0.0, a, b, SIGMA_WIDE_STEP, SIGMA_XTOL, max_evals=14)
         if x is not None:
             return math.exp(x)
         res = minimize_scalar(f, bounds=(a, b), method="bounded", options={"xatol": SIGMA_XTOL})
@@ -684,79 +674,76 @@ class FilterErrorLikelihood:
 def _parabolic_minimum(f, x0: float, lo: float, hi: float, step: float, xtol: float,
                        max_evals: int = 12) -> float | None:
     """The minimum of a smooth ``f`` on ``[lo, hi]`` near ``x0``, by successive parabolic
-    interpolation.
+    interpolation, or ``None`` (the caller then searches the whole bracket).
 
-    From ``x0 - step, x0, x0 + step``: the vertex of the parabola through the three lowest points
-    so far (a jump at most four times their span from the lowest, within the bounds) is the next
-    point (where the lowest point's neighbours lie more than four times farther on one side than
-    on the other, a point twice the near distance towards the far one instead: one-sided
-    parabolas converge slowly),
-    until it lies within ``xtol`` of the lowest point. It is returned once the parabola is
-    through the lowest point and its neighbours ``step`` either side (else those two are added
-    first): the vertex's error then goes as ``step`` times its distance from the lowest point times
-    the relative change of the curvature, far below ``xtol`` on a function as smooth as a
-    log-likelihood in its log-intensity. Near the optimum: four evaluations. Returns a bound where
-    ``f`` decreases up to it, and ``None`` where the three points are not convex or the parabolas
-    do not settle within ``max_evals`` evaluations (the caller then searches the whole bracket).
+    From ``x0 - step, x0, x0 + step``, the next point is the vertex of the parabola through the
+    lowest point so far and its neighbours (both sides where it has them; a jump at most four times
+    their span, within the bounds); where the neighbours lie more than four times farther on one
+    side than on the other, a point twice the near distance towards the far one instead (one-sided
+    parabolas converge slowly). A vertex within ``xtol`` of the lowest point is returned only from
+    a parabola through that point and neighbours at most ``step`` either side (else those two are
+    evaluated first): its error is then about ``step^2 |f3| / (6 f2)`` (``f2``, ``f3`` the second
+    and third derivatives; with ``step`` = 0.02 in ln sigma and a log-likelihood's ``|f3 / f2|`` of
+    a few, 1e-4 or less). A bound is returned only where ``f`` is known one ``step`` inside it and
+    the parabola through the bound and its two nearest points has its vertex beyond it (or within
+    ``xtol``). ``None`` where the points are not convex about the lowest one, a vertex repeats a
+    point, or ``max_evals`` evaluations do not settle it.
     """
     x0 = min(max(x0, lo), hi)
     xs = sorted({max(x0 - step, lo), x0, min(x0 + step, hi)})
     if len(xs) < 3:
         return None
     fs = [f(x) for x in xs]
+    tol = step * (1.0 + 1e-9)
     while len(xs) < max_evals:
         order = sorted(range(len(xs)), key=xs.__getitem__)
         at = min(range(len(order)), key=lambda i: fs[order[i]])  # the lowest, in x order
         best = xs[order[at]]
+        inside = 0 < at < len(order) - 1
         # the lowest point and its neighbours either side (a bracket), else its two on one side
         pick = order[max(0, min(at - 1, len(order) - 3)):][:3]
         (a, fa), (b, fb), (c, fc) = ((xs[i], fs[i]) for i in pick)
         d1 = (fb - fa) / (b - a)
         curv = ((fc - fb) / (c - b) - d1) / (c - a)  # half the second derivative
         span = c - a
+        if best in (lo, hi) and not inside:
+            # the minimum at a bound: once f is known one step inside, and the parabola through
+            # the bound and its two nearest points has its vertex beyond it (or within xtol)
+            nearest = min((x for x in xs if x != best), key=lambda x: abs(x - best))
+            if abs(nearest - best) > tol:
+                v = best + step if best == lo else best - step
+            else:
+                v = 0.5 * (a + b) - d1 / (2.0 * curv) if curv > 0.0 else best
+                if not (lo < v < hi) or abs(v - best) < xtol:
+                    return best
+            if v in xs:
+                return None
+            xs.append(v)
+            fs.append(f(v))
+            continue
         near, far = sorted((b - a, c - b))
-        if 0 < at < len(order) - 1 and far > 4.0 * near:
-            # a lopsided bracket: one-sided parabolas would creep; mirror the near point instead
+        if inside and far > 4.0 * near:
             v = best + (2.0 * near if c - b == far else -2.0 * near)
         elif curv > 0.0:
             v = 0.5 * (a + b) - d1 / (2.0 * curv)
-        elif 0 < at < len(order) - 1:
+        elif inside:
             return None  # a bracket that is not convex: not the smooth function this is for
         else:  # downhill to a side, not convex there: step on
             v = best + (2.0 * span if at else -2.0 * span)
         v = min(max(v, best - 4.0 * span, lo), best + 4.0 * span, hi)
         if abs(v - best) < xtol:
-            if span <= 2.0 * step * (1.0 + 1e-9) or best in (lo, hi):
+            if inside and b - a <= tol and c - b <= tol:
                 return v
-            # the parabola is through distant points: once more through the lowest point's neighbours
-            for x in (max(best - step, lo), min(best + step, hi)):
-                if x not in xs:
-                    xs.append(x)
-                    fs.append(f(x))
+            # not yet a local bracket: the lowest point's neighbours one step either side first
+            new = [x for x in (max(best - step, lo), min(best + step, hi)) if x not in xs]
+            if not new:
+                return None
+            for x in new:
+                xs.append(x)
+                fs.append(f(x))
             continue
-        if v in xs:  # a bound already tried: the lowest there is the answer, else give up
-            return v if v == best else None
+        if v in xs:  # the parabolas repeat a point without settling
+            return None
         xs.append(v)
         fs.append(f(v))
     return None
-
-
-def _squarem_step(x0: np.ndarray, x1: np.ndarray, x2: np.ndarray, max_alpha: float = 8.0) -> np.ndarray:
-    """One squared extrapolation (SQUAREM, scheme S3: Varadhan & Roland 2008, *Scand. J. Statist.*
-    35, 335-353) of the fixed-point iterates ``x0 -> x1 -> x2`` of an EM map (here ``ln R``)::
-
-        r = x1 - x0,   v = x2 - 2 x1 + x0,   alpha = -|r| / |v|,
-        x' = x0 - 2 alpha r + alpha^2 v
-
-    ``alpha = -1`` gives ``x2`` back; an EM update converging linearly at the rate ``rho`` has
-    ``alpha ~ -1 / (1 - rho)``: the extrapolation takes the geometric tail in one step. Clamped to
-    ``[-max_alpha, -1]`` (a slower map than a rate of 7/8 is left to the EM updates themselves);
-    the caller's next EM update from ``x'`` is the scheme's stabilising step.
-    """
-    r = x1 - x0
-    v = x2 - 2.0 * x1 + x0
-    nv = float(np.linalg.norm(v))
-    if not nv > 0.0:
-        return x2
-    alpha = min(max(-float(np.linalg.norm(r)) / nv, -max_alpha), -1.0)
-    return x0 - 2.0 * alpha * r + alpha * alpha * v

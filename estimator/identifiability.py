@@ -359,34 +359,59 @@ def lateral_axis_turn_rad(euler_rad: np.ndarray) -> float:
 
 def _crosswind_findings(problem: Problem, evals: Evaluation, st: Structure,
                         informs: dict[str, set[str]]) -> list[Finding]:
-    """A WARNING per aircraft whose free sideslip offsets (biases of the channels that measure
-    ``beta_s`` or ``flank_s``) only maneuvers of nearly constant heading inform
-    (:data:`CROSSWIND_TURN_MIN_RAD`): they are confounded with each maneuver's steady crosswind."""
+    """A WARNING per set of free sideslip offsets (biases of any scope but a maneuver's in the
+    channels that measure ``beta_s`` or ``flank_s``) linked through the maneuvers that inform
+    them, when none of those maneuvers turns (:data:`CROSSWIND_TURN_MIN_RAD`): each maneuver's
+    steady crosswind then trades with an offset common to the sensors it carries. One turning
+    maneuver anchors every offset of its set (it fixes its sensors' offsets, and through them the
+    crosswind of every maneuver that shares a sensor with it). Judged as if each maneuver's steady
+    wind were free (in its initial velocities or a steady-wind parameter, as in the shipped model
+    sets); a set informed by a maneuver the evaluation does not cover is not judged."""
     ps = problem.parameters
     lateral = [c for c in problem.channels if c.measures in ("beta_s", "flank_s")]
-    by_instance: dict[str, list[str]] = {}
-    for i, prm in enumerate(ps):
-        if (st.free[i] and prm.kind == "bias" and prm.scope != "maneuver"
-                and any(prm.name in c.expression.names for c in lateral) and informs.get(prm.key)):
-            by_instance.setdefault(prm.instance, []).append(prm.key)
-    if not by_instance:
+    keys = [prm.key for i, prm in enumerate(ps)
+            if st.free[i] and prm.kind == "bias" and prm.scope != "maneuver"
+            and any(prm.name in c.expression.names for c in lateral) and informs.get(prm.key)]
+    if not keys:
         return []
+    # the sets: offsets linked by a maneuver that informs both (union-find over the keys)
+    parent = {k: k for k in keys}
+
+    def root(k: str) -> str:
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    first: dict[str, str] = {}
+    for k in keys:
+        for m in informs[k]:
+            if m in first:
+                parent[root(k)] = root(first[m])
+            else:
+                first[m] = k
+    sets: dict[str, list[str]] = {}
+    for k in keys:
+        sets.setdefault(root(k), []).append(k)
     pos = {problem.maneuvers[k].id: i for i, k in enumerate(evals.maneuvers)}
     turn: dict[str, float] = {}
     out = []
-    for instance, keys in by_instance.items():
-        mans = sorted(set().union(*(informs[k] for k in keys)) & set(pos))
+    for members in sets.values():
+        mans = sorted(set().union(*(informs[k] for k in members)))
+        if not mans or any(m not in pos for m in mans):
+            continue
         for m in mans:
             if m not in turn:
                 i = pos[m]
                 turn[m] = lateral_axis_turn_rad(evals.X[evals.seg[i]:evals.seg[i + 1], 3:6])
-        if not mans or max(turn[m] for m in mans) >= CROSSWIND_TURN_MIN_RAD:
+        if max(turn[m] for m in mans) >= CROSSWIND_TURN_MIN_RAD:
             continue
         widest = max(mans, key=turn.__getitem__)
-        who = f" of {instance}" if instance else ""
+        owners = sorted({ps[k].instance for k in members} - {""})
+        who = f" of {', '.join(owners)}" if owners else ""
         out.append(Finding(
             "crosswind_confounded", Severity.WARNING,
-            f"the sideslip offsets{who} ({', '.join(keys)}) are told from each maneuver's steady "
+            f"the sideslip offsets{who} ({', '.join(members)}) are told from each maneuver's steady "
             f"crosswind only through weak couplings: in none of the {len(mans)} maneuver(s) that "
             f"inform them does the aircraft's lateral axis turn by more than "
             f"{np.degrees(CROSSWIND_TURN_MIN_RAD):.1f} deg rms in the horizontal plane (the most: "
@@ -396,6 +421,6 @@ def _crosswind_findings(problem: Problem, evals: Evaluation, st: Structure,
             "turbulence along the body axis) then goes into the offsets, which their deviations "
             "do not include",
             "fly a maneuver that turns the heading (a windup turn, a heading change of 20 deg or "
-            "more) on this aircraft, or fix the sideslip offsets at known values",
-            parameters=tuple(keys), value=float(np.degrees(turn[widest]))))
+            "more) with these sensors, or fix the sideslip offsets at known values",
+            parameters=tuple(members), value=float(np.degrees(turn[widest]))))
     return out

@@ -562,5 +562,11 @@ def smooth(obs_sample: np.ndarray, e: np.ndarray, h: np.ndarray, r: np.ndarray, 
     xs = np.zeros((n_samples, ns))
     Ps = np.zeros((n_samples, ns, ns))
     if n_samples:
-        _rts(obs, e, h, r, Phi, Qd, P0, n_samples, xs, Ps)
+        try:
+            _rts(obs, e, h, r, Phi, Qd, P0, n_samples, xs, Ps)
+        except ZeroDivisionError:
+            # the backward pass solves with each predicted covariance: one was singular
+            raise np.linalg.LinAlgError(
+                "smooth: a predicted covariance Phi P Phi^T + Qd is singular; give a positive-definite "
+                "Qd (gauss_markov's is)") from None
     return xs, Ps

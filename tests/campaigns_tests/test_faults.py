@@ -22,8 +22,9 @@ Each fault is injected into a copy, the way a user meets it:
   ``load_problem``, because the problem file is where a user declares units. Each passes the
   import's checks (asserted), so the verdict is what catches it.
 
-For each fault: the verdict is never a clean success; it has the severity the fault deserves; the
-first warning-or-failure finding in the order the user reads them (``summary()``,
+For each fault: the verdict is never a clean success (which the base's own warning already makes
+true: the checks that decide are the next ones); it has the severity the fault deserves; the
+first warning-or-failure finding beyond the base's own in the order the user reads them (``summary()``,
 ``findings.csv``: most severe first) has the fault's code and names its channel, maneuver and
 time; and no data-fault finding (stuck, dead, dead input, accelerometer sign, unit error) names a
 channel or maneuver that was not faulted. Turbulence is the exception to "first": parameters the

@@ -219,9 +219,11 @@ def test_lateral_axis_turn_is_the_rms_heading_change():
 
 def test_sideslip_offsets_on_maneuvers_of_constant_heading_are_flagged(flight):
     """The same problem, its maneuvers' headings and bank flattened (a pitch doublet's attitude):
-    every free sideslip offset of the aircraft (biases of the channels measuring beta_s) is
-    named, a WARNING with the most the lateral axis turned; on the flight's own attitude (a roll
-    to 0.8 rad and its heading changes) nothing is said."""
+    every free sideslip offset (biases of the channels measuring beta_s) is named in one WARNING,
+    with the most the lateral axis turned; on the flight's own attitude (a roll to 0.8 rad and
+    its heading changes) nothing is said; one turning maneuver anchors the set (the largest turn
+    counts, not the smallest); an offset linked to no turning maneuver is named on its own; a
+    vane's AOA bias is never named; a maneuver the evaluation lacks leaves its set unjudged."""
     from estimator.identifiability import CROSSWIND_TURN_MIN_RAD, _crosswind_findings, lateral_axis_turn_rad
 
     prob = flight.problem(noise=NOISE, rng=np.random.default_rng(3))
@@ -231,18 +233,31 @@ def test_sideslip_offsets_on_maneuvers_of_constant_heading_are_flagged(flight):
     ids = [m.id for m in prob.maneuvers]
     free = prob.parameters.free_mask
     keys = [p.key for i, p in enumerate(prob.parameters) if p.name in ("b_sb", "b_n") and free[i]]
-    assert keys, "the tejas model set's sideslip offsets are free"
-    informs = {k: set(ids) for k in keys}
+    (vane,) = [p.key for i, p in enumerate(prob.parameters) if p.name == "b_l" and free[i]]
+    assert len(keys) == 2, "the tejas model set's side- and nose-probe sideslip offsets are free"
+    informs = {k: set(ids) for k in keys + [vane]}
     turns = [lateral_axis_turn_rad(ev.X[ev.seg[i]:ev.seg[i + 1], 3:6]) for i in range(len(ids))]
-    assert max(turns) > CROSSWIND_TURN_MIN_RAD, "the analytic flight turns its heading"
+    assert min(turns) > CROSSWIND_TURN_MIN_RAD, "the analytic flight turns its heading in both maneuvers"
     assert not _crosswind_findings(prob, ev, st, informs)
     X = ev.X.copy()
     X[:, 3] = 0.0
     X[:, 5] = 0.3
-    (f,) = _crosswind_findings(prob, replace(ev, X=X), st, informs)
+    flat = replace(ev, X=X)
+    (f,) = _crosswind_findings(prob, flat, st, informs)
     assert f.code == "crosswind_confounded" and f.severity == Severity.WARNING
-    assert set(f.parameters) == set(keys)
+    assert set(f.parameters) == set(keys), "both offsets, not the vane's AOA bias"
     assert f.value == pytest.approx(0.0, abs=1e-9)
     assert "airspeed" in f.message and "heading" in f.advice
-    # a calibration parameter that no lateral channel carries is never named
-    assert not _crosswind_findings(prob, replace(ev, X=X), st, {"b_l": set(ids)})
+    # the first maneuver flat, the second turning: the set is anchored
+    X1 = ev.X.copy()
+    s0, s1 = ev.seg[0], ev.seg[1]
+    X1[s0:s1, 3], X1[s0:s1, 5] = 0.0, 0.3
+    assert not _crosswind_findings(prob, replace(ev, X=X1), st, informs)
+    # the side probe informed by the flat maneuver only, the nose probe by the turning one only:
+    # not linked, and the side probe's offset is named alone
+    side, nose = keys if keys[0].startswith("b_sb") else keys[::-1]
+    split = {side: {ids[0]}, nose: {ids[1]}}
+    (g,) = _crosswind_findings(prob, replace(ev, X=X1), st, split)
+    assert g.parameters == (side,)
+    # a maneuver the evaluation does not cover: not judged
+    assert not _crosswind_findings(prob, flat, st, {k: set(ids) | {"elsewhere"} for k in keys})

@@ -355,3 +355,12 @@ def test_filter_validation_names_the_argument():
     smooth_good = {k: v for k, v in good.items() if k != "J"}
     with pytest.raises(ValueError, match="r"):
         smooth(**(smooth_good | {"r": -r}))
+
+
+def test_a_singular_predicted_covariance_is_a_linear_algebra_error():
+    """No process noise and no prior: the smoother's backward pass meets a singular predicted
+    covariance and says so (a LinAlgError the solver turns into a verdict), not a division by zero."""
+    obs = np.repeat(np.arange(10), 2)
+    with pytest.raises(np.linalg.LinAlgError, match="singular"):
+        smooth(obs, np.zeros(20), np.ones((20, 3)), np.ones(20), np.eye(3), np.zeros((3, 3)),
+               np.zeros((3, 3)), 10)
