@@ -517,9 +517,10 @@ class FilterErrorLikelihood:
                        "the deviations are Cramér-Rao bounds of its information matrix, without the "
                        "coloured-innovation correction")
                     + "; the method is experimental: on JSBSim's simulated turbulence the flow "
-                    "delays and sideslip biases come out several deviations off the truth while the "
-                    "innovations look white (the aircraft answers the gusts, which the wind model "
-                    "leaves out); check the estimates against a calm-air calibration before use",
+                    "delays (4-6 ms long) and sideslip biases (an aircraft's common offset of 0.12-"
+                    "0.15 deg) come out several deviations off the truth while the innovations look "
+                    "white, on every turbulence draw tried (the cause is not yet known); check the "
+                    "estimates against a calm-air calibration before use",
                     "calibrate where the air is calm by the output-error method, or fix the delays "
                     "and biases at calm-air values for the turbulent maneuvers; treat these "
                     "deviations as lower bounds"),
