@@ -556,6 +556,11 @@ def smooth(obs_sample: np.ndarray, e: np.ndarray, h: np.ndarray, r: np.ndarray, 
     -------
     x_s : (n_samples, ns) smoothed state mean ``E[s_k | e]`` (state units, e.g. m/s NED).
     P_s : (n_samples, ns, ns) smoothed covariance ``Cov(s_k | e)``.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If a predicted covariance is singular.
     """
     obs, e, h, r, Phi, Qd, P0, n_samples = _check_model(obs_sample, e, h, r, Phi, Qd, P0, n_samples)
     ns = Phi.shape[0]
