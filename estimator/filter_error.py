@@ -517,13 +517,18 @@ class FilterErrorLikelihood:
                        "the deviations are Cramér-Rao bounds of its information matrix, without the "
                        "coloured-innovation correction")
                     + "; the method is experimental: on JSBSim's simulated turbulence the flow "
-                    "delays (4-6 ms long) and sideslip biases (an aircraft's common offset of 0.12-"
-                    "0.15 deg) come out several deviations off the truth while the innovations look "
-                    "white, on every turbulence draw tried (the cause is not yet known); check the "
-                    "estimates against a calm-air calibration before use",
-                    "calibrate where the air is calm by the output-error method, or fix the delays "
-                    "and biases at calm-air values for the turbulent maneuvers; treat these "
-                    "deviations as lower bounds"),
+                    "delays come out 4-6 ms long (its lateral and vertical turbulence is second-order "
+                    "Dryden, the wind states first-order: a wind of their own form leaves the delays "
+                    "right), and an aircraft's common sideslip offset (every sideslip channel's bias "
+                    "alike) 0.1-0.4 deg off at many deviations while the innovations look white: with "
+                    "the wind as states the flight's kinematics hardly fix that offset, and the "
+                    "calibration models' shape fixes it instead, wherever that shape is wrong (a vane "
+                    "pair's installation biases, acting before the airdata computer's upwash "
+                    "inversion, moved it 0.13 deg); check the estimates against a calm-air "
+                    "calibration before use",
+                    "calibrate where the air is calm by the output-error method, or fix the sideslip "
+                    "biases and the delays at calm-air values for the turbulent maneuvers; treat "
+                    "these deviations as lower bounds"),
         ]
 
     # --- the pieces ---------------------------------------------------------------------------
