@@ -520,7 +520,7 @@ class FilterErrorLikelihood:
                     "delays come out 4-6 ms long (its lateral and vertical turbulence is second-order "
                     "Dryden, the wind states first-order: a wind of their own form leaves the delays "
                     "right), and an aircraft's common sideslip offset (every sideslip channel's bias "
-                    "alike) 0.1-0.4 deg off at many deviations while the innovations look white: with "
+                    "alike) 0.05-0.15 deg off at up to 31 deviations while the innovations look white: with "
                     "the wind as states the flight's kinematics hardly fix that offset, and the "
                     "calibration models' shape fixes it instead, wherever that shape is wrong (a vane "
                     "pair's installation biases, acting before the airdata computer's upwash "
