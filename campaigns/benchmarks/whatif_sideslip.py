@@ -127,6 +127,7 @@ def fly(case: str, out: Path) -> None:
            "flights": [{"configurations": ["PT1-BOOM"], "mach": [0.6], "maneuvers": KINDS,
                         "altitude_m": 6000.0}]}
     if case in ("steady_vane_biases", "steady_no_biases"):
+        out.parent.mkdir(parents=True, exist_ok=True)
         (out.parent / "fleet_vane_biases.toml").write_text(VANE_BIAS_FLEET)
         raw |= {"fleet": str(out.parent / "fleet_vane_biases.toml"),
                 "errors": NOISE_ONLY | {"installation_biases": case == "steady_vane_biases"}}
