@@ -33,15 +33,15 @@ from pathlib import Path
 import numpy as np
 
 import synth.campaign as synth_campaign
+from campaigns.analytic_flight import gauss_markov_wind
 from campaigns.truth import recovery_table, true_parameters
-from estimator.filter_error import WindOptions
+from estimator.filter_error import DRYDEN_SCALE_LENGTH_M, WindOptions
 from estimator.io import problem_from_dataset
 from estimator.solver import SolverOptions, estimate
 from synth.campaign import fly_campaign, parse_campaign
 from synth.sensors import dcm_body_to_ned
 
 CASES = ("jsbsim", "reversed", "gauss_markov", "steady", "steady_vane_biases", "steady_no_biases")
-SCALE_LENGTH_M = 533.4
 KINDS = ["pitch_doublet", "3211", "roller_coaster", "pullup_rudder_doublets", "windup_turn", "shss"]
 STEADY_WIND_NED_MPS = [6.0, -4.0, 0.0]
 VANES = ("vane_left", "vane_right", "boom_alpha_vane", "boom_beta_upper_vane", "boom_beta_lower_vane")
@@ -79,17 +79,6 @@ ROWS = ("b_sb[PT1]", "b_bu[PT1]", "b_bl[PT1]", "tau_alpha_zl", "tau_alpha_zr", "
         "tau_bu", "tau_bl")
 
 
-def gauss_markov_mps(n: int, dt_s: float, sigma_mps: float, v_mps: float, rng) -> np.ndarray:
-    """(n, 3) independent stationary first-order Gauss-Markov components, exact discretisation."""
-    a = np.exp(-v_mps * dt_s / SCALE_LENGTH_M)
-    e = rng.standard_normal((n, 3))
-    x = np.empty((n, 3))
-    x[0] = sigma_mps * e[0]
-    for k in range(1, n):
-        x[k] = a * x[k - 1] + sigma_mps * np.sqrt(1.0 - a * a) * e[k]
-    return x
-
-
 def with_wind(truth, wind_ned_mps: np.ndarray):
     """The truth with the air moving at ``wind_ned_mps`` (N, 3) instead: the motion unchanged."""
     v_air = truth.v_body_mps - np.einsum("nji,nj->ni", dcm_body_to_ned(truth.euler_rad), wind_ned_mps)
@@ -114,8 +103,8 @@ def fly(case: str, out: Path) -> None:
             elif case == "reversed":
                 w = steady + turb[::-1]
             elif case == "gauss_markov":
-                w = steady + gauss_markov_mps(tr.n_samples, tr.dt_s, float(np.sqrt(np.mean(turb ** 2))),
-                                              float(tr.tas_mps.mean()), rng)
+                w = steady + gauss_markov_wind(tr.t_s, float(np.sqrt(np.mean(turb ** 2))),
+                                               DRYDEN_SCALE_LENGTH_M, float(tr.tas_mps.mean()), rng)
             else:
                 w = np.broadcast_to(steady, turb.shape).copy()
             out_segments.append(with_wind(tr, w))
@@ -128,8 +117,11 @@ def fly(case: str, out: Path) -> None:
                         "altitude_m": 6000.0}]}
     if case in ("steady_vane_biases", "steady_no_biases"):
         out.parent.mkdir(parents=True, exist_ok=True)
-        (out.parent / "fleet_vane_biases.toml").write_text(VANE_BIAS_FLEET)
-        raw |= {"fleet": str(out.parent / "fleet_vane_biases.toml"),
+        fleet = out.parent / "fleet_vane_biases.toml"
+        if fleet.exists() and fleet.read_text() != VANE_BIAS_FLEET:  # never overwrite a user's file
+            raise SystemExit(f"{fleet} exists and is not this study's fleet: give another --out")
+        fleet.write_text(VANE_BIAS_FLEET)
+        raw |= {"fleet": str(fleet),
                 "errors": NOISE_ONLY | {"installation_biases": case == "steady_vane_biases"}}
     # why the module attribute is replaced: fly_campaign offers no hook between JSBSim's flight
     # and the instrumentation, and this study must change exactly that (one process: workers=1)
