@@ -169,9 +169,10 @@ def tejas_channels(t_s: np.ndarray, states_at: States, inputs: Inputs, sensors: 
 
     ``states_at(t)``: (N, 7) states with altitude; ``taus``: the time delays by parameter name
     (``tau_phi``, ..., ``tau_alpha_zl``, ``tau_sp``, ``tau_np``); ``biases``: ``b_l``, ``b_r``,
-    ``b_sa``, ``b_sb`` (and ``b_n`` with ``nose_probe``). Attitude, altitude and airspeed; the two
-    vanes; the side probe (its angle-of-attack model is implicit: a fixed point, a contraction);
-    with ``nose_probe``, its sideslip.
+    ``b_sa``, ``b_sb`` (and ``b_n`` with ``nose_probe``), and the vanes' sideslip reference offset
+    ``c_vb`` of ``tejas_ins`` if given (0 otherwise: the ``tejas`` model has none). Attitude,
+    altitude and airspeed; the two vanes; the side probe (its angle-of-attack model is implicit:
+    a fixed point, a contraction); with ``nose_probe``, its sideslip.
     """
     def flow(ts, sensor):
         return local_flow(states_at(ts), inputs(ts)[1], sensors[sensor] - r_cg_m if sensor else None)
@@ -186,7 +187,8 @@ def tejas_channels(t_s: np.ndarray, states_at: States, inputs: Inputs, sensors: 
     for ch, sensor, sign in (("alpha_zl", "vane_left", -1.0), ("alpha_zr", "vane_right", 1.0)):
         ts = t_s - taus[f"tau_{ch}"]
         a_s, b_s, _, _ = flow(ts, sensor)
-        meas[ch] = tab("f1", a_s) + sign * tab("f2", flow(ts, None)[0]) * b_s + biases[f"b_{ch[-1]}"]
+        meas[ch] = (tab("f1", a_s) + sign * tab("f2", flow(ts, None)[0]) * (b_s + biases.get("c_vb", 0.0))
+                    + biases[f"b_{ch[-1]}"])
     a_s, b_s, _, _ = flow(t_s - taus["tau_sp"], "side_probe")
     z = a_s.copy()
     # alpha_zsp = alpha_s + f3(alpha_zsp) + b_sa: a contraction (|f3'| << 1); on these flights it
@@ -247,6 +249,7 @@ def truth_values(rng: np.random.Generator) -> dict:
         "tau_phi": 0.02, "tau_theta": 0.02, "tau_psi": 0.02, "tau_tas": 0.0, "tau_h": 0.0,
         "tau_alpha_zl": 0.03, "tau_alpha_zr": 0.045, "tau_sp": 0.08, "tau_np": 0.06, "k_h": 0.0, "k_spr": 0.0,
         "b_l": 0.3 * DEG, "b_r": -0.2 * DEG, "b_sa": 0.25 * DEG, "b_sb": -0.15 * DEG, "b_n": 0.1 * DEG,
+        "c_vb": 0.2 * DEG,  # tejas_ins only (Flight with ins)
         "f1": None, "f2": None, "f3": None, "f4": None, "f5": None,
         "_table_noise": rng.normal(size=40),
     }
@@ -289,6 +292,8 @@ class Flight:
         start = {"f1": 0, "f2": 10, "f3": 20, "f4": 25, "f5": 30}
         self.tables = truth_tables(self.bp, {n: tn[start[n]:start[n] + self.bp[n].size] for n in TABLES})
         self.truth = {**truth, **(INS_DELAYS_S if ins else {}), **(tau_override or {})}
+        if not ins:  # the vanes' sideslip reference offset is tejas_ins's; tejas has none
+            self.truth["c_vb"] = 0.0
         self.maneuvers = [self._maneuver(f"m{k}", T, params) for k, params in
                           enumerate([dict(au=8.0, aphi=0.4, ath=0.15), dict(av=6.0, aw=6.0, aphi=0.8)])]
 

@@ -46,7 +46,11 @@ def test_a_model_set_extends_another(tmp_path):
     ch, sp = load_model_set("tejas_ins")
     assert [c.name for c in ch] == [c.name for c in base_ch] + ["vn", "ve", "vd"]
     assert {s.name for s in sp} == {s.name for s in base_sp} | {
-        "wind_n", "wind_e", "wind_d", "tau_vn", "tau_ve", "tau_vd"}
+        "wind_n", "wind_e", "wind_d", "tau_vn", "tau_ve", "tau_vd", "c_vb"}
+    # the vanes replaced in place, their sidewash seen from the sideslip reference offset c_vb
+    vanes = {c.name: c.model for c in ch if c.name in ("alpha_zl", "alpha_zr")}
+    assert "- f2(alpha_t) * (beta_s + c_vb)" in vanes["alpha_zl"]
+    assert "+ f2(alpha_t) * (beta_s + c_vb)" in vanes["alpha_zr"]
     # a channel of the same name replaces the base's; a parameter table replaces it whole
     (tmp_path / "mine.toml").write_text(
         'extends = "tejas"\n[[channel]]\nname = "tas"\nmodel = "tas_t * (1 + k_tas)"\nunit = "m/s"\n'
@@ -156,6 +160,12 @@ def test_filter_error_with_the_ins_velocities_recovers_wind_and_calibration():
     cal = [i for i, k in enumerate(keys)
            if est[i] and prob.parameters[k].kind in ("bias", "time_delay", "scale", "table")]
     assert np.mean(np.abs(z[cal]) < 3.0) >= 0.95, sorted((abs(z[i]), keys[i]) for i in cal)[-5:]
+    # the vanes' sideslip reference offset (0.2 deg injected) and the sideslip offsets it frees
+    # from the vanes' shape: each within 3 honest deviations
+    side = [i for i, k in enumerate(keys) if k.startswith(("c_vb", "b_sb", "b_n"))]
+    assert sorted(keys[i].split("[")[0] for i in side) == ["b_n", "b_sb", "c_vb"], [keys[i] for i in side]
+    for i in side:
+        assert est[i] and abs(z[i]) < 3.0, (keys[i], z[i])
 
 
 def test_velocity_signals_at_two_sensors_are_two_signals(windy):
