@@ -519,13 +519,14 @@ class FilterErrorLikelihood:
                     + "; the method is experimental: on JSBSim's simulated turbulence the flow "
                     "delays come out 4-6 ms long (its lateral and vertical turbulence is second-order "
                     "Dryden, the wind states first-order: a wind of their own form leaves the delays "
-                    "right), and an aircraft's common sideslip offset (every sideslip channel's bias "
-                    "alike) 0.05-0.15 deg off at up to 31 deviations while the innovations look white: with "
-                    "the wind as states the flight's kinematics hardly fix that offset, and the "
-                    "calibration models' shape fixes it instead, wherever that shape is wrong (a vane "
-                    "pair's installation biases, acting before the airdata computer's upwash "
-                    "inversion, moved it 0.13 deg); check the estimates against a calm-air "
-                    "calibration before use",
+                    "right); with the wind as states the flight's kinematics fix an aircraft's common "
+                    "sideslip offset (every sideslip channel's bias alike) only to 0.05-0.1 deg, so a "
+                    "calibration model that sees the sideslip through an alpha-dependent shape with "
+                    "no free reference offset of its own lets that shape fix it, wrongly wherever "
+                    "the shape is wrong, with small deviations and white innovations (the paper's "
+                    "vane model: PT1's offsets 0.15 deg off at 30 deviations; tejas_ins frees the "
+                    "vanes' sideslip reference offset c_vb for this, and they came out within 1.2); "
+                    "check the estimates against a calm-air calibration before use",
                     "calibrate where the air is calm by the output-error method, or fix the sideslip "
                     "biases and the delays at calm-air values for the turbulent maneuvers; treat "
                     "these deviations as lower bounds"),

@@ -17,8 +17,8 @@ pressure recomputed from it). Cases:
   truth and the vanes' installation biases (-0.44 and -0.12 deg);
 - ``steady_no_biases``: the same without the installation biases (the control).
 
-Printed and written (``--write``): each case's sideslip offsets and flow delays against their
-truth, in honest deviations. Run: ``python campaigns/benchmarks/whatif_sideslip.py --out DIR
+Printed and written (``--write``): each case's sideslip offsets, the vanes' sideslip reference
+offset ``c_vb``, the flow delays and the airspeed delay against their truth, in honest deviations. Run: ``python campaigns/benchmarks/whatif_sideslip.py --out DIR
 --write campaigns/benchmarks/results/whatif_sideslip.txt`` (about a minute on 2 cores).
 """
 
@@ -75,8 +75,8 @@ NOISE_ONLY = {
     "sensors": {**{s: {"noise_deg": 0.07} for s in VANES},
                 **{s: {"noise_pa": 20.0} for s in ("side_probe_left", "side_probe_right")}},
 }
-ROWS = ("b_sb[PT1]", "b_bu[PT1]", "b_bl[PT1]", "tau_alpha_zl", "tau_alpha_zr", "tau_sp", "tau_ba",
-        "tau_bu", "tau_bl")
+ROWS = ("b_sb[PT1]", "b_bu[PT1]", "b_bl[PT1]", "c_vb[PT1]", "tau_alpha_zl", "tau_alpha_zr", "tau_sp",
+        "tau_ba", "tau_bu", "tau_bl", "tau_tas")
 
 
 def with_wind(truth, wind_ned_mps: np.ndarray):
@@ -159,7 +159,7 @@ def main() -> None:
         cells = []
         for k in ROWS:
             row = rt.loc[k]
-            unit = "deg" if k.startswith("b_") else "ms"
+            unit = "ms" if k.startswith("tau_") else "deg"
             cells.append(f"{row['error_display']:+.3f}{unit[0]} ({row['z_colored']:+.1f})"
                          if unit == "deg" else f"{row['error_display']:+.1f}ms ({row['z_colored']:+.1f})")
         lines.append(f"{case:20s} " + " ".join(f"{c:>15s}" for c in cells))
