@@ -18,8 +18,9 @@ pressure recomputed from it). Cases:
 - ``steady_no_biases``: the same without the installation biases (the control).
 
 Printed and written (``--write``): each case's sideslip offsets, the vanes' sideslip reference
-offset ``c_vb``, the flow delays and the airspeed delay against their truth, in honest deviations. Run: ``python campaigns/benchmarks/whatif_sideslip.py --out DIR
---write campaigns/benchmarks/results/whatif_sideslip.txt`` (about a minute on 2 cores).
+offset ``c_vb``, the flow delays and the airspeed delay against their truth, in honest deviations.
+Run: ``python campaigns/benchmarks/whatif_sideslip.py --out DIR --write
+campaigns/benchmarks/results/whatif_sideslip.txt`` (one to two minutes on 2 cores).
 """
 
 from __future__ import annotations
