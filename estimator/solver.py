@@ -86,6 +86,12 @@ REFRESH_ROUNDS = 3
 #: Newton's inversion (estimator.calibrated) leaves the table's range (study (c): a vane table
 #: segment estimated at slope 0.04, 12-16 deg, with only a poor-model warning)
 MIN_CALIBRATION_SLOPE = 0.25
+#: An estimated calibration parameter closer to a bound than this many of its honest deviations is
+#: a warning: its interval (+-2 deviations, 95 %) reaches the bound, where the Gaussian deviation no
+#: longer describes the estimate (the bound truncates it) and the data want the parameter at the edge
+#: of its physical range (the filter-error demo: the airspeed delay at 0.29 s, bound 0.3 s, deviation
+#: 0.034 s, 0.3 s off its truth; not flagged while it stayed 0.3 deviations inside the bound)
+NEAR_BOUND_DEVIATIONS = 2.0
 
 
 @dataclass(frozen=True)
@@ -577,6 +583,8 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
                 + _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs)
                 + _crosswind_findings(problem, evals, st, informs)
                 + _imu_noise_note(dev, st, keys, opt) + _iteration_findings(it, stage_notes)
+                + _near_bounds(problem, theta, st, state,
+                               np.where(np.isfinite(dev.std_colored), dev.std_colored, dev.std_crb))
                 + wind_findings + _unsettled(refresh_move, dev.std_crb, keys)
                 + _not_invertible(problem, evals, st))
     diagnosis_table, outliers = None, {}
@@ -638,6 +646,36 @@ def _not_invertible(problem: Problem, evals: Evaluation, st: Structure) -> list[
             "model, turbulence), bound or regularise the table, or fly maneuvers that cover that "
             "range of the flow angle",
             channel=ch.name, parameters=params[:12], value=float(np.min(ce.slope * sign))))
+    return out
+
+
+def _near_bounds(problem: Problem, theta: np.ndarray, st: Structure, state: list[str],
+                 std: np.ndarray) -> list[Finding]:
+    """A warning for each estimated calibration parameter (a table value, a bias, a scale, a delay,
+    an IMU bias; not a maneuver's nuisance scale or offset) within :data:`NEAR_BOUND_DEVIATIONS`
+    deviations ``std`` (SI; the honest ones where computed) of a bound: one on the bound is
+    ``on_bound``'s."""
+    out = []
+    for i, p in enumerate(problem.parameters.parameters):
+        if state[i] != "estimated" or (p.scope == "maneuver" and p.kind in ("scale", "bias")):
+            continue
+        if p.kind not in ("table", "bias", "scale", "time_delay", "imu_bias") or not np.isfinite(std[i]):
+            continue
+        gap = np.array([theta[i] - st.lo[i], st.hi[i] - theta[i]])
+        side = int(np.argmin(gap))
+        if not (std[i] > 0.0 and gap[side] < NEAR_BOUND_DEVIATIONS * std[i]):
+            continue
+        bound = (st.lo, st.hi)[side][i]
+        unit = "" if p.unit in ("", "1") else f" {p.unit}"
+        out.append(Finding(
+            "near_bound", Severity.WARNING,
+            f"{p.key} = {theta[i]:.6g}{unit} is {gap[side] / std[i]:.1f} of its deviations "
+            f"({std[i]:.3g}{unit}) from its {('lower', 'upper')[side]} bound {bound:.6g}{unit}: the data "
+            "want it at the edge of its physical range, and the bound truncates what its deviation "
+            "describes",
+            "read it as suspect: check the data of the channels it enters (units, signs, a fault) or "
+            "a model-structure error it may take up (in turbulence: the wind model's form) before "
+            "using it or widening the bounds", parameters=(p.key,), value=float(gap[side] / std[i])))
     return out
 
 

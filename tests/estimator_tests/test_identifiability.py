@@ -261,3 +261,24 @@ def test_sideslip_offsets_on_maneuvers_of_constant_heading_are_flagged(flight):
     assert g.parameters == (side,)
     # a maneuver the evaluation does not cover: not judged
     assert not _crosswind_findings(prob, flat, st, {k: set(ids) | {"elsewhere"} for k in keys})
+
+
+def test_an_estimate_within_two_deviations_of_its_bound_is_a_warning(flight):
+    """An estimate whose +-2-deviation interval reaches a bound is suspect (the bound truncates what
+    the deviation describes; the filter-error demo's airspeed delay sat 0.3 deviations inside its
+    bound, 0.3 s off its truth, unflagged): a ``near_bound`` warning names it, the bound and the gap;
+    far from every bound there is none."""
+    prob = flight.problem(noise=NOISE, rng=np.random.default_rng(4))
+    free = estimate(prob, SolverOptions(diagnose=False))
+    assert free.converged, free.message
+    assert not [f for f in free.findings if f.code == "near_bound"], "no bound within reach"
+    row = free.to_pandas().loc["tau_alpha_zr"]
+    # the upper bound one deviation above the unbounded optimum: the optimum stays inside
+    near = _with_bounds(prob, "tau_alpha_zr", (-0.3, row["value"] + row["std_colored"]))
+    res = estimate(near, SolverOptions(diagnose=False))
+    assert res.converged, res.message
+    assert res.to_pandas().loc["tau_alpha_zr", "state"] == "estimated"
+    (f,) = [f for f in res.findings if f.code == "near_bound"]
+    assert f.severity == Severity.WARNING and f.parameters == ("tau_alpha_zr",)
+    assert "upper bound" in f.message and 0.5 < f.value < 2.0, f.text()
+    assert res.verdict == Verdict.SUCCESS_WITH_WARNINGS
