@@ -665,12 +665,13 @@ def _near_bounds(problem: Problem, theta: np.ndarray, st: Structure, state: list
         side = int(np.argmin(gap))
         if not (std[i] > 0.0 and gap[side] < NEAR_BOUND_DEVIATIONS * std[i]):
             continue
-        bound = (st.lo, st.hi)[side][i]
-        unit = "" if p.unit in ("", "1") else f" {p.unit}"
+        k = p.display_scale  # shown as the reports show it (deg, ms)
+        bound = (st.lo, st.hi)[side][i] * k
+        unit = "" if p.display_unit in ("", "1") else f" {p.display_unit}"
         out.append(Finding(
             "near_bound", Severity.WARNING,
-            f"{p.key} = {theta[i]:.6g}{unit} is {gap[side] / std[i]:.1f} of its deviations "
-            f"({std[i]:.3g}{unit}) from its {('lower', 'upper')[side]} bound {bound:.6g}{unit}: the data "
+            f"{p.key} = {theta[i] * k:.6g}{unit} is {gap[side] / std[i]:.1f} of its deviations "
+            f"({std[i] * k:.3g}{unit}) from its {('lower', 'upper')[side]} bound {bound:.6g}{unit}: the data "
             "want it at the edge of its physical range, and the bound truncates what its deviation "
             "describes",
             "read it as suspect: check the data of the channels it enters (units, signs, a fault) or "

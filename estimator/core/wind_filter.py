@@ -44,6 +44,28 @@ the altitude error starts at zero at the maneuver start. Check: from a stationar
 ``D = 0``, ``Var D(dt) = T_c^2 (1 - E)^2 sigma^2 + Qd_2[1, 1] = 2 sigma^2 T_c^2 (x - 1 + E)``, the
 variance of the integral of a stationary OU process over ``dt``.
 
+**Dryden wind in body axes** (:func:`dryden_body`). MIL-F-8785C's Dryden turbulence (what
+JSBSim's milspec model generates) has a first-order longitudinal component ``u_g`` and
+second-order lateral and vertical ones ``v_g, w_g`` (body axes), each with the autocorrelation
+(``x = V tau / L``, ``tau`` the time lag)::
+
+    R_u(tau) = sigma^2 exp(-x),        R_v(tau) = R_w(tau) = sigma^2 (1 - x / 2) exp(-x)
+
+A lateral or vertical component is ``y = z_1 + sqrt(3) z_2`` of two states with, ``a = V / L``::
+
+    d/dt [z_1, z_2] = a [[0, 1], [-1, -2]] [z_1, z_2] + [0, sigma sqrt(a)] eta
+
+(the shaping filter ``sigma sqrt(L / V) (1 + sqrt(3) s L / V) / (1 + s L / V)^2``, its second
+state scaled by ``L / V`` to m/s). Stationary: ``Var z_1 = Var z_2 = sigma^2 / 4``, uncorrelated,
+so ``Var y = sigma^2``. Its ``A = -a I + N`` with ``N^2 = 0``, so exactly::
+
+    Phi_2 = exp(-x) [[1 + x, x], [-x, 1 - x]],   x = V dt / L
+    Qd_2  = P_inf - Phi_2 P_inf Phi_2^T,         P_inf = (sigma^2 / 4) I   (stationary)
+
+Check: ``[1, sqrt(3)] Phi_2(tau) P_inf [1, sqrt(3)]^T = sigma^2 (1 - x / 2) exp(-x)``. The five
+states ``(u, v_1, v_2, w_1, w_2)`` map to the body-axis wind by :data:`DRYDEN_OUTPUT`; a channel's
+sensitivity to the states is its body-axis wind sensitivity times that map.
+
 **Innovations** (:func:`innovations`). Kalman filter with zero prior mean; observations at one
 sample are processed one after the other as scalars, each with its own gain (valid because the
 measurement noise covariance is diagonal)::
@@ -183,6 +205,56 @@ def gauss_markov(v_mps: float, L_m, sigma_mps, dt_s: float,
         Phi[3, 3] = 1.0
         Qd[2, 3] = Qd[3, 2] = s2 * tc * em[2] ** 2
         Qd[3, 3] = 2.0 * s2 * tc * tc * _g_integrated(float(x[2]))
+    return Phi, Qd, P0
+
+
+#: The body-axis wind (u, v, w) from :func:`dryden_body`'s five states (u, v_1, v_2, w_1, w_2).
+DRYDEN_OUTPUT = np.array([[1.0, 0.0, 0.0, 0.0, 0.0],
+                          [0.0, 1.0, math.sqrt(3.0), 0.0, 0.0],
+                          [0.0, 0.0, 0.0, 1.0, math.sqrt(3.0)]])
+
+
+def dryden_body(v_mps: float, L_m: float, sigma_mps: float, dt_s: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact discretisation of MIL-F-8785C's Dryden turbulence in body axes (module docstring).
+
+    Parameters
+    ----------
+    v_mps : true airspeed, m/s (turbulence scale crossed per second; Taylor's hypothesis).
+    L_m : turbulence scale length, m (one for the three axes: MIL-F-8785C above 2000 ft).
+    sigma_mps : standard deviation of each component, m/s (isotropic above 2000 ft).
+    dt_s : sample interval, s.
+
+    Returns
+    -------
+    Phi : (5, 5) state transition over ``dt_s``; states (u, v_1, v_2, w_1, w_2), m/s.
+    Qd : (5, 5) process-noise covariance per step, (m/s)^2, positive definite.
+    P0 : (5, 5) the stationary covariance (u: sigma^2; each second-order state sigma^2 / 4).
+    """
+    v = float(_positive_finite("v_mps", v_mps, (), "a scalar airspeed in m/s"))
+    dt = float(_positive_finite("dt_s", dt_s, (), "a scalar sample interval in s"))
+    L = float(_positive_finite("L_m", L_m, (), "a scalar scale length in m"))
+    sig = float(_positive_finite("sigma_mps", sigma_mps, (), "a scalar standard deviation in m/s"))
+    x = v * dt / L
+    em = -math.expm1(-x)  # 1 - exp(-x), accurate for small x
+    E = 1.0 - em
+    Phi = np.zeros((5, 5))
+    P0 = np.zeros((5, 5))
+    Qd = np.zeros((5, 5))
+    Phi[0, 0] = E
+    P0[0, 0] = sig * sig
+    Qd[0, 0] = sig * sig * em * (2.0 - em)  # sigma^2 (1 - E^2)
+    q = 0.25 * sig * sig
+    # P_inf - Phi_2 P_inf Phi_2^T with P_inf = q I, Phi_2 = E [[1 + x, x], [-x, 1 - x]]:
+    # q (1 - E^2 ((1 + x)^2 + x^2)), -q E^2 (-x (1 + x) + x (1 - x)) = 2 q E^2 x^2,
+    # q (1 - E^2 ((1 - x)^2 + x^2)); 1 - E^2 (1 +- 2x + 2x^2) by expm1 for small x
+    e2 = -math.expm1(-2.0 * x)  # 1 - E^2
+    for i in (1, 3):
+        Phi[i:i + 2, i:i + 2] = E * np.array([[1.0 + x, x], [-x, 1.0 - x]])
+        P0[i, i] = P0[i + 1, i + 1] = q
+        Qd[i, i] = q * (e2 - E * E * (2.0 * x + 2.0 * x * x))
+        Qd[i + 1, i + 1] = q * (e2 + E * E * (2.0 * x - 2.0 * x * x))
+        Qd[i, i + 1] = Qd[i + 1, i] = 2.0 * q * E * E * x * x
     return Phi, Qd, P0
 
 

@@ -160,12 +160,17 @@ def test_filter_error_with_the_ins_velocities_recovers_wind_and_calibration():
     cal = [i for i, k in enumerate(keys)
            if est[i] and prob.parameters[k].kind in ("bias", "time_delay", "scale", "table")]
     assert np.mean(np.abs(z[cal]) < 3.0) >= 0.95, sorted((abs(z[i]), keys[i]) for i in cal)[-5:]
-    # the vanes' sideslip reference offset (0.2 deg injected) and the sideslip offsets it frees
-    # from the vanes' shape: each within 3 honest deviations
-    side = [i for i, k in enumerate(keys) if k.startswith(("c_vb", "b_sb", "b_n"))]
-    assert sorted(keys[i].split("[")[0] for i in side) == ["b_n", "b_sb", "c_vb"], [keys[i] for i in side]
+    # the sideslip offsets, each within 3 honest deviations; the vanes' sideslip reference offset
+    # (0.2 deg injected) too where estimated, or held (at its start, the truth here) where these
+    # two short maneuvers' alpha range leaves f2's change with alpha too small to tell it
+    side = [i for i, k in enumerate(keys) if k.startswith(("b_sb", "b_n"))]
+    assert len(side) == 2, [keys[i] for i in side]
     for i in side:
         assert est[i] and abs(z[i]) < 3.0, (keys[i], z[i])
+    df = res.to_pandas()
+    (cvb,) = [k for k in keys if k.startswith("c_vb")]
+    assert (df.loc[cvb, "state"] == "estimated" and abs(z[keys.index(cvb)]) < 3.0) or (
+        df.loc[cvb, "state"] == "held" and df.loc[cvb, "reason"].startswith("undetermined")), df.loc[cvb]
 
 
 def test_velocity_signals_at_two_sensors_are_two_signals(windy):
