@@ -242,6 +242,26 @@ def gauss_markov_wind(t_s: np.ndarray, sigma_mps: float, L_m: float, v_mps: floa
     return x
 
 
+def dryden_body_wind(t_s: np.ndarray, sigma_mps: float, L_m: float, v_mps: float,
+                     rng: np.random.Generator) -> np.ndarray:
+    """MIL-F-8785C Dryden turbulence in body axes (N, 3) on a uniform grid, stationary from the
+    start: the five states of :func:`estimator.core.wind_filter.dryden_body` stepped exactly
+    (``x[k+1] = Phi x[k] + chol(Qd) n``) and mapped to (u, v, w) by its ``DRYDEN_OUTPUT``."""
+    from estimator.core.wind_filter import DRYDEN_OUTPUT, dryden_body
+
+    Phi, Qd, P0 = dryden_body(v_mps, L_m, sigma_mps, float(t_s[1] - t_s[0]))
+    # Qd's second-order pairs are nearly singular for tiny steps (the noise enters the derivative
+    # state only): their Cholesky factor from the eigen-decomposition, not numpy's cholesky
+    w, V = np.linalg.eigh(Qd)
+    G = V * np.sqrt(np.maximum(w, 0.0))
+    n = rng.standard_normal((t_s.size, 5))
+    x = np.empty((t_s.size, 5))
+    x[0] = np.sqrt(np.diag(P0)) * n[0]
+    for k in range(1, t_s.size):
+        x[k] = Phi @ x[k - 1] + G @ n[k]
+    return x @ DRYDEN_OUTPUT.T
+
+
 def truth_values(rng: np.random.Generator) -> dict:
     """Injected parameter values of :class:`Flight` (SI); the tables from ``_table_noise``."""
     return {
@@ -264,6 +284,9 @@ class Flight:
     specs : the ``tejas`` model set's parameter specifications (their table breakpoints).
     T : maneuver length, s.
     tau_override : time delays replacing the truth's.
+    turbulence_form : "gauss_markov" (the default, above) or "dryden": MIL-F-8785C's Dryden
+        turbulence in body axes (:func:`dryden_body_wind`; :attr:`wind_ned_mps` is then its NED
+        equivalent, ``C_bn^T dW_body``).
     turbulence : ``(sigma_mps, L_m, seed)``: the flow sensors (and the airspeed) see the air moving
         with a turbulent wind ``dW`` (NED, m/s; three independent first-order Gauss-Markov
         components of intensity ``sigma`` and scale length ``L`` at the flight's 150 m/s, drawn
@@ -280,7 +303,11 @@ class Flight:
 
     def __init__(self, truth: dict, specs, T: float = 25.0, tau_override: dict | None = None,
                  turbulence: tuple[float, float, int] | None = None,
-                 steady_wind_ned_mps=(0.0, 0.0, 0.0), ins: bool = False):
+                 steady_wind_ned_mps=(0.0, 0.0, 0.0), ins: bool = False,
+                 turbulence_form: str = "gauss_markov"):
+        if turbulence_form not in ("gauss_markov", "dryden"):
+            raise ValueError(f"turbulence_form must be 'gauss_markov' or 'dryden', got {turbulence_form!r}")
+        self.turbulence_form = turbulence_form
         self.turbulence = turbulence
         self.steady_wind_ned_mps = np.asarray(steady_wind_ned_mps, dtype=float)
         self.ins = ins
@@ -321,7 +348,19 @@ class Flight:
             x[:, :3] -= np.einsum("nij,j->ni", ned_to_body(x[:, 3:6]), w0)
             return x
 
-        if self.turbulence is not None:
+        if self.turbulence is not None and self.turbulence_form == "dryden":
+            gust_b = dryden_body_wind(t_fine, *self.turbulence[:2], 150.0,
+                                      np.random.default_rng([self.turbulence[2], int(mid[1:])]))
+            b_at = np.stack([np.interp(t, t_fine, d) for d in gust_b.T], 1)
+            self.wind_ned_mps[mid] = (t, np.einsum("nji,nj->ni", ned_to_body(states_at(t)[:, 3:6]), b_at))
+
+            def flow_states(ts):
+                # the air's velocity relative to the aircraft: V - C_bn W0 - dW_body
+                x = states_at(ts)
+                x[:, :3] -= (np.einsum("nij,j->ni", ned_to_body(x[:, 3:6]), w0)
+                             + np.stack([np.interp(ts, t_fine, d) for d in gust_b.T], 1))
+                return x
+        elif self.turbulence is not None:
             gust = gauss_markov_wind(t_fine, *self.turbulence[:2], 150.0,
                                      np.random.default_rng([self.turbulence[2], int(mid[1:])]))
             self.wind_ned_mps[mid] = (t, np.stack([np.interp(t, t_fine, d) for d in gust.T], 1))

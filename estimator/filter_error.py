@@ -18,6 +18,13 @@ Gauss-Markov components (the Dryden form of MIL-F-8785C, isotropic above 2000 ft
 
     d(dW)/dt = -(V/L) dW + sigma sqrt(2 V / L) eta
 
+or, with ``WindOptions(form="dryden")``, MIL-F-8785C's Dryden turbulence in body axes: the
+longitudinal component as above, the lateral and vertical second-order (five states,
+:func:`estimator.core.wind_filter.dryden_body`; ``h = -(dy/dV) D``, ``D`` the states' map to the
+body-axis wind, and the wind history turned back to NED with the attitude). On JSBSim's milspec
+turbulence, which has that form, it leaves the flow delays as long as the first-order form does
+(README).
+
 ``L`` the scale length (1750 ft = 533.4 m above 2000 ft), ``sigma`` the turbulence intensity
 (estimated per maneuver), ``V`` the maneuver's mean true airspeed. The IMU senses what the gusts
 do to the aircraft, so the attitude, altitude and inertial channels do not see ``dW``.
@@ -89,6 +96,8 @@ from estimator.verdict import Finding, Severity
 
 #: MIL-F-8785C scale length above 2000 ft (1750 ft), m.
 DRYDEN_SCALE_LENGTH_M = 533.4
+#: The wind states' forms (WindOptions.form).
+WIND_FORMS = ("gauss_markov", "dryden")
 #: Search bounds of the turbulence intensity, m/s: from next to nothing to severe.
 SIGMA_SEARCH_MPS = (1e-3, 15.0)
 #: The first relaxation searches all of SIGMA_SEARCH_MPS, the later ones a factor of
@@ -128,6 +137,11 @@ class WindOptions:
         estimated (a structure error of one sensor is then taken for wind: on the demo's calm
         data the 22-deg wind-up turns came out at 0.9-1.25 m/s from the nose probe's high-alpha
         error, and that bin did not converge).
+    form : the wind states' form: "gauss_markov" (default) — three first-order Gauss-Markov NED
+        components (Dryden's longitudinal spectrum for all three); "dryden" — MIL-F-8785C's Dryden
+        turbulence in body axes: the longitudinal component first-order, the lateral and vertical
+        second-order (five states; :func:`estimator.core.wind_filter.dryden_body`), the form
+        JSBSim's milspec turbulence has.
     calm_sigma_mps : a maneuver whose estimated intensity is below this is taken as flown in calm
         air (no wind states: its innovations are its residuals, as in the output-error method).
         Calm data still give a small intensity — the wind states then follow what the calibration
@@ -140,11 +154,14 @@ class WindOptions:
     sigma_mps: float | None = None
     calm_sigma_mps: float = 0.3
     where: str = "diagnosed"
+    form: str = "gauss_markov"
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.scale_length_m) and self.scale_length_m > 0):
             raise ValueError(f"WindOptions.scale_length_m must be a positive length in m, got "
                              f"{self.scale_length_m!r}")
+        if self.form not in WIND_FORMS:
+            raise ValueError(f"WindOptions.form must be one of {WIND_FORMS}, got {self.form!r}")
         if self.where not in ("diagnosed", "all"):
             raise ValueError(f"WindOptions.where must be 'diagnosed' or 'all', got {self.where!r}")
         if self.sigma_mps is not None and not (math.isfinite(self.sigma_mps) and self.sigma_mps > 0):
@@ -162,8 +179,10 @@ class _Maneuver:
     order: np.ndarray  # permutation of the concatenated pieces into sample order
     sample: np.ndarray  # (n,) sample index of each observation
     channel: np.ndarray  # (n,) channel index of each observation
-    h: np.ndarray  # (n, 3) wind sensitivity
+    h: np.ndarray  # (n, ns) sensitivity to the wind states (ns = 3 NED, or 5 Dryden body-axis)
     v_mps: float  # mean true airspeed
+    c_nb: np.ndarray | None = None  # (n_samples, 3, 3) NED -> body rotation (Dryden form: the
+    # wind history back to NED)
 
 
 @dataclass
@@ -462,7 +481,8 @@ class FilterErrorLikelihood:
         es = [ce.e for ce in ev.channels]
         for m in noise.maneuvers:
             man = self.model.problem.maneuvers[m.k]
-            xs, Ps = self.wind_history(m, self._residuals(ev, m, es), noise.R, noise.sigma_mps[m.k])
+            xs, Ps = self.wind_ned(m, *self.wind_history(m, self._residuals(ev, m, es), noise.R,
+                                                         noise.sigma_mps[m.k]))
             sd = np.sqrt(np.maximum(np.diagonal(Ps, axis1=1, axis2=2), 0.0))
             parts.append(pd.DataFrame({
                 "maneuver": man.id, "t_s": man.t_s[:m.n_samples],
@@ -517,9 +537,10 @@ class FilterErrorLikelihood:
                        "the deviations are Cramér-Rao bounds of its information matrix, without the "
                        "coloured-innovation correction")
                     + "; the method is experimental: on JSBSim's simulated turbulence the flow "
-                    "delays come out 4-6 ms long (its lateral and vertical turbulence is second-order "
-                    "Dryden, the wind states first-order: a wind of their own form leaves the delays "
-                    "right); with the wind as states the flight's kinematics fix an aircraft's common "
+                    "delays come out 4-6 ms long and the airspeed's up to 0.3 s (not from the wind "
+                    "states' form: Dryden's form leaves them so; a wind of the states' own form drawn "
+                    "apart from the flight leaves them right; the cause is open); with the wind as "
+                    "states the flight's kinematics fix an aircraft's common "
                     "sideslip offset (every sideslip channel's bias alike) only to 0.05-0.1 deg, so a "
                     "calibration model that sees the sideslip through an alpha-dependent shape with "
                     "no free reference offset of its own lets that shape fix it, wrongly wherever "
@@ -545,6 +566,7 @@ class FilterErrorLikelihood:
             for b, k in enumerate(ce.mans):
                 per[int(k)].append((ci, b, int(ce.rseg[b]), int(ce.rseg[b + 1])))
         out = []
+        dryden = self.wind.form == "dryden"
         for k, pieces in per.items():
             i = pos[k]
             X = ev.X[seg[i]:seg[i + 1]]
@@ -564,13 +586,18 @@ class FilterErrorLikelihood:
                 rows = np.clip(ce.rows[r0:r1] - self._placement[key], 0, seg[i + 1] - seg[i] - 1)
                 samples.append(rows)
                 chans.append(np.full(rows.size, ce.channel))
-                # h = -(dy/dV) C_bn: the output's change per unit NED wind
-                hs.append(-np.einsum("ni,nij->nj", ce.dydv[r0:r1], C[rows]))
+                # h = -(dy/dV) C_bn: the output's change per unit NED wind; in the Dryden form the
+                # states are body-axis: -(dy/dV) times the states' map to the body-axis wind
+                if dryden:
+                    hs.append(-ce.dydv[r0:r1] @ self._wf.DRYDEN_OUTPUT)
+                else:
+                    hs.append(-np.einsum("ni,nij->nj", ce.dydv[r0:r1], C[rows]))
             sample = np.concatenate(samples)
             order = np.argsort(sample, kind="stable")
             out.append(_Maneuver(k, int(seg[i + 1] - seg[i]), pieces, order, sample[order],
                                  np.concatenate(chans)[order], np.concatenate(hs)[order],
-                                 float(np.mean(np.linalg.norm(X[:, :3], axis=1)))))
+                                 float(np.mean(np.linalg.norm(X[:, :3], axis=1))),
+                                 C if dryden else None))
         return out
 
     @staticmethod
@@ -613,14 +640,28 @@ class FilterErrorLikelihood:
         return cols, J[m.order]
 
     def wind_history(self, m: _Maneuver, e: np.ndarray, R: np.ndarray, sigma: float):
-        """The smoothed turbulent wind (n_samples, 3), NED, m/s, and its covariance
-        (n_samples, 3, 3) of one maneuver (zero in calm air)."""
+        """The smoothed wind states (n_samples, ns) of one maneuver and their covariance
+        (n_samples, ns, ns) (zero in calm air); :meth:`wind_ned` turns them into the NED wind."""
+        ns = m.h.shape[1]
         if sigma == 0.0:
-            return np.zeros((m.n_samples, 3)), np.zeros((m.n_samples, 3, 3))
+            return np.zeros((m.n_samples, ns)), np.zeros((m.n_samples, ns, ns))
         Phi, Qd, P0 = self._process(m, sigma)
         return self._wf.smooth(m.sample, e, m.h, R[m.channel], Phi, Qd, P0, m.n_samples)
 
+    @staticmethod
+    def wind_ned(m: _Maneuver, xs: np.ndarray, Ps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The turbulent wind (n_samples, 3), NED, m/s, and its covariance (n_samples, 3, 3) from
+        the wind states of :meth:`wind_history`."""
+        if m.c_nb is None:
+            return xs, Ps
+        from estimator.core.wind_filter import DRYDEN_OUTPUT
+
+        T = np.einsum("nji,jk->nik", m.c_nb, DRYDEN_OUTPUT)  # states -> NED: C_bn^T D
+        return np.einsum("nij,nj->ni", T, xs), np.einsum("nij,njk,nlk->nil", T, Ps, T)
+
     def _process(self, m: _Maneuver, sigma: float):
+        if self.wind.form == "dryden":
+            return self._wf.dryden_body(m.v_mps, self.wind.scale_length_m, sigma, float(self.dt_s[m.k]))
         return self._wf.gauss_markov(m.v_mps, self.wind.scale_length_m, sigma, float(self.dt_s[m.k]))
 
     def _innovations(self, m: _Maneuver, e: np.ndarray, R: np.ndarray, sigma: float,

@@ -170,7 +170,7 @@ class SolverOptions:
                 object.__setattr__(self, "wind", WindOptions(**dict(self.wind)))
             except TypeError as exc:
                 raise ValueError(f"SolverOptions: wind = {dict(self.wind)!r}: {exc}; its keys are "
-                                 "scale_length_m, sigma_mps, calm_sigma_mps") from None
+                                 "scale_length_m, sigma_mps, calm_sigma_mps, where, form") from None
         if self.wind is not None and not isinstance(self.wind, WindOptions):
             raise ValueError(f"SolverOptions: wind must be WindOptions or a table of its keys, got "
                              f"{self.wind!r}")

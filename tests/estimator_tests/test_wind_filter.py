@@ -13,7 +13,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from estimator.core.wind_filter import gauss_markov, innovations, normal_equations, smooth
+from estimator.core.wind_filter import (
+    DRYDEN_OUTPUT,
+    dryden_body,
+    gauss_markov,
+    innovations,
+    normal_equations,
+    smooth,
+)
 
 # ----------------------------------------------------------------------------------------------
 # the dense reference
@@ -235,6 +242,45 @@ def test_wind_axes_are_stationary_with_exponential_autocorrelation():
     np.testing.assert_allclose(np.diag(P0_s), 1.21, rtol=1e-15, err_msg="a scalar sigma applies to all axes")
     np.testing.assert_allclose(np.diag(Phi_s), np.exp(-v * dt / 250.0), rtol=1e-15,
                                err_msg="a scalar L applies to all axes")
+
+
+@pytest.mark.parametrize("x", [1e-5, 1e-3, 0.02, 0.3, 3.0])
+def test_dryden_body_axes_have_the_milspec_autocorrelations(x):
+    """MIL-F-8785C's Dryden form: the longitudinal component exp(-V tau / L), the lateral and
+    vertical (1 - V tau / 2L) exp(-V tau / L), each of variance sigma^2, uncorrelated with each
+    other; P0 stationary, Qd positive definite, for short and long steps alike."""
+    v, L, sig = 150.0, 533.4, 1.3
+    dt = x * L / v
+    Phi, Qd, P0 = dryden_body(v, L, sig, dt)
+    np.testing.assert_allclose(Phi @ P0 @ Phi.T + Qd, P0, rtol=0, atol=1e-14 * sig**2,
+                               err_msg="P0 must be the stationary covariance")
+    assert np.linalg.eigvalsh(Qd).min() > 0.0, "Qd positive definite (the smoother needs it)"
+    for k in (0, 1, 5, 40):
+        xi = v * k * dt / L
+        cov = DRYDEN_OUTPUT @ np.linalg.matrix_power(Phi, k) @ P0 @ DRYDEN_OUTPUT.T
+        want = sig**2 * np.array([np.exp(-xi), (1 - xi / 2) * np.exp(-xi), (1 - xi / 2) * np.exp(-xi)])
+        np.testing.assert_allclose(np.diag(cov), want, rtol=1e-10, atol=1e-13,
+                                   err_msg=f"autocorrelations at V tau / L = {xi:g}")
+        np.testing.assert_allclose(cov - np.diag(np.diag(cov)), 0.0, atol=1e-15,
+                                   err_msg="the three components are independent")
+
+
+def test_dryden_process_noise_against_van_loan():
+    """The closed-form Qd of the second-order pairs equals Van Loan's integral of the continuous
+    model d/dt z = (V/L) [[0, 1], [-1, -2]] z + [0, sigma sqrt(V/L)] eta."""
+    from scipy.linalg import expm
+
+    v, L, sig, dt = 180.0, 533.4, 0.9, 0.025
+    a = v / L
+    A = a * np.array([[0.0, 1.0], [-1.0, -2.0]])
+    Qc = np.array([[0.0, 0.0], [0.0, sig**2 * a]])
+    M = expm(np.block([[-A, Qc], [np.zeros((2, 2)), A.T]]) * dt)
+    Phi2 = M[2:, 2:].T
+    Qd2 = Phi2 @ M[:2, 2:]
+    Phi, Qd, _ = dryden_body(v, L, sig, dt)
+    for i in (1, 3):
+        np.testing.assert_allclose(Phi[i:i + 2, i:i + 2], Phi2, rtol=1e-12)
+        np.testing.assert_allclose(Qd[i:i + 2, i:i + 2], Qd2, rtol=1e-9, atol=1e-18)
 
 
 @pytest.mark.parametrize("x", [1e-4, 3e-3, 0.02, 0.3, 0.49, 0.51, 2.0, 20.0])
