@@ -538,8 +538,8 @@ class FilterErrorLikelihood:
                        "coloured-innovation correction")
                     + "; the method is experimental: on JSBSim's simulated turbulence the flow "
                     "delays come out 4-6 ms long and the airspeed's up to 0.3 s (not from the wind "
-                    "states' form: Dryden's form leaves them so; a wind of the states' own form drawn "
-                    "apart from the flight leaves them right; the cause is open); with the wind as "
+                    "states' form: turbulence of either form drawn apart from the flight leaves them "
+                    "right, and it goes with the gusts' tie to the aircraft's motion); with the wind as "
                     "states the flight's kinematics fix an aircraft's common "
                     "sideslip offset (every sideslip channel's bias alike) only to 0.05-0.1 deg, so a "
                     "calibration model that sees the sideslip through an alpha-dependent shape with "

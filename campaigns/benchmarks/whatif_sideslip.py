@@ -12,6 +12,9 @@ pressure recomputed from it). Cases:
   statistics, no longer tied to the motion the gusts caused;
 - ``gauss_markov``: the steady wind plus three independent first-order Gauss-Markov components of
   JSBSim's rms and the 533.4-m scale length: the filter's own wind model;
+- ``dryden_body``: the steady wind plus MIL-F-8785C Dryden turbulence of JSBSim's rms drawn in body
+  axes (second-order laterally and vertically: JSBSim's form) and turned to NED with the flight's
+  attitude, drawn apart from the flight;
 - ``steady``: the steady wind only, the filter's wind states forced on at 1 m/s;
 - ``steady_vane_biases``: as ``steady`` with no injected error but white noise, the local-flow
   truth and the vanes' installation biases (-0.44 and -0.12 deg);
@@ -34,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 import synth.campaign as synth_campaign
-from campaigns.analytic_flight import gauss_markov_wind
+from campaigns.analytic_flight import dryden_body_wind, gauss_markov_wind
 from campaigns.truth import recovery_table, true_parameters
 from estimator.filter_error import DRYDEN_SCALE_LENGTH_M, WindOptions
 from estimator.io import problem_from_dataset
@@ -42,7 +45,8 @@ from estimator.solver import SolverOptions, estimate
 from synth.campaign import fly_campaign, parse_campaign
 from synth.sensors import dcm_body_to_ned
 
-CASES = ("jsbsim", "reversed", "gauss_markov", "steady", "steady_vane_biases", "steady_no_biases")
+CASES = ("jsbsim", "reversed", "gauss_markov", "dryden_body", "steady", "steady_vane_biases",
+         "steady_no_biases")
 KINDS = ["pitch_doublet", "3211", "roller_coaster", "pullup_rudder_doublets", "windup_turn", "shss"]
 STEADY_WIND_NED_MPS = [6.0, -4.0, 0.0]
 VANES = ("vane_left", "vane_right", "boom_alpha_vane", "boom_beta_upper_vane", "boom_beta_lower_vane")
@@ -103,6 +107,10 @@ def fly(case: str, out: Path) -> None:
                 w = tr.wind_ned_mps
             elif case == "reversed":
                 w = steady + turb[::-1]
+            elif case == "dryden_body":
+                b = dryden_body_wind(tr.t_s, float(np.sqrt(np.mean(turb ** 2))), DRYDEN_SCALE_LENGTH_M,
+                                     float(tr.tas_mps.mean()), rng)
+                w = steady + np.einsum("nij,nj->ni", dcm_body_to_ned(tr.euler_rad), b)
             elif case == "gauss_markov":
                 w = steady + gauss_markov_wind(tr.t_s, float(np.sqrt(np.mean(turb ** 2))),
                                                DRYDEN_SCALE_LENGTH_M, float(tr.tas_mps.mean()), rng)
