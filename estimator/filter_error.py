@@ -547,7 +547,7 @@ class FilterErrorLikelihood:
                     "the shape is wrong, with small deviations and white innovations (the paper's "
                     "vane model: PT1's offsets 0.15 deg off at 30 deviations; the shipped INS model "
                     "set frees the vanes' sideslip reference offset for this, and they came out "
-                    "within 1.2); "
+                    "within 1.0); "
                     "check the estimates against a calm-air calibration before use",
                     "calibrate where the air is calm by the output-error method, or fix the sideslip "
                     "biases and the delays at calm-air values for the turbulent maneuvers; treat "
