@@ -491,6 +491,11 @@ class FilterErrorLikelihood:
         return pd.concat(parts, ignore_index=True)
 
     @property
+    def noise(self) -> FilterNoise | None:
+        """The noise statistics of the last relaxation (None before the first)."""
+        return self._last
+
+    @property
     def held(self) -> bool:
         """Are the noise statistics held for good (:data:`HOLD_AFTER` relaxations done)?"""
         return self._relaxed >= HOLD_AFTER

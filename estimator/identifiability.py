@@ -87,7 +87,7 @@ class _Hold:
 
 
 def _screen(problem: Problem, st: Structure, evals: Evaluation, R: np.ndarray, opt: SolverOptions,
-            loose: bool) -> tuple[Structure, list[_Hold]]:
+            loose: bool, normal=None) -> tuple[Structure, list[_Hold]]:
     """Hold the parameters the data do not determine; returns the new structure and the holds.
 
     Parameters no sample depends on (a table breakpoint beyond the flown range, a bias of a sensor
@@ -95,7 +95,10 @@ def _screen(problem: Problem, st: Structure, evals: Evaluation, R: np.ndarray, o
     direction) are held. With ``loose``, so is a parameter whose Cramér-Rao deviation exceeds half
     its allowed range (a pressure-altitude scale in level flight). Judged away from the solution,
     where ``R`` holds the residuals of a wrong trajectory, the deviations are inflated: the
-    estimation therefore judges every requested parameter again at its solution.
+    estimation therefore judges every requested parameter again at its solution. ``normal``: a
+    function of the structure giving the normal equations to judge by (the filter-error method's,
+    whose wind states leave a parameter less determined than the output-error residuals say);
+    None: the output-error ones of ``evals`` and ``R``.
     """
     ps = problem.parameters
     keys = ps.keys
@@ -103,7 +106,7 @@ def _screen(problem: Problem, st: Structure, evals: Evaluation, R: np.ndarray, o
     for _ in range(12):
         if not st.free.any():
             break
-        N = build_normal(st, evals, R)
+        N = build_normal(st, evals, R) if normal is None else normal(st)
         no_data = st.free & ~_has_data(N, st, opt.min_support_samples)
         if no_data.any():
             held = tuple(int(i) for i in np.nonzero(no_data)[0])
