@@ -244,9 +244,22 @@ def gauss_markov_wind(t_s: np.ndarray, sigma_mps: float, L_m: float, v_mps: floa
 
 def dryden_body_wind(t_s: np.ndarray, sigma_mps: float, L_m: float, v_mps: float,
                      rng: np.random.Generator) -> np.ndarray:
-    """MIL-F-8785C Dryden turbulence in body axes (N, 3) on a uniform grid, stationary from the
-    start: the five states of :func:`estimator.core.wind_filter.dryden_body` stepped exactly
-    (``x[k+1] = Phi x[k] + chol(Qd) n``) and mapped to (u, v, w) by its ``DRYDEN_OUTPUT``."""
+    """MIL-F-8785C Dryden turbulence in body axes, stationary from the start: the five states of
+    :func:`estimator.core.wind_filter.dryden_body` stepped exactly (``x[k+1] = Phi x[k] + G n``,
+    ``G G^T = Qd``) and mapped to (u, v, w) by its ``DRYDEN_OUTPUT``.
+
+    Parameters
+    ----------
+    t_s : (N,) uniform time grid, s.
+    sigma_mps : intensity of each component, m/s.
+    L_m : scale length, m.
+    v_mps : airspeed, m/s (Taylor's hypothesis).
+    rng : random generator.
+
+    Returns
+    -------
+    (N, 3) turbulent wind in body axes (u, v, w), m/s.
+    """
     from estimator.core.wind_filter import DRYDEN_OUTPUT, dryden_body
 
     Phi, Qd, P0 = dryden_body(v_mps, L_m, sigma_mps, float(t_s[1] - t_s[0]))
@@ -269,7 +282,7 @@ def truth_values(rng: np.random.Generator) -> dict:
         "tau_phi": 0.02, "tau_theta": 0.02, "tau_psi": 0.02, "tau_tas": 0.0, "tau_h": 0.0,
         "tau_alpha_zl": 0.03, "tau_alpha_zr": 0.045, "tau_sp": 0.08, "tau_np": 0.06, "k_h": 0.0, "k_spr": 0.0,
         "b_l": 0.3 * DEG, "b_r": -0.2 * DEG, "b_sa": 0.25 * DEG, "b_sb": -0.15 * DEG, "b_n": 0.1 * DEG,
-        "c_vb": 0.2 * DEG,  # tejas_ins only (Flight with ins)
+        "c_vb": 0.0,  # tejas_ins only; these maneuvers' alpha range leaves it undetermined (held)
         "f1": None, "f2": None, "f3": None, "f4": None, "f5": None,
         "_table_noise": rng.normal(size=40),
     }
@@ -319,8 +332,6 @@ class Flight:
         start = {"f1": 0, "f2": 10, "f3": 20, "f4": 25, "f5": 30}
         self.tables = truth_tables(self.bp, {n: tn[start[n]:start[n] + self.bp[n].size] for n in TABLES})
         self.truth = {**truth, **(INS_DELAYS_S if ins else {}), **(tau_override or {})}
-        if not ins:  # the vanes' sideslip reference offset is tejas_ins's; tejas has none
-            self.truth["c_vb"] = 0.0
         self.maneuvers = [self._maneuver(f"m{k}", T, params) for k, params in
                           enumerate([dict(au=8.0, aphi=0.4, ath=0.15), dict(av=6.0, aw=6.0, aphi=0.8)])]
 

@@ -21,9 +21,9 @@ Gauss-Markov components (the Dryden form of MIL-F-8785C, isotropic above 2000 ft
 or, with ``WindOptions(form="dryden")``, MIL-F-8785C's Dryden turbulence in body axes: the
 longitudinal component as above, the lateral and vertical second-order (five states,
 :func:`estimator.core.wind_filter.dryden_body`; ``h = -(dy/dV) D``, ``D`` the states' map to the
-body-axis wind, and the wind history turned back to NED with the attitude). On JSBSim's milspec
-turbulence, which has that form, it leaves the flow delays as long as the first-order form does
-(README).
+body-axis wind, and the wind history turned back to NED with the attitude). On JSBSim's
+turbulence (turb-type 4, Tustin: that form), it leaves the flow delays as long as the
+first-order form does (README).
 
 ``L`` the scale length (1750 ft = 533.4 m above 2000 ft), ``sigma`` the turbulence intensity
 (estimated per maneuver), ``V`` the maneuver's mean true airspeed. The IMU senses what the gusts
@@ -141,7 +141,7 @@ class WindOptions:
         components (Dryden's longitudinal spectrum for all three); "dryden" — MIL-F-8785C's Dryden
         turbulence in body axes: the longitudinal component first-order, the lateral and vertical
         second-order (five states; :func:`estimator.core.wind_filter.dryden_body`), the form
-        JSBSim's milspec turbulence has.
+        JSBSim's Tustin turbulence (turb-type 4) has.
     calm_sigma_mps : a maneuver whose estimated intensity is below this is taken as flown in calm
         air (no wind states: its innovations are its residuals, as in the output-error method).
         Calm data still give a small intensity — the wind states then follow what the calibration
@@ -181,8 +181,8 @@ class _Maneuver:
     channel: np.ndarray  # (n,) channel index of each observation
     h: np.ndarray  # (n, ns) sensitivity to the wind states (ns = 3 NED, or 5 Dryden body-axis)
     v_mps: float  # mean true airspeed
-    c_nb: np.ndarray | None = None  # (n_samples, 3, 3) NED -> body rotation (Dryden form: the
-    # wind history back to NED)
+    c_bn: np.ndarray | None = None  # (n_samples, 3, 3) NED -> body rotation C_bn (Dryden form:
+    # the wind history back to NED)
 
 
 @dataclass
@@ -542,17 +542,18 @@ class FilterErrorLikelihood:
                        "the deviations are Cramér-Rao bounds of its information matrix, without the "
                        "coloured-innovation correction")
                     + "; the method is experimental: on JSBSim's simulated turbulence the flow "
-                    "delays come out 4-6 ms long and the airspeed's up to 0.3 s (not from the wind "
-                    "states' form: turbulence of either form drawn apart from the flight leaves them "
-                    "right, and it goes with the gusts' tie to the aircraft's motion); with the wind as "
+                    "delays come out 4-6 ms long (not from the wind states' form: turbulence of "
+                    "either form drawn apart from the flight leaves them right; it goes with the "
+                    "gusts' tie to the aircraft's motion) and the airspeed's up to 0.3 s off; with "
+                    "the wind as "
                     "states the flight's kinematics fix an aircraft's common "
                     "sideslip offset (every sideslip channel's bias alike) only to 0.05-0.1 deg, so a "
                     "calibration model that sees the sideslip through an alpha-dependent shape with "
                     "no free reference offset of its own lets that shape fix it, wrongly wherever "
                     "the shape is wrong, with small deviations and white innovations (the paper's "
-                    "vane model: PT1's offsets 0.15 deg off at 30 deviations; the shipped INS model "
-                    "set frees the vanes' sideslip reference offset for this, and they came out "
-                    "within 1.0); "
+                    "vane model: an aircraft's offsets 0.15 deg off at 30 deviations; the shipped INS "
+                    "model set frees the vanes' sideslip reference offset for this, and on JSBSim's "
+                    "turbulence they came out within 2.6); "
                     "check the estimates against a calm-air calibration before use",
                     "calibrate where the air is calm by the output-error method, or fix the sideslip "
                     "biases and the delays at calm-air values for the turbulent maneuvers; treat "
@@ -657,11 +658,14 @@ class FilterErrorLikelihood:
     def wind_ned(m: _Maneuver, xs: np.ndarray, Ps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The turbulent wind (n_samples, 3), NED, m/s, and its covariance (n_samples, 3, 3) from
         the wind states of :meth:`wind_history`."""
-        if m.c_nb is None:
+        if m.c_bn is None:
+            if xs.shape[1] != 3:
+                raise ValueError(f"wind_ned: {xs.shape[1]} wind states without the attitude to turn "
+                                 "them to NED (a maneuver linearised without C_bn); report this as a bug")
             return xs, Ps
         from estimator.core.wind_filter import DRYDEN_OUTPUT
 
-        T = np.einsum("nji,jk->nik", m.c_nb, DRYDEN_OUTPUT)  # states -> NED: C_bn^T D
+        T = np.einsum("nji,jk->nik", m.c_bn, DRYDEN_OUTPUT)  # states -> NED: C_bn^T D
         return np.einsum("nij,nj->ni", T, xs), np.einsum("nij,njk,nlk->nil", T, Ps, T)
 
     def _process(self, m: _Maneuver, sigma: float):
@@ -769,7 +773,11 @@ def _parabolic_minimum(f, x0: float, lo: float, hi: float, step: float, xtol: fl
             else:
                 v = 0.5 * (a + b) - d1 / (2.0 * curv) if curv > 0.0 else best
                 if not (lo < v < hi) or abs(v - best) < xtol:
-                    return best
+                    # the parabola is a model of f: confirm that f a tolerance inside is not
+                    # lower, else hand over (hypothesis found a minimum 0.002 inside the bound,
+                    # where the parabola put it beyond)
+                    inward = best + xtol if best == lo else best - xtol
+                    return best if f(inward) >= fs[xs.index(best)] else None
             if v in xs:
                 return None
             xs.append(v)

@@ -211,6 +211,12 @@ def _high_correlations(corr: np.ndarray, keys: list[str], thr: float) -> list[Co
     return out
 
 
+def maneuver_nuisance(p) -> bool:
+    """Is parameter ``p`` a maneuver's nuisance scale or offset (``k_h`` in level flight), whose
+    bound is only noted, not a calibration result whose bound is a warning?"""
+    return p.scope == "maneuver" and p.kind in ("scale", "bias")
+
+
 def _parameter_states(problem: Problem, theta: np.ndarray, start: np.ndarray, st: Structure,
                       holds: list[_Hold], unresolved: np.ndarray, unident: list, opt: SolverOptions
                       ) -> tuple[list[str], list[str]]:
@@ -302,7 +308,7 @@ def _parameter_findings(problem, holds, unident, correlated, state, reason, opt,
             p = ps.parameters[i]
             # a calibration result (a table value, a bias, a delay, an IMU bias) on its bound is not a
             # measurement; a maneuver's nuisance scale or offset (k_h in level flight) is only noted
-            nuisance = p.scope == "maneuver" and p.kind in ("scale", "bias")
+            nuisance = maneuver_nuisance(p)
             out.append(Finding("on_bound", Severity.INFO if nuisance else Severity.WARNING,
                                f"{p.key} is {reason[i]}",
                                "the data want it outside its physical range: check the data of the "

@@ -62,6 +62,7 @@ from estimator.identifiability import (
     _parameter_findings,
     _parameter_states,
     _screen,
+    maneuver_nuisance,
 )
 from estimator.iteration import OutputErrorLikelihood, _evaluate, _gauss_newton, _Iterated, _staged_start
 from estimator.model import Evaluation, Model, ModelEvaluationError
@@ -401,7 +402,8 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
             again = requested & ~st.free & st_new.free
             if again.any():
                 st_new = Structure(problem, st_new.free & ~again)
-                holds_new = holds_new + [h for h in holds if any(again[i] for i in h.params)]
+                holds_new = holds_new + [replace(h, params=tuple(i for i in h.params if again[i]))
+                                         for h in holds if any(again[i] for i in h.params)]
         if crawled and not (st.free & ~st_new.free).any():
             # the iteration limit stays a failure unless what the round crawled along is held now
             break
@@ -672,32 +674,38 @@ def _filter_error_normal(lik: FilterErrorLikelihood, evals: Evaluation, noise, s
 
 def _near_bounds(problem: Problem, theta: np.ndarray, st: Structure, state: list[str],
                  std: np.ndarray) -> list[Finding]:
-    """A warning for each estimated calibration parameter (a table value, a bias, a scale, a delay,
-    an IMU bias; not a maneuver's nuisance scale or offset) within :data:`NEAR_BOUND_DEVIATIONS`
-    deviations ``std`` (SI; the honest ones where computed) of a bound: one on the bound is
-    ``on_bound``'s."""
+    """A warning for each estimated parameter (not a maneuver's nuisance scale or offset, whose
+    bound is only noted: :func:`estimator.identifiability.maneuver_nuisance`) within
+    :data:`NEAR_BOUND_DEVIATIONS` deviations ``std`` (SI; the honest ones where computed) of a
+    bound: one on the bound is ``on_bound``'s. Where that interval spans more than half the
+    allowed range the parameter is weakly determined rather than pushed to an edge, and the
+    warning says so."""
     out = []
     for i, p in enumerate(problem.parameters.parameters):
-        if state[i] != "estimated" or (p.scope == "maneuver" and p.kind in ("scale", "bias")):
-            continue
-        if p.kind not in ("table", "bias", "scale", "time_delay", "imu_bias") or not np.isfinite(std[i]):
+        if state[i] != "estimated" or maneuver_nuisance(p) or not (np.isfinite(std[i]) and std[i] > 0.0):
             continue
         gap = np.array([theta[i] - st.lo[i], st.hi[i] - theta[i]])
         side = int(np.argmin(gap))
-        if not (std[i] > 0.0 and gap[side] < NEAR_BOUND_DEVIATIONS * std[i]):
+        if not gap[side] < NEAR_BOUND_DEVIATIONS * std[i]:
             continue
         k = p.display_scale  # shown as the reports show it (deg, ms)
         bound = (st.lo, st.hi)[side][i] * k
         unit = "" if p.display_unit in ("", "1") else f" {p.display_unit}"
-        out.append(Finding(
-            "near_bound", Severity.WARNING,
-            f"{p.key} = {theta[i] * k:.6g}{unit} is {gap[side] / std[i]:.1f} of its deviations "
-            f"({std[i] * k:.3g}{unit}) from its {('lower', 'upper')[side]} bound {bound:.6g}{unit}: the data "
-            "want it at the edge of its physical range, and the bound truncates what its deviation "
-            "describes",
-            "read it as suspect: check the data of the channels it enters (units, signs, a fault) or "
-            "a model-structure error it may take up (in turbulence: the wind model's form) before "
-            "using it or widening the bounds", parameters=(p.key,), value=float(gap[side] / std[i])))
+        where = (f"{p.key} = {theta[i] * k:.6g}{unit} is {gap[side] / std[i]:.1f} of its deviations "
+                 f"({std[i] * k:.3g}{unit}) from its {('lower', 'upper')[side]} bound {bound:.6g}{unit}")
+        if 2.0 * NEAR_BOUND_DEVIATIONS * std[i] > st.hi[i] - st.lo[i]:
+            why = (": weakly determined, its interval of +-2 deviations spans more than half its "
+                   "allowed range, so the bounds, not the data, confine it")
+            advice = ("fix it at a known value, or fly maneuvers that excite it; do not read its "
+                      "deviation as its accuracy")
+        else:
+            why = (": the data want it at the edge of its physical range, and the bound truncates "
+                   "what its deviation describes")
+            advice = ("read it as suspect: check the data of the channels it enters (units, signs, a "
+                      "fault) or a model-structure error it may take up (in turbulence: what the wind "
+                      "states take up) before using it or widening the bounds")
+        out.append(Finding("near_bound", Severity.WARNING, where + why, advice, parameters=(p.key,),
+                           value=float(gap[side] / std[i])))
     return out
 
 

@@ -7,7 +7,9 @@ aircraft's motion is always JSBSim's (it answered the real gusts); only the air 
 and the airspeed see changes, ``V_air = V_ground - C_bn W`` (alpha, beta, TAS, Mach, dynamic
 pressure recomputed from it). Cases:
 
-- ``jsbsim``: JSBSim's wind (milspec, second-order Dryden laterally and vertically);
+- ``jsbsim``: JSBSim's wind (turb-type 4, Tustin: Dryden, second-order laterally and vertically);
+- ``jsbsim_dryden_states``: the same, calibrated with the filter's Dryden form
+  (``WindOptions(form="dryden")``: body-axis wind states, second-order laterally and vertically);
 - ``reversed``: the steady wind plus JSBSim's turbulence run backwards in time: the same
   statistics, no longer tied to the motion the gusts caused;
 - ``gauss_markov``: the steady wind plus three independent first-order Gauss-Markov components of
@@ -45,8 +47,8 @@ from estimator.solver import SolverOptions, estimate
 from synth.campaign import fly_campaign, parse_campaign
 from synth.sensors import dcm_body_to_ned
 
-CASES = ("jsbsim", "reversed", "gauss_markov", "dryden_body", "steady", "steady_vane_biases",
-         "steady_no_biases")
+CASES = ("jsbsim", "jsbsim_dryden_states", "reversed", "gauss_markov", "dryden_body", "steady",
+         "steady_vane_biases", "steady_no_biases")
 KINDS = ["pitch_doublet", "3211", "roller_coaster", "pullup_rudder_doublets", "windup_turn", "shss"]
 STEADY_WIND_NED_MPS = [6.0, -4.0, 0.0]
 VANES = ("vane_left", "vane_right", "boom_alpha_vane", "boom_beta_upper_vane", "boom_beta_lower_vane")
@@ -103,7 +105,7 @@ def fly(case: str, out: Path) -> None:
         out_segments = []
         for tr in original(spec, airframe, aircraft, env):
             turb = tr.wind_ned_mps - steady
-            if case == "jsbsim":
+            if case in ("jsbsim", "jsbsim_dryden_states"):
                 w = tr.wind_ned_mps
             elif case == "reversed":
                 w = steady + turb[::-1]
@@ -142,7 +144,8 @@ def fly(case: str, out: Path) -> None:
 
 
 def calibrate(case: str, dataset: Path):
-    wind = WindOptions(where="all", sigma_mps=1.0) if case.startswith("steady") else WindOptions()
+    form = "dryden" if case.endswith("dryden_states") else "gauss_markov"
+    wind = WindOptions(where="all", sigma_mps=1.0) if case.startswith("steady") else WindOptions(form=form)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         p = problem_from_dataset(dataset, model="tejas_ins")

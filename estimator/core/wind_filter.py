@@ -44,10 +44,10 @@ the altitude error starts at zero at the maneuver start. Check: from a stationar
 ``D = 0``, ``Var D(dt) = T_c^2 (1 - E)^2 sigma^2 + Qd_2[1, 1] = 2 sigma^2 T_c^2 (x - 1 + E)``, the
 variance of the integral of a stationary OU process over ``dt``.
 
-**Dryden wind in body axes** (:func:`dryden_body`). MIL-F-8785C's Dryden turbulence (what
-JSBSim's milspec model generates) has a first-order longitudinal component ``u_g`` and
-second-order lateral and vertical ones ``v_g, w_g`` (body axes), each with the autocorrelation
-(``x = V tau / L``, ``tau`` the time lag)::
+**Dryden wind in body axes** (:func:`dryden_body`). MIL-F-8785C's Dryden turbulence (what JSBSim
+generates with its Tustin-discretised model, turb-type 4, the synthesizer's default) has a
+first-order longitudinal component ``u_g`` and second-order lateral and vertical ones ``v_g, w_g``
+(body axes), each with the autocorrelation (``x = V tau / L``, ``tau`` the time lag)::
 
     R_u(tau) = sigma^2 exp(-x),        R_v(tau) = R_w(tau) = sigma^2 (1 - x / 2) exp(-x)
 
@@ -127,6 +127,7 @@ import math
 
 import numpy as np
 from numba import njit
+from scipy.special import gammainc
 from threadpoolctl import threadpool_limits
 
 #: Below this ``x = V dt / L`` the integrated state's ``g(x)`` is summed as its series (the closed
@@ -245,16 +246,19 @@ def dryden_body(v_mps: float, L_m: float, sigma_mps: float, dt_s: float
     P0[0, 0] = sig * sig
     Qd[0, 0] = sig * sig * em * (2.0 - em)  # sigma^2 (1 - E^2)
     q = 0.25 * sig * sig
-    # P_inf - Phi_2 P_inf Phi_2^T with P_inf = q I, Phi_2 = E [[1 + x, x], [-x, 1 - x]]:
-    # q (1 - E^2 ((1 + x)^2 + x^2)), -q E^2 (-x (1 + x) + x (1 - x)) = 2 q E^2 x^2,
-    # q (1 - E^2 ((1 - x)^2 + x^2)); 1 - E^2 (1 +- 2x + 2x^2) by expm1 for small x
-    e2 = -math.expm1(-2.0 * x)  # 1 - E^2
+    # P_inf - Phi_2 P_inf Phi_2^T with P_inf = q I, Phi_2 = E [[1 + x, x], [-x, 1 - x]], y = 2x:
+    #   [0, 0]: q (1 - e^-y (1 + y + y^2/2)) = q P(3, y), the regularised lower incomplete gamma
+    #           function (O(x^3) for small x: written as the difference, it cancels to noise)
+    #   [1, 1]: q (1 - e^-y (1 - y + y^2/2)) = q (P(3, y) + 2 y e^-y)
+    #   [0, 1]: -q E^2 (-x (1 + x) + x (1 - x)) = q e^-y y^2 / 2
+    y = 2.0 * x
+    p3 = float(gammainc(3.0, y))
     for i in (1, 3):
         Phi[i:i + 2, i:i + 2] = E * np.array([[1.0 + x, x], [-x, 1.0 - x]])
         P0[i, i] = P0[i + 1, i + 1] = q
-        Qd[i, i] = q * (e2 - E * E * (2.0 * x + 2.0 * x * x))
-        Qd[i + 1, i + 1] = q * (e2 + E * E * (2.0 * x - 2.0 * x * x))
-        Qd[i, i + 1] = Qd[i + 1, i] = 2.0 * q * E * E * x * x
+        Qd[i, i] = q * p3
+        Qd[i + 1, i + 1] = q * (p3 + 2.0 * y * E * E)
+        Qd[i, i + 1] = Qd[i + 1, i] = 0.5 * q * E * E * y * y
     return Phi, Qd, P0
 
 

@@ -161,8 +161,9 @@ def test_filter_error_with_the_ins_velocities_recovers_wind_and_calibration():
            if est[i] and prob.parameters[k].kind in ("bias", "time_delay", "scale", "table")]
     assert np.mean(np.abs(z[cal]) < 3.0) >= 0.95, sorted((abs(z[i]), keys[i]) for i in cal)[-5:]
     # the sideslip offsets, each within 3 honest deviations; the vanes' sideslip reference offset
-    # (0.2 deg injected) too where estimated, or held (at its start, the truth here) where these
-    # two short maneuvers' alpha range leaves f2's change with alpha too small to tell it
+    # (none injected: the truth is the paper's vane model) too where estimated, or held at 0 where
+    # these two short maneuvers' alpha range leaves f2's change with alpha too small to tell it
+    # (its recovery on JSBSim data: tests/campaigns_tests/test_vane_sideslip_reference.py)
     side = [i for i, k in enumerate(keys) if k.startswith(("b_sb", "b_n"))]
     assert len(side) == 2, [keys[i] for i in side]
     for i in side:

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize_scalar
 
@@ -62,6 +62,8 @@ def _nll_shape(S: float, n: float = 2000.0):
 
 @settings(max_examples=400, deadline=None)
 @given(S=st.floats(3.05, 3.0 + 15.0 ** 2), start=st.floats(-6.5, 2.6), n=st.sampled_from([20.0, 2000.0, 2e5]))
+# found by a CI run: the minimum 0.002 inside the upper bound, where the parabola put it beyond
+@example(S=3.05, start=-1.901183396965859, n=20.0)
 def test_the_relaxation_search_is_right_or_hands_over(S, start, n):
     """As the relaxation calls it (a factor 1.5 either side of the last value, SIGMA_STEP), on a
     likelihood's shape, from anywhere: the result is within SIGMA_XTOL of the minimum in the

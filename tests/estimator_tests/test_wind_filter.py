@@ -265,12 +265,16 @@ def test_dryden_body_axes_have_the_milspec_autocorrelations(x):
                                    err_msg="the three components are independent")
 
 
-def test_dryden_process_noise_against_van_loan():
+@pytest.mark.parametrize("x", [1e-7, 1e-5, 3e-3, 0.3, 3.0])
+def test_dryden_process_noise_against_van_loan(x):
     """The closed-form Qd of the second-order pairs equals Van Loan's integral of the continuous
-    model d/dt z = (V/L) [[0, 1], [-1, -2]] z + [0, sigma sqrt(V/L)] eta."""
+    model d/dt z = (V/L) [[0, 1], [-1, -2]] z + [0, sigma sqrt(V/L)] eta, to rounding, from steps
+    where its first element is O(x^3) (a difference of O(x) terms would keep ~x^2 of its digits)
+    to long ones."""
     from scipy.linalg import expm
 
-    v, L, sig, dt = 180.0, 533.4, 0.9, 0.025
+    v, L, sig = 180.0, 533.4, 0.9
+    dt = x * L / v
     a = v / L
     A = a * np.array([[0.0, 1.0], [-1.0, -2.0]])
     Qc = np.array([[0.0, 0.0], [0.0, sig**2 * a]])
