@@ -542,9 +542,9 @@ class FilterErrorLikelihood:
                        "the deviations are Cramér-Rao bounds of its information matrix, without the "
                        "coloured-innovation correction")
                     + "; the method is experimental: on JSBSim's simulated turbulence the flow "
-                    "delays come out 4-6 ms long (not from the wind states' form: turbulence of "
-                    "either form drawn apart from the flight leaves them right; it goes with the "
-                    "gusts' tie to the aircraft's motion) and the airspeed's up to 0.3 s off; with "
+                    "delays come out 4-6 ms long (not from the wind states' form: with the turbulence's "
+                    "timing against the aircraft's motion broken, JSBSim's own series or a draw of "
+                    "either form leaves them right) and the airspeed's up to 0.3 s off; with "
                     "the wind as "
                     "states the flight's kinematics fix an aircraft's common "
                     "sideslip offset (every sideslip channel's bias alike) only to 0.05-0.1 deg, so a "

@@ -12,6 +12,9 @@ pressure recomputed from it). Cases:
   (``WindOptions(form="dryden")``: body-axis wind states, second-order laterally and vertically);
 - ``reversed``: the steady wind plus JSBSim's turbulence run backwards in time: the same
   statistics, no longer tied to the motion the gusts caused;
+- ``shifted``: the steady wind plus JSBSim's turbulence shifted circularly by half the segment:
+  JSBSim's own series, its every property kept but its timing against the motion the gusts caused
+  (reversed, the series still lines up with itself at the segment's middle);
 - ``gauss_markov``: the steady wind plus three independent first-order Gauss-Markov components of
   JSBSim's rms and the 533.4-m scale length: the filter's own wind model;
 - ``dryden_body``: the steady wind plus MIL-F-8785C Dryden turbulence of JSBSim's rms drawn in body
@@ -47,7 +50,7 @@ from estimator.solver import SolverOptions, estimate
 from synth.campaign import fly_campaign, parse_campaign
 from synth.sensors import dcm_body_to_ned
 
-CASES = ("jsbsim", "jsbsim_dryden_states", "reversed", "gauss_markov", "dryden_body", "steady",
+CASES = ("jsbsim", "jsbsim_dryden_states", "reversed", "shifted", "gauss_markov", "dryden_body", "steady",
          "steady_vane_biases", "steady_no_biases")
 KINDS = ["pitch_doublet", "3211", "roller_coaster", "pullup_rudder_doublets", "windup_turn", "shss"]
 STEADY_WIND_NED_MPS = [6.0, -4.0, 0.0]
@@ -107,6 +110,8 @@ def fly(case: str, out: Path) -> None:
             turb = tr.wind_ned_mps - steady
             if case in ("jsbsim", "jsbsim_dryden_states"):
                 w = tr.wind_ned_mps
+            elif case == "shifted":
+                w = steady + np.roll(turb, turb.shape[0] // 2, axis=0)
             elif case == "reversed":
                 w = steady + turb[::-1]
             elif case == "dryden_body":
