@@ -553,7 +553,7 @@ class FilterErrorLikelihood:
                     "the shape is wrong, with small deviations and white innovations (the paper's "
                     "vane model: an aircraft's offsets 0.15 deg off at 30 deviations; the shipped INS "
                     "model set frees the vanes' sideslip reference offset for this, and on JSBSim's "
-                    "turbulence they came out within 2.6); "
+                    "turbulence they came out within 2.2); "
                     "check the estimates against a calm-air calibration before use",
                     "calibrate where the air is calm by the output-error method, or fix the sideslip "
                     "biases and the delays at calm-air values for the turbulent maneuvers; treat "
@@ -744,7 +744,7 @@ def _parabolic_minimum(f, x0: float, lo: float, hi: float, step: float, xtol: fl
     and third derivatives; with ``step`` = 0.02 in ln sigma and a log-likelihood's ``|f3 / f2|`` of
     a few, 1e-4 or less). A bound is returned only where ``f`` is known one ``step`` inside it and
     the parabola through the bound and its two nearest points has its vertex beyond it (or within
-    ``xtol``). ``None`` where the points are not convex about the lowest one, a vertex repeats a
+    ``xtol``), and ``f`` one ``xtol`` inside it is not lower. ``None`` where the points are not convex about the lowest one, a vertex repeats a
     point, or ``max_evals`` evaluations do not settle it.
     """
     x0 = min(max(x0, lo), hi)

@@ -374,6 +374,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         lik, evals, missed = _widened(problem, st, theta, evals, lik)
         if missed:
             stage_notes.append(_missed_note(missed, f"after {probe.iterations} filter-error iterations"))
+    sol_held, sol_holds = np.zeros_like(requested), []  # what screens at a solution held
     for rnd in range(1, max(opt.screen_rounds, 1) + 1):
         try:
             it = _gauss_newton(model, theta, st, opt, evals, lik=lik)
@@ -385,25 +386,21 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         crawled = it.status == Status.ITERATION_LIMIT
         if not (it.status.converged or crawled) or rnd == opt.screen_rounds:
             break
-        # identifiability at the solution: the whole screen again, from the requested free set;
-        # the filter-error method judges by its own information (the wind states take some of
-        # what the output-error residuals would give: study (c)'s calm flights had the vanes'
-        # sideslip reference offset at 0.8 deg Cramer-Rao beside bounds of +-0.5 deg, not held)
+        # identifiability at the solution: the whole screen again, from the requested free set
+        # less what a screen at an earlier solution held (judged again where the estimation went
+        # without it, a parameter can look determined, a bilinear term's sensitivity moving with
+        # its partner, be freed, and the last round would estimate it unscreened: study (c)'s
+        # calm r4, the vanes' sideslip reference offset held, freed, then on its bound). The
+        # filter-error method judges by its own information: its wind states take some of what
+        # the output-error residuals show
         fem_normal = None
         if isinstance(lik, FilterErrorLikelihood) and lik.noise is not None:
             fem_normal = partial(_filter_error_normal, lik, evals, lik.noise)
-        st_new, holds_new = _screen(problem, Structure(problem, requested), evals,
+        st_new, holds_new = _screen(problem, Structure(problem, requested & ~sol_held), evals,
                                     channel_variances(it.sse, it.cnt), opt, loose=True, normal=fem_normal)
-        if rnd > 1:
-            # what a screen at a solution held stays held: judged again where the estimation
-            # went without it, a parameter can look determined (a bilinear term's sensitivity
-            # moves with its partner), be freed, and the last round would estimate it unscreened
-            # (study (c): the vanes' sideslip reference offset held, freed, then on its bound)
-            again = requested & ~st.free & st_new.free
-            if again.any():
-                st_new = Structure(problem, st_new.free & ~again)
-                holds_new = holds_new + [replace(h, params=tuple(i for i in h.params if again[i]))
-                                         for h in holds if any(again[i] for i in h.params)]
+        holds_new = sol_holds + holds_new
+        if it.status.converged:  # a solution: its holds stay (not a round that crawled)
+            sol_held, sol_holds = requested & ~st_new.free, holds_new
         if crawled and not (st.free & ~st_new.free).any():
             # the iteration limit stays a failure unless what the round crawled along is held now
             break
@@ -693,7 +690,7 @@ def _near_bounds(problem: Problem, theta: np.ndarray, st: Structure, state: list
         unit = "" if p.display_unit in ("", "1") else f" {p.display_unit}"
         where = (f"{p.key} = {theta[i] * k:.6g}{unit} is {gap[side] / std[i]:.1f} of its deviations "
                  f"({std[i] * k:.3g}{unit}) from its {('lower', 'upper')[side]} bound {bound:.6g}{unit}")
-        if 2.0 * NEAR_BOUND_DEVIATIONS * std[i] > st.hi[i] - st.lo[i]:
+        if NEAR_BOUND_DEVIATIONS * std[i] > 0.25 * (st.hi[i] - st.lo[i]):  # +-2 sigma > half the range
             why = (": weakly determined, its interval of +-2 deviations spans more than half its "
                    "allowed range, so the bounds, not the data, confine it")
             advice = ("fix it at a known value, or fly maneuvers that excite it; do not read its "

@@ -11,10 +11,11 @@ pressure recomputed from it). Cases:
 - ``jsbsim_dryden_states``: the same, calibrated with the filter's Dryden form
   (``WindOptions(form="dryden")``: body-axis wind states, second-order laterally and vertically);
 - ``reversed``: the steady wind plus JSBSim's turbulence run backwards in time: the same
-  statistics, no longer tied to the motion the gusts caused;
+  statistics, its timing against the motion the gusts caused scrambled (it still lines up with
+  itself at the segment's middle);
 - ``shifted``: the steady wind plus JSBSim's turbulence shifted circularly by half the segment:
-  JSBSim's own series, its every property kept but its timing against the motion the gusts caused
-  (reversed, the series still lines up with itself at the segment's middle);
+  JSBSim's own series, its statistics kept (one step at the wrap point) but its timing against the
+  motion the gusts caused lost;
 - ``gauss_markov``: the steady wind plus three independent first-order Gauss-Markov components of
   JSBSim's rms and the 533.4-m scale length: the filter's own wind model;
 - ``dryden_body``: the steady wind plus MIL-F-8785C Dryden turbulence of JSBSim's rms drawn in body
