@@ -744,8 +744,9 @@ def _parabolic_minimum(f, x0: float, lo: float, hi: float, step: float, xtol: fl
     and third derivatives; with ``step`` = 0.02 in ln sigma and a log-likelihood's ``|f3 / f2|`` of
     a few, 1e-4 or less). A bound is returned only where ``f`` is known one ``step`` inside it and
     the parabola through the bound and its two nearest points has its vertex beyond it (or within
-    ``xtol``), and ``f`` one ``xtol`` inside it is not lower. ``None`` where the points are not convex about the lowest one, a vertex repeats a
-    point, or ``max_evals`` evaluations do not settle it.
+    ``xtol``), and ``f`` one ``xtol`` inside it is not lower. ``None`` where the points are not
+    convex about the lowest one, a vertex repeats a point, or ``max_evals`` evaluations do not
+    settle it.
     """
     x0 = min(max(x0, lo), hi)
     xs = sorted({max(x0 - step, lo), x0, min(x0 + step, hi)})
