@@ -376,6 +376,13 @@ class FilterErrorLikelihood:
         return float(sum(parts))
 
     def normal(self, st: Structure, ev: Evaluation, noise: FilterNoise) -> NormalEquations:
+        return self.normal_of(st, self.normal_blocks(st, ev, noise))
+
+    def normal_blocks(self, st: Structure, ev: Evaluation, noise: FilterNoise) -> list[tuple]:
+        """Each maneuver's normal-equation block over the free parameters of ``st`` it depends on:
+        ``(k, cols, H, g, nonzeros)``. The filter acts on the Jacobian column by column (its gains
+        held), so the block of a structure with fewer free parameters is the sub-block of these
+        (:meth:`normal_of`): the identifiability screen filters once, not once per pass."""
         es = [ce.e for ce in ev.channels]
 
         def blocks(m: _Maneuver):
@@ -383,11 +390,20 @@ class FilterErrorLikelihood:
             nu, s, dnu = self._innovations(m, self._residuals(ev, m, es), noise.R,
                                            noise.sigma_mps[m.k], J)
             w = dnu / np.sqrt(s)[:, None]
-            return cols, w.T @ w, -(w.T @ (nu / np.sqrt(s))), np.count_nonzero(J, axis=0)
+            return m.k, cols, w.T @ w, -(w.T @ (nu / np.sqrt(s))), np.count_nonzero(J, axis=0)
 
+        return self._map(blocks, noise.maneuvers)
+
+    @staticmethod
+    def normal_of(st: Structure, blocks: list[tuple]) -> NormalEquations:
+        """The normal equations of structure ``st`` from :meth:`normal_blocks` of ``st`` or of a
+        structure whose free parameters include ``st``'s."""
         N = NormalEquations(st)
-        for m, (cols, H, g, nz) in zip(noise.maneuvers, self._map(blocks, noise.maneuvers), strict=True):
-            N.add_blocks(H[None], g[None], cols[None], np.array([m.k]), 1.0)
+        for k, cols, H, g, nz in blocks:
+            keep = st.free[cols]
+            if not keep.all():
+                cols, H, g, nz = cols[keep], H[np.ix_(keep, keep)], g[keep], nz[keep]
+            N.add_blocks(H[None], g[None], cols[None], np.array([k]), 1.0)
             np.add.at(N.support, cols, nz)
         return N
 

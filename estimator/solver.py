@@ -393,11 +393,13 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         # calm r4, the vanes' sideslip reference offset held, freed, then on its bound). The
         # filter-error method judges by its own information: its wind states take some of what
         # the output-error residuals show
+        base = Structure(problem, requested & ~sol_held)
         fem_normal = None
         if isinstance(lik, FilterErrorLikelihood) and lik.noise is not None:
-            fem_normal = partial(_filter_error_normal, lik, evals, lik.noise)
-        st_new, holds_new = _screen(problem, Structure(problem, requested & ~sol_held), evals,
-                                    channel_variances(it.sse, it.cnt), opt, loose=True, normal=fem_normal)
+            # filtered once for the screen's widest structure; each pass takes its sub-blocks
+            fem_normal = partial(lik.normal_of, blocks=lik.normal_blocks(base, evals, lik.noise))
+        st_new, holds_new = _screen(problem, base, evals, channel_variances(it.sse, it.cnt), opt,
+                                    loose=True, normal=fem_normal)
         holds_new = sol_holds + holds_new
         if it.status.converged:  # a solution: its holds stay (not a round that crawled)
             sol_held, sol_holds = requested & ~st_new.free, holds_new
@@ -662,11 +664,6 @@ def _not_invertible(problem: Problem, evals: Evaluation, st: Structure) -> list[
             "range of the flow angle",
             channel=ch.name, parameters=params[:12], value=float(np.min(ce.slope * sign))))
     return out
-
-
-def _filter_error_normal(lik: FilterErrorLikelihood, evals: Evaluation, noise, st: Structure):
-    """The filter-error normal equations at ``evals`` for structure ``st`` (the screen's)."""
-    return lik.normal(st, evals, noise)
 
 
 def _near_bounds(problem: Problem, theta: np.ndarray, st: Structure, state: list[str],
