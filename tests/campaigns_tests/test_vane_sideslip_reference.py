@@ -17,6 +17,7 @@ import warnings
 
 import pytest
 
+from campaigns.benchmarks.whatif_sideslip import NOISE_ONLY, VANE_BIAS_FLEET
 from campaigns.truth import recovery_table, true_parameters
 from estimator.filter_error import WindOptions
 from estimator.io import problem_from_dataset
@@ -25,37 +26,9 @@ from synth.campaign import fly_campaign, parse_campaign
 
 pytestmark = pytest.mark.slow
 
-FLEET = """airframe = "f16-testbed"
-[[aircraft]]
-id = "PT1"
-fuel_kg = 1300.0
-ballast_kg = 120.0
-ballast_position_body_m = [8.5, 0.0, 0.2]
-[aircraft.installation_bias_deg]
-vane_left = -0.44
-vane_right = -0.12
-side_probe_left = 0.0
-side_probe_right = 0.0
-nose_probe = 0.0
-boom_alpha_vane = 0.0
-boom_beta_upper_vane = 0.0
-boom_beta_lower_vane = 0.0
-[[configuration]]
-id = "PT1-BOOM"
-aircraft = "PT1"
-nose_sensor = "boom"
-"""
-VANES = ("vane_left", "vane_right", "boom_alpha_vane", "boom_beta_upper_vane", "boom_beta_lower_vane")
-#: white noise of the typical preset, no other error but the local-flow truth and the vane biases
-ERRORS = {
-    "preset": "none", "local_flow": True, "installation_biases": True,
-    "imu": {"accel_noise_mps2": 0.02, "gyro_noise_deg_s": 0.01},
-    "ins": {"euler_noise_deg": 0.03, "velocity_noise_mps": 0.05},
-    "airdata": {"qc_noise_pa": 15.0, "ps_noise_pa": 10.0, "tt_noise_k": 0.2},
-    "dgps": {"h_noise_m": 0.3},
-    "sensors": {**{s: {"noise_deg": 0.07} for s in VANES},
-                **{s: {"noise_pa": 20.0} for s in ("side_probe_left", "side_probe_right")}},
-}
+# PT1 with the vanes' installation biases only, and white noise of the typical preset with no
+# other error but the local-flow truth: the what-if study's steady_vane_biases case
+FLEET, ERRORS = VANE_BIAS_FLEET, NOISE_ONLY
 OFFSETS = ("b_sb[PT1]", "b_bu[PT1]", "b_bl[PT1]")
 
 
