@@ -8,6 +8,9 @@ and the airspeed see changes, ``V_air = V_ground - C_bn W`` (alpha, beta, TAS, M
 pressure recomputed from it). Cases:
 
 - ``jsbsim``: JSBSim's wind (turb-type 4, Tustin: Dryden, second-order laterally and vertically);
+- ``jsbsim_120hz``: the same, on a 120-Hz common time base (JSBSim's own rate) instead of 40 Hz:
+  whether the sampling (the wind states' placement on the samples, the interpolation) makes the
+  delays;
 - ``jsbsim_dryden_states``: the same, calibrated with the filter's Dryden form
   (``WindOptions(form="dryden")``: body-axis wind states, second-order laterally and vertically);
 - ``reversed``: the steady wind plus JSBSim's turbulence run backwards in time: the same
@@ -29,7 +32,7 @@ pressure recomputed from it). Cases:
 Printed and written (``--write``): each case's sideslip offsets, the vanes' sideslip reference
 offset ``c_vb``, the flow delays and the airspeed delay against their truth, in honest deviations.
 Run: ``python campaigns/benchmarks/whatif_sideslip.py --out DIR --write
-campaigns/benchmarks/results/whatif_sideslip.txt`` (one to two minutes on 2 cores).
+campaigns/benchmarks/results/whatif_sideslip.txt`` (three to four minutes on 2 cores).
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ import numpy as np
 
 import synth.campaign as synth_campaign
 from campaigns.analytic_flight import dryden_body_wind, gauss_markov_wind
+from campaigns.studies.invocations import code_version
 from campaigns.truth import recovery_table, true_parameters
 from estimator.filter_error import DRYDEN_SCALE_LENGTH_M, WindOptions
 from estimator.io import problem_from_dataset
@@ -51,8 +55,8 @@ from estimator.solver import SolverOptions, estimate
 from synth.campaign import fly_campaign, parse_campaign
 from synth.sensors import dcm_body_to_ned
 
-CASES = ("jsbsim", "jsbsim_dryden_states", "reversed", "shifted", "gauss_markov", "dryden_body", "steady",
-         "steady_vane_biases", "steady_no_biases")
+CASES = ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states", "reversed", "shifted", "gauss_markov",
+         "dryden_body", "steady", "steady_vane_biases", "steady_no_biases")
 KINDS = ["pitch_doublet", "3211", "roller_coaster", "pullup_rudder_doublets", "windup_turn", "shss"]
 STEADY_WIND_NED_MPS = [6.0, -4.0, 0.0]
 VANES = ("vane_left", "vane_right", "boom_alpha_vane", "boom_beta_upper_vane", "boom_beta_lower_vane")
@@ -109,7 +113,7 @@ def fly(case: str, out: Path) -> None:
         out_segments = []
         for tr in original(spec, airframe, aircraft, env):
             turb = tr.wind_ned_mps - steady
-            if case in ("jsbsim", "jsbsim_dryden_states"):
+            if case in ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states"):
                 w = tr.wind_ned_mps
             elif case == "shifted":
                 w = steady + np.roll(turb, turb.shape[0] // 2, axis=0)
@@ -127,7 +131,8 @@ def fly(case: str, out: Path) -> None:
             out_segments.append(with_wind(tr, w))
         return out_segments
 
-    raw = {"name": f"whatif_{case}", "fleet": "fleet_default", "seed": 14001, "common_rate_hz": 40.0,
+    raw = {"name": f"whatif_{case}", "fleet": "fleet_default", "seed": 14001,
+           "common_rate_hz": 120.0 if case == "jsbsim_120hz" else 40.0,
            "environment": {"planet": "flat", "wind_ned_mps": STEADY_WIND_NED_MPS, "turbulence": "light"},
            "errors": {"preset": "typical"},
            "flights": [{"configurations": ["PT1-BOOM"], "mach": [0.6], "maneuvers": KINDS,
@@ -167,7 +172,7 @@ def main() -> None:
     a = ap.parse_args()
     lines = ["filter-error method (tejas_ins) on PT1-BOOM's maneuvers of the demo's light-turbulence",
              "block, JSBSim's flight, the wind the sensors see replaced: estimate - truth (honest "
-             "deviations)", ""]
+             "deviations)", f"code: {code_version(__file__)}", ""]
     header = f"{'case':20s} " + " ".join(f"{k:>15s}" for k in ROWS)
     lines += [header, "-" * len(header)]
     for case in a.cases:
