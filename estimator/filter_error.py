@@ -561,7 +561,7 @@ class FilterErrorLikelihood:
                     "delays come out 4-7 ms long (not from the wind states' form nor the sampling "
                     "rate, 40 or 120 Hz: with the turbulence's "
                     "timing against the aircraft's motion broken, JSBSim's own series or a draw of "
-                    "either form leaves them right) and the airspeed's up to 0.3 s off; with "
+                    "either form leaves them right) and the airspeed's 0.24-0.31 s off; with "
                     "the wind as "
                     "states the flight's kinematics fix an aircraft's common "
                     "sideslip offset (every sideslip channel's bias alike) only to 0.05-0.1 deg, so a "
