@@ -14,6 +14,7 @@ the time in the run, what went wrong, and what to try. No partial or silently ba
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import jsbsim
 import numpy as np
@@ -289,6 +290,7 @@ def fly_maneuver(
     env: Environment,
     *,
     dt_s: float = 1.0 / 120.0,
+    added_wind: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> list[TruthTrajectory]:
     """Fly ``spec`` with ``aircraft`` in ``env`` and return its truth.
 
@@ -299,6 +301,10 @@ def fly_maneuver(
     aircraft : fuel (split equally between the two internal tanks) and ballast of the tail.
     env : planet, steady wind, turbulence and its seed, gust.
     dt_s : simulation step, s (default 1/120 s).
+    added_wind : ``t_s`` (n,) -> (n, 3) wind, NED, m/s, added to ``env``'s steady wind and set at
+        every step, so that the aircraft flies through it (a turbulence model of a study's own;
+        None: none). The truth's wind is the steady wind plus it at every sample but the first,
+        the state on entry, which has the steady wind: start the history at zero.
 
     Returns
     -------
@@ -325,7 +331,15 @@ def fly_maneuver(
             f"{spec.duration_s} s maneuver; start it earlier"
         )
 
+    extra = None if added_wind is None else np.asarray(added_wind(t_s), dtype=float)
+    if extra is not None and extra.shape != (n, 3):
+        raise ValueError(f"{where}: added_wind must return an (n, 3) NED wind for the {n} steps, "
+                         f"got shape {extra.shape}")
+    steady = np.asarray(env.wind_ned_mps, dtype=float)
+
     def start_gust(i: int) -> None:
+        if extra is not None:  # the step from sample i flies in the wind of sample i + 1
+            io.set_wind_ned(fdm, steady + extra[min(i + 1, n - 1)])
         if i == gust_step:
             io.start_cosine_gust(fdm, amplitude_mps=env.gust.amplitude_mps,
                                  direction_ned=env.gust.direction_ned,

@@ -3,9 +3,9 @@
 JSBSim flies PT1-BOOM's maneuvers of the demo's light-turbulence block (Mach 0.6, 6000 m, a 7-m/s
 steady wind); before the sensors see it, the wind in the truth is replaced, and the filter-error
 method (model set ``tejas_ins``) calibrates the result. What each case keeps of the flight: the
-aircraft's motion is always JSBSim's (it answered the real gusts); only the air the flow sensors
-and the airspeed see changes, ``V_air = V_ground - C_bn W`` (alpha, beta, TAS, Mach, dynamic
-pressure recomputed from it). Cases:
+aircraft's motion is JSBSim's turbulent flight (it answered the real gusts) but in the two cases
+that say otherwise; only the air the flow sensors and the airspeed see changes,
+``V_air = V_ground - C_bn W`` (alpha, beta, TAS, Mach, dynamic pressure recomputed from it). Cases:
 
 - ``jsbsim``: JSBSim's wind (turb-type 4, Tustin: Dryden, second-order laterally and vertically);
 - ``jsbsim_120hz``: the same, on a 120-Hz common time base (JSBSim's own rate) instead of 40 Hz:
@@ -19,6 +19,13 @@ pressure recomputed from it). Cases:
 - ``shifted``: the steady wind plus JSBSim's turbulence shifted circularly by half the segment:
   JSBSim's own series, its statistics kept (one step at the wrap point) but its timing against the
   motion the gusts caused lost;
+- ``calm_motion``: JSBSim flies the maneuver in the steady wind only (no turbulence); the sensors
+  see the steady wind plus the turbulence JSBSim made in the turbulent flight of the same maneuver:
+  JSBSim's own gust series exactly, the aircraft's answer to them removed;
+- ``gauss_markov_flown``: JSBSim flies through the steady wind plus three independent first-order
+  Gauss-Markov components (the filter's own wind model, rms 1.1 m/s as JSBSim's, the 533.4-m scale
+  length, from zero at the maneuver's start), set at every step: the aircraft answers these gusts
+  and the sensors see them; the filter's wind model is exact;
 - ``gauss_markov``: the steady wind plus three independent first-order Gauss-Markov components of
   JSBSim's rms and the 533.4-m scale length: the filter's own wind model;
 - ``dryden_body``: the steady wind plus MIL-F-8785C Dryden turbulence of JSBSim's rms drawn in body
@@ -53,10 +60,17 @@ from estimator.filter_error import DRYDEN_SCALE_LENGTH_M, WindOptions
 from estimator.io import problem_from_dataset
 from estimator.solver import SolverOptions, estimate
 from synth.campaign import fly_campaign, parse_campaign
+from synth.environment import Environment
 from synth.sensors import dcm_body_to_ned
 
-CASES = ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states", "reversed", "shifted", "gauss_markov",
-         "dryden_body", "steady", "steady_vane_biases", "steady_no_biases")
+CASES = ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states", "calm_motion", "gauss_markov_flown",
+         "reversed", "shifted", "gauss_markov", "dryden_body", "steady", "steady_vane_biases",
+         "steady_no_biases")
+#: rms of each gauss_markov_flown component, m/s: JSBSim's light turbulence in the demo's block
+#: (its maneuvers' per-axis rms 0.8-1.8 m/s, 0.9-1.4 m/s over the three axes)
+FLOWN_SIGMA_MPS = 1.1
+#: the airspeed of the Gauss-Markov decorrelation V / L, m/s: Mach 0.6 at 6000 m, the block's point
+FLOWN_TAS_MPS = 190.0
 KINDS = ["pitch_doublet", "3211", "roller_coaster", "pullup_rudder_doublets", "windup_turn", "shss"]
 STEADY_WIND_NED_MPS = [6.0, -4.0, 0.0]
 VANES = ("vane_left", "vane_right", "boom_alpha_vane", "boom_beta_upper_vane", "boom_beta_lower_vane")
@@ -109,12 +123,28 @@ def fly(case: str, out: Path) -> None:
     rng = np.random.default_rng(2026)
     original = synth_campaign.fly_maneuver
 
-    def replaced(spec, airframe, aircraft, env):
+    def replaced(spec, airframe, aircraft, env: Environment):
+        if case == "gauss_markov_flown":
+            def added(t_s: np.ndarray) -> np.ndarray:
+                w = gauss_markov_wind(t_s, FLOWN_SIGMA_MPS, DRYDEN_SCALE_LENGTH_M, FLOWN_TAS_MPS, rng)
+                # the process from zero at the start (no step into the gusts): x_k - a^k x_0
+                return w - w[:1] * np.exp(-FLOWN_TAS_MPS * (t_s - t_s[0]) / DRYDEN_SCALE_LENGTH_M)[:, None]
+
+            return original(spec, airframe, aircraft, replace(env, turbulence="none"),
+                            added_wind=added)
+        calm = (original(spec, airframe, aircraft, replace(env, turbulence="none"))
+                if case == "calm_motion" else None)
         out_segments = []
-        for tr in original(spec, airframe, aircraft, env):
+        for j, tr in enumerate(original(spec, airframe, aircraft, env)):
             turb = tr.wind_ned_mps - steady
             if case in ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states"):
                 w = tr.wind_ned_mps
+            elif case == "calm_motion":
+                # the calm flight's samples are at the same times (a scripted maneuver, one step)
+                tc = calm[j]
+                w = steady + np.stack([np.interp(tc.t_s, tr.t_s, turb[:, i]) for i in range(3)], 1)
+                out_segments.append(with_wind(tc, w))
+                continue
             elif case == "shifted":
                 w = steady + np.roll(turb, turb.shape[0] // 2, axis=0)
             elif case == "reversed":
