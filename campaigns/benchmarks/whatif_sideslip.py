@@ -19,6 +19,9 @@ that say otherwise; only the air the flow sensors and the airspeed see changes,
 - ``shifted``: the steady wind plus JSBSim's turbulence shifted circularly by half the segment:
   JSBSim's own series, its statistics kept (one step at the wrap point) but its timing against the
   motion the gusts caused lost;
+- ``jsbsim_noise_free``: the same, without the IMU's and the flow sensors' noise and quantization
+  (the other channels' noise kept): how the delays' error depends on how closely the filter can
+  follow the gusts;
 - ``calm_motion``: JSBSim flies the maneuver in the steady wind only (no turbulence); the sensors
   see the steady wind plus the turbulence JSBSim made in the turbulent flight of the same maneuver:
   JSBSim's own gust series exactly, the aircraft's answer to them removed;
@@ -63,7 +66,8 @@ from synth.campaign import fly_campaign, parse_campaign
 from synth.environment import Environment
 from synth.sensors import dcm_body_to_ned
 
-CASES = ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states", "calm_motion", "gauss_markov_flown",
+CASES = ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states", "jsbsim_noise_free", "calm_motion",
+         "gauss_markov_flown",
          "reversed", "shifted", "gauss_markov", "dryden_body", "steady", "steady_vane_biases",
          "steady_no_biases")
 #: rms of each gauss_markov_flown component, m/s: JSBSim's light turbulence in the demo's block
@@ -74,6 +78,7 @@ FLOWN_TAS_MPS = 190.0
 KINDS = ["pitch_doublet", "3211", "roller_coaster", "pullup_rudder_doublets", "windup_turn", "shss"]
 STEADY_WIND_NED_MPS = [6.0, -4.0, 0.0]
 VANES = ("vane_left", "vane_right", "boom_alpha_vane", "boom_beta_upper_vane", "boom_beta_lower_vane")
+PROBES = ("side_probe_left", "side_probe_right", "nose_probe")
 #: PT1 with the vanes' installation biases only (the default fleet's values)
 VANE_BIAS_FLEET = """airframe = "f16-testbed"
 [[aircraft]]
@@ -137,7 +142,7 @@ def fly(case: str, out: Path) -> None:
         out_segments = []
         for j, tr in enumerate(original(spec, airframe, aircraft, env)):
             turb = tr.wind_ned_mps - steady
-            if case in ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states"):
+            if case in ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states", "jsbsim_noise_free"):
                 w = tr.wind_ned_mps
             elif case == "calm_motion":
                 # the calm flight's samples are at the same times (a scripted maneuver, one step)
@@ -167,6 +172,12 @@ def fly(case: str, out: Path) -> None:
            "errors": {"preset": "typical"},
            "flights": [{"configurations": ["PT1-BOOM"], "mach": [0.6], "maneuvers": KINDS,
                         "altitude_m": 6000.0}]}
+    if case == "jsbsim_noise_free":
+        raw["errors"] = {"preset": "typical",
+                         "imu": {"accel_noise_mps2": 0.0, "gyro_noise_deg_s": 0.0,
+                                 "accel_quant_mps2": 0.0, "gyro_quant_deg_s": 0.0},
+                         "sensors": {**{s: {"noise_deg": 0.0, "quant_deg": 0.0} for s in VANES},
+                                     **{s: {"noise_pa": 0.0, "quant_pa": 0.0} for s in PROBES}}}
     if case in ("steady_vane_biases", "steady_no_biases"):
         out.parent.mkdir(parents=True, exist_ok=True)
         fleet = out.parent / "fleet_vane_biases.toml"
