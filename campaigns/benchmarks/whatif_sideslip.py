@@ -42,7 +42,7 @@ that say otherwise; only the air the flow sensors and the airspeed see changes,
 Printed and written (``--write``): each case's sideslip offsets, the vanes' sideslip reference
 offset ``c_vb``, the flow delays and the airspeed delay against their truth, in honest deviations.
 Run: ``python campaigns/benchmarks/whatif_sideslip.py --out DIR --write
-campaigns/benchmarks/results/whatif_sideslip.txt`` (three to four minutes on 2 cores).
+campaigns/benchmarks/results/whatif_sideslip.txt`` (about four minutes on 2 cores).
 """
 
 from __future__ import annotations
