@@ -377,6 +377,7 @@ def stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 5.0) -> None:
     try:
         # the pool's own process table: the public API has no way to end running tasks
         procs = list((getattr(pool, "_processes", None) or {}).values())
+        manager = getattr(pool, "_executor_manager_thread", None)  # shutdown forgets it
         pool.shutdown(wait=False, cancel_futures=True)
         for proc in procs:
             if proc.is_alive():
@@ -386,6 +387,12 @@ def stop_pool(pool: ProcessPoolExecutor, timeout_s: float = 5.0) -> None:
             if proc.is_alive():
                 proc.kill()
                 proc.join(timeout=timeout_s)
+        # The pool's manager thread closes its wake-up pipe as it ends. Left running, it races
+        # concurrent.futures' exit hook, which writes to that pipe unlocked (CPython 3.11:
+        # "OSError: Bad file descriptor" printed at exit after Ctrl-C). Its workers are gone, so
+        # it ends at once: wait for it here.
+        if manager is not None and manager.is_alive():
+            manager.join(timeout=timeout_s)
     finally:
         if previous is not None:
             signal.signal(signal.SIGINT, previous)

@@ -118,6 +118,30 @@ def test_worker_pool_runs_tasks_and_stops_its_workers_on_an_exception():
         assert not p.is_alive()
 
 
+def test_a_stopped_pool_leaves_no_manager_thread_for_the_exit_hook(monkeypatch):
+    """CPython 3.11's exit hook writes to a pool manager's wake-up pipe, unlocked, while a still
+    running manager may be closing it: a Ctrl-C'd ``fpr fly`` printed "OSError: Bad file
+    descriptor" at exit (CI, 1cfbfc4). :func:`stop_pool` waits for the manager to end. The
+    manager is slowed as it winds up, so that a stop that does not wait is caught every time."""
+    import concurrent.futures.process as cfp
+
+    wind_up = cfp._ExecutorManagerThread.join_executor_internals
+
+    def slow_wind_up(self):
+        time.sleep(0.5)
+        wind_up(self)
+
+    monkeypatch.setattr(cfp._ExecutorManagerThread, "join_executor_internals", slow_wind_up)
+    with pytest.raises(KeyboardInterrupt):
+        with worker_pool(2) as pool:
+            for _ in range(4):
+                pool.submit(time.sleep, 30)
+            manager = pool._executor_manager_thread
+            time.sleep(0.2)  # the workers have started their tasks
+            raise KeyboardInterrupt
+    assert manager is not None and not manager.is_alive(), "the manager thread outlives stop_pool"
+
+
 def test_sigterm_takes_ctrl_cs_path_in_the_commands():
     from campaigns._signals import Terminated, interrupt_status, sigterm_as_interrupt
 
