@@ -85,6 +85,7 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import minimize_scalar
 
+from estimator.core.cross_correlation import high_pass, lagged_correlation
 from estimator.core.kinematics import rotation_ned_to_body
 from estimator.core.sensitivity import worker_threads
 from estimator.iteration import _evaluate
@@ -120,6 +121,17 @@ SETTLE_AFTER = 4
 SETTLED_BELOW = 0.1
 #: ... and after HOLD_AFTER relaxations, held whatever the residuals do
 HOLD_AFTER = 6
+#: The aircraft's answer to the gusts (FilterErrorLikelihood.answer_findings): a flow channel's
+#: innovations against the IMU's specific force along the body axis the channel sees the air on,
+#: high-passed over ANSWER_HIGH_PASS_S (a maneuver's own motion is slower; a gust's answer is
+#: immediate, lift and side force), at the IMU ANSWER_LAGS_S after the innovation at most (the
+#: aircraft's acceleration builds up over a few samples). Reported beyond ANSWER_Z standard errors
+#: (Bartlett's; with the lags tried a false finding in about 1e-5 maneuver-channels) and where it
+#: explains at least ANSWER_R^2 = 1 % of the innovations' variance.
+ANSWER_HIGH_PASS_S = 1.0
+ANSWER_LAGS_S = 0.1
+ANSWER_Z = 5.0
+ANSWER_R = 0.1
 
 
 @dataclass(frozen=True)
@@ -563,7 +575,8 @@ class FilterErrorLikelihood:
                     "measures that answer, which the wind model takes as independent of the motion "
                     "(JSBSim flying through a wind of exactly the filter's form: 12-14 ms long; "
                     "the same gusts with the aircraft's answer removed: right; not the wind "
-                    "states' form nor the sampling rate); with "
+                    "states' form nor the sampling rate; the gust_answer warnings name the "
+                    "channels and maneuvers whose innovations show that answer); with "
                     "the wind as "
                     "states the flight's kinematics fix an aircraft's common "
                     "sideslip offset (every sideslip channel's bias alike) only to 0.05-0.1 deg, so a "
@@ -579,6 +592,90 @@ class FilterErrorLikelihood:
                     "biases and the delays at calm-air values for the turbulent maneuvers; treat "
                     "these deviations as lower bounds"),
         ]
+
+    def answer_findings(self, ev: Evaluation, noise: FilterNoise) -> list[Finding]:
+        """Where the innovations show the aircraft's answer to the gusts, one finding per channel.
+
+        The wind model takes the wind as independent of the motion, but the aircraft answers each
+        gust at once (lift, side force, drag) and the IMU that drives the state equations measures
+        that answer; the part of each gust the filter has not yet followed is then correlated with
+        the IMU, and the flow channels' time delays (whose sensitivity is the flow angles' rate)
+        take that correlation up (README; campaigns/benchmarks/results/whatif_sideslip.txt). Per
+        turbulent maneuver and flow channel: the normalised innovations against the IMU's specific
+        force along the body axis of the channel's largest wind sensitivity, high-passed
+        (:data:`ANSWER_HIGH_PASS_S`), at lags 0 to :data:`ANSWER_LAGS_S` (IMU after innovation);
+        reported where it passes :data:`ANSWER_Z` standard errors and :data:`ANSWER_R`. Its sign
+        is no test: the filter's sequential updates within a sample can leave a later channel's
+        innovation opposite to an earlier one's (on JSBSim's turbulence the side probe's alpha is
+        positive, every other flow channel negative; none of them is in calm_motion's case).
+        """
+        p = self.model.problem
+        es = [ce.e for ce in ev.channels]
+        kinds = [q.kind for q in p.parameters.parameters]
+        keys = p.parameters.keys
+        axes = "xyz"
+        hits: dict[int, list[tuple]] = {}
+        tried: dict[int, int] = {}
+        for m in noise.maneuvers:
+            sigma = float(noise.sigma_mps[m.k])
+            if sigma == 0.0:
+                continue
+            man = p.maneuvers[m.k]
+            dt = float(self.dt_s[m.k])
+            nu, s, _ = self._innovations(m, self._residuals(ev, m, es), noise.R, sigma)
+            nu = nu / np.sqrt(s)
+            width = max(int(round(ANSWER_HIGH_PASS_S / dt)), 3)
+            acc = high_pass(np.asarray(man.accel_imu_mps2[:m.n_samples], dtype=float), width)
+            lags = np.arange(0, int(round(ANSWER_LAGS_S / dt)) + 1)
+            for ci, b, r0, r1 in m.pieces:
+                ce = ev.channels[ci]
+                sens = np.mean(ce.dydv[r0:r1], axis=0)
+                if not np.any(sens):
+                    continue  # a channel that does not see the air
+                ax = int(np.argmax(np.abs(sens)))
+                idx = np.flatnonzero(m.channel == ce.channel)
+                rows, first = np.unique(m.sample[idx], return_index=True)
+                if rows.size < 10 * lags.size:
+                    continue
+                r, se = lagged_correlation(nu[idx[first]], rows, acc[:, ax], lags, width)
+                tried[ce.channel] = tried.get(ce.channel, 0) + 1
+                z = np.abs(r) / se
+                if not np.isfinite(z).any():
+                    continue
+                j = int(np.nanargmax(z))
+                if z[j] > ANSWER_Z and abs(r[j]) >= ANSWER_R:
+                    delays = tuple(keys[i] for i in ce.colmap[b] if kinds[i] == "time_delay")
+                    hits.setdefault(ce.channel, []).append(
+                        (man.id, float(r[j]), float(z[j]), float(lags[j] * dt), axes[ax],
+                         (float(man.t_s[0]), float(man.t_s[m.n_samples - 1])), delays))
+        out = []
+        for c, found in hits.items():
+            ch = p.channels[c]
+            worst = max(found, key=lambda h: abs(h[1]))
+            rs = [h[1] for h in found]
+            delays = tuple(dict.fromkeys(k for h in found for k in h[6]))
+            what = ("the channel's time delay then comes out too long and its deviation too small "
+                    "(JSBSim's simulated turbulence: the flow delays 4-7 ms long at 2.7-4.6 "
+                    "deviations at 40 Hz, the airspeed's 0.24-0.31 s)" if delays else
+                    "the channel's calibration parameters may then be biased beyond their deviations")
+            out.append(Finding(
+                "gust_answer", Severity.WARNING,
+                f"filter-error method: {ch.name}'s innovations correlate with the IMU's specific "
+                f"force along body {worst[4]} (high-passed over {ANSWER_HIGH_PASS_S:g} s, up to "
+                f"{ANSWER_LAGS_S:g} s later) in {len(found)} of {tried[c]} turbulent maneuvers "
+                f"(r = {min(rs):+.2f} to {max(rs):+.2f}; the strongest {worst[0]}, "
+                f"{worst[5][0]:.1f}-{worst[5][1]:.1f} s: r = {worst[1]:+.2f} at {worst[3]:.3f} s, "
+                f"{worst[2]:.0f} standard errors): the IMU that drives the state equations measures "
+                "the aircraft's answer to the gusts (lift, side force, drag), which the wind model "
+                "takes as independent of the motion (a sensor that responds to acceleration itself, "
+                f"vibration or a vane's mass unbalance, would show the same); {what}",
+                "fix this channel's time delay at a calm-air value (the output-error method on calm "
+                "maneuvers) and estimate the rest here, or fly the maneuvers in calmer air" if delays
+                else "check the channel against a calm-air calibration, or fly the maneuvers in "
+                "calmer air",
+                channel=ch.name, maneuver=worst[0], t_s=worst[5], parameters=delays,
+                value=worst[1]))
+        return out
 
     # --- the pieces ---------------------------------------------------------------------------
     def _linearise(self, ev: Evaluation) -> list[_Maneuver]:

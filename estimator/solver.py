@@ -574,7 +574,8 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         R = noise.R
         history = history + [lik.cost(evals, noise)]
         N = lik.normal(st, evals, noise)
-        wind_findings = lik.findings(noise, opt.colored, lik.noise_drift(evals) if lik.held else None)
+        wind_findings = (lik.findings(noise, opt.colored, lik.noise_drift(evals) if lik.held else None)
+                         + lik.answer_findings(evals, noise))
         wind = lik.wind_table(evals, noise)
     else:
         R = channel_variances(it.sse, it.cnt)

@@ -40,7 +40,9 @@ that say otherwise; only the air the flow sensors and the airspeed see changes,
 - ``steady_no_biases``: the same without the installation biases (the control).
 
 Printed and written (``--write``): each case's sideslip offsets, the vanes' sideslip reference
-offset ``c_vb``, the flow delays and the airspeed delay against their truth, in honest deviations.
+offset ``c_vb``, the flow delays and the airspeed delay against their truth, in honest deviations,
+and how many flow channels the ``gust_answer`` finding names (the innovations correlate with the
+IMU: the aircraft's answer to the gusts, seen from the data alone).
 Run: ``python campaigns/benchmarks/whatif_sideslip.py --out DIR --write
 campaigns/benchmarks/results/whatif_sideslip.txt`` (about four minutes on 2 cores).
 """
@@ -214,7 +216,7 @@ def main() -> None:
     lines = ["filter-error method (tejas_ins) on PT1-BOOM's maneuvers of the demo's light-turbulence",
              "block, JSBSim's flight, the wind the sensors see replaced: estimate - truth (honest "
              "deviations)", f"code: {code_version(__file__)}", ""]
-    header = f"{'case':20s} " + " ".join(f"{k:>15s}" for k in ROWS)
+    header = f"{'case':20s} " + " ".join(f"{k:>15s}" for k in ROWS) + f" {'answer':>7s}"
     lines += [header, "-" * len(header)]
     for case in a.cases:
         t0 = time.perf_counter()
@@ -226,9 +228,13 @@ def main() -> None:
             unit = "ms" if k.startswith("tau_") else "deg"
             cells.append(f"{row['error_display']:+.3f}{unit[0]} ({row['z_colored']:+.1f})"
                          if unit == "deg" else f"{row['error_display']:+.1f}ms ({row['z_colored']:+.1f})")
-        lines.append(f"{case:20s} " + " ".join(f"{c:>15s}" for c in cells))
+        answered = sum(f.code == "gust_answer" for f in r.findings)
+        lines.append(f"{case:20s} " + " ".join(f"{c:>15s}" for c in cells) + f" {answered:>7d}")
         print(lines[-1], f"[{r.verdict.name}, {time.perf_counter() - t0:.0f} s]", flush=True)
-    lines += ["", "d: deg; the steady cases force the wind states on at 1 m/s (calm air)."]
+    lines += ["", "d: deg; the steady cases force the wind states on at 1 m/s (calm air).",
+              "answer: the flow channels (of 8) whose innovations correlate with the IMU's specific "
+              "force, the aircraft's",
+              "answer to the gusts (gust_answer findings: FilterErrorLikelihood.answer_findings)."]
     text = "\n".join(lines) + "\n"
     print(text)
     if a.write:

@@ -43,6 +43,23 @@ def test_wind_errors_against_the_truth(problem):
     assert not len(wind_errors(problem, oem)[0])
 
 
+def test_the_aircrafts_answer_to_the_gusts_is_found(problem):
+    """JSBSim's aircraft answers the gusts and its IMU measures that; the wind model takes the wind
+    as independent of the motion, so the flow innovations correlate with the IMU's specific force
+    (issue 14: the cause of the long flow delays). The finding names each alpha vane, the IMU axis,
+    the delay it biases and a maneuver, and the analytic flight, whose IMU the gusts do not move,
+    has none (tests/estimator_tests/test_filter_error.py)."""
+    res = estimate(problem, SolverOptions(method="filter_error", diagnose=False))
+    found = {f.channel: f for f in res.findings if f.code == "gust_answer"}
+    assert {"alpha_zl", "alpha_zr"} <= set(found), [f.text() for f in res.findings]
+    for name in ("alpha_zl", "alpha_zr"):
+        f = found[name]
+        assert f.severity.name == "WARNING" and "along body z" in f.message
+        assert f.parameters and all(k.startswith("tau") for k in f.parameters), f.parameters
+        assert f.maneuver in {m.id for m in problem.maneuvers} and len(f.t_s) == 2
+        assert abs(f.value) >= 0.1 and "calm-air value" in f.advice
+
+
 def test_report_has_the_wind_section(problem):
     wf = run_workflow(problem, WorkflowOptions(solver=SolverOptions(method="filter_error")))
     sections = truth_sections(wf)
