@@ -42,7 +42,9 @@ that say otherwise; only the air the flow sensors and the airspeed see changes,
 Printed and written (``--write``): each case's sideslip offsets, the vanes' sideslip reference
 offset ``c_vb``, the flow delays and the airspeed delay against their truth, in honest deviations,
 and how many flow channels the ``gust_answer`` finding names (the innovations correlate with the
-IMU: the aircraft's answer to the gusts, seen from the data alone).
+IMU: the aircraft's answer to the gusts, seen from the data alone); and, on the ``jsbsim`` case,
+what holding the flow delays (alone, and with the sideslip offsets) at their truth, as a perfect
+calm-air calibration would, does to the calibrated sensors' accuracy against the truth.
 Run: ``python campaigns/benchmarks/whatif_sideslip.py --out DIR --write
 campaigns/benchmarks/results/whatif_sideslip.txt`` (about four minutes on 2 cores).
 """
@@ -207,6 +209,42 @@ def calibrate(case: str, dataset: Path):
     return r, recovery_table(r, true_parameters(p, r.free_estimated))
 
 
+#: the flow channels' delays, and the sideslip offsets (every sideslip channel's bias and the
+#: vanes' reference offset) of PT1: what the fixing variants hold at their truth
+FLOW_DELAYS = ("tau_alpha_zl", "tau_alpha_zr", "tau_sp", "tau_ba", "tau_bu", "tau_bl")
+SIDESLIP_OFFSETS = ("b_sb[PT1]", "b_bu[PT1]", "b_bl[PT1]", "c_vb[PT1]")
+
+
+def fixing(dataset: Path) -> list[str]:
+    """What holding parameters at a calm-air calibration's values does on JSBSim's turbulence
+    (the truth stands in for a perfect calm-air calibration): the calibrated sensors' accuracy
+    against the truth, |mean| + 3 sd of (calibrated - true flow angle at the sensor), deg, with
+    everything free, the flow delays held, and the delays and the sideslip offsets held."""
+    from campaigns.workflow_truth import calibrated_errors
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        p = problem_from_dataset(dataset, model="tejas_ins")
+        r = estimate(p, SolverOptions(method="filter_error", wind=WindOptions(), diagnose=False))
+        truth = true_parameters(p, r.free_estimated).values
+        rows = []
+        for label, held in (("all free", ()), ("flow delays held", FLOW_DELAYS),
+                            ("delays and sideslip offsets held", FLOW_DELAYS + SIDESLIP_OFFSETS)):
+            ps = p.parameters.with_values({k: truth[k] for k in held}).with_free({k: False for k in held})
+            q = replace(p, parameters=ps)
+            res = r if not held else estimate(q, SolverOptions(method="filter_error", wind=WindOptions(),
+                                                               diagnose=False))
+            errs = calibrated_errors(q, res)
+            rows.append((label, {c: float(np.degrees(abs(d["error_rad"].mean()) + 3 * d["error_rad"].std()))
+                                 for c, d in errs.items()}))
+    names = list(rows[0][1])
+    head = f"{'jsbsim case, held at the truth':34s} " + " ".join(f"{c:>9s}" for c in names)
+    return ["", "What holding parameters at a (perfect) calm-air calibration does on the jsbsim case: the",
+            "calibrated sensors' |mean| + 3 sd against the truth, deg",
+            head, "-" * len(head)] + [
+        f"{label:34s} " + " ".join(f"{acc[c]:9.3f}" for c in names) for label, acc in rows]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True, help="scratch directory for the datasets")
@@ -231,6 +269,9 @@ def main() -> None:
         answered = sum(f.code == "gust_answer" for f in r.findings)
         lines.append(f"{case:20s} " + " ".join(f"{c:>15s}" for c in cells) + f" {answered:>7d}")
         print(lines[-1], f"[{r.verdict.name}, {time.perf_counter() - t0:.0f} s]", flush=True)
+    if "jsbsim" in a.cases:
+        lines += fixing(a.out / "jsbsim")
+        print("\n".join(lines[-6:]), flush=True)
     lines += ["", "d: deg; the steady cases force the wind states on at 1 m/s (calm air).",
               "answer: the flow channels (of 8) whose innovations correlate with the IMU's specific "
               "force, the aircraft's",
