@@ -54,15 +54,14 @@ def _autocorrelation(full: np.ndarray, max_lag: int) -> np.ndarray:
     ok = np.isfinite(full)
     x = np.where(ok, full, 0.0)
     var = float(np.sum(x * x)) / max(int(ok.sum()), 1)
-    out = np.zeros(max_lag + 1)
     if var <= 0.0:
-        return out
-    for lag in range(max_lag + 1):
-        pairs = ok[:full.size - lag] & ok[lag:]
-        n = int(pairs.sum())
-        if n:
-            out[lag] = float(np.sum(x[:full.size - lag] * x[lag:])) / n / var
-    return out
+        return np.zeros(max_lag + 1)
+    # every lag at once: the series against its windows of max_lag + 1 samples (zero-padded)
+    pad = np.zeros(max_lag)
+    num = x @ np.lib.stride_tricks.sliding_window_view(np.concatenate([x, pad]), max_lag + 1)
+    w = ok.astype(float)
+    pairs = w @ np.lib.stride_tricks.sliding_window_view(np.concatenate([w, pad]), max_lag + 1)
+    return np.where(pairs > 0, num / np.maximum(pairs, 1.0) / var, 0.0)
 
 
 def lagged_correlation(x: np.ndarray, rows: np.ndarray, u: np.ndarray, lags: np.ndarray,
