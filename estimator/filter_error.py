@@ -80,6 +80,7 @@ from __future__ import annotations
 import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -196,6 +197,18 @@ class _Maneuver:
     v_mps: float  # mean true airspeed
     c_bn: np.ndarray | None = None  # (n_samples, 3, 3) NED -> body rotation C_bn (Dryden form:
     # the wind history back to NED)
+
+
+class _Answer(NamedTuple):
+    """One maneuver's innovation-IMU correlation beyond the thresholds (answer_findings)."""
+
+    maneuver: str
+    r: float
+    z: float  # |r| in standard errors
+    lag_s: float
+    axis: str  # body axis of the IMU's specific force: x, y or z
+    t_s: tuple[float, float]  # the maneuver's time span, s
+    delays: tuple[str, ...]  # the channel's time-delay parameters
 
 
 @dataclass
@@ -617,7 +630,7 @@ class FilterErrorLikelihood:
         kinds = [q.kind for q in p.parameters.parameters]
         keys = p.parameters.keys
         axes = "xyz"
-        hits: dict[int, list[tuple]] = {}
+        hits: dict[int, list[_Answer]] = {}
         tried: dict[int, int] = {}
         for m in noise.maneuvers:
             sigma = float(noise.sigma_mps[m.k])
@@ -648,15 +661,15 @@ class FilterErrorLikelihood:
                 j = int(np.nanargmax(z))
                 if z[j] > ANSWER_Z and abs(r[j]) >= ANSWER_R:
                     delays = tuple(keys[i] for i in ce.colmap[b] if kinds[i] == "time_delay")
-                    hits.setdefault(ce.channel, []).append(
-                        (man.id, float(r[j]), float(z[j]), float(lags[j] * dt), axes[ax],
-                         (float(man.t_s[0]), float(man.t_s[m.n_samples - 1])), delays))
+                    hits.setdefault(ce.channel, []).append(_Answer(
+                        man.id, float(r[j]), float(z[j]), float(lags[j] * dt), axes[ax],
+                        (float(man.t_s[0]), float(man.t_s[m.n_samples - 1])), delays))
         out = []
         for c, found in hits.items():
             ch = p.channels[c]
-            worst = max(found, key=lambda h: abs(h[1]))
-            rs = [h[1] for h in found]
-            delays = tuple(dict.fromkeys(k for h in found for k in h[6]))
+            worst = max(found, key=lambda h: abs(h.r))
+            rs = [h.r for h in found]
+            delays = tuple(dict.fromkeys(k for h in found for k in h.delays))
             what = ("the channel's time delay then comes out too long and its deviation too small "
                     "(JSBSim's simulated turbulence: the flow delays 4-7 ms long at 2.7-4.6 "
                     "deviations at 40 Hz, the airspeed's 0.24-0.31 s)" if delays else
@@ -664,11 +677,11 @@ class FilterErrorLikelihood:
             out.append(Finding(
                 "gust_answer", Severity.WARNING,
                 f"filter-error method: {ch.name}'s innovations correlate with the IMU's specific "
-                f"force along body {worst[4]} (high-passed over {ANSWER_HIGH_PASS_S:g} s, up to "
+                f"force along body {worst.axis} (high-passed over {ANSWER_HIGH_PASS_S:g} s, up to "
                 f"{ANSWER_LAGS_S:g} s later) in {len(found)} of {tried[c]} turbulent maneuvers "
-                f"(r = {min(rs):+.2f} to {max(rs):+.2f}; the strongest {worst[0]}, "
-                f"{worst[5][0]:.1f}-{worst[5][1]:.1f} s: r = {worst[1]:+.2f} at {worst[3]:.3f} s, "
-                f"{worst[2]:.0f} standard errors): the IMU that drives the state equations measures "
+                f"(r = {min(rs):+.2f} to {max(rs):+.2f}; the strongest {worst.maneuver}, "
+                f"{worst.t_s[0]:.1f}-{worst.t_s[1]:.1f} s: r = {worst.r:+.2f} at {worst.lag_s:.3f} s, "
+                f"{worst.z:.0f} standard errors): the IMU that drives the state equations measures "
                 "the aircraft's answer to the gusts (lift, side force, drag), which the wind model "
                 "takes as independent of the motion (a sensor that responds to acceleration itself, "
                 f"vibration or a vane's mass unbalance, would show the same); {what}",
@@ -677,8 +690,8 @@ class FilterErrorLikelihood:
                 "moves into the sideslip offsets (what-if study: the sideslip sensors' accuracy "
                 "0.34-0.43 deg with everything free, 0.64-0.76 with the flow delays held, 0.07-0.18 "
                 "with the delays and sideslip offsets held)",
-                channel=ch.name, maneuver=worst[0], t_s=worst[5], parameters=delays,
-                value=worst[1]))
+                channel=ch.name, maneuver=worst.maneuver, t_s=worst.t_s, parameters=delays,
+                value=worst.r))
         return out
 
     # --- the pieces ---------------------------------------------------------------------------

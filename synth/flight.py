@@ -337,7 +337,7 @@ def fly_maneuver(
                          f"got shape {extra.shape}")
     steady = np.asarray(env.wind_ned_mps, dtype=float)
 
-    def start_gust(i: int) -> None:
+    def on_step(i: int) -> None:  # the added wind, and the gust at its step
         if extra is not None:  # the step from sample i flies in the wind of sample i + 1
             io.set_wind_ned(fdm, steady + extra[min(i + 1, n - 1)])
         if i == gust_step:
@@ -346,7 +346,7 @@ def fly_maneuver(
                                  duration_s=env.gust.duration_s)
 
     try:
-        si = fly_controller(fdm, reader, controller, n, dt_s, departure_advice(spec), start_gust)
+        si = fly_controller(fdm, reader, controller, n, dt_s, departure_advice(spec), on_step)
     except ManeuverFailure as exc:
         raise FlightError(
             f"{where} (aircraft {aircraft.id}), t = {exc.t_s:.2f} s into "

@@ -218,9 +218,11 @@ SIDESLIP_OFFSETS = ("b_sb[PT1]", "b_bu[PT1]", "b_bl[PT1]", "c_vb[PT1]")
 def fixing(dataset: Path) -> list[str]:
     """What holding parameters at a calm-air calibration's values does on JSBSim's turbulence
     (the truth stands in for a perfect calm-air calibration): the calibrated sensors' accuracy
-    against the truth, |mean| + 3 sd of (calibrated - true flow angle at the sensor), deg, with
-    everything free, the flow delays held, and the delays and the sideslip offsets held."""
+    against the truth, Table 2's 3 sigma (:func:`estimator.workflow.three_sigma`: 3 x the rms of
+    calibrated - true flow angle at the sensor, a mean offset counted), deg, with everything free,
+    the flow delays held, and the delays and the sideslip offsets held."""
     from campaigns.workflow_truth import calibrated_errors
+    from estimator.workflow import three_sigma
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -235,12 +237,12 @@ def fixing(dataset: Path) -> list[str]:
             res = r if not held else estimate(q, SolverOptions(method="filter_error", wind=WindOptions(),
                                                                diagnose=False))
             errs = calibrated_errors(q, res)
-            rows.append((label, {c: float(np.degrees(abs(d["error_rad"].mean()) + 3 * d["error_rad"].std()))
+            rows.append((label, {c: three_sigma(np.degrees(d["error_rad"].to_numpy()))
                                  for c, d in errs.items()}))
     names = list(rows[0][1])
     head = f"{'jsbsim case, held at the truth':34s} " + " ".join(f"{c:>9s}" for c in names)
     return ["", "What holding parameters at a (perfect) calm-air calibration does on the jsbsim case: the",
-            "calibrated sensors' |mean| + 3 sd against the truth, deg",
+            "calibrated sensors' 3 sigma against the truth (Table 2's: 3 x rms of the error), deg",
             head, "-" * len(head)] + [
         f"{label:34s} " + " ".join(f"{acc[c]:9.3f}" for c in names) for label, acc in rows]
 
