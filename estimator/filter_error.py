@@ -687,8 +687,8 @@ class FilterErrorLikelihood:
                 f"vibration or a vane's mass unbalance, would show the same); {what}",
                 "calibrate in calm air (the output-error method), or hold the flow delays together "
                 "with the sideslip biases at calm-air values; not the delays alone: the bias then "
-                "moves into the sideslip offsets (what-if study: the sideslip sensors' accuracy "
-                "0.34-0.43 deg with everything free, 0.64-0.76 with the flow delays held, 0.07-0.18 "
+                "moves into the sideslip offsets (what-if study: the sideslip sensors' 3 sigma "
+                "0.70-0.72 deg with everything free, 1.74-1.75 with the flow delays held, 0.07-0.18 "
                 "with the delays and sideslip offsets held)",
                 channel=ch.name, maneuver=worst.maneuver, t_s=worst.t_s, parameters=delays,
                 value=worst.r))
