@@ -87,6 +87,7 @@ import pandas as pd
 from scipy.optimize import minimize_scalar
 
 from estimator.core.cross_correlation import high_pass, lagged_correlation
+from estimator.core.instrumental import instrument_sums, iv_difference
 from estimator.core.kinematics import rotation_ned_to_body
 from estimator.core.sensitivity import worker_threads
 from estimator.iteration import _evaluate
@@ -134,6 +135,14 @@ ANSWER_HIGH_PASS_S = 1.0
 ANSWER_LAGS_S = 0.1
 ANSWER_Z = 5.0
 ANSWER_R = 0.1
+#: The time delays' feedback check (estimator.core.instrumental): each delay's instrument is its
+#: sensitivity FEEDBACK_LAGS_S earlier (the mean over these lags; at least one sample): older than
+#: the filter's memory of the innovations (under a sample at 40-120 Hz in light turbulence), young
+#: enough to follow a maneuver's flow-angle rate (150 ms: the instrument too weak, the difference
+#: 20-40 ms of noise on the what-if data). A delay's deviation is widened where the difference to
+#: the likelihood estimate exceeds FEEDBACK_Z of its deviations (two-sided 5 %).
+FEEDBACK_LAGS_S = (0.05, 0.075, 0.1)
+FEEDBACK_Z = 2.0
 
 
 @dataclass(frozen=True)
@@ -458,19 +467,98 @@ class FilterErrorLikelihood:
                                              rank_rtol=opt.rank_rtol, imu_only=True,
                                              imu_channels=calm[:, None] | ground[None, :])
         mans = {m.k: m for m in noise.maneuvers}
+        is_delay = np.array([q.kind == "time_delay" for q in p.parameters.parameters])
+        air = np.array([bool(ch.expression.names & AIR_RELATIVE_SIGNALS) for ch in p.channels])
+        # the delays of the channels that see the air, where the loop closes: instrumented in
+        # every channel's innovations (the filter's updates carry one channel's delay into the
+        # others' innovations)
+        instrumented = np.zeros_like(is_delay)
+        for ce in ev.channels:
+            if air[ce.channel]:
+                for b in range(len(ce.mans)):
+                    instrumented[[i for i in ce.colmap[b] if is_delay[i]]] = True
+        sums: dict[int, tuple] = {}
+
+        def series(k: int):
+            if k not in mans:
+                return np.zeros(0, dtype=np.intp), []
+            cols, chans = self.innovation_series(st, ev, noise, mans[k])
+            # the delays' feedback check rides on the same series (one filter pass)
+            lags = np.unique(np.maximum(np.rint(np.asarray(FEEDBACK_LAGS_S) / self.dt_s[k]), 1)
+                             ).astype(np.int64)
+            parts = [instrument_sums(rows, J, nu, instrumented[cols], lags) for _, rows, nu, J in chans]
+            sums[k] = (cols, [sum(x) for x in zip(*parts, strict=True)] if parts else None)
+            return cols, chans
+
         std, cov = innovation_honest_std(
-            N, st, lambda k: (self.innovation_series(st, ev, noise, mans[k]) if k in mans
-                              else (np.zeros(0, dtype=np.intp), [])),
-            np.array([m.n for m in p.maneuvers]), self.dt_s, dev.std_crb, rank_rtol=opt.rank_rtol,
-            cross_channel=opt.colored_cross_channel,
+            N, st, series, np.array([m.n for m in p.maneuvers]), self.dt_s, dev.std_crb,
+            rank_rtol=opt.rank_rtol, cross_channel=opt.colored_cross_channel,
             map_fn=lambda fn, ks: self._map(fn, list(ks)))
         std = np.sqrt(std ** 2 + std_imu ** 2)
         cov = cov + cov_imu
+        feedback = self._delay_feedback(sums, instrumented, st, std, opt.rank_rtol)
+        for i, _, after, _, _ in feedback:
+            std[i] = after
+            if st.gpos[i] >= 0:
+                cov[st.gpos[i], st.gpos[i]] = after ** 2
         std[dev.unresolved] = np.nan
         std_imu[dev.unresolved] = np.nan
         dh = np.sqrt(np.maximum(np.diag(cov), 1e-300))
         return replace(dev, std_colored=std, correlation_colored=cov / np.outer(dh, dh), std_imu=std_imu,
-                       imu_psd=imu_psd)
+                       imu_psd=imu_psd, feedback=tuple(feedback))
+
+    def feedback_findings(self, feedback: tuple) -> list[Finding]:
+        """A warning naming the time delays whose honest deviation the feedback check widened
+        (:meth:`honest_deviations`; ``feedback`` as :attr:`estimator.uncertainty._Deviations.feedback`)."""
+        if not feedback:
+            return []
+        ps = self.model.problem.parameters.parameters
+        parts = []
+        for i, before, after, d, sd in feedback:
+            q = ps[i]
+            k, unit = q.display_scale, ("" if q.display_unit in ("", "1") else f" {q.display_unit}")
+            parts.append(f"{q.key} {before * k:.3g} -> {after * k:.3g}{unit} (instrumental estimate "
+                         f"{d * k:+.3g}{unit} off, {abs(d) / sd:.1f} deviations of the difference)")
+        return [Finding(
+            "delay_feedback", Severity.WARNING,
+            "filter-error method: the time delays' estimate is not what an instrumental-variable "
+            f"estimate of the same data gives (each delay's sensitivity {FEEDBACK_LAGS_S[0]:g}-"
+            f"{FEEDBACK_LAGS_S[-1]:g} s earlier as its instrument, untouched by the gust at the "
+            "sample): the IMU that drives the state equations measures the aircraft's answer to the "
+            "gusts the innovations carry, a loop the likelihood takes as open, and the delays come "
+            "out biased (on JSBSim's light turbulence 4-7 ms long). Their honest deviations are "
+            "widened by the difference (beyond its own noise): " + "; ".join(parts),
+            "read these delays as that uncertain; for delays as sharp as calm air gives, calibrate "
+            "them in calm air (the output-error method) and hold them with the sideslip biases "
+            "(gust_answer's advice)",
+            parameters=tuple(ps[i].key for i, *_ in feedback),
+            value=max(abs(d) / sd for _, _, _, d, sd in feedback))]
+
+    def _delay_feedback(self, sums: dict[int, tuple], instrumented: np.ndarray, st: Structure,
+                        std: np.ndarray, rank_rtol: float) -> list[tuple[int, float, float, float, float]]:
+        """The time delays whose honest deviation the feedback check widens
+        (:mod:`estimator.core.instrumental`): where the instrumental-variable estimate differs from
+        the likelihood's by more than FEEDBACK_Z deviations of the difference, the deviation
+        becomes ``sqrt(std^2 + D^2 - Var D)``. Returns ``(parameter, std before, after, D, sd of
+        D)`` per widened delay (of those ``instrumented``: the delays of channels that see the
+        air), SI."""
+        P = instrumented.size
+        acc = [np.zeros((P, P)), np.zeros(P), np.zeros((P, P)), np.zeros((P, P)), np.zeros(P)]
+        for cols, parts in sums.values():
+            if parts is None:
+                continue
+            for a, x in zip(acc, parts, strict=True):
+                if a.ndim == 2:
+                    a[np.ix_(cols, cols)] += x
+                else:
+                    a[cols] += x
+        D, V = iv_difference(*acc, rank_rtol=rank_rtol)
+        out = []
+        for i in np.flatnonzero(instrumented & st.free & np.isfinite(D) & np.isfinite(std)):
+            if abs(D[i]) > FEEDBACK_Z * math.sqrt(V[i]):
+                out.append((int(i), float(std[i]), math.sqrt(std[i] ** 2 + D[i] ** 2 - V[i]),
+                            float(D[i]), math.sqrt(V[i])))
+        return out
 
     def predictions(self, ev: Evaluation, noise: FilterNoise) -> list[np.ndarray]:
         """Every channel's measurement less its innovation scaled to the measurement noise,

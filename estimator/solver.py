@@ -587,6 +587,7 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
                       replace(opt, colored=False) if filter_error else opt)
     if filter_error and opt.colored:
         dev = lik.honest_deviations(st, evals, noise, N, dev, opt, theta)
+        wind_findings = wind_findings + lik.feedback_findings(dev.feedback)
     correlated = correlated + _high_correlations(dev.correlation, [keys[i] for i in st.glob],
                                                  opt.correlation_warn)
     # a set still unidentifiable here (the screen's rounds ran out) is reported with the holds

@@ -483,6 +483,9 @@ class _Deviations:
     correlation, correlation_colored : the global parameters' correlations, Cramér-Rao and honest.
     unresolved : parameters of a set still unidentifiable at the solution (their deviations NaN).
     imu_psd : the IMU noise densities used, per aircraft (None without ``colored``).
+    feedback : the time delays whose honest deviation the filter-error method's feedback check
+        widened: ``(parameter, deviation before, after, IV - ML difference, its deviation)``, SI
+        (:meth:`estimator.filter_error.FilterErrorLikelihood.honest_deviations`).
     """
 
     std_crb: np.ndarray
@@ -492,6 +495,7 @@ class _Deviations:
     correlation_colored: np.ndarray
     unresolved: np.ndarray
     imu_psd: dict[str, np.ndarray] | None
+    feedback: tuple[tuple[int, float, float, float, float], ...] = ()
 
 
 def _deviations(model: Model, theta: np.ndarray, N: NormalEquations, st: Structure, R: np.ndarray,

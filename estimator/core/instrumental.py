@@ -1,0 +1,88 @@
+r"""The time delays' feedback check: an instrumental-variable estimate against the likelihood's.
+
+Why (Söderström & Stoica 1983, *Instrumental Variable Methods for System Identification*; Ljung
+1999, *System Identification* §13.4; Hausman 1978, *Econometrica* 46, 1251): the filter-error
+estimate solves the likelihood's normal equations ``sum J~^T nu~ = 0`` (normalised innovations
+``nu~``, their Jacobian ``J~``). A time delay's column of ``J~`` is the filtered rate of the flow
+angle the model integrates from the IMU; in turbulence the IMU measures the aircraft's answer to
+the gust that the innovation at the same sample carries (lift and side force follow the air at
+once), so that column is correlated with the current innovation, the loop is closed without a
+delay, and the estimate is biased (JSBSim's light turbulence: the flow delays 4-7 ms long at 3-5
+deviations). An instrument ``Z`` correlated with the regressor but not with the current innovation
+removes the bias: each delay's column taken ``L`` samples earlier (the mean over the lags ``L``),
+every other column as it is. From the estimate, one step of each (linearised)::
+
+    d_ML = -(J~^T J~)^-1 J~^T nu~,          d_IV = -(Z^T J~)^-1 Z^T nu~
+    V_ML = (J~^T J~)^-1,                     V_IV = (Z^T J~)^-1 Z^T Z (J~^T Z)^-1
+
+Without feedback both estimates are consistent and the likelihood's efficient, so their difference
+``D = d_IV - d_ML`` has the variance ``V_IV - V_ML`` (Hausman); a ``D`` beyond it measures the
+likelihood estimate's bias, and ``D^2 - (V_IV - V_ML)`` estimates its square. The instrumental
+estimate itself is not the better value: where the flow sensors are noise-free (the likelihood's
+bias 1-3 ms) it moves 4-12 ms the other way (campaigns/benchmarks/whatif_sideslip.py), and it is
+2-3x less precise; its difference is used to widen the deviations, not to move the estimate.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def instrument_sums(rows: np.ndarray, J: np.ndarray, nu: np.ndarray, is_delay: np.ndarray,
+                    lags: np.ndarray) -> tuple[np.ndarray, ...]:
+    """One channel's contributions to the normal equations of both estimates.
+
+    Parameters
+    ----------
+    rows : (n,) the observations' sample indices, increasing.
+    J : (n, p) the normalised innovations' Jacobian, SI per parameter.
+    nu : (n,) the normalised innovations, 1.
+    is_delay : (p,) which columns are time delays (instrumented).
+    lags : (m,) the instruments' lags, samples (>= 1): a delay's instrument at a sample is the mean
+        of its column at those samples earlier (zero where a sample is missing).
+
+    Returns
+    -------
+    ``Z^T J``, ``Z^T nu``, ``Z^T Z``, ``J^T J``, ``J^T nu``: (p, p), (p,), (p, p), (p, p), (p,).
+    """
+    Z = J.copy()
+    if is_delay.any():
+        Z[:, is_delay] = 0.0
+        for lag in lags:
+            at = np.searchsorted(rows, rows - lag)
+            ok = (at < rows.size) & (rows[np.minimum(at, rows.size - 1)] == rows - lag)
+            Z[np.ix_(np.flatnonzero(ok), np.flatnonzero(is_delay))] += (
+                J[np.ix_(at[ok], np.flatnonzero(is_delay))] / lags.size)
+    return Z.T @ J, Z.T @ nu, Z.T @ Z, J.T @ J, J.T @ nu
+
+
+def iv_difference(ZJ: np.ndarray, Zn: np.ndarray, ZZ: np.ndarray, JJ: np.ndarray, Jn: np.ndarray,
+                  rank_rtol: float) -> tuple[np.ndarray, np.ndarray]:
+    """The instrumental-variable step less the likelihood's, and that difference's variance.
+
+    Parameters
+    ----------
+    ZJ, Zn, ZZ, JJ, Jn : the sums of :func:`instrument_sums` over every channel and maneuver, laid
+        out on the (P,) parameters (zero rows and columns for parameters nothing informs).
+    rank_rtol : relative singular-value threshold of the inverses (on the normalised matrices).
+
+    Returns
+    -------
+    (P,) ``D = d_IV - d_ML`` and (P,) ``V_IV - V_ML`` (its variance where there is no feedback),
+    SI; NaN where a parameter is not informed or its instrument is (numerically) empty.
+    """
+    P = JJ.shape[0]
+    D, V = np.full(P, np.nan), np.full(P, np.nan)
+    free = np.flatnonzero((np.diag(JJ) > 0.0) & (np.diag(ZZ) > 0.0))
+    if not free.size:
+        return D, V
+    s = 1.0 / np.sqrt(np.diag(JJ)[free])  # columns to unit information: the thresholds are relative
+    S = np.outer(s, s)
+    Mi = np.linalg.pinv(JJ[np.ix_(free, free)] * S, rtol=rank_rtol, hermitian=True)
+    Ai = np.linalg.pinv(ZJ[np.ix_(free, free)] * S, rtol=rank_rtol)
+    d_ml = -(Mi @ (Jn[free] * s)) * s
+    d_iv = -(Ai @ (Zn[free] * s)) * s
+    v_iv = np.einsum("ij,jk,ik->i", Ai, ZZ[np.ix_(free, free)] * S, Ai) * s * s
+    D[free] = d_iv - d_ml
+    V[free] = np.maximum(v_iv - np.diag(Mi) * s * s, 0.0)
+    return D, V
