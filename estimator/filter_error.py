@@ -542,17 +542,9 @@ class FilterErrorLikelihood:
         becomes ``sqrt(std^2 + D^2 - Var D)``. Returns ``(parameter, std before, after, D, sd of
         D)`` per widened delay (of those ``instrumented``: the delays of channels that see the
         air), SI."""
-        P = instrumented.size
-        acc = [np.zeros((P, P)), np.zeros(P), np.zeros((P, P)), np.zeros((P, P)), np.zeros(P)]
-        for cols, parts in sums.values():
-            if parts is None:
-                continue
-            for a, x in zip(acc, parts, strict=True):
-                if a.ndim == 2:
-                    a[np.ix_(cols, cols)] += x
-                else:
-                    a[cols] += x
-        D, V = iv_difference(*acc, rank_rtol=rank_rtol)
+        # in maneuver order: the sums are filled by worker threads, the result must not depend on them
+        D, V = iv_difference([(sums[k][0], *sums[k][1]) for k in sorted(sums) if sums[k][1] is not None],
+                             st.gpos, rank_rtol)
         out = []
         for i in np.flatnonzero(instrumented & st.free & np.isfinite(D) & np.isfinite(std)):
             if abs(D[i]) > FEEDBACK_Z * math.sqrt(V[i]):

@@ -56,33 +56,60 @@ def instrument_sums(rows: np.ndarray, J: np.ndarray, nu: np.ndarray, is_delay: n
     return Z.T @ J, Z.T @ nu, Z.T @ Z, J.T @ J, J.T @ nu
 
 
-def iv_difference(ZJ: np.ndarray, Zn: np.ndarray, ZZ: np.ndarray, JJ: np.ndarray, Jn: np.ndarray,
-                  rank_rtol: float) -> tuple[np.ndarray, np.ndarray]:
-    """The instrumental-variable step less the likelihood's, and that difference's variance.
+def iv_difference(blocks, gpos: np.ndarray, rank_rtol: float) -> tuple[np.ndarray, np.ndarray]:
+    """The instrumental-variable step less the likelihood's, and that difference's variance, of
+    the global parameters (each maneuver's own parameters eliminated: Schur complements).
 
     Parameters
     ----------
-    ZJ, Zn, ZZ, JJ, Jn : the sums of :func:`instrument_sums` over every channel and maneuver, laid
-        out on the (P,) parameters (zero rows and columns for parameters nothing informs).
-    rank_rtol : relative singular-value threshold of the inverses (on the normalised matrices).
+    blocks : per maneuver ``(cols, ZJ, Zn, ZZ, JJ, Jn)``: the parameter indices it informs and the
+        sums of :func:`instrument_sums` over its channels on them. Maneuvers are independent.
+    gpos : (P,) each parameter's position among the globals, -1 for a maneuver's own.
+    rank_rtol : relative singular-value threshold of the inverses (on matrices normalised to unit
+        information per parameter).
 
     Returns
     -------
     (P,) ``D = d_IV - d_ML`` and (P,) ``V_IV - V_ML`` (its variance where there is no feedback),
-    SI; NaN where a parameter is not informed or its instrument is (numerically) empty.
+    SI; NaN for a maneuver's own parameters and where a global is not informed.
     """
-    P = JJ.shape[0]
+    P, G = gpos.size, int(gpos.max(initial=-1)) + 1
     D, V = np.full(P, np.nan), np.full(P, np.nan)
-    free = np.flatnonzero((np.diag(JJ) > 0.0) & (np.diag(ZZ) > 0.0))
+    S_iv, S_ml, W_iv = np.zeros((G, G)), np.zeros((G, G)), np.zeros((G, G))
+    b_iv, b_ml = np.zeros(G), np.zeros(G)
+    for cols, ZJ, Zn, ZZ, JJ, Jn in blocks:
+        g, loc = np.flatnonzero(gpos[cols] >= 0), np.flatnonzero(gpos[cols] < 0)
+        gi = gpos[cols[g]]
+        # T = [I, -A_GL A_LL^-1]: the maneuver's equations with its own parameters eliminated
+        T_iv, T_ml = _eliminate(ZJ, g, loc, rank_rtol), _eliminate(JJ, g, loc, rank_rtol)
+        S_iv[np.ix_(gi, gi)] += T_iv @ ZJ[:, g]
+        S_ml[np.ix_(gi, gi)] += T_ml @ JJ[:, g]
+        b_iv[gi] += T_iv @ Zn
+        b_ml[gi] += T_ml @ Jn
+        W_iv[np.ix_(gi, gi)] += T_iv @ ZZ @ T_iv.T
+    free = np.flatnonzero((np.diag(S_ml) > 0.0) & (np.diag(W_iv) > 0.0))
     if not free.size:
         return D, V
-    s = 1.0 / np.sqrt(np.diag(JJ)[free])  # columns to unit information: the thresholds are relative
+    s = 1.0 / np.sqrt(np.diag(S_ml)[free])  # unit information: the thresholds are relative
     S = np.outer(s, s)
-    Mi = np.linalg.pinv(JJ[np.ix_(free, free)] * S, rtol=rank_rtol, hermitian=True)
-    Ai = np.linalg.pinv(ZJ[np.ix_(free, free)] * S, rtol=rank_rtol)
-    d_ml = -(Mi @ (Jn[free] * s)) * s
-    d_iv = -(Ai @ (Zn[free] * s)) * s
-    v_iv = np.einsum("ij,jk,ik->i", Ai, ZZ[np.ix_(free, free)] * S, Ai) * s * s
-    D[free] = d_iv - d_ml
-    V[free] = np.maximum(v_iv - np.diag(Mi) * s * s, 0.0)
+    Mi = np.linalg.pinv(S_ml[np.ix_(free, free)] * S, rtol=rank_rtol, hermitian=True)
+    Ai = np.linalg.pinv(S_iv[np.ix_(free, free)] * S, rtol=rank_rtol)
+    d_ml = -(Mi @ (b_ml[free] * s)) * s
+    d_iv = -(Ai @ (b_iv[free] * s)) * s
+    v_iv = np.einsum("ij,jk,ik->i", Ai, W_iv[np.ix_(free, free)] * S, Ai) * s * s
+    at = np.flatnonzero(gpos >= 0)[np.argsort(gpos[gpos >= 0])][free]
+    D[at] = d_iv - d_ml
+    V[at] = np.maximum(v_iv - np.diag(Mi) * s * s, 0.0)
     return D, V
+
+
+def _eliminate(A: np.ndarray, g: np.ndarray, loc: np.ndarray, rank_rtol: float) -> np.ndarray:
+    """``[I, -A_GL A_LL^-1]`` laid out on the block's columns (globals ``g``, locals ``loc``)."""
+    T = np.zeros((g.size, g.size + loc.size))
+    T[np.arange(g.size), g] = 1.0
+    if loc.size:
+        d = np.diag(A)[loc]
+        s = 1.0 / np.sqrt(np.where(d > 0.0, d, 1.0))
+        inv = np.linalg.pinv(A[np.ix_(loc, loc)] * np.outer(s, s), rtol=rank_rtol) * np.outer(s, s)
+        T[:, loc] = -A[np.ix_(g, loc)] @ inv
+    return T

@@ -31,7 +31,8 @@ def _regression(rng: np.random.Generator, n: int, feedback: float):
 
 
 def _difference(rows, J, nu):
-    return iv_difference(*instrument_sums(rows, J, nu, np.array([True, False]), LAGS), rank_rtol=RTOL)
+    sums = instrument_sums(rows, J, nu, np.array([True, False]), LAGS)
+    return iv_difference([(np.arange(2), *sums)], np.arange(2), RTOL)
 
 
 def test_without_feedback_the_difference_is_its_own_noise():
@@ -76,7 +77,7 @@ def test_nothing_instrumented_gives_no_difference(seed, n):
     sums = instrument_sums(np.arange(n), J, nu, np.zeros(3, dtype=bool), np.array([2]))
     np.testing.assert_allclose(sums[0], sums[3])
     np.testing.assert_allclose(sums[1], sums[4])
-    D, V = iv_difference(*sums, rank_rtol=RTOL)
+    D, V = iv_difference([(np.arange(3), *sums)], np.arange(3), RTOL)
     np.testing.assert_allclose(D, 0.0, atol=1e-9 * np.abs(np.linalg.lstsq(J, nu, rcond=None)[0]).max())
     np.testing.assert_allclose(V, 0.0, atol=1e-12)
 
@@ -89,3 +90,34 @@ def test_a_missing_sample_leaves_the_instrument_zero_there():
     ZJ, *_ = instrument_sums(rows, J, np.zeros(6), np.array([True]), np.array([1]))
     # Z = [0, 1, 2, 0, 4, 5] (samples 0 and 5 have no predecessor): Z.J = 2 + 6 + 20 + 30
     assert ZJ[0, 0] == 58.0
+
+
+def test_eliminating_each_maneuvers_own_parameters_equals_the_whole_solve():
+    """Three maneuvers, each with two parameters of its own and two of the three globals: the
+    globals' difference and variance from the Schur complements equal the dense solve of the whole
+    system (to rounding); the maneuvers' own parameters are NaN."""
+    rng = np.random.default_rng(3)
+    gpos = np.array([0, 1, 2, -1, -1, -1, -1, -1, -1])
+    delay = np.array([True, False, False] + [False] * 6)
+    P = gpos.size
+    whole = [np.zeros((P, P)), np.zeros(P), np.zeros((P, P)), np.zeros((P, P)), np.zeros(P)]
+    blocks = []
+    for k, glob in enumerate(([0, 1], [0, 2], [0, 1, 2])):
+        cols = np.array(glob + [3 + 2 * k, 4 + 2 * k])
+        rows, J, nu = _regression(rng, 500, 0.3)
+        J = np.column_stack([J, rng.standard_normal((500, cols.size - 2))])
+        sums = instrument_sums(rows, J, nu, delay[cols], LAGS)
+        blocks.append((cols, *sums))
+        for a, x in zip(whole, sums, strict=True):
+            if a.ndim == 2:
+                a[np.ix_(cols, cols)] += x
+            else:
+                a[cols] += x
+    D, V = iv_difference(blocks, gpos, RTOL)
+    ZJ, Zn, ZZ, JJ, Jn = whole
+    Ai, Mi = np.linalg.inv(ZJ), np.linalg.inv(JJ)
+    D_ref = -Ai @ Zn + Mi @ Jn
+    V_ref = np.diag(Ai @ ZZ @ Ai.T) - np.diag(Mi)
+    np.testing.assert_allclose(D[:3], D_ref[:3], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(V[:3], np.maximum(V_ref[:3], 0.0), rtol=1e-9, atol=1e-12)
+    assert np.isnan(D[3:]).all() and np.isnan(V[3:]).all()
