@@ -143,6 +143,11 @@ ANSWER_R = 0.1
 #: the likelihood estimate exceeds FEEDBACK_Z of its deviations (two-sided 5 %).
 FEEDBACK_LAGS_S = (0.05, 0.075, 0.1)
 FEEDBACK_Z = 2.0
+#: ... judged only where the instrumental estimate's deviation is at most FEEDBACK_WEAK times the
+#: likelihood's (the instrument's correlation with the regressor 1/3 at least; the flow delays'
+#: 1.2-2.1 times on the what-if data, the airspeed delay's 2-10: a weak instrument's difference is
+#: far from normal: there it moved 0.05-0.9 s on data where the delay is 0.02-0.3 s off)
+FEEDBACK_WEAK = 3.0
 
 
 @dataclass(frozen=True)
@@ -498,6 +503,8 @@ class FilterErrorLikelihood:
         cov = cov + cov_imu
         feedback = self._delay_feedback(sums, instrumented, st, std, opt.rank_rtol)
         for i, _, after, _, _ in feedback:
+            if not math.isfinite(after):
+                continue
             std[i] = after
             if st.gpos[i] >= 0:
                 cov[st.gpos[i], st.gpos[i]] = after ** 2
@@ -510,29 +517,33 @@ class FilterErrorLikelihood:
     def feedback_findings(self, feedback: tuple) -> list[Finding]:
         """A warning naming the time delays whose honest deviation the feedback check widened
         (:meth:`honest_deviations`; ``feedback`` as :attr:`estimator.uncertainty._Deviations.feedback`)."""
-        if not feedback:
+        widened = [f for f in feedback if math.isfinite(f[2])]
+        if not widened:
             return []
         ps = self.model.problem.parameters.parameters
         parts = []
-        for i, before, after, d, sd in feedback:
+        for i, before, after, d, sd in widened:
             q = ps[i]
             k, unit = q.display_scale, ("" if q.display_unit in ("", "1") else f" {q.display_unit}")
             parts.append(f"{q.key} {before * k:.3g} -> {after * k:.3g}{unit} (instrumental estimate "
                          f"{d * k:+.3g}{unit} off, {abs(d) / sd:.1f} deviations of the difference)")
+        weak = [ps[f[0]].key for f in feedback if not math.isfinite(f[2])]
         return [Finding(
             "delay_feedback", Severity.WARNING,
             "filter-error method: the time delays' estimate is not what an instrumental-variable "
             f"estimate of the same data gives (each delay's sensitivity {FEEDBACK_LAGS_S[0]:g}-"
             f"{FEEDBACK_LAGS_S[-1]:g} s earlier as its instrument, untouched by the gust at the "
-            "sample): the IMU that drives the state equations measures the aircraft's answer to the "
-            "gusts the innovations carry, a loop the likelihood takes as open, and the delays come "
-            "out biased (on JSBSim's light turbulence 4-7 ms long). Their honest deviations are "
-            "widened by the difference (beyond its own noise): " + "; ".join(parts),
+            "sample): the likelihood takes the IMU that drives the state equations as independent "
+            "of the innovations, and where the aircraft answers the gusts (gust_answer) it is not, "
+            "and the delays come out biased (on JSBSim's light turbulence 4-7 ms long); innovations "
+            "coloured by another model error can set the two estimates apart too. Their honest "
+            "deviations are widened by the difference (beyond its own noise): " + "; ".join(parts)
+            + (f"; not judged, the instrument too weak: {', '.join(weak)}" if weak else ""),
             "read these delays as that uncertain; for delays as sharp as calm air gives, calibrate "
             "them in calm air (the output-error method) and hold them with the sideslip biases "
             "(gust_answer's advice)",
-            parameters=tuple(ps[i].key for i, *_ in feedback),
-            value=max(abs(d) / sd for _, _, _, d, sd in feedback))]
+            parameters=tuple(ps[i].key for i, *_ in widened),
+            value=max(abs(d) / sd for _, _, _, d, sd in widened))]
 
     def _delay_feedback(self, sums: dict[int, tuple], instrumented: np.ndarray, st: Structure,
                         std: np.ndarray, rank_rtol: float) -> list[tuple[int, float, float, float, float]]:
@@ -541,13 +552,16 @@ class FilterErrorLikelihood:
         the likelihood's by more than FEEDBACK_Z deviations of the difference, the deviation
         becomes ``sqrt(std^2 + D^2 - Var D)``. Returns ``(parameter, std before, after, D, sd of
         D)`` per widened delay (of those ``instrumented``: the delays of channels that see the
-        air), SI."""
+        air), SI; ``(parameter, std, NaN, NaN, NaN)`` per delay whose instrument is too weak to
+        judge it (its deviation more than FEEDBACK_WEAK times the likelihood's)."""
         # in maneuver order: the sums are filled by worker threads, the result must not depend on them
-        D, V = iv_difference([(sums[k][0], *sums[k][1]) for k in sorted(sums) if sums[k][1] is not None],
-                             st.gpos, rank_rtol)
+        D, V, V_ml = iv_difference([(sums[k][0], *sums[k][1]) for k in sorted(sums)
+                                    if sums[k][1] is not None], st.gpos, rank_rtol)
         out = []
         for i in np.flatnonzero(instrumented & st.free & np.isfinite(D) & np.isfinite(std)):
-            if abs(D[i]) > FEEDBACK_Z * math.sqrt(V[i]):
+            if V[i] + V_ml[i] > FEEDBACK_WEAK ** 2 * V_ml[i]:
+                out.append((int(i), float(std[i]), math.nan, math.nan, math.nan))  # not judged
+            elif abs(D[i]) > FEEDBACK_Z * math.sqrt(V[i]):
                 out.append((int(i), float(std[i]), math.sqrt(std[i] ** 2 + D[i] ** 2 - V[i]),
                             float(D[i]), math.sqrt(V[i])))
         return out

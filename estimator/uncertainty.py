@@ -484,7 +484,8 @@ class _Deviations:
     unresolved : parameters of a set still unidentifiable at the solution (their deviations NaN).
     imu_psd : the IMU noise densities used, per aircraft (None without ``colored``).
     feedback : the time delays whose honest deviation the filter-error method's feedback check
-        widened: ``(parameter, deviation before, after, IV - ML difference, its deviation)``, SI
+        widened: ``(parameter, deviation before, after, IV - ML difference, its deviation)``, SI,
+        and ``(parameter, deviation, NaN, NaN, NaN)`` for one its instrument is too weak to judge
         (:meth:`estimator.filter_error.FilterErrorLikelihood.honest_deviations`).
     """
 

@@ -56,7 +56,8 @@ def instrument_sums(rows: np.ndarray, J: np.ndarray, nu: np.ndarray, is_delay: n
     return Z.T @ J, Z.T @ nu, Z.T @ Z, J.T @ J, J.T @ nu
 
 
-def iv_difference(blocks, gpos: np.ndarray, rank_rtol: float) -> tuple[np.ndarray, np.ndarray]:
+def iv_difference(blocks, gpos: np.ndarray, rank_rtol: float
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The instrumental-variable step less the likelihood's, and that difference's variance, of
     the global parameters (each maneuver's own parameters eliminated: Schur complements).
 
@@ -70,11 +71,13 @@ def iv_difference(blocks, gpos: np.ndarray, rank_rtol: float) -> tuple[np.ndarra
 
     Returns
     -------
-    (P,) ``D = d_IV - d_ML`` and (P,) ``V_IV - V_ML`` (its variance where there is no feedback),
-    SI; NaN for a maneuver's own parameters and where a global is not informed.
+    (P,) ``D = d_IV - d_ML``, (P,) ``V_IV - V_ML`` (its variance where there is no feedback) and
+    (P,) ``V_ML``, SI; NaN for a maneuver's own parameters and where a global is not informed.
+    ``(V_IV / V_ML)^-1/2`` is the instrument's correlation with the regressor, roughly: a weak
+    instrument's difference is far from normal and tells nothing.
     """
     P, G = gpos.size, int(gpos.max(initial=-1)) + 1
-    D, V = np.full(P, np.nan), np.full(P, np.nan)
+    D, V, V_ml = np.full(P, np.nan), np.full(P, np.nan), np.full(P, np.nan)
     S_iv, S_ml, W_iv = np.zeros((G, G)), np.zeros((G, G)), np.zeros((G, G))
     b_iv, b_ml = np.zeros(G), np.zeros(G)
     for cols, ZJ, Zn, ZZ, JJ, Jn in blocks:
@@ -89,7 +92,7 @@ def iv_difference(blocks, gpos: np.ndarray, rank_rtol: float) -> tuple[np.ndarra
         W_iv[np.ix_(gi, gi)] += T_iv @ ZZ @ T_iv.T
     free = np.flatnonzero((np.diag(S_ml) > 0.0) & (np.diag(W_iv) > 0.0))
     if not free.size:
-        return D, V
+        return D, V, V_ml
     s = 1.0 / np.sqrt(np.diag(S_ml)[free])  # unit information: the thresholds are relative
     S = np.outer(s, s)
     Mi = np.linalg.pinv(S_ml[np.ix_(free, free)] * S, rtol=rank_rtol, hermitian=True)
@@ -100,7 +103,8 @@ def iv_difference(blocks, gpos: np.ndarray, rank_rtol: float) -> tuple[np.ndarra
     at = np.flatnonzero(gpos >= 0)[np.argsort(gpos[gpos >= 0])][free]
     D[at] = d_iv - d_ml
     V[at] = np.maximum(v_iv - np.diag(Mi) * s * s, 0.0)
-    return D, V
+    V_ml[at] = np.diag(Mi) * s * s
+    return D, V, V_ml
 
 
 def _eliminate(A: np.ndarray, g: np.ndarray, loc: np.ndarray, rank_rtol: float) -> np.ndarray:

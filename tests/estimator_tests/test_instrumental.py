@@ -32,7 +32,7 @@ def _regression(rng: np.random.Generator, n: int, feedback: float):
 
 def _difference(rows, J, nu):
     sums = instrument_sums(rows, J, nu, np.array([True, False]), LAGS)
-    return iv_difference([(np.arange(2), *sums)], np.arange(2), RTOL)
+    return iv_difference([(np.arange(2), *sums)], np.arange(2), RTOL)[:2]
 
 
 def test_without_feedback_the_difference_is_its_own_noise():
@@ -77,7 +77,7 @@ def test_nothing_instrumented_gives_no_difference(seed, n):
     sums = instrument_sums(np.arange(n), J, nu, np.zeros(3, dtype=bool), np.array([2]))
     np.testing.assert_allclose(sums[0], sums[3])
     np.testing.assert_allclose(sums[1], sums[4])
-    D, V = iv_difference([(np.arange(3), *sums)], np.arange(3), RTOL)
+    D, V, _ = iv_difference([(np.arange(3), *sums)], np.arange(3), RTOL)
     np.testing.assert_allclose(D, 0.0, atol=1e-9 * np.abs(np.linalg.lstsq(J, nu, rcond=None)[0]).max())
     np.testing.assert_allclose(V, 0.0, atol=1e-12)
 
@@ -113,11 +113,12 @@ def test_eliminating_each_maneuvers_own_parameters_equals_the_whole_solve():
                 a[np.ix_(cols, cols)] += x
             else:
                 a[cols] += x
-    D, V = iv_difference(blocks, gpos, RTOL)
+    D, V, V_ml = iv_difference(blocks, gpos, RTOL)
     ZJ, Zn, ZZ, JJ, Jn = whole
     Ai, Mi = np.linalg.inv(ZJ), np.linalg.inv(JJ)
     D_ref = -Ai @ Zn + Mi @ Jn
     V_ref = np.diag(Ai @ ZZ @ Ai.T) - np.diag(Mi)
     np.testing.assert_allclose(D[:3], D_ref[:3], rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(V[:3], np.maximum(V_ref[:3], 0.0), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(V_ml[:3], np.diag(Mi)[:3], rtol=1e-9)
     assert np.isnan(D[3:]).all() and np.isnan(V[3:]).all()
