@@ -22,6 +22,8 @@ that say otherwise; only the air the flow sensors and the airspeed see changes,
 - ``jsbsim_noise_free``: the same, without the IMU's and the flow sensors' noise and quantization
   (the other channels' noise kept): how the delays' error depends on how closely the filter can
   follow the gusts;
+- ``jsbsim_quiet_imu``, ``jsbsim_quiet_sensors``: the same, without the IMU's noise and
+  quantization only, and without the flow sensors' only: which noise makes the delays' error;
 - ``calm_motion``: JSBSim flies the maneuver in the steady wind only (no turbulence); the sensors
   see the steady wind plus the turbulence JSBSim made in the turbulent flight of the same maneuver:
   JSBSim's own gust series exactly, the aircraft's answer to them removed;
@@ -41,8 +43,9 @@ that say otherwise; only the air the flow sensors and the airspeed see changes,
 
 Printed and written (``--write``): each case's sideslip offsets, the vanes' sideslip reference
 offset ``c_vb``, the flow delays and the airspeed delay against their truth, in honest deviations,
-and how many flow channels the ``gust_answer`` finding names (the innovations correlate with the
-IMU: the aircraft's answer to the gusts, seen from the data alone); and, on the ``jsbsim`` case,
+how many flow channels the ``gust_answer`` finding names (the innovations correlate with the
+IMU: the aircraft's answer to the gusts, seen from the data alone) and how many delays' deviations
+the feedback check widened (:mod:`estimator.core.instrumental`); and, on the ``jsbsim`` case,
 what holding the flow delays (alone, and with the sideslip offsets) at their truth, as a perfect
 calm-air calibration would, does to the calibrated sensors' accuracy against the truth.
 Run: ``python campaigns/benchmarks/whatif_sideslip.py --out DIR --write
@@ -70,7 +73,8 @@ from synth.campaign import fly_campaign, parse_campaign
 from synth.environment import Environment
 from synth.sensors import dcm_body_to_ned
 
-CASES = ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states", "jsbsim_noise_free", "calm_motion",
+CASES = ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states", "jsbsim_noise_free", "jsbsim_quiet_imu",
+         "jsbsim_quiet_sensors", "calm_motion",
          "gauss_markov_flown",
          "reversed", "shifted", "gauss_markov", "dryden_body", "steady", "steady_vane_biases",
          "steady_no_biases")
@@ -146,7 +150,8 @@ def fly(case: str, out: Path) -> None:
         out_segments = []
         for j, tr in enumerate(original(spec, airframe, aircraft, env)):
             turb = tr.wind_ned_mps - steady
-            if case in ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states", "jsbsim_noise_free"):
+            if case in ("jsbsim", "jsbsim_120hz", "jsbsim_dryden_states", "jsbsim_noise_free",
+                        "jsbsim_quiet_imu", "jsbsim_quiet_sensors"):
                 w = tr.wind_ned_mps
             elif case == "calm_motion":
                 # the calm flight's samples are at the same times (a scripted maneuver, one step)
@@ -176,10 +181,12 @@ def fly(case: str, out: Path) -> None:
            "errors": {"preset": "typical"},
            "flights": [{"configurations": ["PT1-BOOM"], "mach": [0.6], "maneuvers": KINDS,
                         "altitude_m": 6000.0}]}
-    if case == "jsbsim_noise_free":
+    if case in ("jsbsim_noise_free", "jsbsim_quiet_imu"):
         raw["errors"] = {"preset": "typical",
                          "imu": {"accel_noise_mps2": 0.0, "gyro_noise_deg_s": 0.0,
-                                 "accel_quant_mps2": 0.0, "gyro_quant_deg_s": 0.0},
+                                 "accel_quant_mps2": 0.0, "gyro_quant_deg_s": 0.0}}
+    if case in ("jsbsim_noise_free", "jsbsim_quiet_sensors"):
+        raw["errors"] = {"preset": "typical", **raw["errors"],
                          "sensors": {**{s: {"noise_deg": 0.0, "quant_deg": 0.0} for s in VANES},
                                      **{s: {"noise_pa": 0.0, "quant_pa": 0.0} for s in PROBES}}}
     if case in ("steady_vane_biases", "steady_no_biases"):
@@ -256,7 +263,7 @@ def main() -> None:
     lines = ["filter-error method (tejas_ins) on PT1-BOOM's maneuvers of the demo's light-turbulence",
              "block, JSBSim's flight, the wind the sensors see replaced: estimate - truth (honest "
              "deviations)", f"code: {code_version(__file__)}", ""]
-    header = f"{'case':20s} " + " ".join(f"{k:>15s}" for k in ROWS) + f" {'answer':>7s}"
+    header = f"{'case':20s} " + " ".join(f"{k:>15s}" for k in ROWS) + f" {'answer':>7s} {'widened':>8s}"
     lines += [header, "-" * len(header)]
     for case in a.cases:
         t0 = time.perf_counter()
@@ -269,7 +276,9 @@ def main() -> None:
             cells.append(f"{row['error_display']:+.3f}{unit[0]} ({row['z_colored']:+.1f})"
                          if unit == "deg" else f"{row['error_display']:+.1f}ms ({row['z_colored']:+.1f})")
         answered = sum(f.code == "gust_answer" for f in r.findings)
-        lines.append(f"{case:20s} " + " ".join(f"{c:>15s}" for c in cells) + f" {answered:>7d}")
+        widened = sum(len(f.parameters) for f in r.findings if f.code == "delay_feedback")
+        lines.append(f"{case:20s} " + " ".join(f"{c:>15s}" for c in cells) + f" {answered:>7d}"
+                     + f" {widened:>8d}")
         print(lines[-1], f"[{r.verdict.name}, {time.perf_counter() - t0:.0f} s]", flush=True)
     if "jsbsim" in a.cases:
         lines += fixing(a.out / "jsbsim")
@@ -277,7 +286,12 @@ def main() -> None:
     lines += ["", "d: deg; the steady cases force the wind states on at 1 m/s (calm air).",
               "answer: the flow channels (of 8) whose innovations correlate with the IMU's specific "
               "force, the aircraft's",
-              "answer to the gusts (gust_answer findings: FilterErrorLikelihood.answer_findings)."]
+              "answer to the gusts (gust_answer findings: FilterErrorLikelihood.answer_findings).",
+              "widened: the delays whose honest deviation the feedback check widened (an "
+              "instrumental-variable estimate,",
+              "the delay's sensitivity 50-100 ms earlier as its instrument, differs: "
+              "estimator.core.instrumental); the",
+              "deviations in brackets are the widened ones."]
     text = "\n".join(lines) + "\n"
     print(text)
     if a.write:
