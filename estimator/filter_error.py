@@ -140,7 +140,11 @@ ANSWER_R = 0.1
 #: the filter's memory of the innovations (under a sample at 40-120 Hz in light turbulence), young
 #: enough to follow a maneuver's flow-angle rate (150 ms: the instrument too weak, the difference
 #: 20-40 ms of noise on the what-if data). A delay's deviation is widened where the difference to
-#: the likelihood estimate exceeds FEEDBACK_Z of its deviations (two-sided 5 %).
+#: the likelihood estimate exceeds FEEDBACK_Z of its deviations (two-sided 5 % each; with 6-8
+#: flow delays judged one at a time, a fit without feedback gets a widening about a third of the
+#: time, which errs on the safe side: on the what-if data the Gauss-Markov wind drawn apart from
+#: the flight had 3 delays widened, the calm cases none). The difference's variance takes the
+#: innovations as white; where they are coloured it is too small and the check fires more often.
 FEEDBACK_LAGS_S = (0.05, 0.075, 0.1)
 FEEDBACK_Z = 2.0
 #: ... judged only where the instrumental estimate's deviation is at most FEEDBACK_WEAK times the
@@ -501,13 +505,16 @@ class FilterErrorLikelihood:
             map_fn=lambda fn, ks: self._map(fn, list(ks)))
         std = np.sqrt(std ** 2 + std_imu ** 2)
         cov = cov + cov_imu
-        feedback = self._delay_feedback(sums, instrumented, st, std, opt.rank_rtol)
-        for i, _, after, _, _ in feedback:
-            if not math.isfinite(after):
-                continue
-            std[i] = after
-            if st.gpos[i] >= 0:
-                cov[st.gpos[i], st.gpos[i]] = after ** 2
+        feedback = [f for f in self._delay_feedback(sums, instrumented, st, std, opt.rank_rtol)
+                    if not dev.unresolved[f[0]]]
+        # the bias is common to the delays (the same gusts, the same loop): one rank-one term, its
+        # signs the differences', so that a combination of delays is as uncertain as its parts
+        b = np.zeros(cov.shape[0])
+        for i, before, after, d, _ in feedback:
+            if math.isfinite(after):
+                std[i] = after
+                b[st.gpos[i]] = math.copysign(math.sqrt(after ** 2 - before ** 2), d)
+        cov = cov + np.outer(b, b)
         std[dev.unresolved] = np.nan
         std_imu[dev.unresolved] = np.nan
         dh = np.sqrt(np.maximum(np.diag(cov), 1e-300))
@@ -518,16 +525,24 @@ class FilterErrorLikelihood:
         """A warning naming the time delays whose honest deviation the feedback check widened
         (:meth:`honest_deviations`; ``feedback`` as :attr:`estimator.uncertainty._Deviations.feedback`)."""
         widened = [f for f in feedback if math.isfinite(f[2])]
-        if not widened:
-            return []
         ps = self.model.problem.parameters.parameters
+        weak = [ps[f[0]].key for f in feedback if not math.isfinite(f[2])]
+        if not widened:
+            return [Finding(
+                "delay_feedback", Severity.INFO,
+                "filter-error method: the feedback check of the time delays (an instrumental-"
+                "variable estimate against the likelihood's) cannot judge "
+                f"{', '.join(weak)}: the instrument too weak (its estimate more than "
+                f"{FEEDBACK_WEAK:g} times less precise)",
+                "read these delays' deviations as the likelihood's alone; a bias from the "
+                "aircraft's answer to the gusts would not show in them",
+                parameters=tuple(weak))] if weak else []
         parts = []
         for i, before, after, d, sd in widened:
             q = ps[i]
             k, unit = q.display_scale, ("" if q.display_unit in ("", "1") else f" {q.display_unit}")
             parts.append(f"{q.key} {before * k:.3g} -> {after * k:.3g}{unit} (instrumental estimate "
                          f"{d * k:+.3g}{unit} off, {abs(d) / sd:.1f} deviations of the difference)")
-        weak = [ps[f[0]].key for f in feedback if not math.isfinite(f[2])]
         return [Finding(
             "delay_feedback", Severity.WARNING,
             "filter-error method: the time delays' estimate is not what an instrumental-variable "
@@ -537,7 +552,8 @@ class FilterErrorLikelihood:
             "of the innovations, and where the aircraft answers the gusts (gust_answer) it is not, "
             "and the delays come out biased (on JSBSim's light turbulence 4-7 ms long); innovations "
             "coloured by another model error can set the two estimates apart too. Their honest "
-            "deviations are widened by the difference (beyond its own noise): " + "; ".join(parts)
+            "deviations are widened by the difference (beyond its own noise, in quadrature): "
+            + "; ".join(parts)
             + (f"; not judged, the instrument too weak: {', '.join(weak)}" if weak else ""),
             "read these delays as that uncertain; for delays as sharp as calm air gives, calibrate "
             "them in calm air (the output-error method) and hold them with the sideslip biases "
@@ -558,8 +574,10 @@ class FilterErrorLikelihood:
         D, V, V_ml = iv_difference([(sums[k][0], *sums[k][1]) for k in sorted(sums)
                                     if sums[k][1] is not None], st.gpos, rank_rtol)
         out = []
-        for i in np.flatnonzero(instrumented & st.free & np.isfinite(D) & np.isfinite(std)):
-            if V[i] + V_ml[i] > FEEDBACK_WEAK ** 2 * V_ml[i]:
+        for i in np.flatnonzero(instrumented & st.free & (st.gpos >= 0) & np.isfinite(D)
+                                & np.isfinite(std)):
+            # a weak instrument, or one the inverse's rank cut left without a variance of its own
+            if V[i] + V_ml[i] > FEEDBACK_WEAK ** 2 * V_ml[i] or V[i] <= 1e-9 * V_ml[i]:
                 out.append((int(i), float(std[i]), math.nan, math.nan, math.nan))  # not judged
             elif abs(D[i]) > FEEDBACK_Z * math.sqrt(V[i]):
                 out.append((int(i), float(std[i]), math.sqrt(std[i] ** 2 + D[i] ** 2 - V[i]),
@@ -684,9 +702,9 @@ class FilterErrorLikelihood:
                     "(JSBSim flying through a wind of exactly the filter's form: 12-14 ms long; "
                     "the same gusts with the aircraft's answer removed: right; not the wind "
                     "states' form nor the sampling rate; the gust_answer warnings name the "
-                    "channels and maneuvers whose innovations show that answer, and the feedback "
-                    "check widens the flow delays' deviations to cover it: delay_feedback, not the "
-                    "airspeed's); with "
+                    "channels and maneuvers whose innovations show that answer"
+                    + (", and the feedback check widens the flow delays' deviations to cover it: "
+                       "delay_feedback, not the airspeed's" if colored else "") + "); with "
                     "the wind as "
                     "states the flight's kinematics fix an aircraft's common "
                     "sideslip offset (every sideslip channel's bias alike) only to 0.05-0.1 deg, so a "

@@ -20,7 +20,8 @@ Without feedback both estimates are consistent and the likelihood's efficient, s
 likelihood estimate's bias, and ``D^2 - (V_IV - V_ML)`` estimates its square. The instrumental
 estimate itself is not the better value: where the flow sensors are noise-free (the likelihood's
 bias 1-3 ms) it moves 4-12 ms the other way (campaigns/benchmarks/whatif_sideslip.py), and it is
-2-3x less precise; its difference is used to widen the deviations, not to move the estimate.
+1.2-2.1x less precise (the flow delays there); its difference is used to widen the deviations,
+not to move the estimate.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ import numpy as np
 
 
 def instrument_sums(rows: np.ndarray, J: np.ndarray, nu: np.ndarray, is_delay: np.ndarray,
-                    lags: np.ndarray) -> tuple[np.ndarray, ...]:
+                    lags_samples: np.ndarray) -> tuple[np.ndarray, ...]:
     """One channel's contributions to the normal equations of both estimates.
 
     Parameters
@@ -38,7 +39,7 @@ def instrument_sums(rows: np.ndarray, J: np.ndarray, nu: np.ndarray, is_delay: n
     J : (n, p) the normalised innovations' Jacobian, SI per parameter.
     nu : (n,) the normalised innovations, 1.
     is_delay : (p,) which columns are time delays (instrumented).
-    lags : (m,) the instruments' lags, samples (>= 1): a delay's instrument at a sample is the mean
+    lags_samples : (m,) the instruments' lags, samples (>= 1): a delay's instrument at a sample is the mean
         of its column at those samples earlier (zero where a sample is missing).
 
     Returns
@@ -48,11 +49,11 @@ def instrument_sums(rows: np.ndarray, J: np.ndarray, nu: np.ndarray, is_delay: n
     Z = J.copy()
     if is_delay.any():
         Z[:, is_delay] = 0.0
-        for lag in lags:
+        for lag in lags_samples:
             at = np.searchsorted(rows, rows - lag)
             ok = (at < rows.size) & (rows[np.minimum(at, rows.size - 1)] == rows - lag)
             Z[np.ix_(np.flatnonzero(ok), np.flatnonzero(is_delay))] += (
-                J[np.ix_(at[ok], np.flatnonzero(is_delay))] / lags.size)
+                J[np.ix_(at[ok], np.flatnonzero(is_delay))] / lags_samples.size)
     return Z.T @ J, Z.T @ nu, Z.T @ Z, J.T @ J, J.T @ nu
 
 
