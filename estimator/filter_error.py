@@ -493,9 +493,10 @@ class FilterErrorLikelihood:
                 return np.zeros(0, dtype=np.intp), []
             cols, chans = self.innovation_series(st, ev, noise, mans[k])
             # the delays' feedback check rides on the same series (one filter pass)
-            lags = np.unique(np.maximum(np.rint(np.asarray(FEEDBACK_LAGS_S) / self.dt_s[k]), 1)
-                             ).astype(np.int64)
-            parts = [instrument_sums(rows, J, nu, instrumented[cols], lags) for _, rows, nu, J in chans]
+            lags_samples = np.unique(np.maximum(np.rint(np.asarray(FEEDBACK_LAGS_S) / self.dt_s[k]),
+                                                1)).astype(np.int64)
+            parts = [instrument_sums(rows, J, nu, instrumented[cols], lags_samples)
+                     for _, rows, nu, J in chans]
             sums[k] = (cols, [sum(x) for x in zip(*parts, strict=True)] if parts else None)
             return cols, chans
 

@@ -39,21 +39,21 @@ def instrument_sums(rows: np.ndarray, J: np.ndarray, nu: np.ndarray, is_delay: n
     J : (n, p) the normalised innovations' Jacobian, SI per parameter.
     nu : (n,) the normalised innovations, 1.
     is_delay : (p,) which columns are time delays (instrumented).
-    lags_samples : (m,) the instruments' lags, samples (>= 1): a delay's instrument at a sample is the mean
-        of its column at those samples earlier (zero where a sample is missing).
+    lags_samples : (m,) the instruments' lags, samples (>= 1): a delay's instrument at a sample
+        is the mean of its column at those samples earlier (zero where a sample is missing).
 
     Returns
     -------
     ``Z^T J``, ``Z^T nu``, ``Z^T Z``, ``J^T J``, ``J^T nu``: (p, p), (p,), (p, p), (p, p), (p,).
     """
     Z = J.copy()
-    if is_delay.any():
-        Z[:, is_delay] = 0.0
+    d = np.flatnonzero(is_delay)
+    if d.size:
+        Z[:, d] = 0.0
         for lag in lags_samples:
             at = np.searchsorted(rows, rows - lag)
             ok = (at < rows.size) & (rows[np.minimum(at, rows.size - 1)] == rows - lag)
-            Z[np.ix_(np.flatnonzero(ok), np.flatnonzero(is_delay))] += (
-                J[np.ix_(at[ok], np.flatnonzero(is_delay))] / lags_samples.size)
+            Z[np.ix_(np.flatnonzero(ok), d)] += J[np.ix_(at[ok], d)] / lags_samples.size
     return Z.T @ J, Z.T @ nu, Z.T @ Z, J.T @ J, J.T @ nu
 
 
