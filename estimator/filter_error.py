@@ -150,7 +150,12 @@ FEEDBACK_Z = 2.0
 #: ... judged only where the instrumental estimate's deviation is at most FEEDBACK_WEAK times the
 #: likelihood's (the instrument's correlation with the regressor 1/3 at least; the flow delays'
 #: 1.2-2.1 times on the what-if data, the airspeed delay's 2-10: a weak instrument's difference is
-#: far from normal: there it moved 0.05-0.9 s on data where the delay is 0.02-0.3 s off)
+#: far from normal: there it moved 0.05-0.9 s on data where the delay is 0.02-0.3 s off). A weak
+#: instrument means the likelihood draws its information on the delay from the regressor's fast
+#: part, which in gusts the aircraft answers is that answer (the airspeed delay on JSBSim's
+#: turbulence: 0.23-0.31 s long at 5-11 honest deviations, its instrument 8-10 times less
+#: precise; with the aircraft's answer removed 2 times, and the delay right): such a delay's
+#: honest deviation becomes what the instrument supports, the likelihood's times their ratio
 FEEDBACK_WEAK = 3.0
 
 
@@ -227,6 +232,62 @@ class _Answer(NamedTuple):
     axis: str  # body axis of the IMU's specific force: x, y or z
     t_s: tuple[float, float]  # the maneuver's time span, s
     delays: tuple[str, ...]  # the channel's time-delay parameters
+
+
+class DelayCheck(NamedTuple):
+    """The feedback check's judgement of one time delay (:func:`judge_delays`), SI."""
+
+    parameter: int  # index into the problem's parameters
+    std_before: float  # honest deviation before the check
+    std_after: float  # after it (NaN: not judged)
+    difference: float  # instrumental - likelihood estimate
+    difference_std: float  # its deviation (Hausman: sqrt(Var IV - Var ML))
+    ratio: float  # the instrumental estimate's deviation over the likelihood's
+
+    @property
+    def weak(self) -> bool:
+        """The instrument weak (``ratio`` > FEEDBACK_WEAK): the deviation multiplied by ``ratio``."""
+        return self.ratio > FEEDBACK_WEAK
+
+    @property
+    def differs(self) -> bool:
+        """The difference beyond FEEDBACK_Z of its deviations: the deviation widened by it."""
+        return abs(self.difference) > FEEDBACK_Z * self.difference_std
+
+
+def judge_delays(D: np.ndarray, V: np.ndarray, V_ml: np.ndarray, candidates: np.ndarray,
+                 std: np.ndarray) -> list[DelayCheck]:
+    """The time delays the feedback check widens or cannot judge, SI.
+
+    Parameters
+    ----------
+    D, V, V_ml : per parameter, the instrumental-variable minus the likelihood estimate, its
+        variance and the likelihood's white-innovation variance
+        (:func:`estimator.core.instrumental.iv_difference`).
+    candidates : the delays to judge (bool per parameter).
+    std : their honest deviations before the check.
+
+    Where the instrument is weak (its estimate's deviation more than FEEDBACK_WEAK times the
+    likelihood's), a bias below its deviation cannot show: the deviation is multiplied by that
+    ratio. Where the difference exceeds FEEDBACK_Z of its deviations, ``D^2 - Var D`` is added to
+    the (so multiplied) variance. Where the inverse's rank cut left the difference no variance,
+    the delay is not judged (``std_after`` NaN). Delays the check leaves as they were are not
+    listed.
+    """
+    out = []
+    for i in np.flatnonzero(candidates & np.isfinite(D) & np.isfinite(std)):
+        if V[i] <= 1e-9 * V_ml[i]:
+            out.append(DelayCheck(int(i), float(std[i]), math.nan, float(D[i]), math.nan, math.nan))
+            continue
+        # the sandwich's colour correction kept: the likelihood's honest deviation times the
+        # instrumental over the likelihood's white-innovation deviation
+        c = DelayCheck(int(i), float(std[i]), math.nan, float(D[i]), math.sqrt(V[i]),
+                       math.sqrt((V[i] + V_ml[i]) / V_ml[i]))
+        if c.weak or c.differs:
+            var = (std[i] * c.ratio) ** 2 if c.weak else std[i] ** 2
+            var += D[i] ** 2 - V[i] if c.differs else 0.0
+            out.append(c._replace(std_after=math.sqrt(var)))
+    return out
 
 
 @dataclass
@@ -507,14 +568,20 @@ class FilterErrorLikelihood:
         std = np.sqrt(std ** 2 + std_imu ** 2)
         cov = cov + cov_imu
         feedback = [f for f in self._delay_feedback(sums, instrumented, st, std, opt.rank_rtol)
-                    if not dev.unresolved[f[0]]]
-        # the bias is common to the delays (the same gusts, the same loop): one rank-one term, its
-        # signs the differences', so that a combination of delays is as uncertain as its parts
+                    if not dev.unresolved[f.parameter]]
+        # the bias is common to the delays the difference judged (the same gusts, the same loop):
+        # one rank-one term, its signs the differences', so that a combination of delays is as
+        # uncertain as its parts; a weak instrument's widening has no sign: its own term
         b = np.zeros(cov.shape[0])
-        for i, before, after, d, _ in feedback:
-            if math.isfinite(after):
-                std[i] = after
-                b[st.gpos[i]] = math.copysign(math.sqrt(after ** 2 - before ** 2), d)
+        for f in feedback:
+            if math.isfinite(f.std_after):
+                std[f.parameter] = f.std_after
+                g = st.gpos[f.parameter]
+                own = f.std_before ** 2 * (f.ratio ** 2 - 1.0) if f.weak else 0.0
+                cov[g, g] += own
+                if f.differs:
+                    b[g] = math.copysign(math.sqrt(f.std_after ** 2 - f.std_before ** 2 - own),
+                                         f.difference)
         cov = cov + np.outer(b, b)
         std[dev.unresolved] = np.nan
         std_imu[dev.unresolved] = np.nan
@@ -522,68 +589,87 @@ class FilterErrorLikelihood:
         return replace(dev, std_colored=std, correlation_colored=cov / np.outer(dh, dh), std_imu=std_imu,
                        imu_psd=imu_psd, feedback=tuple(feedback))
 
-    def feedback_findings(self, feedback: tuple) -> list[Finding]:
-        """A warning naming the time delays whose honest deviation the feedback check widened
-        (:meth:`honest_deviations`; ``feedback`` as :attr:`estimator.uncertainty._Deviations.feedback`)."""
-        widened = [f for f in feedback if math.isfinite(f[2])]
+    def feedback_findings(self, feedback: tuple[DelayCheck, ...]) -> list[Finding]:
+        """The feedback check's findings (:meth:`honest_deviations`; ``feedback`` as
+        :attr:`estimator.uncertainty._Deviations.feedback`): a ``delay_feedback`` warning naming
+        the delays widened by the instrumental estimate's difference, a ``delay_weak_instrument``
+        warning naming those widened for a weak instrument, an INFO for those not judged."""
         ps = self.model.problem.parameters.parameters
-        weak = [ps[f[0]].key for f in feedback if not math.isfinite(f[2])]
-        if not widened:
-            return [Finding(
+
+        def change(f: DelayCheck) -> tuple[str, float, str]:
+            q = ps[f.parameter]
+            k, unit = q.display_scale, ("" if q.display_unit in ("", "1") else f" {q.display_unit}")
+            return f"{q.key} {f.std_before * k:.3g} -> {f.std_after * k:.3g}{unit}", k, unit
+
+        parts, weak_parts = [], []
+        for f in feedback:
+            if not math.isfinite(f.std_after):
+                continue
+            text, k, unit = change(f)
+            diff = (f"instrumental estimate {f.difference * k:+.3g}{unit} off, "
+                    f"{abs(f.difference) / f.difference_std:.1f} deviations of the difference")
+            if f.weak:
+                weak_parts.append(f"{text} (its instrumental estimate {f.ratio:.1f} times less "
+                                  f"precise{'; ' + diff if f.differs else ''})")
+            else:
+                parts.append(f"{text} ({diff})")
+        unjudged = [ps[f.parameter].key for f in feedback if not math.isfinite(f.std_after)]
+        out = []
+        if parts:
+            differs = [f for f in feedback if math.isfinite(f.std_after) and not f.weak]
+            out.append(Finding(
+                "delay_feedback", Severity.WARNING,
+                "filter-error method: the time delays' estimate is not what an instrumental-variable "
+                f"estimate of the same data gives (each delay's sensitivity {FEEDBACK_LAGS_S[0]:g}-"
+                f"{FEEDBACK_LAGS_S[-1]:g} s earlier as its instrument, untouched by the gust at the "
+                "sample): the likelihood takes the IMU that drives the state equations as independent "
+                "of the innovations, and where the aircraft answers the gusts (gust_answer) it is not, "
+                "and the delays come out biased (on JSBSim's light turbulence 4-7 ms long); "
+                "innovations coloured by another model error can set the two estimates apart too. "
+                "Their honest deviations are widened by the difference (beyond its own noise, in "
+                "quadrature): " + "; ".join(parts),
+                "read these delays as that uncertain; for delays as sharp as calm air gives, calibrate "
+                "them in calm air (the output-error method) and hold them with the sideslip biases "
+                "(gust_answer's advice)",
+                parameters=tuple(ps[f.parameter].key for f in differs),
+                value=max(abs(f.difference) / f.difference_std for f in differs)))
+        if weak_parts:
+            weak = [f for f in feedback if math.isfinite(f.std_after) and f.weak]
+            out.append(Finding(
+                "delay_weak_instrument", Severity.WARNING,
+                "filter-error method: the feedback check sees these time delays only dimly, their "
+                f"instrument (the sensitivity {FEEDBACK_LAGS_S[0]:g}-{FEEDBACK_LAGS_S[-1]:g} s earlier) "
+                f"more than {FEEDBACK_WEAK:g} times less precise than the likelihood: the likelihood "
+                "draws its information on them from their sensitivity's fast part, which in gusts the "
+                "aircraft answers is that answer, measured by the IMU that drives the state equations "
+                "(on JSBSim's light turbulence the airspeed delay came out 0.23-0.31 s long at 5-11 "
+                "of the likelihood's honest deviations), and a bias below the instrument's deviation "
+                "would not show. Their honest deviations are widened to what the instrument supports "
+                "(and by the difference where it shows): " + "; ".join(weak_parts),
+                "read these delays as that uncertain; for a sharp value calibrate them in calm air "
+                "(the output-error method) and hold them",
+                parameters=tuple(ps[f.parameter].key for f in weak),
+                value=max(f.ratio for f in weak)))
+        if unjudged and not out:
+            out.append(Finding(
                 "delay_feedback", Severity.INFO,
                 "filter-error method: the feedback check of the time delays (an instrumental-"
-                "variable estimate against the likelihood's) cannot judge "
-                f"{', '.join(weak)}: the instrument too weak (its estimate more than "
-                f"{FEEDBACK_WEAK:g} times less precise)",
+                f"variable estimate against the likelihood's) cannot judge {', '.join(unjudged)}: "
+                "the difference has no variance of its own left after the information matrix's "
+                "rank cut",
                 "read these delays' deviations as the likelihood's alone; a bias from the "
                 "aircraft's answer to the gusts would not show in them",
-                parameters=tuple(weak))] if weak else []
-        parts = []
-        for i, before, after, d, sd in widened:
-            q = ps[i]
-            k, unit = q.display_scale, ("" if q.display_unit in ("", "1") else f" {q.display_unit}")
-            parts.append(f"{q.key} {before * k:.3g} -> {after * k:.3g}{unit} (instrumental estimate "
-                         f"{d * k:+.3g}{unit} off, {abs(d) / sd:.1f} deviations of the difference)")
-        return [Finding(
-            "delay_feedback", Severity.WARNING,
-            "filter-error method: the time delays' estimate is not what an instrumental-variable "
-            f"estimate of the same data gives (each delay's sensitivity {FEEDBACK_LAGS_S[0]:g}-"
-            f"{FEEDBACK_LAGS_S[-1]:g} s earlier as its instrument, untouched by the gust at the "
-            "sample): the likelihood takes the IMU that drives the state equations as independent "
-            "of the innovations, and where the aircraft answers the gusts (gust_answer) it is not, "
-            "and the delays come out biased (on JSBSim's light turbulence 4-7 ms long); innovations "
-            "coloured by another model error can set the two estimates apart too. Their honest "
-            "deviations are widened by the difference (beyond its own noise, in quadrature): "
-            + "; ".join(parts)
-            + (f"; not judged, the instrument too weak: {', '.join(weak)}" if weak else ""),
-            "read these delays as that uncertain; for delays as sharp as calm air gives, calibrate "
-            "them in calm air (the output-error method) and hold them with the sideslip biases "
-            "(gust_answer's advice)",
-            parameters=tuple(ps[i].key for i, *_ in widened),
-            value=max(abs(d) / sd for _, _, _, d, sd in widened))]
+                parameters=tuple(unjudged)))
+        return out
 
     def _delay_feedback(self, sums: dict[int, tuple], instrumented: np.ndarray, st: Structure,
-                        std: np.ndarray, rank_rtol: float) -> list[tuple[int, float, float, float, float]]:
-        """The time delays whose honest deviation the feedback check widens
-        (:mod:`estimator.core.instrumental`): where the instrumental-variable estimate differs from
-        the likelihood's by more than FEEDBACK_Z deviations of the difference, the deviation
-        becomes ``sqrt(std^2 + D^2 - Var D)``. Returns ``(parameter, std before, after, D, sd of
-        D)`` per widened delay (of those ``instrumented``: the delays of channels that see the
-        air), SI; ``(parameter, std, NaN, NaN, NaN)`` per delay whose instrument is too weak to
-        judge it (its deviation more than FEEDBACK_WEAK times the likelihood's)."""
+                        std: np.ndarray, rank_rtol: float) -> list[DelayCheck]:
+        """The feedback check (:func:`judge_delays`) of the delays ``instrumented`` (those of the
+        channels that see the air), from the maneuvers' instrument sums."""
         # in maneuver order: the sums are filled by worker threads, the result must not depend on them
         D, V, V_ml = iv_difference([(sums[k][0], *sums[k][1]) for k in sorted(sums)
                                     if sums[k][1] is not None], st.gpos, rank_rtol)
-        out = []
-        for i in np.flatnonzero(instrumented & st.free & (st.gpos >= 0) & np.isfinite(D)
-                                & np.isfinite(std)):
-            # a weak instrument, or one the inverse's rank cut left without a variance of its own
-            if V[i] + V_ml[i] > FEEDBACK_WEAK ** 2 * V_ml[i] or V[i] <= 1e-9 * V_ml[i]:
-                out.append((int(i), float(std[i]), math.nan, math.nan, math.nan))  # not judged
-            elif abs(D[i]) > FEEDBACK_Z * math.sqrt(V[i]):
-                out.append((int(i), float(std[i]), math.sqrt(std[i] ** 2 + D[i] ** 2 - V[i]),
-                            float(D[i]), math.sqrt(V[i])))
-        return out
+        return judge_delays(D, V, V_ml, instrumented & st.free & (st.gpos >= 0), std)
 
     def predictions(self, ev: Evaluation, noise: FilterNoise) -> list[np.ndarray]:
         """Every channel's measurement less its innovation scaled to the measurement noise,
@@ -704,8 +790,9 @@ class FilterErrorLikelihood:
                     "the same gusts with the aircraft's answer removed: right; not the wind "
                     "states' form nor the sampling rate; the gust_answer warnings name the "
                     "channels and maneuvers whose innovations show that answer"
-                    + (", and the feedback check widens the flow delays' deviations to cover it: "
-                       "delay_feedback, not the airspeed's" if colored else "") + "); with "
+                    + (", and the feedback check widens the delays' deviations to cover it: "
+                       "delay_feedback for the flow delays, delay_weak_instrument for the "
+                       "airspeed's" if colored else "") + "); with "
                     "the wind as "
                     "states the flight's kinematics fix an aircraft's common "
                     "sideslip offset (every sideslip channel's bias alike) only to 0.05-0.1 deg, so a "
@@ -787,7 +874,8 @@ class FilterErrorLikelihood:
             delays = tuple(dict.fromkeys(k for h in found for k in h.delays))
             what = ("the channel's time delay then comes out too long and its deviation too small "
                     "(JSBSim's simulated turbulence: the flow delays 4-7 ms long at 2.7-4.6 "
-                    "deviations at 40 Hz, the airspeed's 0.24-0.31 s)" if delays else
+                    "deviations at 40 Hz, the airspeed's 0.24-0.31 s, before the feedback check "
+                    "widened them: delay_feedback, delay_weak_instrument)" if delays else
                     "the channel's calibration parameters may then be biased beyond their deviations")
             out.append(Finding(
                 "gust_answer", Severity.WARNING,

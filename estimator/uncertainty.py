@@ -483,9 +483,8 @@ class _Deviations:
     correlation, correlation_colored : the global parameters' correlations, Cramér-Rao and honest.
     unresolved : parameters of a set still unidentifiable at the solution (their deviations NaN).
     imu_psd : the IMU noise densities used, per aircraft (None without ``colored``).
-    feedback : the time delays whose honest deviation the filter-error method's feedback check
-        widened: ``(parameter, deviation before, after, IV - ML difference, its deviation)``, SI,
-        and ``(parameter, deviation, NaN, NaN, NaN)`` for one its instrument is too weak to judge
+    feedback : the filter-error method's feedback check of the time delays, one
+        :class:`estimator.filter_error.DelayCheck` per delay it widened or could not judge
         (:meth:`estimator.filter_error.FilterErrorLikelihood.honest_deviations`).
     """
 
@@ -496,7 +495,7 @@ class _Deviations:
     correlation_colored: np.ndarray
     unresolved: np.ndarray
     imu_psd: dict[str, np.ndarray] | None
-    feedback: tuple[tuple[int, float, float, float, float], ...] = ()
+    feedback: tuple = ()  # of estimator.filter_error.DelayCheck (filter_error imports this module)
 
 
 def _deviations(model: Model, theta: np.ndarray, N: NormalEquations, st: Structure, R: np.ndarray,
