@@ -45,7 +45,8 @@ Printed and written (``--write``): each case's sideslip offsets, the vanes' side
 offset ``c_vb``, the flow delays and the airspeed delay against their truth, in honest deviations,
 how many flow channels the ``gust_answer`` finding names (the innovations correlate with the
 IMU: the aircraft's answer to the gusts, seen from the data alone) and how many delays' deviations
-the feedback check widened (:mod:`estimator.core.instrumental`); and, on the ``jsbsim`` case,
+the feedback check widened (:mod:`estimator.core.instrumental`: by the instrumental estimate's
+difference, or for a weak instrument); and, on the ``jsbsim`` case,
 what holding the flow delays (alone, and with the sideslip offsets) at their truth, as a perfect
 calm-air calibration would, does to the calibrated sensors' accuracy against the truth.
 Run: ``python campaigns/benchmarks/whatif_sideslip.py --out DIR --write
@@ -276,7 +277,8 @@ def main() -> None:
             cells.append(f"{row['error_display']:+.3f}{unit[0]} ({row['z_colored']:+.1f})"
                          if unit == "deg" else f"{row['error_display']:+.1f}ms ({row['z_colored']:+.1f})")
         answered = sum(f.code == "gust_answer" for f in r.findings)
-        widened = sum(len(f.parameters) for f in r.findings if f.code == "delay_feedback")
+        widened = sum(len(f.parameters) for f in r.findings
+                      if f.code in ("delay_feedback", "delay_weak_instrument"))
         lines.append(f"{case:20s} " + " ".join(f"{c:>15s}" for c in cells) + f" {answered:>7d}"
                      + f" {widened:>8d}")
         print(lines[-1], f"[{r.verdict.name}, {time.perf_counter() - t0:.0f} s]", flush=True)
@@ -289,8 +291,9 @@ def main() -> None:
               "answer to the gusts (gust_answer findings: FilterErrorLikelihood.answer_findings).",
               "widened: the delays whose honest deviation the feedback check widened (an "
               "instrumental-variable estimate,",
-              "the delay's sensitivity 50-100 ms earlier as its instrument, differs: "
-              "estimator.core.instrumental); the",
+              "the delay's sensitivity 50-100 ms earlier as its instrument, differs, or the "
+              "instrument is too weak to tell:",
+              "estimator.core.instrumental, delay_feedback and delay_weak_instrument); the "
               "deviations in brackets are the widened ones."]
     text = "\n".join(lines) + "\n"
     print(text)
