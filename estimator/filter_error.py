@@ -155,7 +155,8 @@ FEEDBACK_Z = 2.0
 #: part, which in gusts the aircraft answers is that answer (the airspeed delay on JSBSim's
 #: turbulence: 0.23-0.31 s long at 5-11 honest deviations, its instrument 8-10 times less
 #: precise; with the aircraft's answer removed 2 times, and the delay right): such a delay's
-#: honest deviation becomes what the instrument supports, the likelihood's times their ratio
+#: honest deviation becomes what the instrument supports, the likelihood's times their ratio (and
+#: the difference where it shows: judge_delays)
 FEEDBACK_WEAK = 3.0
 
 
@@ -270,7 +271,12 @@ def judge_delays(D: np.ndarray, V: np.ndarray, V_ml: np.ndarray, candidates: np.
     Where the instrument is weak (its estimate's deviation more than FEEDBACK_WEAK times the
     likelihood's), a bias below its deviation cannot show: the deviation is multiplied by that
     ratio. Where the difference exceeds FEEDBACK_Z of its deviations, ``D^2 - Var D`` is added to
-    the (so multiplied) variance. Where the inverse's rank cut left the difference no variance,
+    the (so multiplied) variance. Why that holds for a weak instrument too (Anderson & Rubin
+    1949): with one instrument per delay and the innovations' variance known, the set of delays
+    the instrument's moment ``Z^T nu(tau) = 0`` does not reject is the instrumental estimate plus
+    or minus c of its deviations, and its coverage is exact whatever the instrument's strength;
+    the likelihood's error is then at most ``|D|`` plus that, which the widened deviation spans.
+    Where the inverse's rank cut left the difference no variance,
     the delay is not judged (``std_after`` NaN). Delays the check leaves as they were are not
     listed.
     """
@@ -571,17 +577,18 @@ class FilterErrorLikelihood:
                     if not dev.unresolved[f.parameter]]
         # the bias is common to the delays the difference judged (the same gusts, the same loop):
         # one rank-one term, its signs the differences', so that a combination of delays is as
-        # uncertain as its parts; a weak instrument's widening has no sign: its own term
+        # uncertain as its parts; a weak instrument's widening (its difference mostly the
+        # instrument's own noise) is the delay's own term
         b = np.zeros(cov.shape[0])
         for f in feedback:
             if math.isfinite(f.std_after):
                 std[f.parameter] = f.std_after
                 g = st.gpos[f.parameter]
-                own = f.std_before ** 2 * (f.ratio ** 2 - 1.0) if f.weak else 0.0
-                cov[g, g] += own
-                if f.differs:
-                    b[g] = math.copysign(math.sqrt(f.std_after ** 2 - f.std_before ** 2 - own),
-                                         f.difference)
+                grow = f.std_after ** 2 - f.std_before ** 2
+                if f.weak:
+                    cov[g, g] += grow
+                else:
+                    b[g] = math.copysign(math.sqrt(grow), f.difference)
         cov = cov + np.outer(b, b)
         std[dev.unresolved] = np.nan
         std_imu[dev.unresolved] = np.nan
