@@ -147,16 +147,16 @@ ANSWER_R = 0.1
 #: innovations as white; where they are coloured it is too small and the check fires more often.
 FEEDBACK_LAGS_S = (0.05, 0.075, 0.1)
 FEEDBACK_Z = 2.0
-#: ... judged only where the instrumental estimate's deviation is at most FEEDBACK_WEAK times the
+#: ... tested only where the instrumental estimate's deviation is at most FEEDBACK_WEAK times the
 #: likelihood's (the instrument's correlation with the regressor 1/3 at least; the flow delays'
-#: 1.2-2.1 times on the what-if data, the airspeed delay's 2-10: a weak instrument's difference is
-#: far from normal: there it moved 0.05-0.9 s on data where the delay is 0.02-0.3 s off). A weak
-#: instrument means the likelihood draws its information on the delay from the regressor's fast
-#: part, which in gusts the aircraft answers is that answer (the airspeed delay on JSBSim's
-#: turbulence: 0.23-0.31 s long at 5-11 honest deviations, its instrument 8-10 times less
+#: 1.2-2.1 times on the what-if data, the airspeed delay's 5-57: a weak instrument's difference is
+#: far from normal, no test: there it moved 0.05-0.9 s on data where the delay is 0.02-0.3 s off).
+#: A weak instrument means the likelihood draws its information on the delay from the regressor's
+#: fast part, which in gusts the aircraft answers can be that answer (the airspeed delay on
+#: JSBSim's turbulence: 0.23-0.31 s long at 5-11 honest deviations, its instrument 8-10 times less
 #: precise; with the aircraft's answer removed 2 times, and the delay right): such a delay's
-#: honest deviation becomes what the instrument supports, the likelihood's times their ratio (and
-#: the difference where it shows: judge_delays)
+#: honest deviation becomes what the instrument supports and the difference together
+#: (judge_delays)
 FEEDBACK_WEAK = 3.0
 
 
@@ -236,63 +236,70 @@ class _Answer(NamedTuple):
 
 
 class DelayCheck(NamedTuple):
-    """The feedback check's judgement of one time delay (:func:`judge_delays`), SI."""
+    """The feedback check's judgement of one time delay (:func:`judge_delays`)."""
 
     parameter: int  # index into the problem's parameters
-    std_before: float  # honest deviation before the check
-    std_after: float  # after it (NaN: not judged)
-    difference: float  # instrumental - likelihood estimate
-    difference_std: float  # its deviation (Hausman: sqrt(Var IV - Var ML))
+    std_before_s: float  # honest deviation before the check
+    std_after_s: float  # after it (NaN: not judged)
+    difference_s: float  # instrumental - likelihood estimate
+    difference_std_s: float  # its deviation (Hausman: sqrt(Var IV - Var ML))
     ratio: float  # the instrumental estimate's deviation over the likelihood's
 
     @property
     def weak(self) -> bool:
-        """The instrument weak (``ratio`` > FEEDBACK_WEAK): the deviation multiplied by ``ratio``."""
+        """The instrument weak (``ratio`` > FEEDBACK_WEAK): no test, the deviation widened to what
+        the instrument supports and the difference together."""
         return self.ratio > FEEDBACK_WEAK
 
     @property
     def differs(self) -> bool:
-        """The difference beyond FEEDBACK_Z of its deviations: the deviation widened by it."""
-        return abs(self.difference) > FEEDBACK_Z * self.difference_std
+        """A strong instrument's difference beyond FEEDBACK_Z of its deviations: widened by it."""
+        return not self.weak and abs(self.difference_s) > FEEDBACK_Z * self.difference_std_s
 
 
 def judge_delays(D: np.ndarray, V: np.ndarray, V_ml: np.ndarray, candidates: np.ndarray,
                  std: np.ndarray) -> list[DelayCheck]:
-    """The time delays the feedback check widens or cannot judge, SI.
+    """The time delays the feedback check widens or cannot judge.
 
     Parameters
     ----------
     D, V, V_ml : per parameter, the instrumental-variable minus the likelihood estimate, its
-        variance and the likelihood's white-innovation variance
+        variance and the likelihood's white-innovation variance, SI
         (:func:`estimator.core.instrumental.iv_difference`).
     candidates : the delays to judge (bool per parameter).
-    std : their honest deviations before the check.
+    std : their honest deviations before the check, s.
 
-    Where the instrument is weak (its estimate's deviation more than FEEDBACK_WEAK times the
-    likelihood's), a bias below its deviation cannot show: the deviation is multiplied by that
-    ratio. Where the difference exceeds FEEDBACK_Z of its deviations, ``D^2 - Var D`` is added to
-    the (so multiplied) variance. Why that holds for a weak instrument too (Anderson & Rubin
-    1949): with one instrument per delay and the innovations' variance known, the set of delays
-    the instrument's moment ``Z^T nu(tau) = 0`` does not reject is the instrumental estimate plus
-    or minus c of its deviations, and its coverage is exact whatever the instrument's strength;
-    the likelihood's error is then at most ``|D|`` plus that, which the widened deviation spans.
-    Where the inverse's rank cut left the difference no variance,
-    the delay is not judged (``std_after`` NaN). Delays the check leaves as they were are not
-    listed.
+    Returns
+    -------
+    One :class:`DelayCheck` per delay widened or not judged (the others are left as they were).
+
+    Notes
+    -----
+    A strong instrument (its estimate's deviation at most FEEDBACK_WEAK times the likelihood's):
+    where the difference exceeds FEEDBACK_Z of its own deviations (Hausman), the deviation becomes
+    ``sqrt(std^2 + D^2 - Var D)``. A weak one: no test (its difference is far from normal); the
+    deviation becomes ``sqrt((std r)^2 + D^2)``, ``r`` the ratio of the deviations. The motive is
+    Anderson & Rubin's (1949) set: for one parameter, linear, with an instrument that is
+    exogenous and innovations white of known variance, the values the moment ``Z^T nu(tau) = 0``
+    does not reject are the instrumental estimate plus or minus c of its deviations, with exact
+    coverage whatever the instrument's strength, so that the likelihood's error is at most ``|D|``
+    plus that. Here the other parameters are estimated too, the innovations are coloured (``r``
+    keeps the sandwich's factor) and the step is linearised: an approximation, and on the
+    what-if data it covered the airspeed delay's bias in every case. Where the rank cut left the
+    difference or the likelihood no variance (or the instrumental variance came out below the
+    likelihood's), the delay is not judged (``std_after_s`` NaN).
     """
     out = []
     for i in np.flatnonzero(candidates & np.isfinite(D) & np.isfinite(std)):
-        if V[i] <= 1e-9 * V_ml[i]:
+        if not (V_ml[i] > 0.0 and V[i] > 1e-9 * V_ml[i]):
             out.append(DelayCheck(int(i), float(std[i]), math.nan, float(D[i]), math.nan, math.nan))
             continue
-        # the sandwich's colour correction kept: the likelihood's honest deviation times the
-        # instrumental over the likelihood's white-innovation deviation
         c = DelayCheck(int(i), float(std[i]), math.nan, float(D[i]), math.sqrt(V[i]),
                        math.sqrt((V[i] + V_ml[i]) / V_ml[i]))
-        if c.weak or c.differs:
-            var = (std[i] * c.ratio) ** 2 if c.weak else std[i] ** 2
-            var += D[i] ** 2 - V[i] if c.differs else 0.0
-            out.append(c._replace(std_after=math.sqrt(var)))
+        if c.weak:
+            out.append(c._replace(std_after_s=math.sqrt((std[i] * c.ratio) ** 2 + D[i] ** 2)))
+        elif c.differs:
+            out.append(c._replace(std_after_s=math.sqrt(std[i] ** 2 + D[i] ** 2 - V[i])))
     return out
 
 
@@ -581,14 +588,14 @@ class FilterErrorLikelihood:
         # instrument's own noise) is the delay's own term
         b = np.zeros(cov.shape[0])
         for f in feedback:
-            if math.isfinite(f.std_after):
-                std[f.parameter] = f.std_after
+            if math.isfinite(f.std_after_s):
+                std[f.parameter] = f.std_after_s
                 g = st.gpos[f.parameter]
-                grow = f.std_after ** 2 - f.std_before ** 2
+                grow = f.std_after_s ** 2 - f.std_before_s ** 2
                 if f.weak:
                     cov[g, g] += grow
                 else:
-                    b[g] = math.copysign(math.sqrt(grow), f.difference)
+                    b[g] = math.copysign(math.sqrt(grow), f.difference_s)
         cov = cov + np.outer(b, b)
         std[dev.unresolved] = np.nan
         std_imu[dev.unresolved] = np.nan
@@ -606,24 +613,27 @@ class FilterErrorLikelihood:
         def change(f: DelayCheck) -> tuple[str, float, str]:
             q = ps[f.parameter]
             k, unit = q.display_scale, ("" if q.display_unit in ("", "1") else f" {q.display_unit}")
-            return f"{q.key} {f.std_before * k:.3g} -> {f.std_after * k:.3g}{unit}", k, unit
+            lo, hi = q.bounds
+            # wider than the allowed range: the flight does not determine the delay at all
+            wide = ", wider than its allowed range: not determined by this flight" if (
+                math.isfinite(hi - lo) and f.std_after_s > hi - lo) else ""
+            return f"{q.key} {f.std_before_s * k:.3g} -> {f.std_after_s * k:.3g}{unit}{wide}", k, unit
 
-        parts, weak_parts = [], []
-        for f in feedback:
-            if not math.isfinite(f.std_after):
-                continue
-            text, k, unit = change(f)
-            diff = (f"instrumental estimate {f.difference * k:+.3g}{unit} off, "
-                    f"{abs(f.difference) / f.difference_std:.1f} deviations of the difference")
-            if f.weak:
-                weak_parts.append(f"{text} (its instrumental estimate {f.ratio:.1f} times less "
-                                  f"precise{'; ' + diff if f.differs else ''})")
-            else:
-                parts.append(f"{text} ({diff})")
-        unjudged = [ps[f.parameter].key for f in feedback if not math.isfinite(f.std_after)]
+        def diff(f: DelayCheck, k: float, unit: str) -> str:
+            return (f"instrumental estimate {f.difference_s * k:+.3g}{unit} off"
+                    + (f", {abs(f.difference_s) / f.difference_std_s:.1f} deviations of the "
+                       "difference" if not f.weak else ""))
+
+        judged = [f for f in feedback if math.isfinite(f.std_after_s)]
+        differs = [f for f in judged if not f.weak]
+        weak = [f for f in judged if f.weak]
+        unjudged = [ps[f.parameter].key for f in feedback if not math.isfinite(f.std_after_s)]
         out = []
-        if parts:
-            differs = [f for f in feedback if math.isfinite(f.std_after) and not f.weak]
+        if differs:
+            parts = []
+            for f in differs:
+                text, k, unit = change(f)
+                parts.append(f"{text} ({diff(f, k, unit)})")
             out.append(Finding(
                 "delay_feedback", Severity.WARNING,
                 "filter-error method: the time delays' estimate is not what an instrumental-variable "
@@ -639,31 +649,35 @@ class FilterErrorLikelihood:
                 "them in calm air (the output-error method) and hold them with the sideslip biases "
                 "(gust_answer's advice)",
                 parameters=tuple(ps[f.parameter].key for f in differs),
-                value=max(abs(f.difference) / f.difference_std for f in differs)))
-        if weak_parts:
-            weak = [f for f in feedback if math.isfinite(f.std_after) and f.weak]
+                value=max(abs(f.difference_s) / f.difference_std_s for f in differs)))
+        if weak:
+            parts = []
+            for f in weak:
+                text, k, unit = change(f)
+                parts.append(f"{text} (its instrumental estimate {f.ratio:.1f} times less precise, "
+                             f"{diff(f, k, unit)})")
             out.append(Finding(
                 "delay_weak_instrument", Severity.WARNING,
-                "filter-error method: the feedback check sees these time delays only dimly, their "
+                "filter-error method: the feedback check cannot test these time delays, their "
                 f"instrument (the sensitivity {FEEDBACK_LAGS_S[0]:g}-{FEEDBACK_LAGS_S[-1]:g} s earlier) "
                 f"more than {FEEDBACK_WEAK:g} times less precise than the likelihood: the likelihood "
-                "draws its information on them from their sensitivity's fast part, which in gusts the "
-                "aircraft answers is that answer, measured by the IMU that drives the state equations "
+                "draws its information on them from their sensitivity's fast part, which can be the "
+                "aircraft's answer to the gusts, measured by the IMU that drives the state equations "
                 "(on JSBSim's light turbulence the airspeed delay came out 0.23-0.31 s long at 5-11 "
-                "of the likelihood's honest deviations), and a bias below the instrument's deviation "
-                "would not show. Their honest deviations are widened to what the instrument supports "
-                "(and by the difference where it shows): " + "; ".join(weak_parts),
+                "of the likelihood's honest deviations; where the wind states follow fast the "
+                "instrument is weak without any such bias too). Their honest deviations are widened "
+                "to what the instrument supports and the difference together: " + "; ".join(parts),
                 "read these delays as that uncertain; for a sharp value calibrate them in calm air "
                 "(the output-error method) and hold them",
                 parameters=tuple(ps[f.parameter].key for f in weak),
                 value=max(f.ratio for f in weak)))
-        if unjudged and not out:
+        if unjudged:
             out.append(Finding(
                 "delay_feedback", Severity.INFO,
                 "filter-error method: the feedback check of the time delays (an instrumental-"
                 f"variable estimate against the likelihood's) cannot judge {', '.join(unjudged)}: "
-                "the difference has no variance of its own left after the information matrix's "
-                "rank cut",
+                "after the information matrix's rank cut the difference or the likelihood has no "
+                "variance of its own left",
                 "read these delays' deviations as the likelihood's alone; a bias from the "
                 "aircraft's answer to the gusts would not show in them",
                 parameters=tuple(unjudged)))

@@ -39,6 +39,7 @@ from estimator.problem import Problem
 from estimator.verdict import Finding, Severity
 
 if TYPE_CHECKING:
+    from estimator.filter_error import DelayCheck
     from estimator.solver import SolverOptions
 
 
@@ -495,7 +496,7 @@ class _Deviations:
     correlation_colored: np.ndarray
     unresolved: np.ndarray
     imu_psd: dict[str, np.ndarray] | None
-    feedback: tuple = ()  # of estimator.filter_error.DelayCheck (filter_error imports this module)
+    feedback: tuple[DelayCheck, ...] = ()
 
 
 def _deviations(model: Model, theta: np.ndarray, N: NormalEquations, st: Structure, R: np.ndarray,

@@ -75,7 +75,8 @@ def iv_difference(blocks, gpos: np.ndarray, rank_rtol: float
     (P,) ``D = d_IV - d_ML``, (P,) ``V_IV - V_ML`` (its variance where there is no feedback) and
     (P,) ``V_ML``, SI; NaN for a maneuver's own parameters and where a global is not informed.
     ``(V_IV / V_ML)^-1/2`` is the instrument's correlation with the regressor, roughly: a weak
-    instrument's difference is far from normal and tells nothing.
+    instrument's difference is far from normal and is no test
+    (:func:`estimator.filter_error.judge_delays` widens such a delay instead).
     """
     P, G = gpos.size, int(gpos.max(initial=-1)) + 1
     D, V, V_ml = np.full(P, np.nan), np.full(P, np.nan), np.full(P, np.nan)

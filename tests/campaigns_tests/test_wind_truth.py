@@ -87,8 +87,8 @@ def test_the_airspeed_delay_is_honest_where_its_instrument_is_weak(problem, filt
     """The airspeed delay's sensitivity is its rate, which in gusts is mostly the aircraft's answer
     (drag, lift): the likelihood's information on it comes from that answer, the instrument is
     weak and the feedback check cannot test it. Its honest deviation is widened to what the
-    instrument supports (here 69 -> 350 ms, the delay 0.16 s long: 2.4 deviations before, 0.5
-    after; on the what-if data 0.23-0.31 s long at 5-11 before)."""
+    instrument supports and the difference together (here 69 -> 350 ms, the delay 0.16 s long:
+    2.4 deviations before, 0.5 after; on the what-if data 0.23-0.31 s long at 5-11 before)."""
     from campaigns.truth import recovery_table, true_parameters
     from estimator.filter_error import FEEDBACK_WEAK
 
@@ -98,7 +98,8 @@ def test_the_airspeed_delay_is_honest_where_its_instrument_is_weak(problem, filt
     assert weak.severity.name == "WARNING" and "tau_tas" in weak.parameters, weak.text()
     assert weak.value > FEEDBACK_WEAK and "calm air" in weak.advice
     row = rt.loc["tau_tas"]
-    assert abs(row["z_colored"]) < 3.0, row.to_string()
+    # 2.4 deviations before the widening: within 1 only if it happened
+    assert abs(row["z_colored"]) < 1.0, row.to_string()
 
 
 def test_report_has_the_wind_section(problem):

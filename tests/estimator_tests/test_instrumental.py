@@ -147,40 +147,55 @@ def _fast_regression(rng: np.random.Generator, n: int, feedback: float):
 
 def test_a_strong_instrument_without_feedback_widens_at_the_tests_size():
     """No feedback, instrument strong: a widening is a false alarm of the two-sided FEEDBACK_Z
-    test, about 4.6 % (2 sigma); over 400 replications within 1.5-9 % (binomial 3 sigma: 1.5 %)."""
+    test, about 4.6 % (2 sigma); over 400 replications within 1.5-7.7 % (binomial 3 sigma at
+    4.6 %: 3.1 %)."""
     rng = np.random.default_rng(5)
     n_widened = 0
     for _ in range(400):
         checks, _ = _judged(*_regression(rng, 2000, 0.0))
         assert all(not c.weak for c in checks)
         n_widened += len(checks)
-    assert 0.015 < n_widened / 400 < 0.09, n_widened / 400
+    assert 0.015 < n_widened / 400 < 0.077, n_widened / 400
+
+
+def _weak_coverage(feedback: float, seed: int, n_rep: int) -> np.ndarray:
+    """The likelihood's error in widened deviations over ``n_rep`` weak-instrument regressions."""
+    rng = np.random.default_rng(seed)
+    z = []
+    for _ in range(n_rep):
+        rows, J, nu = _fast_regression(rng, 2000, feedback)
+        checks, sd = _judged(rows, J, nu)
+        (c,) = checks
+        assert c.weak and c.ratio > 3.0 and c.parameter == 0 and not c.differs
+        assert np.isclose(c.std_after_s, np.hypot(sd * c.ratio, c.difference_s), rtol=1e-12)
+        z.append(abs(np.linalg.lstsq(-J, nu, rcond=None)[0][0] - 0.5) / c.std_after_s)
+    return np.asarray(z)
 
 
 def test_a_weak_instrument_widens_to_what_it_supports():
-    """Regressor mostly white: the instrumental estimate is several times less precise, the
-    deviation is multiplied by that ratio (and widened by the difference where it shows), and
-    then covers the likelihood's bias from the feedback: the estimate within 3 widened
-    deviations in at least 90 % of 60 replications, against none within 3 of the likelihood's."""
+    """Regressor mostly white: the instrumental estimate is several times less precise, and the
+    deviation becomes what it supports and the difference together, sqrt((sd r)^2 + D^2). It then
+    covers the likelihood's feedback bias. Strong feedback (0.5, the bias about 20 likelihood
+    deviations): every one of 60 replications within 3 widened deviations, none within 3 of the
+    likelihood's. Moderate feedback (0.2, the bias 2-3 instrumental deviations, where the
+    difference alone is no reliable test): at least 90 % within 2 (nominal 95 % for a deviation
+    that is right; the formula errs on the safe side of Anderson-Rubin's |D| + c sd_IV)."""
+    z = _weak_coverage(0.5, 3, 60)
+    assert np.all(z < 3.0), np.round(z, 1)
     rng = np.random.default_rng(3)
-    z_after, z_before = [], []
-    for _ in range(60):
+    z_before = []
+    for _ in range(20):
         rows, J, nu = _fast_regression(rng, 2000, 0.5)
-        checks, sd = _judged(rows, J, nu)
-        (c,) = checks
-        assert c.weak and c.ratio > 3.0 and c.parameter == 0
-        expected = np.sqrt((sd * c.ratio) ** 2 + (c.difference ** 2 - c.difference_std ** 2
-                                                  if c.differs else 0.0))
-        assert np.isclose(c.std_after, expected, rtol=1e-12)
-        err = np.linalg.lstsq(-J, nu, rcond=None)[0][0] - 0.5
-        z_after.append(abs(err) / c.std_after)
-        z_before.append(abs(err) / sd)
-    assert np.mean(np.asarray(z_after) < 3.0) >= 0.9, np.round(z_after, 1)
-    assert np.mean(np.asarray(z_before) < 3.0) == 0.0, np.round(z_before, 1)
+        _, sd = _judged(rows, J, nu)
+        z_before.append(abs(np.linalg.lstsq(-J, nu, rcond=None)[0][0] - 0.5) / sd)
+    assert np.min(z_before) > 3.0, np.round(z_before, 1)
+    z = _weak_coverage(0.2, 4, 200)
+    assert np.mean(z < 2.0) >= 0.9, np.mean(z < 2.0)
 
 
 def test_a_difference_without_variance_is_not_judged():
-    """The rank cut left the difference no variance: listed, not judged (no deviation after)."""
-    (c,) = judge_delays(np.array([0.0]), np.array([0.0]), np.array([1.0]), np.array([True]),
-                        np.array([2.0]))
-    assert np.isnan(c.std_after) and not c.weak and not c.differs
+    """The rank cut left the difference (or the likelihood) no variance: listed, not judged."""
+    for V, V_ml in ((0.0, 1.0), (1.0, 0.0)):
+        (c,) = judge_delays(np.array([0.0]), np.array([V]), np.array([V_ml]), np.array([True]),
+                            np.array([2.0]))
+        assert np.isnan(c.std_after_s) and not c.weak and not c.differs
