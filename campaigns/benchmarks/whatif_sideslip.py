@@ -50,7 +50,7 @@ difference, or for a weak instrument); and, on the ``jsbsim`` case,
 what holding the flow delays (alone, and with the sideslip offsets) at their truth, as a perfect
 calm-air calibration would, does to the calibrated sensors' accuracy against the truth.
 Run: ``python campaigns/benchmarks/whatif_sideslip.py --out DIR --write
-campaigns/benchmarks/results/whatif_sideslip.txt`` (about four minutes on 2 cores).
+campaigns/benchmarks/results/whatif_sideslip.txt`` (about seven minutes on 2 cores).
 """
 
 from __future__ import annotations
