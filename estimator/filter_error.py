@@ -78,9 +78,10 @@ linearisation of the wind sensitivities moves (the "unsettled" warning of the so
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -96,6 +97,9 @@ from estimator.normal_equations import NormalEquations, Structure, residual_sums
 from estimator.problem import AIR_RELATIVE_SIGNALS
 from estimator.uncertainty import honest_std, imu_noise_psd, innovation_honest_std
 from estimator.verdict import Finding, Severity
+
+if TYPE_CHECKING:
+    from estimator.parameters import Parameter
 
 #: MIL-F-8785C scale length above 2000 ft (1750 ft), m.
 DRYDEN_SCALE_LENGTH_M = 533.4
@@ -300,6 +304,122 @@ def judge_delays(D: np.ndarray, V: np.ndarray, V_ml: np.ndarray, candidates: np.
             out.append(c._replace(std_after_s=math.sqrt((std[i] * c.ratio) ** 2 + D[i] ** 2)))
         elif c.differs:
             out.append(c._replace(std_after_s=math.sqrt(std[i] ** 2 + D[i] ** 2 - V[i])))
+    return out
+
+
+def widen_for_feedback(std: np.ndarray, cov: np.ndarray, gpos: np.ndarray,
+                       feedback: list[DelayCheck]) -> tuple[np.ndarray, np.ndarray]:
+    """The honest deviations and covariance with the feedback check's widening.
+
+    Parameters
+    ----------
+    std : (P,) honest deviations per parameter, SI.
+    cov : (G, G) their covariance over the global parameters, SI.
+    gpos : (P,) each parameter's position among the globals (-1 for a maneuver's own).
+    feedback : the check's judgements (:func:`judge_delays`); those not judged change nothing.
+
+    Returns
+    -------
+    New ``std`` and ``cov`` (the inputs are not changed): every judged delay's deviation its
+    ``std_after_s``. Its variance grows by ``std_after^2 - std_before^2``: a weak instrument's as
+    the delay's own term (its difference mostly the instrument's own noise); the strong ones'
+    together as one rank-one term, its signs the differences', because their bias is common (the
+    same gusts, the same loop), so that a combination of delays is as uncertain as its parts.
+    """
+    std, cov = std.copy(), cov.copy()
+    b = np.zeros(cov.shape[0])
+    for f in feedback:
+        if math.isfinite(f.std_after_s):
+            std[f.parameter] = f.std_after_s
+            g = gpos[f.parameter]
+            grow = f.std_after_s ** 2 - f.std_before_s ** 2
+            if f.weak:
+                cov[g, g] += grow
+            else:
+                b[g] = math.copysign(math.sqrt(grow), f.difference_s)
+    return std, cov + np.outer(b, b)
+
+
+def feedback_findings(parameters: Sequence[Parameter], feedback: Sequence[DelayCheck]
+                      ) -> list[Finding]:
+    """The feedback check's findings (``feedback`` as
+    :attr:`estimator.uncertainty._Deviations.feedback`, ``parameters`` the problem's): a
+    ``delay_feedback`` warning naming the delays widened by the instrumental estimate's
+    difference, a ``delay_weak_instrument`` warning naming those widened for a weak instrument, an
+    INFO for those not judged."""
+    ps = parameters
+
+    def change(f: DelayCheck) -> tuple[str, float, str]:
+        q = ps[f.parameter]
+        k, unit = q.display_scale, ("" if q.display_unit in ("", "1") else f" {q.display_unit}")
+        lo, hi = q.bounds
+        # wider than the allowed range: the flight does not determine the delay at all
+        wide = ", wider than its allowed range: not determined by this flight" if (
+            math.isfinite(hi - lo) and f.std_after_s > hi - lo) else ""
+        return f"{q.key} {f.std_before_s * k:.3g} -> {f.std_after_s * k:.3g}{unit}{wide}", k, unit
+
+    def diff(f: DelayCheck, k: float, unit: str) -> str:
+        return (f"instrumental estimate {f.difference_s * k:+.3g}{unit} off"
+                + (f", {abs(f.difference_s) / f.difference_std_s:.1f} deviations of the "
+                   "difference" if not f.weak else ""))
+
+    judged = [f for f in feedback if math.isfinite(f.std_after_s)]
+    differs = [f for f in judged if not f.weak]
+    weak = [f for f in judged if f.weak]
+    unjudged = [ps[f.parameter].key for f in feedback if not math.isfinite(f.std_after_s)]
+    out = []
+    if differs:
+        parts = []
+        for f in differs:
+            text, k, unit = change(f)
+            parts.append(f"{text} ({diff(f, k, unit)})")
+        out.append(Finding(
+            "delay_feedback", Severity.WARNING,
+            "filter-error method: the time delays' estimate is not what an instrumental-variable "
+            f"estimate of the same data gives (each delay's sensitivity {FEEDBACK_LAGS_S[0]:g}-"
+            f"{FEEDBACK_LAGS_S[-1]:g} s earlier as its instrument, untouched by the gust at the "
+            "sample): the likelihood takes the IMU that drives the state equations as independent "
+            "of the innovations, and where the aircraft answers the gusts (gust_answer) it is not, "
+            "and the delays come out biased (on JSBSim's light turbulence 4-7 ms long); "
+            "innovations coloured by another model error can set the two estimates apart too. "
+            "Their honest deviations are widened by the difference (beyond its own noise, in "
+            "quadrature): " + "; ".join(parts),
+            "read these delays as that uncertain; for delays as sharp as calm air gives, calibrate "
+            "them in calm air (the output-error method) and hold them with the sideslip biases "
+            "(gust_answer's advice)",
+            parameters=tuple(ps[f.parameter].key for f in differs),
+            value=max(abs(f.difference_s) / f.difference_std_s for f in differs)))
+    if weak:
+        parts = []
+        for f in weak:
+            text, k, unit = change(f)
+            parts.append(f"{text} (its instrumental estimate {f.ratio:.1f} times less precise, "
+                         f"{diff(f, k, unit)})")
+        out.append(Finding(
+            "delay_weak_instrument", Severity.WARNING,
+            "filter-error method: the feedback check cannot test these time delays, their "
+            f"instrument (the sensitivity {FEEDBACK_LAGS_S[0]:g}-{FEEDBACK_LAGS_S[-1]:g} s earlier) "
+            f"more than {FEEDBACK_WEAK:g} times less precise than the likelihood: the likelihood "
+            "draws its information on them from their sensitivity's fast part, which can be the "
+            "aircraft's answer to the gusts, measured by the IMU that drives the state equations "
+            "(on JSBSim's light turbulence the airspeed delay came out 0.23-0.31 s long at 5-11 "
+            "of the likelihood's honest deviations; where the wind states follow fast the "
+            "instrument is weak without any such bias too). Their honest deviations are widened "
+            "to what the instrument supports and the difference together: " + "; ".join(parts),
+            "read these delays as that uncertain; for a sharp value calibrate them in calm air "
+            "(the output-error method) and hold them",
+            parameters=tuple(ps[f.parameter].key for f in weak),
+            value=max(f.ratio for f in weak)))
+    if unjudged:
+        out.append(Finding(
+            "delay_feedback", Severity.INFO,
+            "filter-error method: the feedback check of the time delays (an instrumental-"
+            f"variable estimate against the likelihood's) cannot judge {', '.join(unjudged)}: "
+            "after the information matrix's rank cut the difference or the likelihood has no "
+            "variance of its own left",
+            "read these delays' deviations as the likelihood's alone; a bias from the "
+            "aircraft's answer to the gusts would not show in them",
+            parameters=tuple(unjudged)))
     return out
 
 
@@ -582,106 +702,12 @@ class FilterErrorLikelihood:
         cov = cov + cov_imu
         feedback = [f for f in self._delay_feedback(sums, instrumented, st, std, opt.rank_rtol)
                     if not dev.unresolved[f.parameter]]
-        # the bias is common to the delays the difference judged (the same gusts, the same loop):
-        # one rank-one term, its signs the differences', so that a combination of delays is as
-        # uncertain as its parts; a weak instrument's widening (its difference mostly the
-        # instrument's own noise) is the delay's own term
-        b = np.zeros(cov.shape[0])
-        for f in feedback:
-            if math.isfinite(f.std_after_s):
-                std[f.parameter] = f.std_after_s
-                g = st.gpos[f.parameter]
-                grow = f.std_after_s ** 2 - f.std_before_s ** 2
-                if f.weak:
-                    cov[g, g] += grow
-                else:
-                    b[g] = math.copysign(math.sqrt(grow), f.difference_s)
-        cov = cov + np.outer(b, b)
+        std, cov = widen_for_feedback(std, cov, st.gpos, feedback)
         std[dev.unresolved] = np.nan
         std_imu[dev.unresolved] = np.nan
         dh = np.sqrt(np.maximum(np.diag(cov), 1e-300))
         return replace(dev, std_colored=std, correlation_colored=cov / np.outer(dh, dh), std_imu=std_imu,
                        imu_psd=imu_psd, feedback=tuple(feedback))
-
-    def feedback_findings(self, feedback: tuple[DelayCheck, ...]) -> list[Finding]:
-        """The feedback check's findings (:meth:`honest_deviations`; ``feedback`` as
-        :attr:`estimator.uncertainty._Deviations.feedback`): a ``delay_feedback`` warning naming
-        the delays widened by the instrumental estimate's difference, a ``delay_weak_instrument``
-        warning naming those widened for a weak instrument, an INFO for those not judged."""
-        ps = self.model.problem.parameters.parameters
-
-        def change(f: DelayCheck) -> tuple[str, float, str]:
-            q = ps[f.parameter]
-            k, unit = q.display_scale, ("" if q.display_unit in ("", "1") else f" {q.display_unit}")
-            lo, hi = q.bounds
-            # wider than the allowed range: the flight does not determine the delay at all
-            wide = ", wider than its allowed range: not determined by this flight" if (
-                math.isfinite(hi - lo) and f.std_after_s > hi - lo) else ""
-            return f"{q.key} {f.std_before_s * k:.3g} -> {f.std_after_s * k:.3g}{unit}{wide}", k, unit
-
-        def diff(f: DelayCheck, k: float, unit: str) -> str:
-            return (f"instrumental estimate {f.difference_s * k:+.3g}{unit} off"
-                    + (f", {abs(f.difference_s) / f.difference_std_s:.1f} deviations of the "
-                       "difference" if not f.weak else ""))
-
-        judged = [f for f in feedback if math.isfinite(f.std_after_s)]
-        differs = [f for f in judged if not f.weak]
-        weak = [f for f in judged if f.weak]
-        unjudged = [ps[f.parameter].key for f in feedback if not math.isfinite(f.std_after_s)]
-        out = []
-        if differs:
-            parts = []
-            for f in differs:
-                text, k, unit = change(f)
-                parts.append(f"{text} ({diff(f, k, unit)})")
-            out.append(Finding(
-                "delay_feedback", Severity.WARNING,
-                "filter-error method: the time delays' estimate is not what an instrumental-variable "
-                f"estimate of the same data gives (each delay's sensitivity {FEEDBACK_LAGS_S[0]:g}-"
-                f"{FEEDBACK_LAGS_S[-1]:g} s earlier as its instrument, untouched by the gust at the "
-                "sample): the likelihood takes the IMU that drives the state equations as independent "
-                "of the innovations, and where the aircraft answers the gusts (gust_answer) it is not, "
-                "and the delays come out biased (on JSBSim's light turbulence 4-7 ms long); "
-                "innovations coloured by another model error can set the two estimates apart too. "
-                "Their honest deviations are widened by the difference (beyond its own noise, in "
-                "quadrature): " + "; ".join(parts),
-                "read these delays as that uncertain; for delays as sharp as calm air gives, calibrate "
-                "them in calm air (the output-error method) and hold them with the sideslip biases "
-                "(gust_answer's advice)",
-                parameters=tuple(ps[f.parameter].key for f in differs),
-                value=max(abs(f.difference_s) / f.difference_std_s for f in differs)))
-        if weak:
-            parts = []
-            for f in weak:
-                text, k, unit = change(f)
-                parts.append(f"{text} (its instrumental estimate {f.ratio:.1f} times less precise, "
-                             f"{diff(f, k, unit)})")
-            out.append(Finding(
-                "delay_weak_instrument", Severity.WARNING,
-                "filter-error method: the feedback check cannot test these time delays, their "
-                f"instrument (the sensitivity {FEEDBACK_LAGS_S[0]:g}-{FEEDBACK_LAGS_S[-1]:g} s earlier) "
-                f"more than {FEEDBACK_WEAK:g} times less precise than the likelihood: the likelihood "
-                "draws its information on them from their sensitivity's fast part, which can be the "
-                "aircraft's answer to the gusts, measured by the IMU that drives the state equations "
-                "(on JSBSim's light turbulence the airspeed delay came out 0.23-0.31 s long at 5-11 "
-                "of the likelihood's honest deviations; where the wind states follow fast the "
-                "instrument is weak without any such bias too). Their honest deviations are widened "
-                "to what the instrument supports and the difference together: " + "; ".join(parts),
-                "read these delays as that uncertain; for a sharp value calibrate them in calm air "
-                "(the output-error method) and hold them",
-                parameters=tuple(ps[f.parameter].key for f in weak),
-                value=max(f.ratio for f in weak)))
-        if unjudged:
-            out.append(Finding(
-                "delay_feedback", Severity.INFO,
-                "filter-error method: the feedback check of the time delays (an instrumental-"
-                f"variable estimate against the likelihood's) cannot judge {', '.join(unjudged)}: "
-                "after the information matrix's rank cut the difference or the likelihood has no "
-                "variance of its own left",
-                "read these delays' deviations as the likelihood's alone; a bias from the "
-                "aircraft's answer to the gusts would not show in them",
-                parameters=tuple(unjudged)))
-        return out
 
     def _delay_feedback(self, sums: dict[int, tuple], instrumented: np.ndarray, st: Structure,
                         std: np.ndarray, rank_rtol: float) -> list[DelayCheck]:

@@ -54,7 +54,7 @@ from functools import partial
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from estimator.filter_error import FilterErrorLikelihood, WindOptions
+from estimator.filter_error import FilterErrorLikelihood, WindOptions, feedback_findings
 from estimator.identifiability import (
     _covariance,
     _crosswind_findings,
@@ -587,7 +587,8 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
                       replace(opt, colored=False) if filter_error else opt)
     if filter_error and opt.colored:
         dev = lik.honest_deviations(st, evals, noise, N, dev, opt, theta)
-        wind_findings = wind_findings + lik.feedback_findings(dev.feedback)
+        wind_findings = wind_findings + feedback_findings(lik.model.problem.parameters.parameters,
+                                                          dev.feedback)
     correlated = correlated + _high_correlations(dev.correlation, [keys[i] for i in st.glob],
                                                  opt.correlation_warn)
     # a set still unidentifiable here (the screen's rounds ran out) is reported with the holds

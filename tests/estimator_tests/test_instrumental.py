@@ -8,7 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from estimator.core.instrumental import instrument_sums, iv_difference
-from estimator.filter_error import judge_delays
+from estimator.filter_error import DelayCheck, feedback_findings, judge_delays, widen_for_feedback
+from estimator.parameters import Parameter
+from estimator.verdict import Severity
 
 RTOL = 1e-10
 #: the instruments' lags, samples (50-100 ms at 40 Hz, as the filter-error method's)
@@ -199,3 +201,79 @@ def test_a_difference_without_variance_is_not_judged():
         (c,) = judge_delays(np.array([0.0]), np.array([V]), np.array([V_ml]), np.array([True]),
                             np.array([2.0]))
         assert np.isnan(c.std_after_s) and not c.weak and not c.differs
+
+
+def _delay(key: str) -> Parameter:
+    return Parameter(key, key, "", None, "s", 0.0, True, "global", (-0.3, 0.3), "time_delay",
+                     1000.0, "ms")
+
+
+#: three delays and a bias: two strong instruments that differ (opposite signs), a weak one, and
+#: a fourth parameter the check leaves alone; positions among the globals shuffled
+_GPOS = np.array([2, 0, 3, 1])
+_CHECKS = [DelayCheck(0, 0.002, 0.005, +0.004, 0.001, 1.5),
+           DelayCheck(1, 0.001, 0.003, -0.003, 0.0005, 1.2),
+           DelayCheck(2, 0.010, 0.700, +0.05, np.nan, 40.0)]
+
+
+def test_the_widening_bookkeeping():
+    """Each judged delay's deviation becomes its std_after and its variance grows by
+    std_after^2 - std_before^2, the covariance staying symmetric and positive semi-definite: the
+    strong ones' growth one rank-one term with the differences' signs (their bias common: the
+    covariance between them grows by the product of their growths' roots, signed), the weak one's
+    its own diagonal term (its correlations shrink by std_before / std_after); the inputs are not
+    changed."""
+    rng = np.random.default_rng(1)
+    A = rng.standard_normal((4, 4))
+    std = np.array([0.002, 0.001, 0.010, 0.03])
+    corr = np.corrcoef(A @ A.T + 4 * np.eye(4))
+    cov = np.empty((4, 4))
+    cov[np.ix_(_GPOS, _GPOS)] = corr * np.outer(std, std)
+    std0, cov0 = std.copy(), cov.copy()
+    s, c = widen_for_feedback(std, cov, _GPOS, _CHECKS)
+    np.testing.assert_array_equal(std, std0)
+    np.testing.assert_array_equal(cov, cov0)
+    np.testing.assert_allclose(s, [0.005, 0.003, 0.700, 0.03])
+    g = _GPOS
+    np.testing.assert_allclose(np.sqrt(np.diag(c)[g]), s, rtol=1e-12)
+    grow = np.sqrt([0.005 ** 2 - 0.002 ** 2, 0.003 ** 2 - 0.001 ** 2])
+    np.testing.assert_allclose(c[g[0], g[1]], cov0[g[0], g[1]] - grow[0] * grow[1], rtol=1e-12)
+    for i in (0, 1, 3):  # the weak delay's covariances with the others are unchanged
+        assert c[g[2], g[i]] == cov0[g[2], g[i]]
+    r_before = cov0[g[2], g[3]] / (0.010 * 0.03)
+    np.testing.assert_allclose(c[g[2], g[3]] / (0.700 * 0.03), r_before * 0.010 / 0.700, rtol=1e-12)
+    np.testing.assert_allclose(c, c.T)
+    assert np.linalg.eigvalsh(c).min() > 0.0
+
+
+def test_a_delay_not_judged_changes_nothing():
+    std, cov = np.array([0.002, 0.03]), np.diag([0.002 ** 2, 0.03 ** 2])
+    s, c = widen_for_feedback(std, cov, np.array([0, 1]),
+                              [DelayCheck(0, 0.002, np.nan, 0.001, np.nan, np.nan)])
+    np.testing.assert_array_equal(s, std)
+    np.testing.assert_array_equal(c, cov)
+
+
+def test_the_findings_of_a_mixed_check():
+    """One check with every kind: a delay_feedback warning naming exactly the strong delays that
+    differ, with their deviations in the display unit and the difference's deviations; a
+    delay_weak_instrument warning naming the weak one, its ratio, and that its widened deviation
+    exceeds its allowed range (0.7 s against 0.6); an INFO naming the one not judged. Nothing else."""
+    ps = [_delay(k) for k in ("tau_a", "tau_b", "tau_tas", "tau_c")]
+    checks = _CHECKS + [DelayCheck(3, 0.002, np.nan, 0.0, np.nan, np.nan)]
+    out = feedback_findings(ps, checks)
+    assert [(f.code, f.severity) for f in out] == [
+        ("delay_feedback", Severity.WARNING), ("delay_weak_instrument", Severity.WARNING),
+        ("delay_feedback", Severity.INFO)]
+    strong, weak, info = out
+    assert strong.parameters == ("tau_a", "tau_b")
+    assert "tau_a 2 -> 5 ms" in strong.message and "tau_b 1 -> 3 ms" in strong.message
+    assert "4.0 deviations of the difference" in strong.message
+    assert strong.value == 6.0  # the largest |D| / sd_D: tau_b's 3 / 0.5
+    assert weak.parameters == ("tau_tas",)
+    assert "tau_tas 10 -> 700 ms" in weak.message and "40.0 times less precise" in weak.message
+    assert "not determined by this flight" in weak.message
+    assert "not determined" not in strong.message
+    assert weak.value == 40.0
+    assert info.parameters == ("tau_c",) and "tau_c" in info.message
+    assert feedback_findings(ps, []) == []
