@@ -308,7 +308,7 @@ def judge_delays(D: np.ndarray, V: np.ndarray, V_ml: np.ndarray, candidates: np.
 
 
 def widen_for_feedback(std: np.ndarray, cov: np.ndarray, gpos: np.ndarray,
-                       feedback: list[DelayCheck]) -> tuple[np.ndarray, np.ndarray]:
+                       feedback: Sequence[DelayCheck]) -> tuple[np.ndarray, np.ndarray]:
     """The honest deviations and covariance with the feedback check's widening.
 
     Parameters
@@ -320,7 +320,7 @@ def widen_for_feedback(std: np.ndarray, cov: np.ndarray, gpos: np.ndarray,
 
     Returns
     -------
-    New ``std`` and ``cov`` (the inputs are not changed): every judged delay's deviation its
+    std, cov : new arrays (the inputs are not changed), SI: every judged delay's deviation its
     ``std_after_s``. Its variance grows by ``std_after^2 - std_before^2``: a weak instrument's as
     the delay's own term (its difference mostly the instrument's own noise); the strong ones'
     together as one rank-one term, its signs the differences', because their bias is common (the
@@ -342,11 +342,20 @@ def widen_for_feedback(std: np.ndarray, cov: np.ndarray, gpos: np.ndarray,
 
 def feedback_findings(parameters: Sequence[Parameter], feedback: Sequence[DelayCheck]
                       ) -> list[Finding]:
-    """The feedback check's findings (``feedback`` as
-    :attr:`estimator.uncertainty._Deviations.feedback`, ``parameters`` the problem's): a
-    ``delay_feedback`` warning naming the delays widened by the instrumental estimate's
-    difference, a ``delay_weak_instrument`` warning naming those widened for a weak instrument, an
-    INFO for those not judged."""
+    """The feedback check's findings.
+
+    Parameters
+    ----------
+    parameters : the problem's parameters (``DelayCheck.parameter`` indexes them).
+    feedback : the check's judgements (:attr:`estimator.uncertainty._Deviations.feedback`).
+
+    Returns
+    -------
+    A ``delay_feedback`` warning naming the delays widened by the instrumental estimate's
+    difference, a ``delay_weak_instrument`` warning naming those widened for a weak instrument,
+    an INFO naming those not judged (each only where there are any), deviations in each
+    delay's display unit.
+    """
     ps = parameters
 
     def change(f: DelayCheck) -> tuple[str, float, str]:
@@ -848,8 +857,11 @@ class FilterErrorLikelihood:
                     "the shape is wrong, with small deviations and white innovations (the paper's "
                     "vane model: an aircraft's offsets 0.15 deg off at 30 deviations; the shipped INS "
                     "model set frees the vanes' sideslip reference offset for this, and on JSBSim's "
-                    "turbulence they came out within 2.2 deviations on a 40-Hz time base, 0.38 deg "
-                    "off at 2.8 on a 120-Hz one); "
+                    "turbulence they came out 0.14-0.29 deg off at 1.9-2.2 deviations on a 40-Hz "
+                    "time base, 0.38 deg at 2.8 on a 120-Hz one, always the same way: one side "
+                    "probe's installation bias, through the airdata computer's two-probe inversion, "
+                    "is a small sideslip error the side probe's model cannot represent, and the "
+                    "weakly fixed offset follows it); "
                     "check the estimates against a calm-air calibration before use",
                     "calibrate where the air is calm by the output-error method, or hold the sideslip "
                     "biases and the flow delays together at calm-air values (not the delays alone: "

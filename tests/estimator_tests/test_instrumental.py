@@ -226,7 +226,8 @@ def test_the_widening_bookkeeping():
     rng = np.random.default_rng(1)
     A = rng.standard_normal((4, 4))
     std = np.array([0.002, 0.001, 0.010, 0.03])
-    corr = np.corrcoef(A @ A.T + 4 * np.eye(4))
+    M = A @ A.T + 4 * np.eye(4)  # positive definite, correlated
+    corr = M / np.sqrt(np.outer(np.diag(M), np.diag(M)))
     cov = np.empty((4, 4))
     cov[np.ix_(_GPOS, _GPOS)] = corr * np.outer(std, std)
     std0, cov0 = std.copy(), cov.copy()
@@ -243,6 +244,7 @@ def test_the_widening_bookkeeping():
     r_before = cov0[g[2], g[3]] / (0.010 * 0.03)
     np.testing.assert_allclose(c[g[2], g[3]] / (0.700 * 0.03), r_before * 0.010 / 0.700, rtol=1e-12)
     np.testing.assert_allclose(c, c.T)
+    assert np.linalg.eigvalsh(cov0).min() > 0.0
     assert np.linalg.eigvalsh(c).min() > 0.0
 
 
