@@ -345,8 +345,15 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: TruthHook
         if pooled:
             a = np.concatenate([p.alpha_t_rad for p in pooled]) * RAD2DEG
             e = np.concatenate([p.e for p in pooled]) * RAD2DEG
+            # no limit: the lowest judged alpha band misses the desired accuracy, or no band has
+            # the samples to be judged (workflow.alpha_limit)
+            judged = wf.alpha_limit_growth.get("passed", pd.Series(dtype=object)).notna().any()
+            usable = (f"its usable range ends at alpha = {wf.alpha_limit_deg:g} deg"
+                      if wf.alpha_limit_deg is not None else
+                      "no usable range: its lowest judged alpha band already misses the desired "
+                      "accuracy" if judged else "no alpha band has enough samples to be judged")
             figs.append((f"Fig. 7: {reqs[lim_ch].sensor} ({lim_ch}) error vs angle of attack, all Mach "
-                         f"bins; its usable range ends at alpha = {wf.alpha_limit_deg} deg",
+                         f"bins; {usable}",
                          figure_crossplot(a, e, reqs[lim_ch].sensor, "alpha (deg)",
                                           "measurement - model (deg)", limit_deg=limit(lim_ch),
                                           x_limit_deg=wf.alpha_limit_deg)))

@@ -313,3 +313,28 @@ def test_from_json_refuses_what_is_not_a_workflow_result(small_workflow, tmp_pat
     one = subproblem(problem, [m.id for m in problem.maneuvers if m.aircraft == first])
     with pytest.raises(ValueError, match="give the problem the workflow ran on"):
         WorkflowResult.from_json(tmp_path / "workflow.json", one)
+
+
+@pytest.mark.slow
+def test_fig7_says_why_there_is_no_usable_alpha_range(small_workflow, tmp_path):
+    """The nose probe's Fig. 7 caption gives its usable alpha limit, and where there is none it
+    says why (it said "alpha = None deg" on the demo's turbulent block, whose lowest band misses
+    the accuracy in the model residuals): the lowest judged band misses, or no band is judged."""
+    from dataclasses import replace
+
+    from estimator.calibration import build_report
+
+    problem, wf = small_workflow
+    g = wf.alpha_limit_growth
+    captions = {}
+    for case, growth, limit in (
+            ("limit", g.assign(passed=True), 12.0),
+            ("misses", g.assign(passed=[False] + [True] * (len(g) - 1)), None),
+            ("unjudged", g.assign(passed=None), None)):
+        html = build_report(replace(wf, alpha_limit_growth=growth, alpha_limit_deg=limit),
+                            tmp_path / case, case)["report"].read_text()
+        (captions[case],) = [c for c in html.split('"') if c.startswith("Fig. 7:")]
+    assert captions["limit"].endswith("its usable range ends at alpha = 12 deg")
+    assert captions["misses"].endswith("its lowest judged alpha band already misses the desired accuracy")
+    assert captions["unjudged"].endswith("no alpha band has enough samples to be judged")
+    assert not any("None" in c for c in captions.values())
