@@ -372,9 +372,9 @@ def _calibrate(args: argparse.Namespace) -> int:
     import warnings
 
     from estimator.calibration import CalibrationOptions, write_estimation
+    from estimator.finding_groups import verdict_text
     from estimator.io import DataWarning, load_problem, problem_from_dataset
     from estimator.solver import estimate
-    from estimator.verdict import verdict_text
 
     src = args.source
     overrides = {**{n: {"free": True} for n in args.free}, **{n: {"free": False} for n in args.fix}}
@@ -486,7 +486,7 @@ def _workflow(problem, out: Path, options: dict, *, overwrite: bool, tool: str =
     :meth:`~estimator.calibration.Calibration.write` with the truth sections of a synthetic dataset."""
     from campaigns.truth_report import truth_sections
     from estimator.calibration import CalibrationOptions, calibrate
-    from estimator.verdict import verdict_text
+    from estimator.finding_groups import verdict_text
 
     # refused at once if --out holds anything but an earlier run's files (or those without
     # --overwrite); the earlier files are removed only when the new report is ready to be written
@@ -502,7 +502,7 @@ def _workflow(problem, out: Path, options: dict, *, overwrite: bool, tool: str =
     tables = cal.write(out, overwrite=overwrite, truth=truth_sections, protect=protect, tool=tool)
     if not wf.final:
         print()
-        print(verdict_text(wf.verdict, wf.findings))
+        print(verdict_text(wf.verdict, wf.finding_groups()))
         print(f"\nreport: {tables['report']}")
         return exit_status(wf.verdict)
     print()
@@ -527,7 +527,7 @@ def _workflow(problem, out: Path, options: dict, *, overwrite: bool, tool: str =
                   "their truth")
             print(summ.to_string(float_format=lambda v: f"{v:.2f}"))
     print()
-    print(verdict_text(wf.verdict, wf.findings))
+    print(verdict_text(wf.verdict, wf.finding_groups()))
     print(f"\nreport: {tables['report']}")
     return exit_status(wf.verdict)
 

@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 
 from aircraft_models.schema import did_you_mean, unknown
+from estimator.finding_groups import groups_frame
 from estimator.problem import Problem, ReadOnlyMapping
 from estimator.report import (
     Banner,
@@ -44,7 +45,7 @@ from estimator.report import (
 )
 from estimator.result import ReadOnlyTable
 from estimator.solver import SolverOptions
-from estimator.verdict import Finding, Verdict, reasons
+from estimator.verdict import Finding, Severity, Verdict
 from estimator.workflow import RAD2DEG, Stage, WorkflowOptions, WorkflowResult, run_workflow
 
 # --------------------------------------------------------------------------------------------------
@@ -162,8 +163,19 @@ def _mean_bias_label(families) -> tuple[str, str]:
 def verdict_banner(wf: WorkflowResult) -> Banner:
     """The workflow's verdict and its failures and warnings (most severe first), for the report's top."""
     v = wf.verdict
-    return Banner(_LEVEL[v], f"{v.name.replace('_', ' ')}: {v.text}",
-                  tuple(f.text() for f in reasons(wf.findings)))
+    groups = wf.finding_groups()
+    acting = [g.text() for g in groups if g.severity >= Severity.WARNING]
+    notes = [g.text() for g in groups if g.severity < Severity.WARNING]
+    room = max(BANNER_LINES - len(acting), 0)
+    shown = notes if len(notes) <= room else notes[:max(room - 1, 0)]
+    more = len(notes) - len(shown)
+    tail = (f"... {more} more note(s): the findings below Table 2, every one in findings.csv",) if more \
+        else ()
+    return Banner(_LEVEL[v], f"{v.name.replace('_', ' ')}: {v.text}", (*acting, *shown, *tail))
+
+
+#: Lines of findings the report's banner shows (every failure and warning, then notes to fill it).
+BANNER_LINES = 10
 
 
 def _held_parameters(wf: WorkflowResult) -> pd.DataFrame:
@@ -213,7 +225,8 @@ def workflow_tables(wf: WorkflowResult) -> dict[str, pd.DataFrame]:
     ``table2_model``, ``vane_biases``, ``installation_biases``, ``table_updates`` (when not empty),
     ``correction_table_<name>`` and ``correction_table_<name>_state``.
     """
-    out = {"stages": _stages_table(wf), "maneuvers": wf.maneuvers, "findings": wf.findings_table()}
+    out = {"stages": _stages_table(wf), "maneuvers": wf.maneuvers, "findings": wf.findings_table(),
+           "finding_groups": groups_frame(wf.finding_groups())}
     held, quality = _held_parameters(wf), _fit_quality(wf)
     if len(held):
         out["held_parameters"] = held
@@ -260,18 +273,22 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: TruthHook
         f"({wf.verdict.text}).\n"
         + "\n".join(wf.notes)
     )
-    tables = [("Estimations", tab["stages"]), ("Failures and warnings", tab["findings"])]
-    csvs = [("maneuvers.csv", tab["maneuvers"]), ("findings.csv", tab["findings"])]
+    tables = [("Findings, each said once (every finding, per maneuver, in findings.csv)",
+               tab["finding_groups"]), ("Estimations", tab["stages"])]
+    csvs = [("maneuvers.csv", tab["maneuvers"]), ("findings.csv", tab["findings"]),
+            ("finding_groups.csv", tab["finding_groups"])]
     if "held_parameters" in tab:
         tables.append(("Parameters held (not estimated) or on a bound, and why", tab["held_parameters"]))
         csvs.append(("held_parameters.csv", tab["held_parameters"]))
     if "fit_quality" in tab:
         csvs.append(("fit_quality.csv", tab["fit_quality"]))
-    sections.append(Section("Summary and verdict", summary, tables=tables, csv=csvs))
+    # the first screen is the verdict (the banner), its findings and Table 2; the details follow
+    summary_section = Section("Findings and estimations", summary, tables=tables, csv=csvs)
     out: dict = {"accuracy": wf.accuracy, "true_accuracy": None, "installation_recovery": None,
                  "recovery": None}
     final = [st for st in wf.final if st.result.success]  # what Table 2 and the figures rest on
     if not final:
+        sections.append(summary_section)
         out["report"] = write_report(out_dir, title, sections, banner=verdict_banner(wf), record=record)
         return out
     sections.append(Section(
@@ -287,6 +304,7 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: TruthHook
         extra = TruthSections()
     out.update(extra.tables)
     sections.extend(extra.after_table2)
+    sections.append(summary_section)
     # Fig. 4 and the apportionment
     fig4 = []
     decl = wf.declarations

@@ -73,6 +73,32 @@ residuals, and air motion the wind states do not follow still reads as turbulenc
 scale error the wind states partly take up (a vane scaled 1.1: innovations at the noise, where the
 output-error residuals are 1.5-1.9x it), and it shows instead as an estimate that each fresh
 linearisation of the wind sensitivities moves (the "unsettled" warning of the solver).
+
+**Table 2** (measurement minus model, :func:`estimator.workflow.stage_residuals`): the sensor saw
+the model's flow plus the turbulent wind, so each channel is compared with the model output plus
+its response to the smoothed wind, ``h . dW_s``. But not the wind all channels smoothed: that one
+the channel helped shape, and a sensor error the calibration model cannot take (a step in one
+vane) would be partly taken for a gust. Each sensor is compared with the wind the *other* sensors
+give, its own channels left out of the smoother's measurement updates
+(:func:`estimator.core.wind_filter.smooth_left_out`; :func:`wind_responses`)::
+
+    e_i = z_i - y_i(theta) - h_i . E[dW_k | e_j : sensor_j != sensor_i]
+
+(a sensor's channels together: the side probes' sideslip takes their angle of attack as input, and
+a fault of the pair shows in both). The left-out wind's own error stays in ``e`` and adds to the
+sensor's scatter (analytic flights in the filter's own turbulence: Table 2 5-16 % above the
+sensors' noise, their error against the truth, where the model output alone is 3-4.5 times it;
+``tests/estimator_tests/test_filter_error_table2.py``). What no measurement minus model shows is a
+calibration error the fit shares out consistently over the sensors: an aircraft's common sideslip
+offset, which the wind states leave weakly fixed (``filter_error_partial``), moves every sideslip
+channel's bias and the reconstructed sideslip alike (the demo's light-turbulence block: PT1's
+sideslip biases 0.10 deg off at one honest deviation; its sideslip cells of Table 2 0.10-0.19 deg
+against 0.22-0.42 deg against the truth, which about each aircraft's mean error are 0.08-0.19 deg).
+The filter reruns from the result alone: its values, ``R`` and
+:attr:`estimator.result.EstimationResult.wind_model` (the wind states' form, scale length and
+each maneuver's intensity); the observations are placed on the samples by the delays at the
+estimate (the iterations kept those of their first linearisation: a delay that crossed half a
+sample since places a channel one sample apart).
 """
 
 from __future__ import annotations
@@ -95,6 +121,7 @@ from estimator.iteration import _evaluate
 from estimator.model import Evaluation, Model
 from estimator.normal_equations import NormalEquations, Structure, residual_sums
 from estimator.problem import AIR_RELATIVE_SIGNALS
+from estimator.result import WindModel
 from estimator.uncertainty import honest_std, imu_noise_psd, innovation_honest_std
 from estimator.verdict import Finding, Severity
 
@@ -421,7 +448,7 @@ def feedback_findings(parameters: Sequence[Parameter], feedback: Sequence[DelayC
             value=max(f.ratio for f in weak)))
     if unjudged:
         out.append(Finding(
-            "delay_feedback", Severity.INFO,
+            "delay_feedback", Severity.NOTE,
             "filter-error method: the feedback check of the time delays (an instrumental-"
             f"variable estimate against the likelihood's) cannot judge {', '.join(unjudged)}: "
             "after the information matrix's rank cut the difference or the likelihood has no "
@@ -787,6 +814,54 @@ class FilterErrorLikelihood:
                 "std_n_mps": sd[:, 0], "std_e_mps": sd[:, 1], "std_d_mps": sd[:, 2]}))
         return pd.concat(parts, ignore_index=True)
 
+    def wind_model(self, noise: FilterNoise) -> WindModel:
+        """The wind states of ``noise`` as the result keeps them (:attr:`EstimationResult.wind_model
+        <estimator.result.EstimationResult.wind_model>`): form, scale length and each maneuver's
+        intensity, m/s (0: no wind states)."""
+        ids = [m.id for m in self.model.problem.maneuvers]
+        return WindModel(self.wind.form, self.wind.scale_length_m,
+                         dict(zip(ids, (float(x) for x in noise.sigma_mps), strict=True)))
+
+    def left_out_wind(self, ev: Evaluation, noise: FilterNoise, group: np.ndarray) -> list[np.ndarray]:
+        """Every channel's response to the wind smoothed from the other groups' channels.
+
+        Parameters
+        ----------
+        ev : an evaluation with the wind sensitivities (``Model.evaluate_all(..., wind=True)``),
+            the one ``noise.maneuvers`` were linearised at.
+        noise : the noise statistics (``R`` per channel, the intensities per maneuver).
+        group : (n_channels,) int, each channel's group (its sensor): a channel's wind is smoothed
+            with every channel of its group left out of the measurement updates.
+
+        Returns
+        -------
+        Per channel of ``ev`` (laid out as its ``ChannelEval.y``), ``h . E[dW | the other groups'
+        residuals]``, the channel's SI unit (:func:`estimator.core.wind_filter.smooth_left_out`);
+        zero in maneuvers without wind states and in channels that do not see the air.
+        """
+        es = [ce.e for ce in ev.channels]
+        out = [np.zeros(ce.y.shape) for ce in ev.channels]
+
+        def one(m: _Maneuver) -> np.ndarray | None:
+            sigma = float(noise.sigma_mps[m.k])
+            if sigma == 0.0:
+                return None
+            Phi, Qd, P0 = self._process(m, sigma)
+            p, _ = self._wf.smooth_left_out(m.sample, self._residuals(ev, m, es), m.h, noise.R[m.channel],
+                                            group[m.channel], Phi, Qd, P0, m.n_samples)
+            back = np.empty_like(p)
+            back[m.order] = p  # back to the pieces' order
+            return back
+
+        for m, w in zip(noise.maneuvers, self._map(one, noise.maneuvers), strict=True):
+            if w is None:
+                continue
+            at = 0
+            for ci, _, r0, r1 in m.pieces:
+                out[ci][r0:r1] = w[at:at + r1 - r0]
+                at += r1 - r0
+        return out
+
     @property
     def noise(self) -> FilterNoise | None:
         """The noise statistics of the last relaxation (None before the first)."""
@@ -830,7 +905,7 @@ class FilterErrorLikelihood:
                     f"they would move by {100 * drift[0]:.1f} % (intensity) and {100 * drift[1]:.1f} % "
                     "(measurement noise variance) at most)")
         return [
-            Finding("turbulence", Severity.INFO, f"filter-error method: {air}"),
+            Finding("turbulence", Severity.NOTE, f"filter-error method: {air}"),
             Finding("filter_error_partial", Severity.WARNING,
                     "filter-error method: "
                     + ("the honest deviations are the coloured innovations' sandwich and the IMU "
@@ -1123,6 +1198,62 @@ class FilterErrorLikelihood:
             np.add.at(num, m.channel, sq)
             np.add.at(cnt, m.channel, 1.0)
         return np.maximum(np.where(cnt > 0, num / np.maximum(cnt, 1), R), 1e-16)
+
+
+def sensor_groups(model: Model) -> np.ndarray:
+    """(n_channels,) int: each channel's group for :meth:`FilterErrorLikelihood.left_out_wind`,
+    one per sensor (``Channel.sensor``), a channel without a sensor a group of its own."""
+    names = [ch.sensor if ch.sensor is not None else f"channel:{ch.name}"
+             for ch in model.problem.channels]
+    first = {n: i for i, n in reversed(list(enumerate(names)))}
+    return np.array([first[n] for n in names], dtype=np.int64)
+
+
+def wind_responses(model: Model, values: np.ndarray, R: np.ndarray, wind: WindModel
+                   ) -> tuple[Evaluation, list[np.ndarray]]:
+    """The model's outputs at ``values`` and each channel's response to the turbulent wind the
+    other sensors give (module docstring, Table 2): what each sensor saw is ``ce.y + w``.
+
+    Parameters
+    ----------
+    model : the model of the estimated problem.
+    values : (P,) the estimate, SI.
+    R : (n_channels,) each channel's measurement-noise variance at the estimate (the filter's
+        ``R``; :attr:`EstimationResult.R <estimator.result.EstimationResult.R>` in channel order),
+        SI squared.
+    wind : the estimate's wind states (:attr:`EstimationResult.wind_model
+        <estimator.result.EstimationResult.wind_model>`), naming every maneuver of the problem.
+
+    Returns
+    -------
+    ev : the evaluation at ``values`` (with the wind sensitivities ``dydv``, without the Jacobian).
+    w : per channel of ``ev``, laid out as its ``ChannelEval.y``: ``h . E[dW | the other sensors'
+        residuals]``, the channel's SI unit (:meth:`FilterErrorLikelihood.left_out_wind`,
+        :func:`sensor_groups`); zero where the maneuver has no wind states or the channel does
+        not see the air.
+
+    Raises
+    ------
+    ValueError
+        ``wind`` does not name a maneuver of the problem, or ``R`` is not one positive variance per
+        channel.
+    """
+    p = model.problem
+    missing = [m.id for m in p.maneuvers if m.id not in wind.sigma_mps]
+    if missing:
+        raise ValueError(f"wind_responses: the wind model names no intensity for maneuver(s) "
+                         f"{', '.join(missing[:5])}: give the wind model of this problem's estimate")
+    R = np.asarray(R, dtype=float)
+    if R.shape != (len(p.channels),) or not np.all(R > 0.0):
+        raise ValueError(f"wind_responses: R must be one positive variance per channel "
+                         f"({len(p.channels)}), got {R!r}")
+    sigma = np.array([wind.sigma_mps[m.id] for m in p.maneuvers])
+    lik = FilterErrorLikelihood(model, WindOptions(scale_length_m=wind.scale_length_m, form=wind.form),
+                                frozenset(m.id for m, s in zip(p.maneuvers, sigma, strict=True) if s > 0))
+    # the wind sensitivities come with the Jacobian pass; the Jacobian itself is not kept
+    ev = model.evaluate_all(np.asarray(values, dtype=float), jacobian=True, keep_jacobian=False, wind=True)
+    noise = FilterNoise(R, sigma, lik._linearise(ev), lik.dt_s)
+    return ev, lik.left_out_wind(ev, noise, sensor_groups(model))
 
 
 def _parabolic_minimum(f, x0: float, lo: float, hi: float, step: float, xtol: float,

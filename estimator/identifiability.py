@@ -292,11 +292,11 @@ def _parameter_findings(problem, holds, unident, correlated, state, reason, opt,
         if h.kind == "unidentifiable":
             continue
         elif h.kind == "no_data":
-            out.append(Finding("held", Severity.INFO, f"held at their start values, no data: {names} "
+            out.append(Finding("held", Severity.NOTE, f"held at their start values, no data: {names} "
                                f"({h.confounding.detail.split(';')[0]})",
                                parameters=h.confounding.parameters))
         else:
-            out.append(Finding("held", Severity.INFO, f"held at their start values, undetermined: {names} "
+            out.append(Finding("held", Severity.NOTE, f"held at their start values, undetermined: {names} "
                                "(their Cramér-Rao deviation exceeds half their allowed range)",
                                "fly maneuvers that excite them, or fix them at known values",
                                parameters=h.confounding.parameters))
@@ -309,7 +309,7 @@ def _parameter_findings(problem, holds, unident, correlated, state, reason, opt,
             # a calibration result (a table value, a bias, a delay, an IMU bias) on its bound is not a
             # measurement; a maneuver's nuisance scale or offset (k_h in level flight) is only noted
             nuisance = maneuver_nuisance(p)
-            out.append(Finding("on_bound", Severity.INFO if nuisance else Severity.WARNING,
+            out.append(Finding("on_bound", Severity.NOTE if nuisance else Severity.WARNING,
                                f"{p.key} is {reason[i]}",
                                "the data want it outside its physical range: check the data of the "
                                "channels it enters (units, signs, a fault) before widening the bounds",
@@ -328,13 +328,13 @@ def _parameter_findings(problem, holds, unident, correlated, state, reason, opt,
         elif b in ics and a in calib:
             against.setdefault(a, []).append(b)
         else:
-            out.append(Finding("correlated", Severity.INFO, f"{' and '.join(c.parameters)}: {c.detail}",
+            out.append(Finding("correlated", Severity.NOTE, f"{' and '.join(c.parameters)}: {c.detail}",
                                parameters=c.parameters))
     man_of = {p.key: p.instance for p in ps if p.scope == "maneuver"}
     for key, partners in against.items():
         if not informs.get(key) or not informs[key] <= {man_of[k] for k in partners}:
             for k in partners:
-                out.append(Finding("correlated", Severity.INFO, f"{k} and {key}: correlation above "
+                out.append(Finding("correlated", Severity.NOTE, f"{k} and {key}: correlation above "
                                    f"{opt.correlation_warn}; the data barely separate them in that "
                                    "maneuver (other maneuvers do)", parameters=(k, key)))
             continue

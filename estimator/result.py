@@ -26,9 +26,10 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
+from estimator.finding_groups import FindingGroup, group_findings
 from estimator.parameters import Parameter, ParameterSet, ParameterSpec
 from estimator.problem import Problem
-from estimator.verdict import Finding, Severity, Status, Verdict, findings_frame, judge, reasons
+from estimator.verdict import Finding, Severity, Status, Verdict, findings_frame, judge
 
 #: Short text of each solver status code (for tables that store the code).
 STATUS_TEXT = {s.value: s.label for s in Status}
@@ -156,6 +157,42 @@ class ResidualStats:
 
 
 @dataclass(frozen=True)
+class WindModel:
+    """The filter-error method's wind states at an estimate: with the result's values and ``R``,
+    all it takes to run its Kalman filter and smoother again (Table 2's wind,
+    :func:`estimator.workflow.stage_residuals`).
+
+    Attributes
+    ----------
+    form : the wind states' form, ``WindOptions.form`` (:mod:`estimator.filter_error`):
+        "gauss_markov" (three NED first-order Gauss-Markov components) or "dryden" (MIL-F-8785C's
+        Dryden turbulence in body axes).
+    scale_length_m : the Dryden scale length ``L``, m.
+    sigma_mps : maneuver id -> its turbulence intensity, m/s, as the estimation left it; 0: no
+        wind states there (calm, or not diagnosed turbulent).
+    """
+
+    form: str
+    scale_length_m: float
+    sigma_mps: Mapping[str, float]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "form", str(self.form))
+        object.__setattr__(self, "scale_length_m", float(self.scale_length_m))
+        object.__setattr__(self, "sigma_mps", MappingProxyType(
+            {str(k): float(v) for k, v in dict(self.sigma_mps).items()}))
+
+    def to_dict(self) -> dict:
+        """Plain JSON values (:meth:`from_dict` reads them back exactly: floats keep their repr)."""
+        return {"form": self.form, "scale_length_m": self.scale_length_m,
+                "sigma_mps": dict(self.sigma_mps)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> WindModel:
+        return cls(d["form"], d["scale_length_m"], d["sigma_mps"])
+
+
+@dataclass(frozen=True)
 class EstimationResult:
     """Estimates of an output-error estimation.
 
@@ -186,6 +223,12 @@ class EstimationResult:
         noise, contributes (``std_colored^2 = max(Morelli-Klein, Cramér-Rao)^2 + std_imu_noise^2``).
     imu_noise_psd : aircraft -> (6,) the IMU white-noise densities used (accelerometers m^2/s^3,
         gyros rad^2/s), or None.
+    wind : the filter-error method's smoothed turbulent wind per maneuver (:attr:`wind_history`);
+        None for output error.
+    wind_model : the filter-error method's wind states (their form, scale length and each
+        maneuver's intensity, :class:`WindModel`), which with ``values`` and ``R`` rerun its
+        filter; None for output error (and in a filter-error result read from a file written
+        before it was kept).
     """
 
     parameters: ParameterSet
@@ -215,6 +258,7 @@ class EstimationResult:
     std_imu_noise: np.ndarray | None = field(default=None, repr=False)
     imu_noise_psd: Mapping[str, np.ndarray] | None = field(default=None, repr=False)
     wind: ReadOnlyTable | None = field(default=None, repr=False)
+    wind_model: WindModel | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         # every way of making a result (build, replace, the constructor, from_json) freezes it:
@@ -240,6 +284,8 @@ class EstimationResult:
             put("fit_quality", ReadOnlyTable.of(self.fit_quality))
         if self.wind is not None:
             put("wind", ReadOnlyTable.of(self.wind))
+        if isinstance(self.wind_model, Mapping):
+            put("wind_model", WindModel.from_dict(self.wind_model))
 
     @classmethod
     def build(cls, problem: Problem, values: np.ndarray, **kw) -> EstimationResult:
@@ -282,6 +328,11 @@ class EstimationResult:
     @property
     def failures(self) -> tuple[Finding, ...]:
         return tuple(f for f in self.findings if f.severity == Severity.FAILURE)
+
+    def finding_groups(self) -> tuple[FindingGroup, ...]:
+        """The findings said once: one group per kind and channel, most important first
+        (:func:`estimator.finding_groups.group_findings`)."""
+        return group_findings(self.findings, len({r.maneuver for r in self.residuals}) or None)
 
     def with_findings(self, more: tuple[Finding, ...], iterations: int = 0) -> EstimationResult:
         """A copy with more findings (the verdict judged again) and ``iterations`` more iterations."""
@@ -376,16 +427,19 @@ class EstimationResult:
             f"g = {self.g_mps2} m/s^2; {int(self.parameters.free_mask.sum())} free parameters"
             + (": " + ", ".join(f"{n} {s}" for s, n in counts.items()) if len(counts) else ""),
         ]
-        shown = reasons(self.findings)
-        if shown:
-            lines.append(f"failures and warnings ({len(shown)}):")
-            lines += [f"  {f.text()}" for f in shown[:max_findings]]
-            if len(shown) > max_findings:
-                lines.append(f"  ... {len(shown) - max_findings} more in findings.csv / result.json")
-        info = [f for f in self.findings if f.severity == Severity.INFO]
-        if info:
-            lines.append(f"notes ({len(info)}):")
-            lines += [f"  {f.message}" for f in info[:max_findings]]
+        groups = self.finding_groups()
+        acting = [g for g in groups if g.severity >= Severity.WARNING]
+        notes = [g for g in groups if g.severity < Severity.WARNING]
+        if acting:
+            lines.append(f"failures and warnings ({len(acting)}; every finding in findings.csv):")
+            lines += [f"  {g.text()}" for g in acting[:max_findings]]
+            if len(acting) > max_findings:
+                lines.append(f"  ... {len(acting) - max_findings} more in findings.csv / result.json")
+        if notes:
+            lines.append(f"notes ({len(notes)}):")
+            lines += [f"  {g.headline}" for g in notes[:max_findings]]
+            if len(notes) > max_findings:
+                lines.append(f"  ... {len(notes) - max_findings} more in findings.csv / result.json")
         cols = ["value_display", "std_crb_display", "std_colored_display", "display_unit", "state"]
         show = df[cols]
         if len(show) > max_rows:
@@ -430,6 +484,7 @@ class EstimationResult:
             "fit_quality_columns": None if self.fit_quality is None else list(self.fit_quality.columns),
             "wind": None if self.wind is None else {"columns": list(self.wind.columns),
                                                     "rows": self.wind_history.to_dict(orient="list")},
+            "wind_model": None if self.wind_model is None else self.wind_model.to_dict(),
             "state": list(self.state), "state_reason": list(self.state_reason),
             "free_estimated": self.free_estimated, "std_imu_noise": self.std_imu_noise,
             "channel_display": {k: list(v) for k, v in self.channel_display.items()},
@@ -526,6 +581,7 @@ class EstimationResult:
         fit_quality = None if fq_cols is None else _frame(fq_rows, fq_cols)
         wd = doc.get("wind")
         wind = None if wd is None else pd.DataFrame({c: wd["rows"][c] for c in wd["columns"]})
+        wm = doc.get("wind_model")  # None too in a file written before it was kept
         corr = doc["correlation"]
         keys = tuple(corr["keys"])
         psd = doc.get("imu_noise_psd")
@@ -552,7 +608,7 @@ class EstimationResult:
             verdict=Verdict[doc["verdict"]], fit_quality=fit_quality, outliers=outliers,
             std_imu_noise=std_imu,
             imu_noise_psd=None if psd is None else {k: _array(v) for k, v in psd.items()},
-            wind=wind,
+            wind=wind, wind_model=None if wm is None else WindModel.from_dict(wm),
         )
 
     def to_csv(self, directory: str | Path, record: Callable[[Path], object] | None = None) -> None:

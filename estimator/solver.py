@@ -64,6 +64,7 @@ from estimator.identifiability import (
     _screen,
     maneuver_nuisance,
 )
+from estimator.io.modelset import declarations_of
 from estimator.iteration import OutputErrorLikelihood, _evaluate, _gauss_newton, _Iterated, _staged_start
 from estimator.model import Evaluation, Model, ModelEvaluationError
 from estimator.normal_equations import Structure, build_normal, channel_variances, ml_cost, residual_sums
@@ -237,7 +238,7 @@ def estimate(problem: Problem, options: SolverOptions | None = None) -> Estimati
         assert best is not None
         if len(starts) > 1:
             best = best.with_findings((Finding(
-                "starts", Severity.INFO,
+                "starts", Severity.NOTE,
                 f"estimated from {len(starts)} starts ({'; '.join(tried)}); the best verdict, then the "
                 "lowest cost, is kept"),))
         return best
@@ -273,7 +274,7 @@ def _estimate_robust(problem: Problem, opt: SolverOptions) -> EstimationResult:
     sub = replace(sub, parameters=sub.parameters.with_values(res.values))
     again = _estimate_guarded(sub, replace(opt, start="given"))
     notes = tuple(Finding(
-        "excluded", Severity.INFO,
+        "excluded", Severity.NOTE,
         f"robust option: {t.size} outlier sample(s) of {ch} in maneuver {man} excluded from the fit "
         f"(at t = {', '.join(f'{v:.3f}' for v in t[:5])}{' ...' if t.size > 5 else ''} s)",
         channel=ch, maneuver=man, t_s=tuple(float(v) for v in t)) for (man, ch), t in excluded.items())
@@ -568,7 +569,7 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     keys = ps.keys
     filter_error = isinstance(lik, FilterErrorLikelihood)
     wind_findings: list[Finding] = []
-    wind = None
+    wind = wind_model = None
     if filter_error:
         noise = lik.relax(evals, lik.stats(evals))
         R = noise.R
@@ -577,6 +578,7 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         wind_findings = (lik.findings(noise, opt.colored, lik.noise_drift(evals) if lik.held else None)
                          + lik.answer_findings(evals, noise))
         wind = lik.wind_table(evals, noise)
+        wind_model = lik.wind_model(noise)  # what Table 2 reruns the smoother with
     else:
         R = channel_variances(it.sse, it.cnt)
         history = history + [ml_cost(it.sse, it.cnt, R)]
@@ -624,7 +626,7 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         status=it.status, message=message, confounding=tuple(confounding),
         elapsed_s=time.perf_counter() - t0, free_estimated=st.free.copy(), state=tuple(state),
         state_reason=tuple(reason), findings=tuple(findings), verdict=verdict,
-        fit_quality=diagnosis_table, outliers=outliers, wind=wind,
+        fit_quality=diagnosis_table, outliers=outliers, wind=wind, wind_model=wind_model,
     )
 
 
@@ -732,7 +734,7 @@ def _unsettled(move: np.ndarray | None, std: np.ndarray, keys: list[str]) -> lis
 def _iteration_findings(it: _Iterated, stage_notes: list[str]) -> list[Finding]:
     """Findings of the start stages and the iterations: the start's notes, a poor quadratic model
     at the estimate, no convergence."""
-    findings = [Finding("start", Severity.INFO, "; ".join(stage_notes))] if stage_notes else []
+    findings = [Finding("start", Severity.NOTE, "; ".join(stage_notes))] if stage_notes else []
     if it.poor:
         findings.append(Finding(
             "poor_model", Severity.WARNING,
@@ -769,7 +771,9 @@ def _diagnosed(problem: Problem, evals: Evaluation, st: Structure, state: list[s
             on_bound.setdefault(p.instance, []).append(p.key)
         elif s == "on_bound" and p.kind == "time_delay":
             on_bound.setdefault("*", []).append(p.key)
-    findings = [_beside_bounds(f, on_bound) for f in diagnosis.findings] + findings
+    calib_on_bound = {ps.parameters[i].key for i, s in enumerate(state)
+                      if s == "on_bound" and ps.parameters[i].kind in ("bias", "scale", "table")}
+    findings = [_beside_bounds(f, on_bound, calib_on_bound) for f in diagnosis.findings] + findings
     return findings, diagnosis.table, dict(diagnosis.outliers)
 
 
@@ -777,19 +781,40 @@ def _diagnosed(problem: Problem, evals: Evaluation, st: Structure, state: list[s
 _BOUND_MIMICS = frozenset({"turbulence", "misfit", "scale_error", "noise_floor", "coloured"})
 
 
-def _beside_bounds(f: Finding, on_bound: dict[str, list[str]]) -> Finding:
+def _beside_bounds(f: Finding, on_bound: dict[str, list[str]],
+                   calib_on_bound: frozenset[str] | set[str] = frozenset()) -> Finding:
     """A residual finding whose channels' parameters sit on a bound names them as a possible cause.
 
     A parameter the data push beyond its bound leaves exactly the residual it could not absorb: flow
     delays of 400 ms against bounds of +-300 ms leave coloured flow residuals common to every sensor,
     which read as turbulence; IMU biases beyond theirs leave kinematic misfits (planning study (c)).
-    The finding keeps its severity; it now says the bound may be the cause, and to widen it before
-    blaming the air or the sensor. ``on_bound``: maneuver id -> its state-equation parameters on a
-    bound, ``"*"`` -> the time delays on a bound.
+    The finding says the bound may be the cause, and to widen it before blaming the air or the
+    sensor. Two become failures, the fit held away from the data by its bounds: a kinematic misfit
+    in a maneuver whose state-equation parameters (IMU biases, initial conditions) sit on a bound,
+    and a flow channel's residual beyond its desired accuracy with one of its own calibration
+    parameters (bias, scale, table) on a bound (the model cannot represent the sensor within its
+    physical range: the real UAV flight's five-hole probe, its scale factors on -0.5). ``on_bound``:
+    maneuver id -> its state-equation parameters on a bound, ``"*"`` -> the time delays on a bound;
+    ``calib_on_bound``: the calibration parameters on a bound.
     """
-    hit = [k for k in f.parameters if k in on_bound.get("*", ())] + list(on_bound.get(f.maneuver or "", ()))
+    calib = [k for k in f.parameters if k in calib_on_bound]
+    if f.code == "noise_floor" and f.severity >= Severity.WARNING and calib:
+        names = ", ".join(calib[:6])
+        f = replace(
+            f, severity=Severity.FAILURE,
+            message=f"{f.message}; with {names} on {'their bounds' if len(calib) > 1 else 'its bound'}: "
+            "the calibration model cannot represent this sensor within its physical range",
+            advice=f"do not use this channel's calibration: check its data (units, sign, the sensor's "
+            f"position and what it measures) and the model set's model for it; widen the bounds of {names} "
+            "only if they are narrower than the sensor's physics")
+    state = list(on_bound.get(f.maneuver or "", ()))
+    hit = [k for k in f.parameters if k in on_bound.get("*", ())] + state
     if f.code not in _BOUND_MIMICS or not hit:
         return f
+    if f.code == "misfit" and state and f.severity < Severity.FAILURE:
+        # not the slow errors of real data: the state equations could not follow the data
+        f = replace(f, severity=Severity.FAILURE, message=f.message.split(": slow, coloured errors")[0]
+                    + ": the fit does not explain this kinematic channel, whose model is exact kinematics")
     names = ", ".join(hit)
     return replace(
         f, message=f"{f.message}; or the bound{'s' if len(hit) > 1 else ''} of {names}, where "
@@ -808,9 +833,11 @@ def _fit_traces(problem: Problem, ev: Evaluation, st: Structure, y: list[np.ndar
 
     ps = problem.parameters
     keys = ps.keys
+    requirements = declarations_of(problem).requirements
     fits = []
     for ce_i, ce in enumerate(ev.channels):
         ch = problem.channels[ce.channel]
+        req = requirements.get(ch.name)
         for b, k in enumerate(ce.mans):
             m = problem.maneuvers[int(k)]
             r0, r1 = ce.rseg[b], ce.rseg[b + 1]
@@ -825,7 +852,9 @@ def _fit_traces(problem: Problem, ev: Evaluation, st: Structure, y: list[np.ndar
                 t_s=m.t_s[rows],
                 z=ce.z[r0:r1], y=(ce.y if y is None else y[ce_i])[r0:r1], measured_t_s=m.t_s[fin],
                 measured=meas[fin], unit=ch.unit,
-                display_scale=ch.display_scale, display_unit=ch.display_unit, parameters=params))
+                display_scale=ch.display_scale, display_unit=ch.display_unit, parameters=params,
+                desired_3sigma=None if req is None else math.radians(req.desired_deg),
+                low_alpha_only=bool(req is not None and req.low_alpha_only)))
     pos = {int(k): i for i, k in enumerate(ev.maneuvers)}
     col = {c.name: c.column for c in problem.channels}
     inputs = []

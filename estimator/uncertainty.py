@@ -559,7 +559,7 @@ def _imu_noise_note(dev: _Deviations, st: Structure, keys: list[str], opt: Solve
     most = (f", most to {keys[worst]} ({inflation[worst]:.2g} x its Cramér-Rao deviation)"
             if worst >= 0 else "")
     return [Finding(
-        "imu_noise", Severity.INFO,
+        "imu_noise", Severity.NOTE,
         f"IMU noise integrated as process noise ({source}: {levels}) adds to the coloured "
         f"deviations{most}",
         "give the IMU's datasheet random walks (SolverOptions.imu_noise) if the data's own level, "

@@ -8,7 +8,7 @@ and of the identifiability checks (is every estimate determined by the data?):
 =======================  ======  ===========================================================
 verdict                  code    when
 =======================  ======  ===========================================================
-SUCCESS                   1      converged, and no finding is a warning or a failure
+SUCCESS                   1      converged, and no finding is a warning or a failure (notes allowed)
 SUCCESS_WITH_WARNINGS     2      converged, at least one warning, no failure
 FAILURE                  -1      not converged, or at least one failure
 =======================  ======  ===========================================================
@@ -20,8 +20,10 @@ where (channel, maneuver, times), how large, and what to do.
 from __future__ import annotations
 
 import enum
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import pandas as pd
 
@@ -73,11 +75,22 @@ class Status(enum.IntEnum):
 
 
 class Severity(enum.IntEnum):
-    """How much a finding weighs: INFO is reported only, WARNING and FAILURE set the verdict."""
+    """How much a finding weighs (SPEC §9: said once, at the severity it deserves).
 
-    INFO = 0
+    ``FAILURE``: the estimates must not be used (no convergence, a wrong minimum, a data fault, a
+    turbulent fit under a method that cannot take it). ``WARNING``: the user should act (what and
+    where the finding says). ``NOTE``: information, no action (a channel the model set has but the
+    data lack, the nose probe's usable alpha range, coloured residuals already in the honest
+    deviations). ``INFO`` is the old name of ``NOTE`` (an alias: files written before read back).
+
+    >>> Severity["INFO"] is Severity.NOTE, Severity.NOTE.name
+    (True, 'NOTE')
+    """
+
+    NOTE = 0
     WARNING = 1
     FAILURE = 2
+    INFO = 0  # the alias of NOTE
 
 
 class Verdict(enum.Enum):
@@ -113,8 +126,9 @@ class Finding:
     Attributes
     ----------
     code : what kind of finding, a short identifier (``"stuck_channel"``, ``"outlier"``,
-        ``"wrong_minimum"``, ``"turbulence"``, ``"unit_error"``, ``"held"``, ``"on_bound"``, ...).
-    severity : INFO, WARNING or FAILURE.
+        ``"misfit"``, ``"turbulence"``, ``"unit_error"``, ``"held"``, ``"on_bound"``, ...; every
+        kind and its severity: :data:`estimator.finding_kinds.KINDS`).
+    severity : NOTE, WARNING or FAILURE.
     message : what was found, with its numbers and where, as a full sentence.
     advice : what to do about it.
     channel : the channel (or IMU input, e.g. ``"az_imu"``) concerned, or None.
@@ -122,6 +136,10 @@ class Finding:
     t_s : the times concerned, s (an outlier's samples; a time range as ``(start, end)``).
     parameters : parameter keys concerned.
     value : the finding's key number (a ratio, a count, a slope), for tables.
+    stage : the estimation of a workflow it comes from (``"Mach 0.50 gear up, biases free"``), or
+        None (a single estimation, or the workflow itself).
+    numbers : its other numbers by name (``ratio``, ``rms``, ``rho1``, ``three_sigma_deg``, ...;
+        display units where the name says so), from which a group of findings states its ranges.
     """
 
     code: str
@@ -133,35 +151,48 @@ class Finding:
     t_s: tuple[float, ...] = ()
     parameters: tuple[str, ...] = ()
     value: float | None = None
+    stage: str | None = None
+    numbers: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         # frozen all the way down: whatever sequences the caller passed become tuples
         object.__setattr__(self, "severity", Severity(self.severity))
         object.__setattr__(self, "t_s", tuple(float(t) for t in self.t_s))
         object.__setattr__(self, "parameters", tuple(self.parameters))
+        object.__setattr__(self, "numbers", MappingProxyType({str(k): float(v) for k, v in
+                                                              dict(self.numbers).items()}))
+
+    def __hash__(self) -> int:  # the numbers' mapping is not hashable itself
+        return hash((self.code, self.severity, self.message, self.channel, self.maneuver, self.stage))
 
     def text(self) -> str:
-        """One line: severity, message and advice."""
-        out = f"{self.severity.name.lower()}: {self.message}"
+        """One line: severity, stage, message and advice."""
+        where = f"{self.stage}: " if self.stage else ""
+        out = f"{self.severity.name.lower()}: {where}{self.message}"
         return out + (f" — {self.advice}" if self.advice else "")
 
     def to_dict(self) -> dict:
-        return {"code": self.code, "severity": self.severity.name, "channel": self.channel,
-                "maneuver": self.maneuver, "t_s": list(self.t_s), "parameters": list(self.parameters),
-                "value": self.value, "message": self.message, "advice": self.advice}
+        return {"code": self.code, "severity": self.severity.name, "stage": self.stage,
+                "channel": self.channel, "maneuver": self.maneuver, "t_s": list(self.t_s),
+                "parameters": list(self.parameters), "value": self.value, "message": self.message,
+                "advice": self.advice,
+                "numbers": {k: (v if math.isfinite(v) else None) for k, v in self.numbers.items()}}
 
     @classmethod
     def from_dict(cls, d: dict) -> Finding:
-        """The finding :meth:`to_dict` gave (severity by name; a ``null`` value is None)."""
+        """The finding :meth:`to_dict` gave (severity by name, ``INFO`` read as NOTE; a ``null``
+        value is None, a ``null`` number NaN)."""
         return cls(code=d["code"], severity=Severity[d["severity"]], message=d["message"],
                    advice=d.get("advice", ""), channel=d.get("channel"), maneuver=d.get("maneuver"),
                    t_s=tuple(d.get("t_s", ())), parameters=tuple(d.get("parameters", ())),
-                   value=None if d.get("value") is None else float(d["value"]))
+                   value=None if d.get("value") is None else float(d["value"]), stage=d.get("stage"),
+                   numbers={k: (math.nan if v is None else float(v))
+                            for k, v in (d.get("numbers") or {}).items()})
 
 
 def judge(status: Status, findings: Iterable[Finding]) -> Verdict:
     """The verdict of a solver status and the findings (module docstring)."""
-    worst = max((f.severity for f in findings), default=Severity.INFO)
+    worst = max((f.severity for f in findings), default=Severity.NOTE)
     if not status.converged or worst >= Severity.FAILURE:
         return Verdict.FAILURE
     if worst >= Severity.WARNING:
@@ -170,9 +201,15 @@ def judge(status: Status, findings: Iterable[Finding]) -> Verdict:
 
 
 def findings_frame(findings: Sequence[Finding]) -> pd.DataFrame:
-    """One row per finding, most severe first (columns of :meth:`Finding.to_dict`)."""
-    cols = ["code", "severity", "channel", "maneuver", "t_s", "parameters", "value", "message", "advice"]
-    rows = [f.to_dict() for f in sorted(findings, key=lambda f: -int(f.severity))]
+    """One row per finding, most severe first (columns of :meth:`Finding.to_dict`; ``numbers`` as
+    ``name=value`` pairs)."""
+    cols = ["code", "severity", "stage", "channel", "maneuver", "t_s", "parameters", "value", "message",
+            "advice", "numbers"]
+    rows = []
+    for f in sorted(findings, key=lambda f: -int(f.severity)):
+        d = f.to_dict()
+        d["numbers"] = "; ".join(f"{k}={v:.6g}" for k, v in f.numbers.items())
+        rows.append(d)
     return pd.DataFrame(rows, columns=cols)
 
 
@@ -180,13 +217,3 @@ def reasons(findings: Iterable[Finding]) -> list[Finding]:
     """The warnings and failures, most severe first (the order within a severity kept: the data's
     findings before the parameters')."""
     return sorted((f for f in findings if f.severity >= Severity.WARNING), key=lambda f: -int(f.severity))
-
-
-def verdict_text(verdict: Verdict, findings: Iterable[Finding], max_lines: int = 15) -> str:
-    """``VERDICT: NAME — text`` and one line per warning or failure (the rest counted)."""
-    shown = reasons(findings)
-    lines = [f"VERDICT: {verdict.name.replace('_', ' ')} — {verdict.text}"]
-    lines += [f"  {f.text()}" for f in shown[:max_lines]]
-    if len(shown) > max_lines:
-        lines.append(f"  ... {len(shown) - max_lines} more in findings.csv")
-    return "\n".join(lines)

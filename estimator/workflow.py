@@ -22,13 +22,18 @@ r"""The paper's calibration workflow over a fleet (Saraf & Kumaresan §3-4; SPEC
    including ``f1(0)``, started where the fleet-mean bias puts it, and ``f2``): the
    correction-model update valid for the whole fleet; the other sensors' tables, biases and scale
    factors come out of the same estimation.
-5. **Gear down.** The gear-down maneuvers of each bin, biases held: the gear-down tables.
+5. **Gear down.** The gear-down maneuvers of each bin, biases held: the gear-down tables. What
+   those maneuvers do not excite (the sideslip of pitch doublets) is held at the nearest gear-up
+   estimate and said once (:func:`hold_unexcited`), not estimated onto its bounds.
 6. **Accuracy** (Table 2). Per sensor and bin (the model set's ``[requirements]``), 3 sigma of
    measurement minus model at the final estimate (about zero: a mean offset counts), against the
    desired accuracy; a ``low_alpha_only`` channel (Tejas: the nose probe's sideslip) only below
    the usable angle of attack found from the growth of the ``alpha_limit_channel``'s error with
    alpha (paper Fig. 7): the highest alpha up to which every 2-degree alpha band keeps its 3 sigma
-   within the desired value.
+   within the desired value. Under the filter-error method the model is what the sensor saw: the
+   model output plus the channel's response to the turbulent wind smoothed from the *other*
+   sensors' channels (:func:`stage_residuals`; :mod:`estimator.filter_error`, "Table 2"), so that
+   the gusts do not count as sensor error and a sensor's own error is not taken for a gust.
 
 What is particular to the aircraft (channels, requirements, the families apportioned) comes from
 the model set (:class:`~estimator.io.modelset.Declarations`, carried by the problem's channels).
@@ -55,6 +60,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from estimator.accuracy import alpha_limit, three_sigma
+from estimator.filter_error import wind_responses
+from estimator.finding_groups import FindingGroup, group_findings
 from estimator.io import subproblem
 from estimator.io.modelset import Declarations, Requirement, declarations_of
 from estimator.model import Model
@@ -72,7 +80,7 @@ JSON_FORMAT = "fpr-workflow-result/1"
 
 __all__ = [
     "ChannelResiduals", "Requirement", "Stage", "WorkflowOptions", "WorkflowResult", "alpha_limit",
-    "apportion", "apportion_biases", "assign_bins", "no_bins_message", "run_workflow",
+    "apportion", "apportion_biases", "assign_bins", "hold_unexcited", "no_bins_message", "run_workflow",
     "stage_residuals", "three_sigma", "vane_biases",
 ]
 
@@ -326,6 +334,29 @@ class WorkflowResult:
         """Every finding of the workflow, most severe first, with its stage."""
         return findings_frame(self.findings)
 
+    def finding_groups(self) -> tuple[FindingGroup, ...]:
+        """The findings said once: one group per kind, channel and stage, most important first
+        (:func:`estimator.finding_groups.group_findings`)."""
+        n = {_stage_label(st): len(st.maneuver_ids) for st in self.stages}
+        groups = group_findings(self.findings, n)
+        # the same bin's two estimations (biases free, then installation biases fixed) fit the same
+        # maneuvers: what both say is said once, by the final one
+        later = {_stage_label(a): _stage_label(b) for a in self.first for b in self.final
+                 if (a.mach, a.gear_down) == (b.mach, b.gear_down)}
+        said = {(g.stage, g.code, g.channel, g.severity): g for g in groups}
+        out = []
+        for g in groups:
+            twin = said.get((later.get(g.stage or ""), g.code, g.channel, g.severity))
+            if twin is not None:
+                continue
+            firsts = [said[k] for s, t in later.items()
+                      if t == g.stage and (k := (s, g.code, g.channel, g.severity)) in said]
+            if firsts:
+                g = replace(g, members=g.members + firsts[0].members,
+                            headline=g.headline + " (the biases-free estimation of this bin says the same)")
+            out.append(g)
+        return tuple(out)
+
     @property
     def usable(self) -> tuple[Stage, ...]:
         """The final and gear-down estimations whose verdict is a success: only they feed Table 2
@@ -522,14 +553,72 @@ def _run(problem: Problem, ids: Sequence[str], name: str, mach: float, gear: boo
     # a later step starts from an earlier one's estimate: that is its start
     solver = opt.solver if values is None else replace(opt.solver, start="given")
     res = estimate(sub, solver)
-    n_warn, n_fail = len(res.warnings), len(res.failures)
+    groups = group_findings(res.findings, len(ids))
+    counts = {s: sum(g.severity == s for g in groups) for s in Severity}
+    said = ", ".join(f"{n} {s.name.lower()}{'s' if n > 1 else ''}" for s, n in
+                     sorted(counts.items(), reverse=True) if n)
     _say(opt, f"  Mach {mach:.2f} gear {'down' if gear else 'up'}, {name}: {len(ids)} maneuvers, "
               f"{int(sub.parameters.free_mask.sum())} free parameters, {res.iterations} iterations, "
               f"{time.perf_counter() - t0:.1f} s: {res.verdict.name.replace('_', ' ')}"
-              + (f" ({n_fail} failure(s), {n_warn} warning(s))" if n_warn or n_fail else ""))
-    for f in (*res.failures, *res.warnings)[:3]:
-        _say(opt, f"      {f.text()[:300]}")
+              + (f" ({said}: below)" if said else ""))
     return Stage(name, mach, gear, sub, res)
+
+
+#: A flow angle that the maneuvers of a stage move by less than this (5th to 95th percentile of its
+#: channels' measurements, deg) does not determine the gains, tables and delays of the channels that
+#: measure it: seven gear-down pitch doublets fly 0.2-0.4 deg of sideslip, and their sideslip
+#: tables and delays ran onto their bounds (a gain needs excursions of several degrees to be told
+#: from its table's neighbours and the noise)
+MIN_EXCITATION_DEG = 2.0
+#: The parameter kinds that need their channel's angle to move to be determined; a sideslip
+#: channel's bias too: without sideslip and heading changes it is one with the steady crosswind
+#: (``crosswind_confounded``), which no gear-down effect changes anyway
+_EXCITED_KINDS = frozenset({"table", "scale", "time_delay"})
+_SIDESLIP = frozenset({"beta_s", "flank_s"})
+
+
+def hold_unexcited(problem: Problem, ids: Sequence[str], held_at: str,
+                   min_excitation_deg: float = MIN_EXCITATION_DEG) -> tuple[list[str], Finding | None]:
+    """The parameter families a stage of maneuvers ``ids`` cannot determine, and the NOTE that says
+    they are held (``held_at``: at what values, in words).
+
+    A flow channel whose measured angle moves by less than ``min_excitation_deg`` over the stage
+    (5th to 95th percentile of its measurements) does not determine its gains, tables and time
+    delay (:data:`_EXCITED_KINDS`; a sideslip channel's bias neither: without sideslip and heading
+    changes it is one with the crosswind): those of its families no excited channel shares are held.
+    The workflow's gear-down step holds them at the nearest gear-up estimate (paper §4: the gear-down
+    update is the correction model's; seven pitch doublets cannot determine sideslip tables).
+    """
+    mans = [m for m in problem.maneuvers if m.id in set(ids)]
+    specs = problem.parameters.specs
+    spread: dict[str, float] = {}
+    families: dict[str, set[str]] = {}
+    for ch in problem.channels:
+        if ch.measures is None:
+            continue
+        z = [np.asarray(m.measurements[ch.column], dtype=float) for m in mans if ch.column in m.measurements]
+        z = np.concatenate(z) if z else np.zeros(0)
+        z = z[np.isfinite(z)]
+        if z.size < 10:
+            continue
+        lo, hi = np.percentile(z, [5.0, 95.0]) * RAD2DEG
+        spread[ch.name] = float(hi - lo)
+        names = set(ch.expression.names) | set(ch.expression.tables) | ({ch.delay} if ch.delay else set())
+        kinds = _EXCITED_KINDS | ({"bias"} if ch.measures in _SIDESLIP else set())
+        families[ch.name] = {n for n in names if n in specs and specs[n].kind in kinds}
+    quiet = sorted(c for c, s in spread.items() if s < min_excitation_deg)
+    busy = set().union(*(families[c] for c in spread if c not in quiet)) if spread else set()
+    held = sorted(set().union(*(families[c] for c in quiet)) - busy) if quiet else []
+    held = [n for n in held if any(p.free for p in problem.parameters.parameters if p.name == n)]
+    if not held:
+        return [], None
+    return held, Finding(
+        "held", Severity.NOTE,
+        f"held at {held_at}: {', '.join(held)} — these {len(mans)} maneuvers do not move what "
+        f"{', '.join(quiet)} measure ({', '.join(f'{c} {spread[c]:.2f} deg' for c in quiet)} from the 5th to "
+        f"the 95th percentile, against {min_excitation_deg:g} deg), so they cannot determine these gains, "
+        "tables and delays (nor a sideslip offset from the crosswind)",
+        parameters=tuple(held), numbers={f"spread_{c}_deg": spread[c] for c in quiet})
 
 
 def _stage_label(st: Stage) -> str:
@@ -547,13 +636,8 @@ def _stage_failed(st: Stage, left_out_of: str) -> Finding:
 
 
 def _stage_findings(stages: Sequence[Stage]) -> list[Finding]:
-    """Every stage's warnings and failures, each message prefixed with its stage."""
-    out = []
-    for st in stages:
-        for f in st.result.findings:
-            if f.severity >= Severity.WARNING:
-                out.append(replace(f, message=f"{_stage_label(st)}: {f.message}"))
-    return out
+    """Every stage's findings, each with its stage (:attr:`Finding.stage`)."""
+    return [replace(f, stage=_stage_label(st)) for st in stages for f in st.result.findings]
 
 
 def vane_biases(problem: Problem, result: EstimationResult, names: Sequence[str] | None = None
@@ -694,14 +778,20 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     for st in final:
         if not st.result.success:
             findings.append(_stage_failed(st, "Table 2 and the correction tables"))
+    gear_notes: list[Finding] = []
     for b, g in down.groupby("bin"):
         if not final_ok:
             notes.append(f"Mach {b:.2f} gear down: no gear-up bin succeeded to start it from; left out")
             continue
         near = min(final_ok, key=lambda s: (abs(s.mach - b), s.mach))
         start = dict(zip(near.result.parameters.keys, near.result.values, strict=True))
-        gear.append(_run(problem, g["id"].tolist(), "gear down", float(b), True, opt,
-                         values={**start, **fixed_bias}, free=free4))
+        ids = g["id"].tolist()
+        held, note = hold_unexcited(problem, ids, f"the Mach {near.mach:.2f} gear-up estimates")
+        st = _run(problem, ids, "gear down", float(b), True, opt, values={**start, **fixed_bias},
+                  free={**free4, **dict.fromkeys(held, False)})
+        gear.append(st)
+        if note is not None:
+            gear_notes.append(replace(note, stage=_stage_label(st)))
     for st in gear:
         if not st.result.success:
             findings.append(_stage_failed(st, "Table 2 and the gear-down correction tables"))
@@ -709,7 +799,7 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
     acc, growth, limit = _accuracy(tuple(final_ok), tuple(st for st in gear if st.result.success), opt,
                                    decl)
     vb = pd.DataFrame(vb_rows)
-    findings += _stage_findings((*first, *final, *gear))
+    findings += _stage_findings((*first, *final, *gear)) + gear_notes
     return WorkflowResult(maneuvers=bins, first=first, final=final, gear_down=tuple(gear), vane_bias=vb,
                           installation=inst, accuracy=acc, alpha_limit_growth=growth,
                           alpha_limit_deg=limit, notes=tuple(notes),
@@ -726,8 +816,11 @@ class ChannelResiduals:
     ----------
     maneuver : (n,) maneuver id per sample.
     t_s : (n,) time, s.
-    z, y : (n,) measurement and model, SI.
+    z, y : (n,) measurement and model, SI; under the filter-error method the model is what the
+        sensor saw: the model output plus ``wind``.
     alpha_t_rad : (n,) the reconstructed angle of attack at the CG, rad.
+    wind : (n,) filter-error method: the channel's response to the turbulent wind smoothed from the
+        other sensors' channels, SI (in ``y``); None for output error.
     """
 
     maneuver: np.ndarray
@@ -735,9 +828,12 @@ class ChannelResiduals:
     z: np.ndarray
     y: np.ndarray
     alpha_t_rad: np.ndarray
+    wind: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        for name in ("maneuver", "t_s", "z", "y", "alpha_t_rad"):  # read-only copies
+        for name in ("maneuver", "t_s", "z", "y", "alpha_t_rad", "wind"):  # read-only copies
+            if getattr(self, name) is None:
+                continue
             a = np.array(getattr(self, name), copy=True)
             a.setflags(write=False)
             object.__setattr__(self, name, a)
@@ -748,13 +844,32 @@ class ChannelResiduals:
 
 
 def stage_residuals(stage: Stage | tuple[Problem, EstimationResult]) -> dict[str, ChannelResiduals]:
-    """Channel name -> residuals of every maneuver of a stage at its estimate."""
+    """Channel name -> residuals of every maneuver of a stage at its estimate (Table 2's samples).
+
+    Output error: measurement minus the model output. Filter error (a result with wind states in
+    some maneuver, :attr:`EstimationResult.wind_model`): measurement minus what the sensor saw,
+    the model output plus the channel's response to the turbulent wind smoothed from the other
+    sensors' channels (:func:`estimator.filter_error.wind_responses`)::
+
+        e_i = z_i - y_i(theta) - h_i . E[dW_k | e_j : sensor_j != sensor_i],   h = -(dy/dV) C_bn
+
+    rerun from the result's values, ``R`` and wind model: the gusts are not counted as sensor
+    error, and a sensor's own error (one its calibration model cannot take) is not taken for a
+    gust, for its own channels do not shape the wind it is compared with. A filter-error result
+    read from a file written before the wind model was kept gives the output-error residuals.
+    """
     problem, result = (stage.problem, stage.result) if isinstance(stage, Stage) else stage
     model = Model(problem)
-    ev = model.evaluate_all(result.values, jacobian=False)
+    wm = result.wind_model
+    seen = None
+    if wm is None or not any(s > 0.0 for s in wm.sigma_mps.values()):
+        ev = model.evaluate_all(result.values, jacobian=False)
+    else:
+        R = np.array([result.R[c.name] for c in problem.channels])
+        ev, seen = wind_responses(model, result.values, R, wm)
     pos = {k: i for i, k in enumerate(ev.maneuvers)}
     out = {}
-    for ce in ev.channels:
+    for i, ce in enumerate(ev.channels):
         ids, ts, al = [], [], []
         for b, k in enumerate(ce.mans):
             rows = ce.rows[ce.rseg[b]:ce.rseg[b + 1]]
@@ -764,45 +879,13 @@ def stage_residuals(stage: Stage | tuple[Problem, EstimationResult]) -> dict[str
             ts.append(m.t_s[rows])
             al.append(np.arctan2(X[rows, 2], X[rows, 0]))
         ch = problem.channels[ce.channel]
-        out[ch.name] = ChannelResiduals(np.concatenate(ids), np.concatenate(ts), ce.z, ce.y,
-                                        np.concatenate(al))
+        if seen is None:
+            out[ch.name] = ChannelResiduals(np.concatenate(ids), np.concatenate(ts), ce.z, ce.y,
+                                            np.concatenate(al))
+        else:
+            out[ch.name] = ChannelResiduals(np.concatenate(ids), np.concatenate(ts), ce.z,
+                                            ce.y + seen[i], np.concatenate(al), wind=seen[i])
     return out
-
-
-def three_sigma(e: np.ndarray) -> float:
-    """3 x the rms about zero (a mean offset is an error too)."""
-    return float(3.0 * np.sqrt(np.mean(np.square(e)))) if e.size else math.nan
-
-
-def alpha_limit(alpha_deg: np.ndarray, err_deg: np.ndarray, desired_deg: float, band_deg: float,
-                min_samples: int) -> tuple[pd.DataFrame, float | None]:
-    """3 sigma of an error in alpha bands and the highest alpha up to which every band passes.
-
-    Returns
-    -------
-    (bands, limit): bands has alpha_lo_deg, alpha_hi_deg, n, three_sigma_deg, passed; limit is the
-    upper edge of the last passing band counted from the lowest (None without judged bands).
-    """
-    if alpha_deg.size == 0:
-        return pd.DataFrame(columns=["alpha_lo_deg", "alpha_hi_deg", "n", "three_sigma_deg", "passed"]), None
-    edges = np.arange(math.floor(alpha_deg.min() / band_deg) * band_deg,
-                      alpha_deg.max() + band_deg, band_deg)
-    rows = []
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
-        sel = (alpha_deg >= lo) & (alpha_deg < hi)
-        n = int(sel.sum())
-        s = three_sigma(err_deg[sel])
-        rows.append({"alpha_lo_deg": float(lo), "alpha_hi_deg": float(hi), "n": n, "three_sigma_deg": s,
-                     "passed": bool(n >= min_samples and s <= desired_deg) if n >= min_samples else None})
-    bands = pd.DataFrame(rows)
-    limit = None
-    for r in bands.itertuples():
-        if r.passed is None:
-            continue
-        if not r.passed:
-            break
-        limit = r.alpha_hi_deg
-    return bands, limit
 
 
 def _accuracy(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOptions, decl: Declarations):

@@ -275,9 +275,13 @@ def test_scale_error_not_matching_a_unit():
 
 
 @pytest.mark.parametrize("excess, code, severity", [
-    (30.0, "misfit", Severity.FAILURE), (2.5, "misfit", Severity.WARNING), (1.3, None, None)])
+    (60.0, "misfit", Severity.FAILURE),  # 1.8 deg rms: beyond any working attitude reference
+    (30.0, "misfit", Severity.NOTE),     # 0.9 deg rms: what a small UAV's AHRS leaves
+    (2.5, "misfit", Severity.NOTE), (1.3, None, None)])
 def test_kinematic_misfit_against_the_floor(excess, code, severity):
-    """theta's residual = its noise plus a smooth error, ``excess`` x the floor in all."""
+    """theta's residual = its noise (0.03 deg) plus a smooth error, ``excess`` x the floor in all: a
+    failure only where the misfit is gross, above ``misfit_ratio`` floors and the attitude limit
+    (1 deg rms); a slow, coloured residual below it is said as a note (real recorded data)."""
     rng = np.random.default_rng(9)
     fits = {f.channel: f for f in clean_maneuver("m0", rng)}
     f = fits["theta"]
@@ -288,8 +292,7 @@ def test_kinematic_misfit_against_the_floor(excess, code, severity):
     ratio = d.table.set_index("channel").loc["theta", "ratio"]
     # the ratio is the excess, to the floor's sampling error (5 sd, 2 % for the max of two spacings)
     assert abs(ratio / excess - 1) < sampling_tol(1600)
-    got = [(x.code, x.severity) for x in d.findings
-           if x.channel == "theta" and x.severity >= Severity.WARNING]
+    got = [(x.code, x.severity) for x in d.findings if x.channel == "theta"]
     assert got == ([] if code is None else [(code, severity)])
 
 
@@ -357,7 +360,7 @@ def test_common_flow_residuals_with_misfitting_kinematics_are_not_turbulence():
     w = gust(t, rng, 0.4 * D2R)
     for i in (5, 6):
         fits[i] = fit("m0", fits[i].channel, t, fits[i].y, fits[i].z + w)
-    fits[1] = fit("m0", "theta", t, fits[1].y, fits[1].z + gust(t, rng, 0.5 * D2R))  # a wrong minimum
+    fits[1] = fit("m0", "theta", t, fits[1].y, fits[1].z + gust(t, rng, 2.0 * D2R))  # a wrong minimum
     d = diagnose(fits)
     assert "turbulence" not in codes(d) and "misfit" in codes(d)
 

@@ -272,7 +272,7 @@ def test_the_diagnostics_judge_the_innovations(turbulent):
     _, prob = turbulent
     res = estimate(prob, SolverOptions(method="filter_error", start="given"))
     assert res.fit_quality is not None
-    codes = {f.code for f in res.findings if f.severity.name != "INFO"}
+    codes = {f.code for f in res.findings if f.severity.name != "NOTE"}
     assert codes == {"filter_error_partial"}, codes
     fq = res.fit_quality.to_pandas()
     flow = fq[fq["flow"]]

@@ -168,9 +168,12 @@ def test_single_wind_up_turn_sideslip_biases_are_honest_and_the_weak_points_flag
     codes = {(f.code, f.channel) for f in res.warnings}
     unident = [f for f in res.warnings if f.code == "unidentifiable"]
     assert unident and {"b_l[PV1]", "b_r[PV1]"} <= set(unident[0].parameters), codes
-    # the nose probe's sideslip at the turn's high angle of attack: model-structure error, with time
-    nose = [f for f in res.warnings if f.code == "noise_floor" and f.channel == "beta_znp"]
+    # the nose probe's sideslip at the turn's high angle of attack: model-structure error, with time,
+    # a note where the probe meets its accuracy within its usable alpha range (paper Fig. 7)
+    nose = [f for f in res.findings if f.code == "noise_floor" and f.channel == "beta_znp"]
     assert nose and nose[0].maneuver == "m0000" and len(nose[0].t_s) == 2, codes
+    assert nose[0].severity == Severity.WARNING or (
+        "usable range" in nose[0].message and "meets its accuracy" in nose[0].message), nose[0].text()
 
 
 def test_a_residual_finding_beside_a_delay_on_its_bound_names_the_bound():
@@ -186,8 +189,7 @@ def test_a_residual_finding_beside_a_delay_on_its_bound_names_the_bound():
     assert row["state"] == "on_bound", (row["state"], row["reason"])
     assert res.verdict != Verdict.SUCCESS, res.summary()
     # the side probe's channels leave a residual finding; each names the bound and the fix
-    side = [f for f in res.findings if f.severity >= Severity.WARNING and f.code != "on_bound"
-            and f.channel in ("alpha_zsp", "beta_zsp")]
+    side = [f for f in res.findings if f.code != "on_bound" and f.channel in ("alpha_zsp", "beta_zsp")]
     assert side, res.summary(max_findings=40)
     for f in side:
         assert "bound of tau_sp" in f.message and "widen the bounds of tau_sp" in f.advice, f.text()
