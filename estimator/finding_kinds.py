@@ -62,17 +62,21 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
     Kind("dead_channel", "FAILURE", _D, "a channel reads exactly 0 while its model moves", cause=True),
     Kind("stuck_channel", "FAILURE", _D, "a channel frozen while its model moves", cause=True),
     Kind("unit_error", "FAILURE", _D, "a channel recorded in another unit than declared", cause=True),
-    Kind("outlier", "WARNING", _D, "single samples far outside the channel's noise", cause=True),
+    Kind("outlier", "rule", _D, "single samples far outside the channel's noise",
+         "WARNING where they carry more than 10 % of the channel's residual sum of squares in the "
+         "maneuver or exceed its desired accuracy (they drag the fit and Table 2: rerun with --robust); "
+         "NOTE otherwise", cause=True),
     Kind("iteration_limit", "FAILURE", _S, "the iteration limit was reached", by_channel=False),
     Kind("stalled", "FAILURE", _S, "no step decreases the cost, yet the step is not negligible",
          by_channel=False),
     Kind("not_converged", "FAILURE", _S, "the iterations did not converge", by_channel=False),
     Kind("misfit", "rule", _D, "a kinematic channel (attitude, heading, airspeed, height) misfits",
-         "FAILURE where the misfit is gross (a wrong minimum or a data fault: attitude off by a degree "
-         "and more, state-equation parameters on their bounds, the flow channels misfitting beside "
-         "it); NOTE otherwise: a coloured residual a few times the white-noise floor is what real "
-         "recorded data look like (filtered INS attitude, baro lag, static-source error), taken in "
-         "by the honest deviations"),
+         "FAILURE where gross: above 3 x its floor and beyond what real data show (attitude 1 deg, "
+         "heading 3 deg, speed the larger of 3 % and 2 m/s, height 50 m rms), or with the maneuver's "
+         "state-equation parameters (IMU biases, initial conditions) on a bound: a wrong minimum or a "
+         "data fault; NOTE otherwise: a slow, coloured residual a few times the white-noise floor is "
+         "what real recorded data look like (filtered INS attitude, baro lag and static-source error, "
+         "IMU scale and misalignment, vertical air motion), taken in by the honest deviations"),
     Kind("scale_error", "FAILURE", _D, "a misfitting channel is a multiple of its model output, no unit"),
     Kind("turbulence", "rule", _D, "flow and airspeed residuals common to every sensor: air motion",
          "FAILURE under the output-error method (it models no process noise: the estimates are "
@@ -80,8 +84,10 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
          by_channel=False),
     Kind("not_invertible", "FAILURE", _S, "a calibration that cannot be applied (a flat or folded table)"),
     Kind("noise_floor", "rule", _D, "a flow channel's residual above its noise floor: model structure",
-         "WARNING where 3 x the residual's rms exceeds the channel's desired accuracy; NOTE where it is "
-         "within it, or where the excess lies beyond the channel's usable alpha range (paper Fig. 7)"),
+         "judged by its effect on Table 2's 3 sigma: NOTE where the channel meets its desired accuracy in "
+         "the maneuver or over the estimation (below its usable alpha range for a low-alpha-only channel, "
+         "paper Fig. 7); WARNING beyond it, or with no stated accuracy; FAILURE beyond it with the "
+         "channel's own calibration parameters on a bound (the model cannot represent the sensor)"),
     Kind("coloured", "NOTE", _D, "a slow, coloured residual: Cramér-Rao deviations optimistic",
          "NOTE: the honest (coloured-residual) deviations take it in"),
     Kind("no_floor", "NOTE", _D, "too few samples to judge a channel's residual"),
