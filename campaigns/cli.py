@@ -98,8 +98,9 @@ def _add_fly(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--altitude-m", type=float, default=6000.0, help="trim altitude, m")
     g.add_argument("--gear-down", action="store_true", help="fly with the landing gear down")
     g.add_argument("--seed", type=int, default=0, help="master seed for errors and turbulence")
-    g.add_argument("--errors", default="typical", choices=["typical", "none"],
-                   help="error preset: typical magnitudes (synth/errors.py), or none (truth only)")
+    g.add_argument("--errors", default="typical", choices=["typical", "none", "real_world"],
+                   help="error preset: typical magnitudes (synth/errors.py), none (truth only), or "
+                        "real_world (typical plus the realism level's instrument errors: docs/realism.md)")
     g.add_argument("--planet", default="flat", choices=["flat", "wgs84"],
                    help="flat non-rotating earth, or JSBSim's rotating WGS84 ellipsoid")
     g.add_argument("--turbulence", default="none", choices=["none", "light", "moderate", "severe"])

@@ -2,7 +2,9 @@
 
 :class:`Environment` is plain data (SI units, radians); :mod:`synth.flight` applies it to JSBSim
 through :mod:`synth.jsbsim_io`. Turbulence is JSBSim's MIL-F-8785C / MIL-HDBK-1797 model; its
-random numbers come from ``turbulence_seed``, so one seed gives bit-identical runs.
+random numbers come from ``turbulence_seed``, so one seed gives bit-identical runs. The realism
+level's slow vertical air motion (:class:`VerticalAirMotion`, opt-in; docs/realism.md) is drawn
+from the same seed.
 
 Example
 -------
@@ -17,7 +19,10 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
+import numpy as np
+
 from aircraft_models.schema import check, field_keys
+from synth.processes import gauss_markov
 
 PLANETS = ("flat", "wgs84")
 
@@ -70,6 +75,52 @@ class Gust:
             )
 
 
+#: The stream of the vertical air motion's generator, beside the maneuver's turbulence seed
+#: (``default_rng([turbulence_seed, VERTICAL_AIR_STREAM])``): "vert" in ASCII.
+VERTICAL_AIR_STREAM = 0x76657274
+
+
+@dataclass(frozen=True)
+class VerticalAirMotion:
+    """Slow vertical motion of the air mass (the realism level; docs/realism.md).
+
+    A stationary first-order Gauss-Markov vertical wind (positive down, NED), drawn per maneuver
+    from ``default_rng([turbulence_seed, VERTICAL_AIR_STREAM])`` at the simulation steps and
+    flown by JSBSim (:func:`synth.flight.fly_maneuver`), so the aircraft responds and the truth's
+    ``true_wind_d_mps`` contains it. Mesoscale motion (gravity waves, 0.1-1 m/s; Nappo, *An
+    Introduction to Atmospheric Gravity Waves*, 2nd ed., 2012, ch. 1-2) of a few kilometres'
+    scale, crossed at 100-250 m/s: tens of seconds, slower than the MIL-F-8785C turbulence
+    (L_w = 533 m: about 3 s).
+
+    Attributes
+    ----------
+    sigma_mps : its standard deviation, m/s (0 < sigma <= 2).
+    tau_s : its correlation time, s (1 <= tau <= 600).
+    """
+
+    sigma_mps: float = 0.4
+    tau_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        for name in ("sigma_mps", "tau_s"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"vertical_air_motion.{name} = {v!r}: expected a finite number")
+            object.__setattr__(self, name, float(v))
+        if not (0.0 < self.sigma_mps <= 2.0):
+            raise ValueError(f"vertical_air_motion.sigma_mps = {self.sigma_mps} must be in (0, 2] m/s; "
+                             "omit vertical_air_motion for none")
+        if not (1.0 <= self.tau_s <= 600.0):
+            raise ValueError(f"vertical_air_motion.tau_s = {self.tau_s} must be in [1, 600] s")
+
+    def wind_down_mps(self, t_s: np.ndarray, seed: int) -> np.ndarray:
+        """The vertical wind (NED down, m/s) at times ``t_s`` (s, uniform, from the record's start)
+        of the maneuver whose turbulence seed is ``seed``; its first value does not depend on the
+        record's length."""
+        rng = np.random.default_rng([int(seed), VERTICAL_AIR_STREAM])
+        return gauss_markov(np.asarray(t_s, dtype=float), self.sigma_mps, self.tau_s, rng)
+
+
 @dataclass(frozen=True)
 class Environment:
     """Planet, wind and turbulence for one flight.
@@ -83,6 +134,9 @@ class Environment:
     turbulence_seed : seed of JSBSim's random generator (``simulation/randomseed``).
     gust : optional discrete 1-cosine gust.
     latitude_rad, longitude_rad : where the flight starts (matters on ``"wgs84"`` only), rad.
+    vertical_air_motion : optional slow vertical air motion (the realism level), drawn from
+        ``turbulence_seed``; in a table ``vertical_air_motion = { sigma_mps = 0.4, tau_s = 30 }``,
+        or ``true`` for the typical values.
     """
 
     planet: str = "flat"
@@ -92,6 +146,7 @@ class Environment:
     gust: Gust | None = None
     latitude_rad: float = math.radians(13.0)
     longitude_rad: float = math.radians(77.6)
+    vertical_air_motion: VerticalAirMotion | None = None
 
     def __post_init__(self) -> None:
         if self.planet not in PLANETS:
@@ -115,6 +170,19 @@ class Environment:
             raise ValueError(f"turbulence_seed must be in [0, 2**31), got {self.turbulence_seed}")
         if not (abs(self.latitude_rad) < math.radians(85.0)):
             raise ValueError(f"latitude_rad must be within +-85 deg, got {self.latitude_rad}")
+        if not (self.vertical_air_motion is None or isinstance(self.vertical_air_motion, VerticalAirMotion)):
+            raise ValueError("vertical_air_motion must be a VerticalAirMotion or None, got "
+                             f"{self.vertical_air_motion!r}")
+
+    def vertical_wind_ned_mps(self, t_s: np.ndarray) -> np.ndarray | None:
+        """(N, 3) the slow vertical air motion at ``t_s`` (NED, only the down component non-zero),
+        m/s, drawn from :attr:`turbulence_seed`; None without it."""
+        if self.vertical_air_motion is None:
+            return None
+        t = np.asarray(t_s, dtype=float)
+        out = np.zeros((t.size, 3))
+        out[:, 2] = self.vertical_air_motion.wind_down_mps(t, self.turbulence_seed)
+        return out
 
     @property
     def turbulence_severity(self) -> int:
@@ -130,7 +198,8 @@ class Environment:
     def from_dict(cls, d: dict) -> Environment:
         """Build from a plain dict (e.g. a TOML table), checking keys and units.
 
-        Keys are the attribute names; ``gust`` is a nested table with :class:`Gust`'s keys.
+        Keys are the attribute names; ``gust`` is a nested table with :class:`Gust`'s keys,
+        ``vertical_air_motion`` one with :class:`VerticalAirMotion`'s (or true/false).
         Degrees are accepted only where the key says so (``latitude_deg``, ``longitude_deg``).
 
         Raises
@@ -160,6 +229,8 @@ class Environment:
                                 for k, v in gust.items()})
         if "wind_ned_mps" in d:
             d["wind_ned_mps"] = tuple(d["wind_ned_mps"])
+        if "vertical_air_motion" in d:
+            d["vertical_air_motion"] = _vertical_air_motion(d["vertical_air_motion"])
         return cls(**d)
 
     def to_dict(self) -> dict:
@@ -170,12 +241,27 @@ class Environment:
             del out["gust"]
         else:
             out["gust"]["direction_ned"] = list(self.gust.direction_ned)
+        if self.vertical_air_motion is None:  # absent while off: the form written before it existed
+            del out["vertical_air_motion"]
         return out
+
+
+def _vertical_air_motion(value) -> VerticalAirMotion | None:
+    """``[environment] vertical_air_motion``: a table, true (the typical values) or false (none)."""
+    if isinstance(value, bool):
+        return VerticalAirMotion() if value else None
+    if value is None or isinstance(value, VerticalAirMotion):
+        return value
+    if not isinstance(value, dict):
+        raise ValueError("environment.vertical_air_motion must be a table { sigma_mps = ..., tau_s = ... }, "
+                         f"true or false, got {value!r}")
+    return VerticalAirMotion(**check(value, _VERTICAL_KEYS, "environment.vertical_air_motion"))
 
 
 # the values' types and ranges are checked by the dataclasses themselves
 _GUST_KEYS = field_keys(Gust, required=("amplitude_mps",))
+_VERTICAL_KEYS = field_keys(VerticalAirMotion, units=("s",))
 _ENVIRONMENT_KEYS = field_keys(Environment, units=("rad",))
 
 
-__all__ = ["Environment", "Gust", "PLANETS", "TURBULENCE_LEVELS"]
+__all__ = ["Environment", "Gust", "PLANETS", "TURBULENCE_LEVELS", "VERTICAL_AIR_STREAM", "VerticalAirMotion"]

@@ -6,6 +6,9 @@ recorder rates and clock offsets, on/off switches for the local-flow truth, the 
 baseline mismatch, the fleet's installation biases and the nose-probe high-AOA irregularity, and one
 seed per random source. Campaigns draw values; this module only holds and checks them.
 
+The realism level (:class:`RealismErrors`, ``[realism]``; preset ``real_world``) adds the slow,
+correlated imperfections of real installations; it is off unless asked for (docs/realism.md).
+
 Units are SI and radians inside (SPEC §2). At the dict/TOML edge a key may instead carry an edge
 unit, converted here and nowhere else:
 
@@ -16,11 +19,12 @@ field suffix (SI)         accepted edge suffix          factor
 ``_rps``                  ``_deg_s``                   pi / 180
 ``_rad_per_rad``          ``_deg_per_deg``             1
 ``_s``                    ``_ms``                      1e-3
+``_per_rad``              ``_per_deg``                 180 / pi
 ========================  ===========================  ===========
 
 Dict / TOML form (``ErrorConfig.from_dict``; ``to_dict`` writes the SI form)::
 
-    preset = "typical"              # start from "none" (default) or "typical", then override
+    preset = "typical"              # start from "none" (default), "typical" or "real_world"
     local_flow = true               # local-flow truth model on (off: sensors see free stream)
     baseline_mismatch = true        # ADC tables from the nominal model (off: ADC inverts the truth)
     installation_biases = true      # add the fleet's per-aircraft installation biases
@@ -70,6 +74,20 @@ Dict / TOML form (``ErrorConfig.from_dict``; ``to_dict`` writes the SI form)::
     [channel_delays_ms]             # extra lag of single non-flow channels, by column name
     phi_rad = 40.0
 
+    [realism]                       # the realism level (docs/realism.md); each source 0 = off
+    ins_attitude_sigma_deg = [0.1, 0.1, 0.2]   # INS attitude: Gauss-Markov per axis
+    ins_attitude_tau_s = [30.0, 30.0, 60.0]
+    accel_scale = [8e-4, -6e-4, 1e-3]          # IMU scale factors, non-orthogonality, mounting
+    gyro_nonorthogonality_rad = [-2.5e-4, 3e-4, 2e-4]
+    imu_mounting_rad = [1e-3, -8e-4, 1.2e-3]
+    static_error_c0 = 0.004                    # static source: dPp/qc = c0 + c_alpha alpha + c M^2
+    static_error_c_alpha_per_deg = 0.0014
+    static_error_c_mach2 = 0.012
+    static_lag_ms = 300.0                      # pneumatic lags of the static and total lines
+    total_lag_ms = 100.0
+    gnss_velocity_rate_hz = 5.0                # INS velocities: GNSS fixes held between them
+    gnss_velocity_latency_ms = 60.0
+
     [seeds]                         # one integer per random source
     imu_noise = 11
 
@@ -112,9 +130,13 @@ DIRECT_CHANNELS: Mapping[str, str] = MappingProxyType({
     "h_dgps_m": "dgps",
 })
 
-#: Random sources, each with its own seed.
+#: Random sources, each with its own seed (only append: a master seed derives them in this order).
 SEED_SOURCES = ("imu_noise", "vane_noise", "probe_noise", "nose_probe_irregularity", "ins_noise",
-                "airdata_noise", "dgps_noise")
+                "airdata_noise", "dgps_noise", "ins_attitude")
+#: The seeds of the realism level's random sources: left out of :meth:`ErrorConfig.flat` (the
+#: injected values stored with the data) while the realism level is off, so that datasets without
+#: it stay byte-identical to those written before it existed.
+REALISM_SEED_SOURCES = ("ins_attitude",)
 
 
 def _vec3(value: Any, where: str) -> Vec3:
@@ -217,6 +239,151 @@ class DgpsErrors:
         _check_nonneg(self, "dgps")
 
 
+def _check_small(values: Vec3 | float, limit: float, where: str) -> None:
+    if np.any(np.abs(np.asarray(values, dtype=float)) > limit):
+        raise ValueError(f"{where} = {values!r}: the small-error model holds up to {limit} in magnitude")
+
+
+@dataclass(frozen=True)
+class RealismErrors:
+    """The realism level: slow, correlated imperfections of real installations (opt-in).
+
+    Each source is switched by its magnitude (all zero: off, the default; :meth:`typical` gives
+    every one at its typical value; the physics and the sources of the numbers are in
+    ``docs/realism.md``). Body axes x fwd / y right / z down.
+
+    Attributes
+    ----------
+    ins_attitude_sigma_rad : (3,) std of the INS attitude error of phi, theta, psi, rad: a
+        stationary first-order Gauss-Markov process per axis (an aided INS's filter error),
+        drawn per maneuver from ``seeds.ins_attitude``. 0: off.
+    ins_attitude_tau_s : (3,) its correlation times, s (used where the sigma is > 0).
+    accel_scale, gyro_scale : (3,) scale-factor errors per axis (1): the triad outputs
+        ``(1 + s_i)`` times its axis' input.
+    accel_nonorthogonality_rad, gyro_nonorthogonality_rad : (3,) the triad's non-orthogonality,
+        rad: ``(m_yx, m_zx, m_zy)``, the y axis tilted towards x, the z axis towards x and towards y
+        (the triad's frame is that of its x axis and x-y plane).
+    imu_mounting_rad : (3,) small rotation of the IMU case from the body axes (about x, y, z),
+        rad, common to both triads. A triad measures ``(I + diag(s)) (I + N) (I - [d x]) x_body``
+        (:meth:`imu_matrix`).
+    static_error_c0, static_error_c_alpha_per_rad, static_error_c_mach2 : static-source position
+        error ``dPp / qc = c0 + c_alpha alpha + c_mach2 M^2`` (1, 1/rad, 1) added to the static
+        pressure at the port (true alpha and Mach); the pitot's total pressure has none, so the
+        impact pressure the ADC measures is ``qc - dPp``. 0: off.
+    static_lag_s, total_lag_s : first-order pneumatic lag of the static and the total-pressure
+        line to the airdata computer's transducers, s. 0: off.
+    gnss_velocity_rate_hz : the INS's NED velocity channels are a GNSS velocity of this fix rate,
+        held between fixes on the INS stream, Hz. 0: off (the INS's own velocity).
+    gnss_velocity_latency_s : a fix reaches the INS this long after its time of validity, s.
+    """
+
+    ins_attitude_sigma_rad: Vec3 = _ZERO3
+    ins_attitude_tau_s: Vec3 = (30.0, 30.0, 60.0)
+    accel_scale: Vec3 = _ZERO3
+    gyro_scale: Vec3 = _ZERO3
+    accel_nonorthogonality_rad: Vec3 = _ZERO3
+    gyro_nonorthogonality_rad: Vec3 = _ZERO3
+    imu_mounting_rad: Vec3 = _ZERO3
+    static_error_c0: float = 0.0
+    static_error_c_alpha_per_rad: float = 0.0
+    static_error_c_mach2: float = 0.0
+    static_lag_s: float = 0.0
+    total_lag_s: float = 0.0
+    gnss_velocity_rate_hz: float = 0.0
+    gnss_velocity_latency_s: float = 0.05
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(f.default, tuple):
+                object.__setattr__(self, f.name, _vec3(v, f"realism.{f.name}"))
+            elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"realism.{f.name} = {v!r}: expected one finite number")
+            else:
+                object.__setattr__(self, f.name, float(v))
+        if min(self.ins_attitude_sigma_rad) < 0:
+            raise ValueError(f"realism.ins_attitude_sigma_rad = {self.ins_attitude_sigma_rad} must be "
+                             ">= 0 (standard deviations)")
+        if any(s > 0 and not t > 0 for s, t in zip(self.ins_attitude_sigma_rad, self.ins_attitude_tau_s,
+                                                  strict=True)):
+            raise ValueError(f"realism.ins_attitude_tau_s = {self.ins_attitude_tau_s} must be > 0 where "
+                             "ins_attitude_sigma_rad is > 0 (a correlation time)")
+        for name in ("static_lag_s", "total_lag_s", "gnss_velocity_rate_hz", "gnss_velocity_latency_s"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"realism.{name} = {getattr(self, name)} must be >= 0 (0: off)")
+        for name in ("accel_scale", "gyro_scale"):
+            _check_small(getattr(self, name), 0.1, f"realism.{name}")
+        for name in ("accel_nonorthogonality_rad", "gyro_nonorthogonality_rad", "imu_mounting_rad"):
+            _check_small(getattr(self, name), 0.1, f"realism.{name}")
+        for name in ("static_error_c0", "static_error_c_mach2"):
+            _check_small(getattr(self, name), 0.2, f"realism.{name}")
+        _check_small(self.static_error_c_alpha_per_rad, 1.0, "realism.static_error_c_alpha_per_rad")
+
+    @classmethod
+    def typical(cls) -> RealismErrors:
+        """Every source at its typical value (docs/realism.md gives the physics and sources).
+
+        INS attitude 0.1 / 0.1 / 0.2 deg with 30 / 30 / 60 s; IMU scale factors 0.4-1.0e-3,
+        non-orthogonality 0.2-0.3 mrad, mounting 0.8-1.2 mrad; static-source error 0.4 % of qc
+        + 0.08 / rad alpha + 1.2 % M^2; pneumatic lags 0.3 s static, 0.1 s total; GNSS velocity
+        5 Hz with 60 ms latency.
+        """
+        mrad = 1e-3
+        return cls(
+            ins_attitude_sigma_rad=(math.radians(0.1), math.radians(0.1), math.radians(0.2)),
+            ins_attitude_tau_s=(30.0, 30.0, 60.0),
+            accel_scale=(8e-4, -6e-4, 1.0e-3),
+            gyro_scale=(-1.0e-3, 7e-4, 4e-4),
+            accel_nonorthogonality_rad=(0.3 * mrad, -0.2 * mrad, 0.25 * mrad),
+            gyro_nonorthogonality_rad=(-0.25 * mrad, 0.3 * mrad, 0.2 * mrad),
+            imu_mounting_rad=(1.0 * mrad, -0.8 * mrad, 1.2 * mrad),
+            static_error_c0=0.004,
+            static_error_c_alpha_per_rad=0.08,
+            static_error_c_mach2=0.012,
+            static_lag_s=0.3,
+            total_lag_s=0.1,
+            gnss_velocity_rate_hz=5.0,
+            gnss_velocity_latency_s=0.06,
+        )
+
+    @property
+    def ins_attitude(self) -> bool:
+        """The INS attitude error is on."""
+        return any(self.ins_attitude_sigma_rad)
+
+    @property
+    def imu_matrix_errors(self) -> bool:
+        """An IMU scale factor, non-orthogonality or mounting error is on."""
+        return any(any(getattr(self, n)) for n in ("accel_scale", "gyro_scale", "accel_nonorthogonality_rad",
+                                                   "gyro_nonorthogonality_rad", "imu_mounting_rad"))
+
+    @property
+    def static_source_error(self) -> bool:
+        """The static-source position error is on."""
+        return bool(self.static_error_c0 or self.static_error_c_alpha_per_rad or self.static_error_c_mach2)
+
+    @property
+    def gnss_velocity(self) -> bool:
+        """The INS velocities are held GNSS fixes."""
+        return self.gnss_velocity_rate_hz > 0.0
+
+    def imu_matrix(self, triad: str) -> np.ndarray:
+        """(3, 3) ``I + M`` of the accelerometer (``"accel"``) or gyro (``"gyro"``) triad: it
+        measures ``(I + M) x`` for the body-axis vector x (scale, non-orthogonality, mounting)::
+
+            I + M = (I + diag(s)) (I + N) (I - [d x])
+            N = [[0, 0, 0], [m_yx, 0, 0], [m_zx, m_zy, 0]],   [d x] the cross-product matrix of d
+        """
+        if triad not in ("accel", "gyro"):
+            raise ValueError(f"imu_matrix: triad {triad!r} is 'accel' or 'gyro'")
+        s = getattr(self, f"{triad}_scale")
+        m_yx, m_zx, m_zy = getattr(self, f"{triad}_nonorthogonality_rad")
+        dx, dy, dz = self.imu_mounting_rad
+        n = np.array([[0.0, 0.0, 0.0], [m_yx, 0.0, 0.0], [m_zx, m_zy, 0.0]])
+        cross = np.array([[0.0, -dz, dy], [dz, 0.0, -dx], [-dy, dx, 0.0]])
+        return (np.eye(3) + np.diag(s)) @ (np.eye(3) + n) @ (np.eye(3) - cross)
+
+
 @dataclass(frozen=True)
 class FlowSensorErrors:
     """Transduction errors of one flow-angle sensor.
@@ -292,6 +459,7 @@ class Seeds:
     ins_noise: int = 105
     airdata_noise: int = 106
     dgps_noise: int = 107
+    ins_attitude: int = 108
 
     @classmethod
     def from_master(cls, master: int) -> Seeds:
@@ -314,7 +482,7 @@ def _default_recorders() -> Mapping[str, RecorderErrors]:
 
 
 _SWITCHES = ("local_flow", "baseline_mismatch", "installation_biases", "nose_probe_irregularity")
-_GROUPS = ("imu", "ins", "airdata", "dgps")
+_GROUPS = ("imu", "ins", "airdata", "dgps", "realism")
 #: the keys of an errors block (module docstring); the two channel-delay spellings are converted below
 _ERROR_KEYS = {"preset": Key(), **{s: Key(bool) for s in _SWITCHES}, **dict.fromkeys(_GROUPS, Key()),
                **dict.fromkeys(("sensors", "recorders", "channel_delays_s", "channel_delays_ms", "seeds"),
@@ -343,6 +511,7 @@ class ErrorConfig:
     recorders: Mapping[str, RecorderErrors] = field(default_factory=_default_recorders)
     channel_delays_s: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
     seeds: Seeds = field(default_factory=Seeds)
+    realism: RealismErrors = field(default_factory=RealismErrors)
 
     def __post_init__(self) -> None:
         bad = sorted(set(self.sensors) - set(ALL_SENSORS))
@@ -426,6 +595,13 @@ class ErrorConfig:
                                                "psi_rad": 0.010}),
         )
 
+    @classmethod
+    def real_world(cls) -> ErrorConfig:
+        """:meth:`typical` plus every source of the realism level at its typical value
+        (:meth:`RealismErrors.typical`; docs/realism.md). The slow vertical air motion is the
+        environment's (``[environment] vertical_air_motion``), not an instrumentation error."""
+        return dataclasses.replace(cls.typical(), realism=RealismErrors.typical())
+
     # ------------------------------------------------------------------ dict form
     def to_dict(self) -> dict:
         """Nested plain dict in SI key names (TOML/JSON-ready; ``rate_hz`` omitted when ideal)."""
@@ -440,6 +616,8 @@ class ErrorConfig:
         out["sensors"] = {s: _plain(e) for s, e in self.sensors.items()}
         out["recorders"] = {r: _plain(e) for r, e in self.recorders.items()}
         out["channel_delays_s"] = dict(self.channel_delays_s)
+        if self.realism != RealismErrors():  # absent while off: the form written before it existed
+            out["realism"] = _plain(self.realism)
         return out
 
     @classmethod
@@ -448,8 +626,9 @@ class ErrorConfig:
 
         Parameters
         ----------
-        d : mapping; ``preset`` ("none", the default, or "typical") is the starting point, every
-            other key overrides it. Edge units (``_deg``, ``_deg_s``, ``_ms``) are converted to SI.
+        d : mapping; ``preset`` ("none", the default, "typical" or "real_world") is the starting
+            point, every other key overrides it. Edge units (``_deg``, ``_deg_s``, ``_ms``,
+            ``_per_deg``) are converted to SI.
         seed : master seed; every source seed not given in ``d["seeds"]`` derives from it. Without
             it, seeds not given keep the preset's.
 
@@ -460,7 +639,7 @@ class ErrorConfig:
         """
         d = check(d, _ERROR_KEYS, "errors")
         preset = d.pop("preset", "none")
-        presets = {"none": cls.none, "typical": cls.typical}
+        presets = {"none": cls.none, "typical": cls.typical, "real_world": cls.real_world}
         if preset not in presets:
             raise ValueError(f"errors.preset = {preset!r}{did_you_mean(str(preset), presets)}; "
                              f"valid: {sorted(presets)}")
@@ -521,11 +700,12 @@ class ErrorConfig:
     @classmethod
     def with_only(cls, path: str, value: Any = None) -> ErrorConfig:
         """Every error off but one: ``path`` (dotted SI, as in :meth:`with_values`) set to
-        ``value``, or to its :meth:`typical` value when ``value`` is None. Recorders stay ideal
-        unless ``path`` names a recorder field. For tests of one error source at a time.
+        ``value``, or to its :meth:`typical` value when ``value`` is None (a ``realism.`` path:
+        its :meth:`real_world` value). Recorders stay ideal unless ``path`` names a recorder
+        field. For tests of one error source at a time.
         """
         if value is None:
-            node: Any = cls.typical().to_dict()
+            node: Any = cls.real_world().to_dict()
             for p in path.split("."):
                 if not isinstance(node, Mapping) or p not in node:
                     raise ValueError(f"with_only: no typical value at {path!r}")
@@ -542,8 +722,11 @@ class ErrorConfig:
         for k in ("local_flow", "baseline_mismatch", "installation_biases",
                   "nose_probe_irregularity"):
             out[k] = float(d[k])
-        for g in ("imu", "ins", "airdata", "dgps", "seeds"):
+        realism = "realism" in d
+        for g in ("imu", "ins", "airdata", "dgps", "seeds", *(("realism",) if realism else ())):
             for k, v in d[g].items():
+                if g == "seeds" and k in REALISM_SEED_SOURCES and not realism:
+                    continue  # stored only with the realism level (module docstring)
                 out[f"{g}.{k}"] = v
         for s, sd in d["sensors"].items():
             for k, v in sd.items():
@@ -575,7 +758,14 @@ def _mapping(value: Any, where: str) -> Mapping:
 
 def _edge_unit(name: str) -> str | None:
     """The SI unit of field ``name`` whose edge-unit spelling it accepts (:data:`_EDGE_UNITS`)."""
+    if _per_rad(name):  # a coefficient per radian is no angle: its edge spelling is _per_deg
+        return None
     return next((u for u in _EDGE_UNITS if name.endswith(SUFFIXES[u][0][0])), None)
+
+
+def _per_rad(name: str) -> bool:
+    """A coefficient per radian (``static_error_c_alpha_per_rad``), not a ``_rad_per_rad`` ratio."""
+    return name.endswith("_per_rad") and not name.endswith("_rad_per_rad")
 
 
 def _update(obj: Any, d: Any, where: str) -> Any:
@@ -584,6 +774,9 @@ def _update(obj: Any, d: Any, where: str) -> Any:
     # the schema's spellings, converted here as before (a quoted number stays accepted)
     alias = {key: (f.name, factor) for f in fields(obj)
              for key, factor in Key(unit=_edge_unit(f.name)).spellings(f.name).items()}
+    # per degree -> per radian: x / deg = x * (180 / pi) / rad
+    alias.update({f.name[: -len("_per_rad")] + "_per_deg": (f.name, 180.0 / math.pi)
+                  for f in fields(obj) if _per_rad(f.name)})
     changes: dict[str, Any] = {}
     for key, value in d.items():
         if key not in alias:

@@ -201,8 +201,15 @@ def start_flight(
         "gear_pos_norm": float(x_trim[C["gear_pos_norm"]]),
         "residuals": {k: float(v) for k, v in trim_residuals.items()},
     }
-    if any(env.wind_ned_mps):
-        _reinit_with_wind(fdm, reader, env.wind_ned_mps)
+    wind_entry = env.wind_ned_mps
+    vertical = env.vertical_wind_ned_mps(np.zeros(1))
+    if vertical is not None:
+        # the aircraft has been flying in the moving air mass: restarted with its trimmed
+        # air-relative state in the steady wind plus the vertical motion's first value, it starts
+        # without a transient (the settling flies it held; fly_maneuver lets it vary from t = 0)
+        wind_entry = tuple(float(x) for x in np.asarray(env.wind_ned_mps) + vertical[0])
+    if any(wind_entry):
+        _reinit_with_wind(fdm, reader, wind_entry)
     if env.turbulence != "none":
         io.set_turbulence(fdm, severity=env.turbulence_severity,
                           windspeed_at_20ft_mps=env.turbulence_w20_mps)
@@ -304,7 +311,10 @@ def fly_maneuver(
     added_wind : ``t_s`` (n,) -> (n, 3) wind, NED, m/s, added to ``env``'s steady wind and set at
         every step, so that the aircraft flies through it (a turbulence model of a study's own;
         None: none). The truth's wind is the steady wind plus it at every sample but the first,
-        the state on entry, which has the steady wind: start the history at zero.
+        the state on entry, which has the steady wind: start the history at zero. ``env``'s slow
+        vertical air motion (:class:`~synth.environment.VerticalAirMotion`, the realism level) is
+        flown the same way, added to it; the state on entry has its first value (it is there
+        from the trim on, see :func:`start_flight`).
 
     Returns
     -------
@@ -335,6 +345,9 @@ def fly_maneuver(
     if extra is not None and extra.shape != (n, 3):
         raise ValueError(f"{where}: added_wind must return an (n, 3) NED wind for the {n} steps, "
                          f"got shape {extra.shape}")
+    vertical = env.vertical_wind_ned_mps(t_s)
+    if vertical is not None:
+        extra = vertical if extra is None else vertical + extra
     steady = np.asarray(env.wind_ned_mps, dtype=float)
 
     def on_step(i: int) -> None:  # the added wind, and the gust at its step

@@ -18,6 +18,10 @@ Pipeline (SPEC §6, paper Eq. 2 and §3), for one maneuver
 
 Use :func:`instrument`; :func:`channel_response` evaluates the noise-free calibration relationship
 (what the estimator's tables f1..f5 should find).
+
+The realism level (opt-in, docs/realism.md) acts on the continuous signals of stages 3-4 (IMU
+matrices, static-source error and pneumatic lags) and on the INS (attitude drift, held GNSS
+velocity): :func:`_realism_signals`, :func:`_ins_attitude_errors`, :func:`_record_ins_dgps`.
 """
 
 from __future__ import annotations
@@ -49,6 +53,12 @@ from synth.local_flow import (
     irregularity_rad,
     load_adc_baseline,
     load_local_flow_truth,
+)
+from synth.processes import (
+    first_order_lag,
+    gauss_markov,
+    hold_fix_times_s,
+    static_source_error_ratio,
 )
 from synth.recorders import (
     allowed_stamp_interval_s,
@@ -323,15 +333,22 @@ def instrument(
 
     flow = _flow_at_sensors(truth, airframe, configuration, errors, truth_model, sensing)
     direct, f_imu, v_ned, v_ins_ned = _continuous_signals(truth, airframe, euler, qc_true)
+    # the realism level (off: the same arrays, untouched): the IMU triads' matrices and the
+    # pitot-static system's position error and lags act on the continuous signals
+    direct, ports, realism_injected = _realism_signals(truth, errors, direct, qc_true)
     rec = _plan_recorders(truth.t_s, sensors, errors, direct, common_rate_hz)
 
     def rng(seed: int, name: str) -> np.random.Generator:
         return channel_rng(seed, maneuver_key, _RNG_INDEX[name])
 
     dru = _record_dru(truth, sensors, errors, direct, flow, sensing, qc_true, rec, rng)
-    _air_data_computer(dru, truth, sensors, errors, adc, qc_true, rec, rng)
+    _air_data_computer(dru, truth, sensors, errors, adc, ports, rec, rng)
     clean_cols = _clean_channels(truth, sensors, errors, flow, sensing, adc, qc_true)
-    ins, dgps = _record_ins_dgps(truth, errors, direct, rec, rng)
+    attitude_error = _ins_attitude_errors(errors, rec, rng)
+    if attitude_error:
+        realism_injected["realism.ins_attitude_error_mean_rad"] = [
+            float(np.mean(attitude_error[c])) for c in _INS_COLUMNS[:3]]
+    ins, dgps = _record_ins_dgps(truth, errors, direct, rec, rng, attitude_error)
 
     streams = {"dru": dru, "ins": ins, "dgps": dgps}
     common, own_rate = _to_common_base(streams, rec, common_rate_hz)
@@ -343,6 +360,7 @@ def instrument(
     data = pd.DataFrame(columns)
 
     injected = _injected(errors, maneuver_key, common_rate_hz, sensors, flow.bias_rad, rec, columns)
+    injected.update(realism_injected)
     units = {c: _units(c) for c in columns}
     stream_frames = {r: pd.DataFrame({"t_s": rec.stamps[r], **cols}) for r, cols in streams.items()}
     return InstrumentedManeuver(data=data, injected=injected, channel_units=units,
@@ -460,6 +478,53 @@ def _continuous_signals(truth: TruthTrajectory, airframe: Airframe, euler: np.nd
     return direct, f_imu, v_ned, v_ins_ned
 
 
+def _realism_signals(truth: TruthTrajectory, errors: ErrorConfig, direct: dict[str, np.ndarray],
+                     qc_true: np.ndarray
+                     ) -> tuple[dict[str, np.ndarray], tuple[np.ndarray, np.ndarray], dict[str, list]]:
+    """The realism level on the continuous signals, at the truth rate (docs/realism.md).
+
+    * IMU: each triad measures ``(I + M) x`` (:meth:`~synth.errors.RealismErrors.imu_matrix`:
+      scale factors, non-orthogonality, mounting), before its bias and noise.
+    * Pitot-static system: the static port senses ``ps + dPp``, ``dPp = qc (c0 + c_alpha alpha +
+      c_mach2 M^2)`` (true alpha at the CG, true Mach; :func:`synth.processes.static_source_error_ratio`),
+      the pitot the true total pressure ``pt = ps + qc``; the static and total lines lag them to the
+      ADC's transducers (:func:`synth.processes.first_order_lag`): ``ps_pa = L_s(ps + dPp)``,
+      ``qc_pa = L_t(pt) - L_s(ps + dPp)``. Pressure altitude, Mach and TAS follow from them.
+
+    Returns
+    -------
+    ``direct`` (a new dict when changed), the impact and static pressure at the ports (Pa; the
+    probes' normalising pressures: position error, no line lag) and the realism values to add to
+    the injected ones (the triads' matrices ``I + M``, row-major). Off: the inputs themselves.
+    """
+    real = errors.realism
+    ports = (qc_true, truth.p_static_pa)
+    extra: dict[str, list] = {}
+    if not (real.imu_matrix_errors or real.static_source_error or real.static_lag_s or real.total_lag_s):
+        return direct, ports, extra
+    direct = dict(direct)
+    if real.imu_matrix_errors:
+        for triad, cols in (("accel", _IMU_COLUMNS[:3]), ("gyro", _IMU_COLUMNS[3:])):
+            m = real.imu_matrix(triad)
+            sensed = np.stack([direct[c] for c in cols], axis=1) @ m.T
+            direct.update({c: sensed[:, i] for i, c in enumerate(cols)})
+            extra[f"realism.{triad}_matrix"] = [float(v) for v in m.ravel()]
+    if not (real.static_source_error or real.static_lag_s or real.total_lag_s):
+        return direct, ports, extra
+    ps_port = truth.p_static_pa
+    dp_port = np.zeros_like(qc_true)
+    if real.static_source_error:
+        dp_port = qc_true * static_source_error_ratio(
+            truth.alpha_rad, truth.mach, real.static_error_c0, real.static_error_c_alpha_per_rad,
+            real.static_error_c_mach2)
+        ps_port = truth.p_static_pa + dp_port
+    pt_port = truth.p_static_pa + qc_true  # a pitot senses the total pressure within +-20 deg
+    ps_line = first_order_lag(truth.t_s, ps_port, real.static_lag_s)
+    direct["ps_pa"] = ps_line
+    direct["qc_pa"] = first_order_lag(truth.t_s, pt_port, real.total_lag_s) - ps_line
+    return direct, (qc_true - dp_port, ps_port), extra
+
+
 @dataclass(frozen=True)
 class _RecorderPlan:
     """When each recorder samples each channel (times in s).
@@ -516,10 +581,15 @@ def _plan_recorders(t: np.ndarray, sensors, errors: ErrorConfig, direct: dict[st
     # an IMU sample averages the interval before its stamp: it needs truth that far back
     window_lag = {c: plan["dru"][c] + (1.0 / rec["dru"].rate_hz if rec["dru"].rate_hz else 0.0)
                   for c in _IMU_COLUMNS}
+    real = errors.realism
+    # a held GNSS velocity fix can be up to its latency and one fix interval older than the sample
+    hold_lag = ([plan["ins"][c] + real.gnss_velocity_latency_s + 1.0 / real.gnss_velocity_rate_hz
+                 for c in _INS_COLUMNS[3:]] if real.gnss_velocity else [])
     t0, t1 = float(t[0]), float(t[-1])
     intervals = {}
     for r in RECORDERS:
-        lags = list(plan[r].values()) + (list(window_lag.values()) if r == "dru" else [])
+        lags = list(plan[r].values()) + (list(window_lag.values()) if r == "dru" else []) + (
+            hold_lag if r == "ins" else [])
         lo, hi = allowed_stamp_interval_s(t0, t1, rec[r].clock_offset_s, lags)
         if rec[r].rate_hz is not None:
             stamps = grid_in_interval_s(lo, hi, rec[r].rate_hz)
@@ -593,10 +663,12 @@ def _record_dru(truth: TruthTrajectory, sensors, errors: ErrorConfig, direct: di
 
 
 def _air_data_computer(dru: dict[str, np.ndarray], truth: TruthTrajectory, sensors,
-                       errors: ErrorConfig, adc: AirdataComputer, qc_true: np.ndarray,
+                       errors: ErrorConfig, adc: AirdataComputer, ports: tuple[np.ndarray, np.ndarray],
                        rec: _RecorderPlan, rng) -> None:
     """Stage 5: the airdata computer on the DRU's samples (paper Eq. 2); adds the calibrated flow
-    channels (rad) and the probes' angles to ``dru`` in place."""
+    channels (rad) and the probes' angles to ``dru`` in place. ``ports``: the impact and static
+    pressure at the pitot-static ports (Pa, truth rate; the true ones without the realism level's
+    static-source error), which the probes' normalising pressures are."""
     seeds = errors.seeds
     ad = errors.airdata
     mach_m = dru["mach"]
@@ -609,10 +681,15 @@ def _air_data_computer(dru: dict[str, np.ndarray], truth: TruthTrajectory, senso
     # airdata for each probe are therefore its qc and ps transducers' samples at the probe's lag
     # (the same transducers: same bias and noise realisation as qc_pa, ps_pa), as when the probe's
     # pressures and its normalising pressure share one pneumatic path and transducer frame.
+    # With the realism level, the static-source position error is the port's, so the probes'
+    # normalising pressures have it too; the ADC lines' pneumatic lag is not theirs (their path's
+    # lag is the probe's delay): docs/realism.md.
+    qc_port, ps_port = ports
+
     def probe_airdata(s: str) -> tuple[np.ndarray, np.ndarray]:
-        qc_s = transduce(rec.at("dru", s, qc_true), bias=ad.qc_bias_pa, noise_std=ad.qc_noise_pa,
+        qc_s = transduce(rec.at("dru", s, qc_port), bias=ad.qc_bias_pa, noise_std=ad.qc_noise_pa,
                          quant_step=ad.qc_quant_pa, rng=rng(seeds.airdata_noise, "qc_pa"))
-        ps_s = transduce(rec.at("dru", s, truth.p_static_pa), bias=ad.ps_bias_pa,
+        ps_s = transduce(rec.at("dru", s, ps_port), bias=ad.ps_bias_pa,
                          noise_std=ad.ps_noise_pa, quant_step=ad.ps_quant_pa,
                          rng=rng(seeds.airdata_noise, "ps_pa"))
         return qc_s, mach_from_pressures(qc_s, ps_s)
@@ -666,19 +743,49 @@ def _clean_channels(truth: TruthTrajectory, sensors, errors: ErrorConfig, flow: 
     return {f"true_clean_{c}": v for c, v in clean.items() if c.startswith(("alpha_z", "beta_z"))}
 
 
+def _ins_attitude_errors(errors: ErrorConfig, rec: _RecorderPlan, rng) -> dict[str, np.ndarray]:
+    """The realism level's INS attitude errors at the INS stamps, rad: Euler column -> a stationary
+    first-order Gauss-Markov process (:func:`synth.processes.gauss_markov`), one generator per
+    axis from ``seeds.ins_attitude``; empty when off."""
+    real = errors.realism
+    if not real.ins_attitude:
+        return {}
+    t = rec.stamps["ins"]
+    return {c: gauss_markov(t, sigma, tau, rng(errors.seeds.ins_attitude, c))
+            for c, sigma, tau in zip(_INS_COLUMNS[:3], real.ins_attitude_sigma_rad, real.ins_attitude_tau_s,
+                                     strict=True)}
+
+
 def _record_ins_dgps(truth: TruthTrajectory, errors: ErrorConfig, direct: dict[str, np.ndarray],
-                     rec: _RecorderPlan, rng) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+                     rec: _RecorderPlan, rng, attitude_error: Mapping[str, np.ndarray]
+                     ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Stage 4 on the INS (Euler angles, rad; NED velocity, m/s) and the DGPS (height, m), at
-    their recorders' stamps; returns the two streams, column -> samples."""
+    their recorders' stamps; returns the two streams, column -> samples.
+
+    ``attitude_error``: Euler column -> the INS filter's attitude error at the INS stamps, rad
+    (the realism level; empty: none). With the realism level's GNSS velocity on, each velocity
+    sample is the latest GNSS fix that has reached the INS (:func:`synth.processes.hold_fix_times_s`),
+    its bias and noise the fix's (one noise draw per fix)."""
     seeds = errors.seeds
     ins_e = errors.ins
+    real = errors.realism
     ins: dict[str, np.ndarray] = {}
     for i, c in enumerate(_INS_COLUMNS):
         euler_ch = i < 3
-        ins[c] = transduce(rec.at("ins", c, direct[c]),
-                           bias=(ins_e.euler_bias_rad if euler_ch else ins_e.velocity_bias_mps)[i % 3],
-                           noise_std=ins_e.euler_noise_rad if euler_ch else ins_e.velocity_noise_mps,
-                           rng=rng(seeds.ins_noise, c))
+        bias = (ins_e.euler_bias_rad if euler_ch else ins_e.velocity_bias_mps)[i % 3]
+        noise = ins_e.euler_noise_rad if euler_ch else ins_e.velocity_noise_mps
+        if not euler_ch and real.gnss_velocity:
+            t_true = rec.stamps["ins"] - rec.recorders["ins"].clock_offset_s - rec.lag_s["ins"][c]
+            t_fix, held = np.unique(hold_fix_times_s(t_true, real.gnss_velocity_rate_hz,
+                                                     real.gnss_velocity_latency_s), return_inverse=True)
+            fixes = transduce(sample_at(truth.t_s, direct[c], t_fix), bias=bias, noise_std=noise,
+                              rng=rng(seeds.ins_noise, c))
+            ins[c] = fixes[held]
+            continue
+        x = rec.at("ins", c, direct[c])
+        if c in attitude_error:
+            x = x + attitude_error[c]
+        ins[c] = transduce(x, bias=bias, noise_std=noise, rng=rng(seeds.ins_noise, c))
     dgps = {"h_dgps_m": transduce(rec.at("dgps", "h_dgps_m", truth.h_m), bias=errors.dgps.h_bias_m,
                                   noise_std=errors.dgps.h_noise_m, rng=rng(seeds.dgps_noise, "h_dgps_m"))}
     return ins, dgps
@@ -766,6 +873,15 @@ def _injected(errors: ErrorConfig, maneuver_key: int, common_rate_hz: float, sen
     shift = {c: recs[r].clock_offset_s + lag for r in RECORDERS for c, lag in rec.lag_s[r].items()}
     for c in _IMU_COLUMNS:  # an interval mean lags by half its interval
         shift[c] += 0.5 * rec.imu_window_s
+    real = errors.realism
+    if real.gnss_velocity:  # a held fix: its latency and, on average, half a fix interval
+        for c in _INS_COLUMNS[3:]:
+            shift[c] += real.gnss_velocity_latency_s + 0.5 / real.gnss_velocity_rate_hz
+    # a first-order lag delays what changes slowly by its time constant (the lag mismatch of
+    # qc = L_t(pt) - L_s(ps) in a climb is an error, not a delay)
+    if real.static_lag_s or real.total_lag_s:
+        shift["ps_pa"] += real.static_lag_s
+        shift["qc_pa"] += real.total_lag_s
     sources = {"alpha_zl_rad": "vane_left", "alpha_zr_rad": "vane_right",
                "alpha_lsp_rad": "side_probe_left", "alpha_rsp_rad": "side_probe_right",
                "beta_znp_rad": "nose_probe", "flank_np_rad": "nose_probe",

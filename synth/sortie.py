@@ -236,6 +236,10 @@ def fly_sortie(
     if env.gust is not None:
         raise FlightError("sortie: a discrete gust is not modelled in a whole sortie (its start_s "
                           "is relative to one maneuver); remove [environment.gust]")
+    if env.vertical_air_motion is not None:
+        raise FlightError("sortie: the slow vertical air motion is drawn per maneuver, not for a "
+                          "whole sortie; remove [environment] vertical_air_motion, or fly the "
+                          "campaign without --sortie")
     fdm, reader, trim, trim_meta = start_flight(specs[0], airframe, aircraft, env, dt_s)
     # the fuel load stays the aircraft's (as in a per-maneuver run): a whole campaign's
     # configuration is more flight than one tankful, and its engine would flame out
