@@ -294,7 +294,9 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: TruthHook
     sections.append(Section(
         "Table 2: 3-sigma of measurement minus model",
         "Per sensor and Mach bin at the final estimate (installation biases fixed), 3 x rms about zero, "
-        "against the desired accuracy (paper Table 2)"
+        "with the calibration's own uncertainty added (3 sqrt(mean(e^2) + mean(s_cal^2)), s_cal its "
+        "parameters' honest deviations propagated to the channel: what the residual cannot show; "
+        "table2_model.csv gives both parts), against the desired accuracy (paper Table 2)"
         + "".join(f"; {r.sensor} below the usable angle of attack"
                   for r in wf.declarations.requirements.values() if r.low_alpha_only) + ".",
         tables=[("", accuracy_table_html(wf.accuracy, "3-sigma of measurement - model (deg)"))],

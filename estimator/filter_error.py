@@ -86,14 +86,16 @@ give, its own channels left out of the smoother's measurement updates
 
 (a sensor's channels together: the side probes' sideslip takes their angle of attack as input, and
 a fault of the pair shows in both). The left-out wind's own error stays in ``e`` and adds to the
-sensor's scatter (analytic flights in the filter's own turbulence: Table 2 5-16 % above the
-sensors' noise, their error against the truth, where the model output alone is 3-4.5 times it;
+sensor's scatter (analytic flights in the filter's own turbulence: the residual's scatter 5-16 %
+above the sensors' noise, where the model output alone is 3-4.5 times it;
 ``tests/estimator_tests/test_filter_error_table2.py``). What no measurement minus model shows is a
 calibration error the fit shares out consistently over the sensors: an aircraft's common sideslip
 offset, which the wind states leave weakly fixed (``filter_error_partial``), moves every sideslip
 channel's bias and the reconstructed sideslip alike (the demo's light-turbulence block: PT1's
-sideslip biases 0.10 deg off at one honest deviation; its sideslip cells of Table 2 0.10-0.19 deg
-against 0.22-0.42 deg against the truth, which about each aircraft's mean error are 0.08-0.19 deg).
+sideslip biases 0.10 deg off at one honest deviation; the residual's scatter in its sideslip cells
+0.10-0.19 deg against 0.22-0.42 deg against the truth). Table 2 therefore adds the calibration's
+own uncertainty to the scatter (:mod:`estimator.accuracy`, :func:`estimator.workflow.calibration_deviations`):
+there 0.30-0.41 deg (``tests/estimator_tests/test_table2_uncertainty.py``).
 The filter reruns from the result alone: its values, ``R`` and
 :attr:`estimator.result.EstimationResult.wind_model` (the wind states' form, scale length and
 each maneuver's intensity); the observations are placed on the samples by the delays at the

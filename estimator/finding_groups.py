@@ -8,7 +8,8 @@ console shows: the verdict, every FAILURE and WARNING group (most important firs
 NOTEs as fit in about ten lines, and where the rest are.
 
 Which findings form a group (:data:`estimator.finding_kinds.KINDS`, ``by_channel``): one kind, one
-estimation (the finding's ``stage``) and, for the kinds about a channel, one channel. A group has
+estimation (the finding's ``stage``) and, for the kinds about a channel, one channel; a channel's
+residual above its floor is one kind, coloured (1.2-2 floors) or above 2 (misfit, structure). A group has
 the severity of its most severe member, said first; where its members differ (a flow channel's
 residual beyond its accuracy in 3 maneuvers, within it in 8), the headline names the severe ones.
 Within a severity, groups are said in the kinds' order (the data's faults first: they explain the
@@ -91,12 +92,13 @@ def group_findings(findings: Iterable[Finding],
     buckets: dict[tuple, list[Finding]] = {}
     for f in findings:
         kind = kind_of(f.code)
-        key = (f.stage, f.code, f.channel if kind.by_channel else None)
+        key = (f.stage, _FAMILY.get(f.code, f.code), f.channel if kind.by_channel else None)
         buckets.setdefault(key, []).append(f)
     out = []
-    for (stage, code, channel), members in buckets.items():
+    for (stage, _, channel), members in buckets.items():
         n = n_maneuvers.get(stage) if isinstance(n_maneuvers, Mapping) else n_maneuvers
         members = sorted(members, key=_worst_key, reverse=True)
+        code = members[0].code
         head = _headline(code, members, n)
         sev = members[0].severity
         if any(f.severity != sev for f in members):  # the severe ones said apart, with where
@@ -105,6 +107,11 @@ def group_findings(findings: Iterable[Finding],
                      f"{_names(severe)}; the others are notes]" if sev > Severity.NOTE else "")
         out.append(FindingGroup(code, sev, stage, channel, tuple(members), head, members[0].advice, n))
     return tuple(sorted(out, key=_sort_key))
+
+
+#: Codes said as one group on a channel: a residual above its floor is one thing, whether the
+#: diagnostics call it coloured (1.2-2 floors) or a misfit / structure error (above 2 floors)
+_FAMILY = {"misfit": "residual", "noise_floor": "residual", "coloured": "residual"}
 
 
 def _worst_key(f: Finding) -> tuple[int, float]:

@@ -71,8 +71,8 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
          by_channel=False),
     Kind("not_converged", "FAILURE", _S, "the iterations did not converge", by_channel=False),
     Kind("misfit", "rule", _D, "a kinematic channel (attitude, heading, airspeed, height) misfits",
-         "FAILURE where gross: above 3 x its floor and beyond what real data show (attitude 1 deg, "
-         "heading 3 deg, speed the larger of 3 % and 2 m/s, height 50 m rms), or with the maneuver's "
+         "FAILURE where gross: above 3 x its floor and beyond what real data show (attitude 1.5 deg, "
+         "heading 2.5 deg, speed the larger of 3 % and 2 m/s, height 50 m rms), or with the maneuver's "
          "state-equation parameters (IMU biases, initial conditions) on a bound: a wrong minimum or a "
          "data fault; NOTE otherwise: a slow, coloured residual a few times the white-noise floor is "
          "what real recorded data look like (filtered INS attitude, baro lag and static-source error, "

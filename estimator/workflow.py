@@ -34,6 +34,16 @@ r"""The paper's calibration workflow over a fleet (Saraf & Kumaresan §3-4; SPEC
    model output plus the channel's response to the turbulent wind smoothed from the *other*
    sensors' channels (:func:`stage_residuals`; :mod:`estimator.filter_error`, "Table 2"), so that
    the gusts do not count as sensor error and a sensor's own error is not taken for a gust.
+   The 3 sigma is the calibrated channel's, not the residual's alone: the residual cannot see an
+   error of the calibration itself (an offset estimated 0.1 deg off moves the model and the
+   reconstructed flow alike), so the calibration's own uncertainty is added at each sample,
+   ``3 sqrt(mean(e^2) + mean(s_cal^2))``, ``s_cal^2 = J_c C J_c^T`` (:mod:`estimator.accuracy`;
+   :func:`calibration_deviations`): ``J_c`` the sensitivity of the channel's model output to its
+   own calibration parameters, ``C`` their honest covariance from the stage. Parameters a stage
+   holds at another stage's estimate (step 4's installation biases, step 5's held sideslip
+   parameters) carry no deviation in it and are left out of ``C``: a known, small omission.
+   One definition for both methods; ``scatter_three_sigma_deg`` and ``calibration_sd_deg`` (the
+   rms of ``s_cal``) say how much each part contributes.
 
 What is particular to the aircraft (channels, requirements, the families apportioned) comes from
 the model set (:class:`~estimator.io.modelset.Declarations`, carried by the problem's channels).
@@ -60,14 +70,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from estimator.accuracy import alpha_limit, three_sigma
+from estimator.accuracy import alpha_limit, calibration_variance, three_sigma
 from estimator.filter_error import wind_responses
 from estimator.finding_groups import FindingGroup, group_findings
 from estimator.io import subproblem
 from estimator.io.modelset import Declarations, Requirement, declarations_of
 from estimator.model import Model
 from estimator.parameters import make_key
-from estimator.problem import Problem, ReadOnlyMapping
+from estimator.problem import STATE_PARAMS, Problem, ReadOnlyMapping
 from estimator.result import EstimationResult, ReadOnlyTable, _json_clean
 from estimator.solver import SolverOptions, estimate
 from estimator.verdict import Finding, Severity, Verdict, findings_frame, judge
@@ -81,7 +91,7 @@ JSON_FORMAT = "fpr-workflow-result/1"
 __all__ = [
     "ChannelResiduals", "Requirement", "Stage", "WorkflowOptions", "WorkflowResult", "alpha_limit",
     "apportion", "apportion_biases", "assign_bins", "hold_unexcited", "no_bins_message", "run_workflow",
-    "stage_residuals", "three_sigma", "vane_biases",
+    "calibration_deviations", "stage_residuals", "three_sigma", "vane_biases",
 ]
 
 
@@ -220,9 +230,12 @@ class WorkflowResult:
         mean, its std, the fleet mean and the aircraft's deviation from it, deg.
     installation : per aircraft: installation biases (``installation_<label>_deg`` per
         apportioned family, their mean, and stds), and the Mach they were taken at.
-    accuracy : Table 2: sensor, channel, mach, gear, n, three_sigma_deg, desired_deg, passed.
-    alpha_limit_growth : alpha band (deg), samples, 3 sigma (deg) of the residual of the model
-        set's ``alpha_limit_channel`` (Tejas: the nose probe's sideslip).
+    accuracy : Table 2: sensor, channel, mach, gear, n, three_sigma_deg (the residual's scatter and
+        the calibration's own uncertainty), desired_deg, passed, note, scatter_three_sigma_deg
+        (the residual's alone), calibration_sd_deg (rms of the calibration's deviation).
+    alpha_limit_growth : alpha band (deg), samples, 3 sigma (deg; Table 2's, with the calibration's
+        own uncertainty) of the residual of the model set's ``alpha_limit_channel`` (Tejas: the
+        nose probe's sideslip).
     alpha_limit_deg : its usable alpha limit (None without its data).
     notes : what a reader must know (exclusions, fallbacks).
     elapsed_s : wall time.
@@ -821,6 +834,12 @@ class ChannelResiduals:
     alpha_t_rad : (n,) the reconstructed angle of attack at the CG, rad.
     wind : (n,) filter-error method: the channel's response to the turbulent wind smoothed from the
         other sensors' channels, SI (in ``y``); None for output error.
+    calibration_sd : (n,) the calibration's own standard deviation of the model output at each
+        sample, ``s_cal = sqrt(J_c C J_c^T)``, SI (:func:`calibration_deviations`); None where it
+        was not computed (Table 2 then is the residual's scatter alone).
+    covariance : which covariance ``C`` ``calibration_sd`` comes from: "honest" (the stage's
+        coloured-residual covariance), or "Cramér-Rao ..." saying why the honest one was not
+        available; "" without ``calibration_sd``.
     """
 
     maneuver: np.ndarray
@@ -829,9 +848,12 @@ class ChannelResiduals:
     y: np.ndarray
     alpha_t_rad: np.ndarray
     wind: np.ndarray | None = None
+    calibration_sd: np.ndarray | None = None
+    covariance: str = ""
 
     def __post_init__(self) -> None:
-        for name in ("maneuver", "t_s", "z", "y", "alpha_t_rad", "wind"):  # read-only copies
+        # read-only copies
+        for name in ("maneuver", "t_s", "z", "y", "alpha_t_rad", "wind", "calibration_sd"):
             if getattr(self, name) is None:
                 continue
             a = np.array(getattr(self, name), copy=True)
@@ -843,7 +865,8 @@ class ChannelResiduals:
         return self.z - self.y
 
 
-def stage_residuals(stage: Stage | tuple[Problem, EstimationResult]) -> dict[str, ChannelResiduals]:
+def stage_residuals(stage: Stage | tuple[Problem, EstimationResult], calibration: bool = True
+                    ) -> dict[str, ChannelResiduals]:
     """Channel name -> residuals of every maneuver of a stage at its estimate (Table 2's samples).
 
     Output error: measurement minus the model output. Filter error (a result with wind states in
@@ -857,9 +880,14 @@ def stage_residuals(stage: Stage | tuple[Problem, EstimationResult]) -> dict[str
     error, and a sensor's own error (one its calibration model cannot take) is not taken for a
     gust, for its own channels do not shape the wind it is compared with. A filter-error result
     read from a file written before the wind model was kept gives the output-error residuals.
+
+    ``calibration``: also each channel's calibration deviation at the same samples
+    (:attr:`ChannelResiduals.calibration_sd`, :func:`calibration_deviations`: one more evaluation
+    with the Jacobian), which Table 2 adds to the residual's scatter.
     """
     problem, result = (stage.problem, stage.result) if isinstance(stage, Stage) else stage
     model = Model(problem)
+    cal = calibration_deviations(problem, result, model) if calibration else {}
     wm = result.wind_model
     seen = None
     if wm is None or not any(s > 0.0 for s in wm.sigma_mps.values()):
@@ -879,16 +907,113 @@ def stage_residuals(stage: Stage | tuple[Problem, EstimationResult]) -> dict[str
             ts.append(m.t_s[rows])
             al.append(np.arctan2(X[rows, 2], X[rows, 0]))
         ch = problem.channels[ce.channel]
+        sd, source = cal.get(ch.name, (None, ""))
+        if sd is not None and sd.shape != ce.y.shape:  # the same layout, or the evaluations disagree
+            raise RuntimeError(f"{ch.name}: {sd.size} calibration deviations for {ce.y.size} residuals")
         if seen is None:
             out[ch.name] = ChannelResiduals(np.concatenate(ids), np.concatenate(ts), ce.z, ce.y,
-                                            np.concatenate(al))
+                                            np.concatenate(al), calibration_sd=sd, covariance=source)
         else:
             out[ch.name] = ChannelResiduals(np.concatenate(ids), np.concatenate(ts), ce.z,
-                                            ce.y + seen[i], np.concatenate(al), wind=seen[i])
+                                            ce.y + seen[i], np.concatenate(al), wind=seen[i],
+                                            calibration_sd=sd, covariance=source)
     return out
 
 
+#: Parameter kinds that are not a channel's calibration: the state equations' initial conditions
+#: (and a model set's per-maneuver steady wind, of that kind) and the IMU biases describe the
+#: maneuver's flight, which the residual sees, not the sensor's correction
+_NOT_CALIBRATION = frozenset({"initial_condition", "imu_bias"})
+
+
+def calibration_deviations(problem: Problem, result: EstimationResult, model: Model | None = None
+                           ) -> dict[str, tuple[np.ndarray, str]]:
+    r"""Channel name -> (the calibration's own deviation of its model output at each sample, SI;
+    which covariance it comes from).
+
+    ``s_cal(t) = sqrt(J_c(t) C J_c(t)^T)`` (:func:`estimator.accuracy.calibration_variance`) at the
+    cost's samples, laid out as :func:`stage_residuals`' (every maneuver's rows in turn):
+
+    - ``J_c``: the derivative of the channel's model output with respect to its own calibration
+      parameters, the columns of the model's Jacobian (:meth:`Model.evaluate_all`, slot space:
+      :attr:`ChannelEval.colmap`) past the 13 state-equation slots — every parameter, table value
+      and time delay of the channel's model that the stage estimated (``free_estimated``), but
+      not an initial condition (a model set's per-maneuver steady wind is one) or IMU bias: those
+      describe the flight, which the residual sees. A per-aircraft bias is a different parameter
+      on each aircraft's rows.
+    - ``C``: their honest covariance (:meth:`EstimationResult.covariance`, ``colored=True``: the
+      coloured residuals' or, for the filter-error method, the innovations' sandwich). Where it is
+      not available (a result read from an older file, a deviation that could not be computed)
+      the Cramér-Rao one, and the returned text says so. A parameter held at another stage's
+      estimate (the final stage's installation biases, the gear-down stage's held sideslip
+      parameters) has no deviation here and is left out: its own uncertainty is not carried
+      (a known, small omission: the installation biases' deviations are the apportionment's).
+
+    Parameters
+    ----------
+    problem, result : the stage's problem and estimate.
+    model : the problem's model, if made already.
+
+    Returns
+    -------
+    Per channel ``(s_cal, source)``: ``s_cal`` (n,) in the channel's SI unit (rad for a flow
+    angle), zero for a channel without estimated calibration parameters; ``source`` "honest" or
+    "Cramér-Rao (...)" with the reason.
+    """
+    model = Model(problem) if model is None else model
+    ps = result.parameters
+    est = np.asarray(result.free_estimated if result.free_estimated is not None else ps.free_mask, dtype=bool)
+    calib = est & np.array([p.kind not in _NOT_CALIBRATION for p in ps.parameters], dtype=bool)
+    keys = ps.keys
+    n0 = len(STATE_PARAMS)  # the state-equation slots come first in every channel's slot space
+    out: dict[str, tuple[np.ndarray, str]] = {}
+
+    def on_channel(ce) -> None:
+        # each channel's Jacobian used once and dropped: a stage's (80,000 samples, 14 channels)
+        # would otherwise be held all at once
+        JT, cm = ce.JT[n0:], ce.colmap[:, n0:]
+        ce.JT = None
+        used = np.unique(cm[calib[cm]])
+        s2 = np.zeros(ce.y.size)
+        source = "honest"
+        if used.size:
+            names = [keys[i] for i in used]
+            C = result.covariance(names, colored=True)
+            if not np.isfinite(C).all():
+                why = ("the result keeps no honest correlations" if result.correlation_colored is None
+                       else "an honest deviation could not be computed")
+                C = result.covariance(names)
+                source = f"Cramér-Rao ({why})"
+            # a parameter with no deviation at all (unidentifiable) cannot be propagated: left out
+            bad = ~np.isfinite(np.diag(C))
+            if bad.any():
+                source += "; without " + ", ".join(n for n, b in zip(names, bad, strict=True) if b)
+            C = np.where(np.isfinite(C), C, 0.0)
+            C[bad, :] = 0.0
+            C[:, bad] = 0.0
+            pos = {int(p): j for j, p in enumerate(used)}
+            for b in range(cm.shape[0]):
+                r0, r1 = int(ce.rseg[b]), int(ce.rseg[b + 1])
+                slots = np.flatnonzero(calib[cm[b]])
+                if not slots.size or r1 == r0:
+                    continue
+                idx = np.array([pos[int(p)] for p in cm[b, slots]])
+                s2[r0:r1] = calibration_variance(JT[slots, r0:r1].T, C[np.ix_(idx, idx)])
+        out[problem.channels[ce.channel].name] = (np.sqrt(s2), source)
+
+    model.evaluate_all(result.values, jacobian=True, keep_jacobian=True, on_channel=on_channel)
+    return out
+
+
+def _calibration_var_deg2(r: ChannelResiduals) -> np.ndarray:
+    """The calibration's own variance at a channel's samples, deg^2 (zero where not computed)."""
+    return np.zeros(r.e.size) if r.calibration_sd is None else np.square(r.calibration_sd * RAD2DEG)
+
+
 def _accuracy(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOptions, decl: Declarations):
+    """Table 2 (module docstring, step 6): per sensor and stage, 3 sigma of the calibrated channel,
+    ``3 sqrt(mean(e^2) + mean(s_cal^2))``, and the usable alpha range of the alpha-limit channel
+    judged on the same 3 sigma per alpha band."""
     lim_ch = decl.alpha_limit_channel
     growth, limit = pd.DataFrame(), None
     req_np = decl.requirements.get(lim_ch) if lim_ch else None
@@ -896,7 +1021,9 @@ def _accuracy(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOption
     if pooled and req_np is not None:
         a = np.concatenate([p.alpha_t_rad for p in pooled]) * RAD2DEG
         e = np.concatenate([p.e for p in pooled]) * RAD2DEG
-        growth, limit = alpha_limit(a, e, req_np.desired_deg, opt.alpha_band_deg, opt.min_band_samples)
+        v = np.concatenate([_calibration_var_deg2(p) for p in pooled])
+        growth, limit = alpha_limit(a, e, req_np.desired_deg, opt.alpha_band_deg, opt.min_band_samples,
+                                    calibration_var_deg2=v)
     rows = []
     for st in (*final, *gear):
         for name, r in st.residuals.items():
@@ -904,18 +1031,23 @@ def _accuracy(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOption
             if req is None:
                 continue
             e = r.e * RAD2DEG
-            note = ""
+            v = _calibration_var_deg2(r)
+            notes = []
             if req.low_alpha_only:
                 if limit is None:
-                    note = "no usable alpha range found"
+                    notes.append("no usable alpha range found")
                 else:
                     keep = r.alpha_t_rad * RAD2DEG < limit
-                    e = e[keep]
-                    note = f"alpha < {limit:.0f} deg"
-            s = three_sigma(e)
+                    e, v = e[keep], v[keep]
+                    notes.append(f"alpha < {limit:.0f} deg")
+            if r.covariance not in ("", "honest"):  # say when the honest covariance was missing
+                notes.append(f"calibration deviation: {r.covariance}")
+            s = three_sigma(e, v)
             rows.append({"sensor": req.sensor, "channel": name, "mach": st.mach,
                          "gear": "down" if st.gear_down else "up", "n": int(e.size),
                          "three_sigma_deg": s, "desired_deg": req.desired_deg,
-                         "passed": bool(s <= req.desired_deg), "note": note})
+                         "passed": bool(s <= req.desired_deg), "note": "; ".join(notes),
+                         "scatter_three_sigma_deg": three_sigma(e),
+                         "calibration_sd_deg": float(np.sqrt(np.mean(v))) if v.size else math.nan})
     return pd.DataFrame(rows), growth, limit
 

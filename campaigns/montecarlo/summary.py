@@ -17,9 +17,11 @@ of z is the same ratio). Per parameter kind (imu_bias, time_delay, bias, scale, 
 initial_condition): the fraction of estimates within 3 reported deviations (Cramér-Rao and
 coloured) of their truth, the z-score standard deviations and median |z|. Per channel, the
 distribution over replications of the 3-sigma accuracy — :func:`estimator.workflow.three_sigma`,
-3 x the rms about zero, computed by the replication — of the residuals (the paper's Table 2) and
-of the calibrated channel against the true flow angle. The time a replication took comes from
-the run's ``timings.csv`` (kept apart from the replication files, which stay bit-identical).
+3 x the rms about zero, computed by the replication — of the residuals (their scatter: Table 2's
+``scatter_three_sigma_deg``, without the calibration's own uncertainty that Table 2 adds and that
+the calibrated rows measure) and of the calibrated channel against the true flow angle. The time
+a replication took comes from the run's ``timings.csv`` (kept apart from the replication files,
+which stay bit-identical).
 
 The files. :func:`write_summary` writes :data:`SUMMARY_FILES` into the run folder (or another
 folder) and records them, with their sizes and SHA-256, in :data:`SUMMARY_LISTING` there
@@ -153,8 +155,8 @@ class MonteCarloSummary:
                       f.to_string(**fmt)]
         if len(self.channels):
             lines += ["", "channels: 3-sigma (3 x rms about zero) over the replications (residual = "
-                      "measurement - model, the paper's Table 2; calibrated = calibrated channel - true "
-                      "flow angle):", self.channels.to_string(**fmt)]
+                      "measurement - model, the scatter of the paper's Table 2; calibrated = calibrated "
+                      "channel - true flow angle):", self.channels.to_string(**fmt)]
         if len(self.findings):
             lines += ["", "the estimator's warnings and failures (replications that had each):",
                       self.findings.head(30).to_string(index=False)]

@@ -275,13 +275,13 @@ def test_scale_error_not_matching_a_unit():
 
 
 @pytest.mark.parametrize("excess, code, severity", [
-    (60.0, "misfit", Severity.FAILURE),  # 1.8 deg rms: beyond any working attitude reference
+    (60.0, "misfit", Severity.FAILURE),  # 1.8 deg rms: beyond any working attitude reference (1.5)
     (30.0, "misfit", Severity.NOTE),     # 0.9 deg rms: what a small UAV's AHRS leaves
     (2.5, "misfit", Severity.NOTE), (1.3, None, None)])
 def test_kinematic_misfit_against_the_floor(excess, code, severity):
     """theta's residual = its noise (0.03 deg) plus a smooth error, ``excess`` x the floor in all: a
     failure only where the misfit is gross, above ``misfit_ratio`` floors and the attitude limit
-    (1 deg rms); a slow, coloured residual below it is said as a note (real recorded data)."""
+    (1.5 deg rms); a slow, coloured residual below it is said as a note (real recorded data)."""
     rng = np.random.default_rng(9)
     fits = {f.channel: f for f in clean_maneuver("m0", rng)}
     f = fits["theta"]

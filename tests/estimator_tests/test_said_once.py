@@ -208,10 +208,10 @@ def test_an_outlier_is_a_warning_where_it_matters(spike_deg, severity):
 
 
 @pytest.mark.parametrize("channel, unit, scale, amp, severity", [
-    ("theta", "rad", D2R, 0.6, Severity.NOTE),      # 0.6 deg rms: a real AHRS
-    ("theta", "rad", D2R, 1.5, Severity.FAILURE),   # beyond any working attitude reference
+    ("theta", "rad", D2R, 0.9, Severity.NOTE),      # 0.9 deg rms: a small UAV's AHRS
+    ("theta", "rad", D2R, 2.0, Severity.FAILURE),   # beyond any working attitude reference (1.5)
     ("psi", "rad", D2R, 2.0, Severity.NOTE),        # a small UAV's heading
-    ("psi", "rad", D2R, 4.0, Severity.FAILURE),
+    ("psi", "rad", D2R, 3.0, Severity.FAILURE),     # beyond 2.5 deg
     ("tas", "m/s", 1.0, 1.5, Severity.NOTE),        # 1 % of 150 m/s: static-source error
     ("tas", "m/s", 1.0, 6.0, Severity.FAILURE),     # 4 %
     ("h", "m", 1.0, 20.0, Severity.NOTE),

@@ -335,8 +335,8 @@ def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: st
               "scatter / mean Cramer-Rao std; in3sig = fraction of calibration estimates within 3 CRB "
               "sigmas of the truth; scat/hon, in3hon = the same against the honest (coloured-residual "
               "or -innovation) deviations the result reports; res_vane = vane residual 3-sigma "
-              "(measurement - model, the paper's Table 2), deg; swept parameter error = rms (max |.|) "
-              "of estimate - truth of the swept parameter's estimates that the data determine, the "
+              "(measurement - model: the scatter of the paper's Table 2), deg; swept parameter error = rms "
+              "(max |.|) of estimate - truth of the swept parameter's estimates that the data determine, the "
               "largest |truth|, the number of estimates on a bound; [..] = failed estimations."),
         table_text(df),
         "",
