@@ -359,8 +359,7 @@ class WorkflowResult:
         said = {(g.stage, g.code, g.channel, g.severity): g for g in groups}
         out = []
         for g in groups:
-            twin = said.get((later.get(g.stage or ""), g.code, g.channel, g.severity))
-            if twin is not None:
+            if g.stage in later and (later[g.stage], g.code, g.channel, g.severity) in said:
                 continue
             firsts = [said[k] for s, t in later.items()
                       if t == g.stage and (k := (s, g.code, g.channel, g.severity)) in said]
