@@ -52,8 +52,6 @@ _D, _S, _I, _U, _F, _W = ("diagnostics", "solver", "identifiability", "uncertain
 #: Every kind, in the order a group of each is said within one severity: the data's faults first
 #: (they explain the rest), then the fit, then the parameters, then the method's own notes.
 KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
-    Kind("bin_failed", "FAILURE", _W, "a Mach bin's estimation failed; it is left out of the calibration",
-         by_channel=False),
     Kind("model_error", "FAILURE", _S, "the model cannot be evaluated at the parameter values",
          by_channel=False),
     Kind("undetermined", "FAILURE", _S, "no free parameter is determined by the data", by_channel=False),
@@ -66,6 +64,8 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
          "WARNING where they carry more than 10 % of the channel's residual sum of squares in the "
          "maneuver or exceed its desired accuracy (they drag the fit and Table 2: rerun with --robust); "
          "NOTE otherwise", cause=True),
+    Kind("bin_failed", "FAILURE", _W, "a Mach bin's estimation failed; it is left out of the calibration",
+         by_channel=False),
     Kind("iteration_limit", "FAILURE", _S, "the iteration limit was reached", by_channel=False),
     Kind("stalled", "FAILURE", _S, "no step decreases the cost, yet the step is not negligible",
          by_channel=False),

@@ -26,7 +26,8 @@ expects:
   imperative such as set, use, give, remove, trim, or a close match: "did you mean ...?");
 - ``flag``: faulty data the estimator (not the reader) must catch: the verdict must be FAILURE or
   SUCCESS WITH WARNINGS, its first finding must name the channel, and no data-fault finding may
-  name a channel that was not touched.
+  name a channel that was not touched (the Mach-bin workflow's "bin failed", said first, quotes
+  its estimation's failures: it must name the channel, and the fault's own finding come next).
 
 A case may allow more than one (``reject|flag``: caught either way). The outcome class printed
 per case is ``clear error`` (a rejection that passes the checks above), ``correct result`` (a
@@ -37,9 +38,17 @@ A case may also require a specific fix in the message (``own_rate``, ``skip_rows
 correct result: verdict SUCCESS or SUCCESS WITH WARNINGS and every compared estimate within 4
 deviations of the testbed's truth.
 
-The script exits 1 if any case is "anything else". A full run takes well under a minute on 2
+A few cases run on a variant base instead (``Case.base``, :data:`VARIANTS`): ``three``, the
+user's report of issue "four bad inputs still not named": the same campaign with a third
+maneuver at Mach 0.5 (a 3211) and the rudder doublets at 0.2 (the sideslip within +-0.7 deg),
+``[workflow] max_mach_variation = 0.1`` in its problem file so that the three maneuvers make one
+Mach bin, run with the Mach-bin workflow (``fpr calibrate problem.toml``, no ``--single``: its
+results have no result.json, so a flag is judged on its findings.csv and printed verdict). A
+variant base must itself be good data: a verdict that is no failure, no data-fault finding.
+
+The script exits 1 if any case is "anything else". A full run takes about a minute on 2
 cores. ``--out`` must be empty or a folder this script made (it holds a ``.bad_inputs`` marker):
-its ``base/`` and ``cases/`` are replaced on every run.
+its ``base/`` and ``cases/`` (and the variants' ``base_NAME/``) are replaced on every run.
 """
 
 from __future__ import annotations
@@ -79,8 +88,10 @@ DATA = "flight421.csv"
 #: Marks a working folder as this script's: only such a folder has its base/ and cases/ replaced.
 MARKER = ".bad_inputs"
 PROBLEM = "problem.toml"
+#: The third maneuver of the ``three`` variant base (:data:`VARIANTS`).
+THIRD = "m0002"
 #: Recorder time of the first sample of each maneuver in the CSV (not 0: a real recorder's clock).
-T_FIRST_S = {DOUBLET: 1520.0, RUDDER: 1700.0}
+T_FIRST_S = {DOUBLET: 1520.0, RUDDER: 1700.0, THIRD: 1880.0}
 
 #: The user's columns: canonical name -> (CSV column, dataset column, factor from SI to the written
 #: unit, unit, extra spec)
@@ -102,25 +113,75 @@ def compared(p: dict) -> bool:
         p["kind"] == "imu_bias" or p["scope"] != "maneuver")
 
 
-def fly_base(root: Path) -> Path:
-    """The synthetic dataset (flown once, cached in ``root/dataset``)."""
-    from synth.campaign import fly_campaign, load_campaign
+@dataclass(frozen=True)
+class Variant:
+    """A base other than the corpus's own: the base campaign changed, and how its cases run.
 
-    ds = root / "dataset"
+    Attributes
+    ----------
+    what : one line for the table.
+    rudder_norm : the rudder doublets' amplitude (the base's 0.4: sideslip within +-1.3 deg).
+    third : a third maneuver kind flown at the same Mach and altitude, or "".
+    tail : appended to the problem file.
+    single : run with ``--single`` (else the Mach-bin workflow).
+    """
+
+    what: str
+    rudder_norm: float = 0.4
+    third: str = ""
+    tail: str = ""
+    single: bool = True
+
+
+#: The bases: ``base`` the corpus's own; ``three`` the user's report of four bad inputs not named
+#: (a 3-maneuver CSV, one Mach bin, small sideslip): module docstring.
+VARIANTS = {
+    "base": Variant("faults_base: pitch doublet + rudder doublets, --single"),
+    "three": Variant("faults_base + a 3211 at Mach 0.5, rudder 0.2 (sideslip within 0.7 deg), one Mach bin, "
+                     "Mach-bin workflow", rudder_norm=0.2, third="3211",
+                     tail="\n[workflow]\nmax_mach_variation = 0.1  # the rudder doublets vary by 0.09: the "
+                          "three maneuvers make one bin\n", single=False),
+}
+
+
+def _dataset_dir(root: Path, variant: str) -> Path:
+    v = VARIANTS[variant]
+    return root / "dataset" if variant == "base" else root / f"dataset_{variant}_r{v.rudder_norm:g}_{v.third}"
+
+
+def fly_base(root: Path, variant: str = "base") -> Path:
+    """The synthetic dataset of a base (flown once, cached in ``root/dataset``, a variant's in
+    ``root/dataset_NAME_...``, named after what it changes)."""
+    import tomllib
+
+    from synth.campaign import fly_campaign, load_campaign, parse_campaign, resolve_campaign_path
+
+    ds = _dataset_dir(root, variant)
     if not (ds / "manifest.json").is_file():
         if ds.exists():
             shutil.rmtree(ds)  # an incomplete earlier attempt, in our own cache folder
-        res = fly_campaign(load_campaign(CAMPAIGN), ds, workers=1)
+        if variant == "base":
+            camp = load_campaign(CAMPAIGN)
+        else:
+            v = VARIANTS[variant]
+            raw = tomllib.loads(resolve_campaign_path(CAMPAIGN).read_text(encoding="utf-8"))
+            flights = [dict(f) for f in raw["flights"]]
+            flights[1]["maneuver"] = {**flights[1].get("maneuver", {}), "rudder_norm": v.rudder_norm}
+            if v.third:
+                flights.append({**flights[0], "maneuvers": [v.third]})
+            camp = parse_campaign({**raw, "name": f"{raw['name']}_{variant}", "flights": flights},
+                                  source=f"{CAMPAIGN} ({variant} variant of bad_inputs.py)")
+        res = fly_campaign(camp, ds, workers=1)
         if not res.ok:
-            raise SystemExit(f"flying the base dataset failed: {res.failures}")
+            raise SystemExit(f"flying the {variant} dataset failed: {res.failures}")
     return ds
 
 
-def write_base(ds_dir: Path, dest: Path) -> None:
-    """The user's files: one CSV of both maneuvers in engineering units and its problem file."""
+def write_base(ds_dir: Path, dest: Path, variant: str = "base") -> None:
+    """The user's files: one CSV of every maneuver in engineering units and its problem file."""
     write_user_files(ds_dir, dest, COLUMNS, CHANNELS, "PV1 vane calibration, flight 421", csv_name=DATA,
                      t_first_s=T_FIRST_S, float_format=FLOAT_FORMAT, configuration="PV1-NP",
-                     time_format=".3f")
+                     time_format=".3f", tail=VARIANTS[variant].tail)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -207,6 +268,8 @@ class Case:
         row lost or added).
     argv : extra command-line arguments; ``single=False`` runs the Mach-bin workflow instead.
     judge : a custom judge ``judge(run) -> (class, reason) or None`` tried first.
+    base : the base the case copies (:data:`VARIANTS`); a variant's cases run as the variant says
+        (``single``). A flag's ``fix`` must match its first finding's message or advice.
     """
 
     name: str
@@ -224,6 +287,7 @@ class Case:
     single: bool = True
     judge: Callable | None = None
     problem: str = PROBLEM
+    base: str = "base"
 
 
 CASES: list[Case] = []
@@ -254,7 +318,11 @@ def aoa_rad_declared_deg(d):
     write(d, df)
 
 
-@case("units", "reject|flag", names=("beta_zsp", "AOSS_SP"))
+#: What a flagged sideslip in degrees declared as radians must say: the factor and the unit to declare.
+BETA_UNIT_FIX = r'57\.29.*unit = "deg"'
+
+
+@case("units", "reject|flag", names=("beta_zsp", "AOSS_SP"), fix=BETA_UNIT_FIX)
 def beta_deg_declared_rad(d):
     """Side-probe sideslip (within +-1.3 deg) written in degrees, declared rad."""
     set_unit(d, "beta_zsp", "rad")
@@ -940,6 +1008,60 @@ def workflow_without_mach(d):
     write(d, read(d).drop(columns=["MACH"]))
 
 
+# --- the user's report: four bad inputs not named (a 3-maneuver CSV, both ways) ---------------
+# Each on the corpus's base (--single) and on the ``three`` variant (Mach-bin workflow).
+
+
+def _cg_in_inches(d: Path) -> None:
+    """The CG written in inches under the metre key (as a user wrote [13.0, 0.0, 5.1] for
+    [0.33, 0.0, 0.13] m)."""
+    def inches(m: re.Match) -> str:
+        v = [round(float(x) / 0.0254, 1) for x in m.group(1).split(",")]
+        return f"r_cg_body_m = [{', '.join(f'{x:.1f}' for x in v)}]"
+
+    path = d / PROBLEM
+    text, n = re.subn(r"r_cg_body_m = \[([^\]]*)\]", inches, path.read_text(), count=1)
+    if n != 1:
+        raise AssertionError("corpus bug: no r_cg_body_m in the problem file")
+    path.write_text(text)
+
+
+def _rates_rad_declared_deg(d: Path) -> None:
+    """The body rates written in rad/s, declared deg/s (read 57 x too small)."""
+    df = read(d)
+    for c in ("P", "Q", "R"):
+        df[c] = df[c] / DEG
+    write(d, df)
+
+
+def _spike_25deg(d: Path) -> None:
+    """One left-vane sample 25 deg off, 12 s into the pitch doublet: below the import's spike check,
+    and alone it makes the vane's Table 2 accuracy miss (3 sigma 1.3 deg against 0.5 deg)."""
+    df = read(d)
+    df.loc[row_at(df, DOUBLET, 12.0), "AOA_L"] += 25.0
+    write(d, df)
+
+
+#: The CG case's message: the key, the unit it probably is, the key to write it under.
+_CG = dict(file=PROBLEM, names=("r_cg_body_m",), when="line", fix=r"inches.*r_cg_body_in = \[")
+_RATES = dict(names=("p", "q", "r", "P", "Q", "R"), fix=r'look like rad/s.*unit = "rad/s"')
+#: The spike's first finding: the outlier, its time, that it makes Table 2 miss, --robust.
+_SPIKE = dict(names=("alpha_zl", "AOA_L"), fix=r"t = 1532\.000 s.*Table 2.*--robust", forbid=r"mrad|set unit")
+for _base, _suffix in (("base", ""), ("three", "_3man")):
+    CASES += [
+        Case(f"cg_inches_under_metre_key{_suffix}", "positions", "reject", _cg_in_inches,
+             _cg_in_inches.__doc__.strip(), base=_base, **_CG),
+        Case(f"rates_rad_declared_deg{_suffix}", "units", "reject", _rates_rad_declared_deg,
+             _rates_rad_declared_deg.__doc__.strip(), base=_base, **_RATES),
+        Case(f"spike_25deg_table2{_suffix}", "spikes", "flag", _spike_25deg, _spike_25deg.__doc__.strip(),
+             base=_base, **_SPIKE),
+    ]
+# the sideslip on the base is beta_deg_declared_rad (+-1.3 deg); on the variant it is within +-0.7 deg
+CASES.append(Case("beta_small_deg_declared_rad_3man", "units", "flag", beta_deg_declared_rad,
+                  "Side-probe sideslip within +-0.7 deg written in degrees, declared rad (3 maneuvers).",
+                  names=("beta_zsp", "AOSS_SP"), fix=BETA_UNIT_FIX, base="three"))
+
+
 # ----------------------------------------------------------------------------------------------
 # running and judging
 
@@ -989,6 +1111,14 @@ def run_cli(problem: Path, out: Path, single: bool = True) -> Run:
         run.error = m.group(1).strip() if m else ""
     if (out / "result.json").is_file():
         run.result = json.loads((out / "result.json").read_text())
+    elif (out / "finding_groups.csv").is_file():
+        # the Mach-bin workflow: its printed verdict, and its findings as the console says them, each
+        # thing once (finding_groups.csv, in the console's order; a group's headline as the message)
+        m = re.search(r"^VERDICT: ([A-Z ]+?) —", run.stdout, re.M)
+        rows = pd.read_csv(out / "finding_groups.csv").astype(object)
+        rows = rows.where(rows.notna(), None).rename(columns={"headline": "message"})
+        run.result = {"verdict": m.group(1).replace(" ", "_") if m else "?",
+                      "findings": rows.to_dict(orient="records")}
     return run
 
 
@@ -1088,9 +1218,16 @@ def judge(c: Case, run: Run, base: dict | None, base_samples: tuple[int, int] | 
         if verdict == "SUCCESS" or not ranked:
             return "anything else", f"silent success: verdict {verdict}, no warning"
         first = ranked[0]
+        if first["code"] == "bin_failed" and len(ranked) > 1 and any(
+                re.search(rf"(?<![\w.]){re.escape(n)}(?![\w])", first["message"]) for n in c.names):
+            # the workflow's "bin failed" quotes its estimation's failures, the fault among them by
+            # name: the fault's own finding (with its fix) must then be the next one said
+            first = ranked[1]
         if not _channels(first) & set(c.names):
             return "anything else", (f"first finding names another channel: {first['code']} "
                                      f"{first.get('channel')}: {first['message'][:80]}")
+        if c.fix and not re.search(c.fix, f"{first['message']} {first.get('advice') or ''}"):
+            return "anything else", f"its first finding lacks the fix /{c.fix}/: {first['message'][:80]}"
         wrong = [f for f in res["findings"] if f["code"] in DATA_FAULTS and not _channels(f) <= set(c.names)]
         if wrong:
             return "anything else", f"data fault blamed on {wrong[0].get('channel')} ({wrong[0]['code']})"
@@ -1192,12 +1329,28 @@ def main(argv: list[str] | None = None) -> int:
         print(s, flush=True)
         lines.append(s)
 
-    emit("fpr bad-input corpus: fpr calibrate problem.toml --single --out RES --no-plots, per case")
+    emit("fpr bad-input corpus: fpr calibrate problem.toml --single --out RES --no-plots, per case (on a "
+         "variant base, as it says: the _3man cases without --single, the Mach-bin workflow)")
     emit(f"machine: {platform.machine()}, Python {platform.python_version()}; working folder {args.out}")
     base_run = run_cli(base_dir / "input" / PROBLEM, base_dir / "results")
     base_class, base_reason = judge_base(base_run, ds)
     emit(f"base: {base_class}: {base_reason} (exit {base_run.status}, {base_run.seconds:.1f} s)")
     base = base_run.result if base_class == "correct result" else None
+    variant_dirs = {"base": base_dir}
+    for name in dict.fromkeys(c.base for c in CASES if not args.only or c.name in args.only):
+        if name == "base":
+            continue
+        v = VARIANTS[name]
+        vdir = root / f"base_{name}"
+        if vdir.exists():
+            shutil.rmtree(vdir)  # this script's own folder of an earlier run
+        write_base(fly_base(root, name), vdir / "input", name)
+        variant_dirs[name] = vdir
+        vrun = run_cli(vdir / "input" / PROBLEM, vdir / "results", single=v.single)
+        vclass, vreason = judge_variant_base(vrun)
+        emit(f"base {name} ({v.what}): {vclass}: {vreason} (exit {vrun.status}, {vrun.seconds:.1f} s)")
+        if vclass != "correct result":
+            base_class = f"{base_class}; base {name}: {vclass}"
     emit()
     w = args.width
     header = f"{'case':<34}{'category':<15}{'expected':<14}{'outcome':<15}{'exit':>4}  message / verdict"
@@ -1208,9 +1361,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.only and c.name not in args.only:
             continue
         d = runs / c.name
-        shutil.copytree(base_dir / "input", d / "input")
+        shutil.copytree(variant_dirs[c.base] / "input", d / "input")
         c.edit(d / "input")
-        run = run_cli(d / "input" / c.problem, d / "results", single=c.single)
+        run = run_cli(d / "input" / c.problem, d / "results", single=c.single and VARIANTS[c.base].single)
         outcome, reason = judge(c, run, base, samples(base_run))
         msg = first_line(run)
         shown = msg if len(msg) <= w else msg[: w - 3] + "..."
@@ -1237,6 +1390,17 @@ def main(argv: list[str] | None = None) -> int:
     if args.write:
         args.write.write_text("\n".join(lines) + "\n")
     return 1 if bad or base_class != "correct result" else 0
+
+
+def judge_variant_base(run: Run) -> tuple[str, str]:
+    """A variant base is good data: not refused, a verdict that is no failure, no data-fault finding
+    (there is no truth comparison: its maneuvers differ from the base's)."""
+    if run.result is None or run.status not in (0, 3):
+        return "anything else", f"exit {run.status}: {(run.error or run.stdout[-300:])[:200]}"
+    faults = [f for f in run.result["findings"] if f["code"] in DATA_FAULTS]
+    if run.result["verdict"] == "FAILURE" or faults:
+        return "anything else", f"{run.result['verdict']}; {len(faults)} data-fault finding(s)"
+    return "correct result", f"{run.result['verdict']}; no data-fault finding"
 
 
 if __name__ == "__main__":

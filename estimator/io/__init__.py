@@ -24,6 +24,8 @@ z down) from the aircraft's reference point::
                               # optional: the channels to fit; default: every channel of the
                               # model set that has data (the others are left out with a warning)
     resample_hz = 40.0        # optional, for every file: see "Sampling" below
+    positions_checked = false # optional: true skips the check that refuses a position far outside
+                              # the airframe the others span where inches or feet would fit (below)
 
     [sensors]                 # metres; a key ending _in or _ft gives inches or feet instead
     imu = [1.80, 0.10, 0.20]  # required: the accelerometer position (lever-arm correction)
@@ -195,11 +197,11 @@ column, the time and data row (0-based, after the header) of the first bad sampl
   0.4 to 4 g, airspeed outside 15 to 700 m/s, altitude outside -500 to 25 000 m, a time step
   outside 0.1 ms to 2 s, ...); true airspeed / Mach that is not a speed of sound; Euler angles
   that change 57 times faster or slower than the body rates say (a degree/radian mistake of
-  that angle, or of the rates if all angles disagree alike). The message gives the observed
-  value and suggests a unit only when the bulk of the data (without its 1 % extremes) is
-  implausible in the declared unit; otherwise the out-of-range samples are named as spikes
-  (:mod:`estimator.io.plausibility`,
-  :mod:`estimator.io.consistency`);
+  that angle, or of the rates if all angles disagree alike or the angle's declared unit cannot be
+  off that way: rates in rad/s declared deg/s, tested on the pitch angle of a pitch doublet). The
+  message gives the observed value and suggests a unit only when the bulk of the data (without
+  its 1 % extremes) is implausible in the declared unit; otherwise the out-of-range samples are
+  named as spikes (:mod:`estimator.io.plausibility`, :mod:`estimator.io.consistency`);
 - spikes: samples (one, or a burst) that jump far outside the plausible range while the rest of
   the channel is plausible are named with their times and rows as spikes, never as a unit error
   (and a unit is never suggested from them): replace them in the file or cut them out of the
@@ -208,7 +210,14 @@ column, the time and data row (0-based, after the header) of the first bad sampl
   :data:`~estimator.io.modelset.MIN_SAMPLES_PER_FREE_PARAMETER` (10) samples per free
   per-maneuver parameter: those parameters (initial conditions, IMU biases) are estimated from
   that maneuver alone;
-- duplicate maneuver ids; a g_mps2 that is not an Earth gravity in m/s^2.
+- duplicate maneuver ids; a g_mps2 that is not an Earth gravity in m/s^2;
+- positions (``[sensors]``, every ``r_cg_body_*``) that cannot be points of one airframe
+  (:mod:`estimator.io.positions`): two positions further apart than any aircraft (120 m); a
+  position under a metre key far outside the cross-section the others span (more than twice its
+  extent, at least 3 m from each) that lands among them read as inches (/ 39.37) or feet
+  (/ 3.281): a CG in inches under ``r_cg_body_m``. The message names the key and its line, the
+  unit and the key to write it under (``r_cg_body_in``); ``positions_checked = true`` skips the
+  second check for a layout that is right (never the first).
 
 Each maneuver's ``meta`` holds its file and time range (or its manifest entry) and, from the
 data, ``mach_mean``, ``mach_min``, ``mach_max`` and ``gear_down`` when Mach and gear are mapped.

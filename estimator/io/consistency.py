@@ -6,13 +6,18 @@ The measured Euler angles must change as the IMU's body rates say::
     theta' = q cos(phi) - r sin(phi)
     psi'   = (q sin(phi) + r cos(phi)) / cos(theta)
 
-For each angle whose kinematic rate varies enough (:data:`MIN_RATE_STD_RPS`), the slope of a
+For each angle whose kinematic rate or whose own rate of change varies enough
+(:data:`MIN_RATE_STD_RPS`: either is excitation; rates in rad/s declared deg/s make the kinematic
+rate 57 times too small to pass that gate alone, while the angles still move), the slope of a
 straight-line fit (with offset, which absorbs gyro biases) of the angle's smoothed time derivative
 against the smoothed kinematic rate must be near 1. A slope near 57.3 or 1/57.3 is a
 degree/radian mistake: of that angle if one angle is off, of the rates if every tested angle is
-off the same way. This catches what range checks cannot: small angles in degrees declared rad,
-an unwrapped heading, rates in deg/s declared rad/s. Fits with poor correlation (little
-excitation, noise, recorder delays) decide nothing.
+off the same way, or if the angle's declared unit cannot be wrong that way (an angle declared in
+degrees that changes 57 times faster than the rates say is not in radians: the rates, declared in
+deg/s, are in rad/s). This catches what range checks cannot: small angles in degrees declared rad,
+an unwrapped heading, rates in deg/s declared rad/s and rates in rad/s declared deg/s (a pitch
+doublet, whose bank and heading hardly move, tests the pitch angle alone). Fits with poor
+correlation (little excitation, noise, recorder delays) decide nothing.
 """
 
 from __future__ import annotations
@@ -58,9 +63,10 @@ def euler_slopes(si: Mapping[str, np.ndarray], t_s: np.ndarray) -> dict[str, flo
             continue
         y = _smooth(rate, n)
         x = _smooth(np.gradient(np.unwrap(si[name]), t_s), n)
-        if np.std(y) < MIN_RATE_STD_RPS or np.std(x) == 0:
+        # excited if either moves: rates in rad/s declared deg/s shrink y 57 times, not x
+        if max(np.std(y), np.std(x)) < MIN_RATE_STD_RPS or np.std(x) == 0 or np.std(y) == 0:
             continue
-        if np.corrcoef(x, y)[0, 1] < MIN_CORRELATION:
+        if not np.corrcoef(x, y)[0, 1] >= MIN_CORRELATION:  # NaN decides nothing either
             continue
         out[name] = float(np.polyfit(y, x, 1)[0])
     return out
@@ -75,6 +81,15 @@ def _deg_rad_guess(slope: float) -> str | None:
     return None
 
 
+def _angle_can_be(unit: str, guess: str | None) -> bool:
+    """Can an angle declared in ``unit`` be off by the factor ``guess`` ("x57": changes 57 times
+    faster than the rates say, so it would be in degrees declared as radians; "/57": in radians
+    declared as degrees)? None (no degree/radian factor): it may be anything."""
+    if guess is None:
+        return True
+    return unit == ("rad" if guess == "x57" else "deg")
+
+
 def check_euler_rates(si: Mapping[str, np.ndarray], t_s: np.ndarray, units: Mapping[str, str],
                       labels: Mapping[str, str], where: Where) -> None:
     """Raise :class:`DataError` if an angle or the rates are off by a degree/radian factor."""
@@ -87,12 +102,18 @@ def check_euler_rates(si: Mapping[str, np.ndarray], t_s: np.ndarray, units: Mapp
     text = "; ".join(f"{labels[k]} changes {s:.3g} times as fast as the body rates say"
                      for k, s in bad.items())
     guesses = {k: _deg_rad_guess(s) for k, s in bad.items()}
-    if len(bad) == len(slopes) > 1 and len(set(guesses.values())) == 1:
+    if len(bad) == len(slopes) and len(set(guesses.values())) == 1 and (
+            len(bad) > 1 or not _angle_can_be(units[next(iter(bad))], next(iter(guesses.values())))):
         g = next(iter(guesses.values()))
-        hint = (f"every tested Euler angle disagrees the same way, so the body rates are likely in "
-                f"the wrong unit: {rates} are declared in {rate_units}")
+        one = next(iter(bad))
+        why = ("every tested Euler angle disagrees the same way" if len(bad) > 1 else
+               f"{labels[one]} is declared in {units[one]!r}, and no angle unit is {_DEG:.4g} times "
+               f"{'smaller' if g == 'x57' else 'larger'} than that")
+        hint = f"{why}, so the body rates are likely in the wrong unit: {rates} are declared in {rate_units}"
         if g is not None:
-            hint += f" but look like {'deg/s' if g == '/57' else 'rad/s'}"
+            real = "deg/s" if g == "/57" else "rad/s"
+            hint += (f" but look like {real} (x {_DEG:.4g} too {'large' if real == 'deg/s' else 'small'} "
+                     f"as read): declare unit = \"{real}\" for p, q and r")
     else:
         parts = []
         for k, g in guesses.items():

@@ -17,12 +17,14 @@ from estimator.io.build import build_problem
 from estimator.io.dataset_problem import load_dataset_maneuvers
 from estimator.io.errors import DataError
 from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
+from estimator.io.positions import check_positions, positions_of
 from estimator.io.tables import check_data_path, infer_format, numeric, pick_column, read_table
 from estimator.parameters import ParameterSpec
 from estimator.problem import LEVER_ARMS, STATE_SIGNALS, ChannelSpec, Problem
 
 TOP_KEYS = ("title", "g_mps2", "lever_arm", "model", "channels", "resample_hz", "sensors", "aircraft",
-            "columns", "files", "data", "parameter", "channel", "workflow", "solver", "report")
+            "columns", "files", "data", "parameter", "channel", "workflow", "solver", "report",
+            "positions_checked")
 #: the CG, in m (or r_cg_body_in, r_cg_body_ft)
 _CG_KEYS = {"r_cg_body_m": Key(unit="m")}
 FILE_KEYS = {**dict.fromkeys(("path", "format", "header", "delimiter", "decimal", "skip_rows", "encoding",
@@ -293,6 +295,11 @@ def load_problem(path: str | Path) -> Problem:
     chans, specs, declared = merge_model_set(raw_model, raw.get("parameter"), raw.get("channel"),
                                              msource, where)
     sensors = parse_positions(raw.get("sensors", {}), f"{where}: [sensors]")
+    checked = raw.get("positions_checked", False)
+    if not isinstance(checked, bool):
+        raise DataError(f"{where}: positions_checked = {checked!r} must be true or false (no quotes)")
+    # a CG or sensor position in the wrong unit (inches under a metre key), before any data is read
+    check_positions(positions_of(raw, path.read_text(encoding="utf-8", errors="replace")), where, checked)
     data = raw.get("data")
     if data is not None:
         check(data, ("dataset", "select"), f"{where}: [data]", DataError)
