@@ -1346,7 +1346,8 @@ def _ratio_finding(st: _Stats, i: int, opt: DiagnosticOptions, code: str, sev: S
     elif code == "misfit":
         msg += (": slow, coloured errors of the kind real recorded data carry (a filtered INS attitude, "
                 "baro lag and static-source error, IMU scale and misalignment, vertical air motion), not a "
-                "gross misfit; the honest deviations take them in")
+                "gross misfit; the honest deviations take their colour in, not a systematic error the "
+                "model set lacks (read the estimates on their bounds and Table 2)")
         advice = ""
     else:
         msg += ": more than its noise — a model-structure error (the calibration model cannot follow the "

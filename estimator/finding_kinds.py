@@ -76,7 +76,8 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
          "state-equation parameters (IMU biases, initial conditions) on a bound: a wrong minimum or a "
          "data fault; NOTE otherwise: a slow, coloured residual a few times the white-noise floor is "
          "what real recorded data look like (filtered INS attitude, baro lag and static-source error, "
-         "IMU scale and misalignment, vertical air motion), taken in by the honest deviations"),
+         "IMU scale and misalignment, vertical air motion); the honest deviations take its colour in, "
+         "not a systematic error the model set lacks"),
     Kind("scale_error", "FAILURE", _D, "a misfitting channel is a multiple of its model output, no unit"),
     Kind("turbulence", "rule", _D, "flow and airspeed residuals common to every sensor: air motion",
          "FAILURE under the output-error method (it models no process noise: the estimates are "

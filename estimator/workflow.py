@@ -348,16 +348,17 @@ class WorkflowResult:
         return findings_frame(self.findings)
 
     def finding_groups(self) -> tuple[FindingGroup, ...]:
-        """The findings said once: one group per kind, channel and stage, most important first
-        (:func:`estimator.finding_groups.group_findings`)."""
+        """The findings said once, most important first (:func:`estimator.finding_groups.group_findings`):
+        one group per kind and channel, over the workflow's estimations. What a bin's two estimations
+        (biases free, then installation biases fixed: the same maneuvers) both say is said by the
+        final one; what several bins say alike (the same kind, channel and severity) is one group
+        that names them, headed by the worst."""
         n = {_stage_label(st): len(st.maneuver_ids) for st in self.stages}
         groups = group_findings(self.findings, n)
-        # the same bin's two estimations (biases free, then installation biases fixed) fit the same
-        # maneuvers: what both say is said once, by the final one
         later = {_stage_label(a): _stage_label(b) for a in self.first for b in self.final
                  if (a.mach, a.gear_down) == (b.mach, b.gear_down)}
         said = {(g.stage, g.code, g.channel, g.severity): g for g in groups}
-        out = []
+        kept = []
         for g in groups:
             if g.stage in later and (later[g.stage], g.code, g.channel, g.severity) in said:
                 continue
@@ -365,8 +366,20 @@ class WorkflowResult:
                       if t == g.stage and (k := (s, g.code, g.channel, g.severity)) in said]
             if firsts:
                 g = replace(g, members=g.members + firsts[0].members,
-                            headline=g.headline + " (the biases-free estimation of this bin says the same)")
-            out.append(g)
+                            headline=g.headline + " (in both of the bin's estimations)")
+            kept.append(g)
+        alike: dict[tuple, list[FindingGroup]] = {}
+        for g in kept:
+            alike.setdefault((g.code, g.channel, g.severity), []).append(g)
+        out = []
+        for g in kept:
+            same = alike[(g.code, g.channel, g.severity)]
+            if len(same) == 1:
+                out.append(g)
+            elif g is same[0]:  # the worst of them leads (groups come most important first)
+                others = "; ".join(h.stage or "the workflow" for h in same[1:])
+                out.append(replace(g, members=tuple(m for h in same for m in h.members),
+                                   headline=f"{g.headline}; the same in {others}"))
         return tuple(out)
 
     @property
