@@ -835,7 +835,8 @@ def diagnose(channels: Sequence[ChannelFit], inputs: Sequence[ManeuverInputs] = 
                 slope=slope, slope_se=slope_se, y_sd=y_sd, slope_k=slope_k, slope_k_se=slope_k_se,
                 ref_sd=ref_sd, floor_jump=_floor_jump(fits, floor, stuck), stuck=stuck,
                 stuck_value=stuck_value, run_t0=run_t0, run_t1=run_t1, n_out=n_out, many=many, keep=keep,
-                common=common, partners=partners, scale=scale)
+                common=common, partners=partners, scale=scale,
+                slope_median=_channel_slope(fits, slope, slope_se, opt))
     findings += _input_findings(inputs, opt)
     accuracy = _flow_accuracy(fits, keep, by_man_inputs, opt)
     done = np.zeros(R, dtype=bool)  # a row whose residual is explained by a finding on it
@@ -1095,6 +1096,25 @@ class _Stats:
     common: np.ndarray
     partners: dict
     scale: np.ndarray
+    slope_median: np.ndarray
+
+
+def _channel_slope(fits: list, slope: np.ndarray, slope_se: np.ndarray, opt: DiagnosticOptions) -> np.ndarray:
+    """Each row's channel's median slope of z on y over the maneuvers where it is assessed (NaN
+    where none is): a unit or scale mistake is the channel's, in every maneuver, while one
+    maneuver's slope alone can be whatever else its residual holds (at the realism level the
+    static-source error in wind-up turns made the airspeed's 1.44-1.9 against 1.0 in the others, an
+    INS drift in steady-sideslip segments the pitch's and DGPS height's 0.53-1.37)."""
+    ok = np.isfinite(slope) & np.isfinite(slope_se) & (slope_se <= opt.slope_max_rel_se * np.abs(slope))
+    out = np.full(len(fits), np.nan)
+    by_ch: dict[str, list[int]] = {}
+    for i, f in enumerate(fits):
+        by_ch.setdefault(f.channel, []).append(i)
+    for rows in by_ch.values():
+        good = [i for i in rows if ok[i]]
+        if good:
+            out[rows] = float(np.median(slope[good]))
+    return out
 
 
 def _floor_jump(fits: list, floor: np.ndarray, stuck: np.ndarray) -> np.ndarray:
@@ -1162,15 +1182,17 @@ def _unit_finding(st: _Stats, i: int, opt: DiagnosticOptions) -> Finding | None:
     b, se = st.slope[i], st.slope_se[i]
     ym = float(np.mean(f.y)) if f.y.size else np.nan
     zm = float(np.mean(f.z)) if f.z.size else np.nan
-    # an absolute quantity that hardly moves about its level in the maneuver (the airspeed of a
-    # wind-up turn at constant Mach, the height or pitch of a steady sideslip) is judged by its level:
-    # a unit or scale mistake moves the level as much as the slope, while a slope over so small a
-    # variation is whatever else the residual holds (at the realism level the static-source error
-    # growing with alpha in a wind-up turn made the airspeed's slope 1.44-1.56 with its level right,
-    # a heading or pitch drift of the INS in an SHSS segment 0.53-1.37)
+    # an absolute quantity (one far from zero against its variation: airspeed, altitude) also
+    # tells a unit or scale mistake by its level where the model's level is its own (the airspeed)
     absolute = bool(not f.flow and np.isfinite(ym) and abs(ym) > 10 * np.std(f.y))
+    # a kinematic channel's slope names a unit or scale only where the channel as a whole is off
+    # (its median slope over the maneuvers beyond the scale tolerance, :func:`_channel_slope`), not
+    # one maneuver's anomaly (a fit a unit mistake drags leaves the maneuvers' slopes 2.8-3.4 for
+    # feet declared as metres: the median names it, each maneuver's own slope the factor)
+    own = st.slope_median[i]
     slope_ok = bool(np.isfinite(b) and np.isfinite(se) and se <= opt.slope_max_rel_se * abs(b)
-                    and not absolute)
+                    and (f.flow or (np.isfinite(own)
+                                    and not 1 / (1 + opt.scale_tol) <= abs(own) <= 1 + opt.scale_tol)))
     bk, sek = st.slope_k[i], st.slope_k_se[i]
     # A flow channel is tested against the deg/rad factor only (>= flow_unit_min_factor): a channel
     # that moves >= 10 x its kinematic angle is resolved as well as the scale test's 0.005 rad when

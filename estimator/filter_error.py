@@ -380,10 +380,10 @@ def feedback_findings(parameters: Sequence[Parameter], feedback: Sequence[DelayC
 
     Returns
     -------
-    A ``delay_feedback`` warning naming the delays widened by the instrumental estimate's
-    difference, a ``delay_weak_instrument`` warning naming those widened for a weak instrument,
-    an INFO naming those not judged (each only where there are any), deviations in each
-    delay's display unit.
+    A ``delay_feedback`` note naming the delays widened by the instrumental estimate's
+    difference, a ``delay_weak_instrument`` note naming those widened for a weak instrument (notes:
+    their honest deviations already say it), a note naming those not judged (each only where there
+    are any), deviations in each delay's display unit.
     """
     ps = parameters
 
@@ -412,7 +412,7 @@ def feedback_findings(parameters: Sequence[Parameter], feedback: Sequence[DelayC
             text, k, unit = change(f)
             parts.append(f"{text} ({diff(f, k, unit)})")
         out.append(Finding(
-            "delay_feedback", Severity.WARNING,
+            "delay_feedback", Severity.NOTE,
             "filter-error method: the time delays' estimate is not what an instrumental-variable "
             f"estimate of the same data gives (each delay's sensitivity {FEEDBACK_LAGS_S[0]:g}-"
             f"{FEEDBACK_LAGS_S[-1]:g} s earlier as its instrument, untouched by the gust at the "
@@ -434,7 +434,7 @@ def feedback_findings(parameters: Sequence[Parameter], feedback: Sequence[DelayC
             parts.append(f"{text} (its instrumental estimate {f.ratio:.1f} times less precise, "
                          f"{diff(f, k, unit)})")
         out.append(Finding(
-            "delay_weak_instrument", Severity.WARNING,
+            "delay_weak_instrument", Severity.NOTE,
             "filter-error method: the feedback check cannot test these time delays, their "
             f"instrument (the sensitivity {FEEDBACK_LAGS_S[0]:g}-{FEEDBACK_LAGS_S[-1]:g} s earlier) "
             f"more than {FEEDBACK_WEAK:g} times less precise than the likelihood: the likelihood "

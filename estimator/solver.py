@@ -589,6 +589,10 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
                       replace(opt, colored=False) if filter_error else opt)
     if filter_error and opt.colored:
         dev = lik.honest_deviations(st, evals, noise, N, dev, opt, theta)
+        # the feedback check widens the delays the aircraft's answer to the gusts biases: what the
+        # answer's findings say is then in the honest deviations, information (a NOTE)
+        wind_findings = [replace(f, severity=Severity.NOTE) if f.code == "gust_answer" else f
+                         for f in wind_findings]
         wind_findings = wind_findings + feedback_findings(lik.model.problem.parameters.parameters,
                                                           dev.feedback)
     correlated = correlated + _high_correlations(dev.correlation, [keys[i] for i in st.glob],

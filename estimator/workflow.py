@@ -376,10 +376,11 @@ class WorkflowResult:
             same = alike[(g.code, g.channel, g.severity)]
             if len(same) == 1:
                 out.append(g)
-            elif g is same[0]:  # the worst of them leads (groups come most important first)
-                others = "; ".join(h.stage or "the workflow" for h in same[1:])
-                out.append(replace(g, members=tuple(m for h in same for m in h.members),
-                                   headline=f"{g.headline}; the same in {others}"))
+            elif g is same[0]:  # said where the first of them is, headed by the worst
+                lead = max(same, key=lambda h: max(abs(m.value or 0.0) for m in h.members))
+                others = "; ".join(h.stage or "the workflow" for h in same if h is not lead)
+                out.append(replace(lead, members=tuple(m for h in same for m in h.members),
+                                   headline=f"{lead.headline}; the same in {others}"))
         return tuple(out)
 
     @property

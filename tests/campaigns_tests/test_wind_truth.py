@@ -60,7 +60,8 @@ def test_the_aircrafts_answer_to_the_gusts_is_found(problem, filter_error):
     assert {"alpha_zl", "alpha_zr"} <= set(found), [f.text() for f in res.findings]
     for name in ("alpha_zl", "alpha_zr"):
         f = found[name]
-        assert f.severity.name == "WARNING" and "along body z" in f.message
+        # a note: the feedback check widens the delays it biases (test below)
+        assert f.severity.name == "NOTE" and "along body z" in f.message
         assert f.parameters and all(k.startswith("tau") for k in f.parameters), f.parameters
         assert f.maneuver in {m.id for m in problem.maneuvers} and len(f.t_s) == 2
         assert abs(f.value) >= 0.1 and "not the delays alone" in f.advice
@@ -76,7 +77,7 @@ def test_the_flow_delays_are_honest_in_the_gusts_the_aircraft_answers(problem, f
 
     res = filter_error
     rt = recovery_table(res, true_parameters(problem, res.free_estimated))
-    found = [f for f in res.findings if f.code == "delay_feedback"]
+    found = [f for f in res.findings if f.code == "delay_feedback" and f.parameters]
     assert len(found) == 1, [f.text() for f in res.findings]
     assert {"tau_alpha_zl", "tau_alpha_zr"} <= set(found[0].parameters), found[0].parameters
     delays = rt[rt.index.str.startswith("tau_")]
@@ -95,7 +96,7 @@ def test_the_airspeed_delay_is_honest_where_its_instrument_is_weak(problem, filt
     res = filter_error
     rt = recovery_table(res, true_parameters(problem, res.free_estimated))
     (weak,) = [f for f in res.findings if f.code == "delay_weak_instrument"]
-    assert weak.severity.name == "WARNING" and "tau_tas" in weak.parameters, weak.text()
+    assert weak.severity.name == "NOTE" and "tau_tas" in weak.parameters, weak.text()
     assert weak.value > FEEDBACK_WEAK and "calm air" in weak.advice
     row = rt.loc["tau_tas"]
     # 2.4 deviations before the widening: within 1 only if it happened

@@ -257,16 +257,17 @@ def test_a_delay_not_judged_changes_nothing():
 
 
 def test_the_findings_of_a_mixed_check():
-    """One check with every kind: a delay_feedback warning naming exactly the strong delays that
+    """One check with every kind: a delay_feedback note naming exactly the strong delays that
     differ, with their deviations in the display unit and the difference's deviations; a
-    delay_weak_instrument warning naming the weak one, its ratio, and that its widened deviation
-    exceeds its allowed range (0.7 s against 0.6); an INFO naming the one not judged. Nothing else."""
+    delay_weak_instrument note naming the weak one, its ratio, and that its widened deviation
+    exceeds its allowed range (0.7 s against 0.6); a note naming the one not judged. Nothing else.
+    Notes: the widened honest deviations already say what they say."""
     ps = [_delay(k) for k in ("tau_a", "tau_b", "tau_tas", "tau_c")]
     checks = _CHECKS + [DelayCheck(3, 0.002, np.nan, 0.0, np.nan, np.nan)]
     out = feedback_findings(ps, checks)
     assert [(f.code, f.severity) for f in out] == [
-        ("delay_feedback", Severity.WARNING), ("delay_weak_instrument", Severity.WARNING),
-        ("delay_feedback", Severity.INFO)]
+        ("delay_feedback", Severity.NOTE), ("delay_weak_instrument", Severity.NOTE),
+        ("delay_feedback", Severity.NOTE)]
     strong, weak, info = out
     assert strong.parameters == ("tau_a", "tau_b")
     assert "tau_a 2 -> 5 ms" in strong.message and "tau_b 1 -> 3 ms" in strong.message
