@@ -241,9 +241,13 @@ def _demo(args: argparse.Namespace) -> int:
         tproblem = problem_from_dataset(turb_out, model="tejas_ins")
     tcode = _workflow(tproblem, turb_report, {"method": "filter_error"}, overwrite=True, tool="fpr demo",
                       source=turb_out)
-    print(f"fpr demo: {time.perf_counter() - t0:.0f} s in all")
-    # the worse verdict of the two blocks (a failure before a success with warnings)
-    return max((code, tcode), key=lambda c: {0: 0, 3: 1, 1: 2}.get(c, 3))
+    names = {v: k for k, v in EXIT_STATUS.items()}
+    print(f"fpr demo: {time.perf_counter() - t0:.0f} s in all; the calm block (the paper's calibration, "
+          f"the main job): {names.get(code, code)}; the light-turbulence block (the filter-error method, "
+          f"experimental, a demonstration): {names.get(tcode, tcode)}; exit status: the calm block's")
+    # the main job's verdict: the turbulent block demonstrates an experimental method, its verdict
+    # printed above with its own findings
+    return code
 
 
 def _show(args: argparse.Namespace) -> int:

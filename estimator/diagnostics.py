@@ -453,11 +453,13 @@ class Diagnosis:
     findings : most severe first, causes before their consequences.
     table : one row per (maneuver, channel) (:func:`diagnose` lists the columns).
     outliers : (maneuver, channel) -> (k,) times of the outlier samples, s.
+    usable_alpha_deg : ``low_alpha_only`` channel -> its usable angle of attack, deg (where found).
     """
 
     findings: tuple[Finding, ...]
     table: pd.DataFrame
     outliers: Mapping[tuple[str, str], np.ndarray] = field(default_factory=dict)
+    usable_alpha_deg: Mapping[str, float] = field(default_factory=dict)
 
     def to_pandas(self) -> pd.DataFrame:
         """The fit-quality table."""
@@ -893,7 +895,8 @@ def diagnose(channels: Sequence[ChannelFit], inputs: Sequence[ManeuverInputs] = 
         elif ratio[i] > opt.coloured_min_ratio and rho1[i] > opt.coloured_rho1:
             findings.append(_coloured_finding(st, i, Severity.NOTE))
     findings = _outliers_beyond_accuracy(findings, fits, keep)
-    return Diagnosis(tuple(_ordered(_attribute(findings))), table, outliers)
+    usable = {ch: a.limit_deg for ch, a in accuracy.items() if a.limit_deg is not None}
+    return Diagnosis(tuple(_ordered(_attribute(findings))), table, outliers, usable)
 
 
 def _outliers_beyond_accuracy(findings: list[Finding], fits: list[ChannelFit], keep: list[np.ndarray]

@@ -908,7 +908,7 @@ class FilterErrorLikelihood:
                     "(measurement noise variance) at most)")
         return [
             Finding("turbulence", Severity.NOTE, f"filter-error method: {air}"),
-            Finding("filter_error_partial", Severity.WARNING,
+            Finding("filter_error_partial", Severity.NOTE,
                     "filter-error method: "
                     + ("the honest deviations are the coloured innovations' sandwich and the IMU "
                        "noise as process noise (in turbulent maneuvers through the channels that do "

@@ -97,12 +97,16 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
     Kind("crosswind_confounded", "WARNING", _I,
          "sideslip offsets confounded with the wind: the maneuvers turn no heading", by_channel=False),
     Kind("on_bound", "rule", _I, "an estimate on its bound", "WARNING; NOTE for a maneuver's nuisance "
-         "parameter (its bound only keeps the fit in range)", by_channel=False),
-    Kind("near_bound", "WARNING", _S, "an estimate within two deviations of its bound", by_channel=False),
+         "parameter (its bound only keeps the fit in range) and for a table value beyond its low-alpha "
+         "channel's usable alpha range (paper Fig. 7)", by_channel=False),
+    Kind("near_bound", "rule", _S, "an estimate within two deviations of its bound",
+         "WARNING; NOTE for a delay the feedback check widened (that note says it) and for a table value "
+         "beyond its low-alpha channel's usable alpha range", by_channel=False),
     Kind("poor_model", "WARNING", _S, "the Gauss-Newton model is poor: some parameters barely determined",
          by_channel=False),
-    Kind("unsettled", "WARNING", _S, "filter error: each fresh linearisation still moves the estimate",
-         by_channel=False),
+    Kind("unsettled", "rule", _S, "filter error: each fresh linearisation still moves the estimate",
+         "WARNING where it moves a calibration parameter by more than a deviation; NOTE where only "
+         "the maneuvers' initial conditions, steady winds and IMU biases move", by_channel=False),
     Kind("imu_noise_unknown", "WARNING", _U, "the IMU noise could not be estimated for the deviations",
          by_channel=False),
     Kind("delay_feedback", "NOTE", _F, "filter error: time delays biased by the aircraft's answer to gusts",
@@ -113,9 +117,13 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
     Kind("gust_answer", "rule", _F, "filter error: innovations correlate with the IMU's answer to gusts",
          "NOTE where the feedback check widens the delays it biases (the honest deviations take it in); "
          "WARNING without the honest deviations", by_channel=False),
-    Kind("filter_error_partial", "WARNING", _F, "filter error: what its deviations do not cover",
-         by_channel=False),
+    Kind("filter_error_partial", "NOTE", _F, "filter error: what its deviations do not cover",
+         "NOTE: said on every filter-error estimation (a property of the method, not of the flight; "
+         "Table 2 carries the sideslip offsets' honest uncertainty)", by_channel=False),
     Kind("held", "NOTE", _I, "parameters held at their start values (no data, or undetermined)",
+         by_channel=False),
+    Kind("unexcited", "NOTE", _W, "the gear-down maneuvers do not move what some channels measure: "
+         "their gains, tables, delays (and sideslip offsets) held at the nearest gear-up estimate",
          by_channel=False),
     Kind("correlated", "NOTE", _I, "highly correlated estimates (their deviations say it)",
          by_channel=False),

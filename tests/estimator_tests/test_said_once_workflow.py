@@ -53,7 +53,7 @@ def test_what_the_maneuvers_do_not_excite_is_held_and_said_once():
     # the sideslip channels' own tables, gains and offsets; tau_sp stays free: alpha_zsp shares it
     assert {"f4", "f5", "k_spr", "b_sb", "b_n", "tau_np"} <= set(held), held
     assert "tau_sp" not in held and "f3" not in held and "f1" not in held, held
-    assert note.code == "held" and note.severity == Severity.NOTE
+    assert note.code == "unexcited" and note.severity == Severity.NOTE
     assert "beta_zsp" in note.message and f"against {MIN_EXCITATION_DEG:g} deg" in note.message
     assert note.numbers["spread_beta_zsp_deg"] < MIN_EXCITATION_DEG
 
