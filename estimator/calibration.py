@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from aircraft_models.schema import did_you_mean, unknown
-from estimator.finding_groups import groups_frame
+from estimator.finding_groups import NOTE_CHARS, groups_frame
 from estimator.problem import Problem, ReadOnlyMapping
 from estimator.report import (
     Banner,
@@ -165,7 +165,7 @@ def verdict_banner(wf: WorkflowResult) -> Banner:
     v = wf.verdict
     groups = wf.finding_groups()
     acting = [g.text() for g in groups if g.severity >= Severity.WARNING]
-    notes = [g.text() for g in groups if g.severity < Severity.WARNING]
+    notes = [g.text(note_chars=NOTE_CHARS) for g in groups if g.severity < Severity.WARNING]
     room = max(BANNER_LINES - len(acting), 0)
     shown = notes if len(notes) <= room else notes[:max(room - 1, 0)]
     more = len(notes) - len(shown)

@@ -29,6 +29,9 @@ from estimator.verdict import Finding, Severity, Verdict
 
 __all__ = ["FindingGroup", "group_findings", "groups_frame", "verdict_text"]
 
+#: A note's line on the console and in the report's banner is cut to this many characters (notes are
+#: information; the whole of each is in finding_groups.csv and the report's findings table)
+NOTE_CHARS = 240
 #: The display unit a number's name ends in (``rms_deg``, ``rms_mps``) and how it is written.
 _UNITS = {"deg": "deg", "m": "m", "mps": "m/s", "ms": "ms", "s": "s", "pa": "Pa", "mps2": "m/s^2"}
 
@@ -62,12 +65,16 @@ class FindingGroup:
         """The members' maneuvers, each once, in the members' order."""
         return tuple(dict.fromkeys(f.maneuver for f in self.members if f.maneuver))
 
-    def text(self, advice: bool | None = None) -> str:
-        """One line: severity, estimation, headline and (failures and warnings) advice."""
+    def text(self, advice: bool | None = None, note_chars: int | None = None) -> str:
+        """One line: severity, estimation, headline and (failures and warnings) advice; a note cut
+        to ``note_chars`` characters at a word (the whole in ``finding_groups.csv``), None: whole."""
         where = f"{self.stage}: " if self.stage else ""
         out = f"{self.severity.name}: {where}{self.headline}"
         with_advice = self.severity >= Severity.WARNING if advice is None else advice
-        return out + (f" — {self.advice}" if with_advice and self.advice else "")
+        out += f" — {self.advice}" if with_advice and self.advice else ""
+        if note_chars is not None and self.severity < Severity.WARNING and len(out) > note_chars:
+            out = out[:note_chars].rsplit(" ", 1)[0] + " …"
+        return out
 
     def to_dict(self) -> dict:
         return {"code": self.code, "severity": self.severity.name, "stage": self.stage,
@@ -264,7 +271,7 @@ def verdict_text(verdict: Verdict, findings: Iterable[Finding] | Sequence[Findin
     lines += [f"  {g.text()}" for g in acting]
     room = max(max_lines - len(acting), 0)
     shown = notes[:room] if len(notes) <= room else notes[:max(room - 1, 0)]
-    lines += [f"  {g.text()}" for g in shown]
+    lines += [f"  {g.text(note_chars=NOTE_CHARS)}" for g in shown]
     rest = len(notes) - len(shown)
     if rest:
         lines.append(f"  ... {rest} more note(s) in {where}")

@@ -89,3 +89,26 @@ def test_a_bins_two_estimations_and_several_bins_say_a_thing_once():
     assert len(g.members) == 4, "both bins, both estimations: one group"
     assert g.stage == "Mach 0.70 gear up, installation biases fixed", "the worst leads"
     assert "in both of the bin's estimations" in g.headline and "the same in Mach 0.50" in g.headline
+
+
+def test_a_fit_held_away_from_its_minimum_is_never_a_success():
+    """A fit converged with one gyro bias held 0.3 deg/s off its estimate (the rest free) is at a
+    wrong point: its attitude misfit is gross (degrees, beyond any working attitude reference) and
+    the verdict is a failure, while the same fit free is none (no wrong minimum becomes a success;
+    the verdict corpus runs the three axes on JSBSim flights)."""
+    import math
+
+    from estimator.solver import SolverOptions, estimate
+    from estimator.verdict import Verdict
+
+    problem = _problem()
+    free = estimate(problem)
+    assert free.verdict != Verdict.FAILURE, free.summary()
+    key = f"dq[{problem.maneuvers[0].id}]"
+    values = dict(zip(free.parameters.keys, free.values, strict=True))
+    values[key] += math.radians(0.3)
+    ps = problem.parameters.with_values(np.array([values[k] for k in problem.parameters.keys]))
+    held = estimate(replace(problem, parameters=ps.with_free({key: False})), SolverOptions(start="given"))
+    assert held.verdict == Verdict.FAILURE, held.summary()
+    gross = [f for f in held.findings if f.code == "misfit" and f.severity == Severity.FAILURE]
+    assert gross and gross[0].channel in ("theta", "h", "tas"), held.summary()
