@@ -244,10 +244,11 @@ def _demo(args: argparse.Namespace) -> int:
     names = {v: k for k, v in EXIT_STATUS.items()}
     print(f"fpr demo: {time.perf_counter() - t0:.0f} s in all; the calm block (the paper's calibration, "
           f"the main job): {names.get(code, code)}; the light-turbulence block (the filter-error method, "
-          f"experimental, a demonstration): {names.get(tcode, tcode)}; exit status: the calm block's")
+          f"experimental, a demonstration): {names.get(tcode, tcode)}; exit status: the calm block's, or "
+          "a failure of either")
     # the main job's verdict: the turbulent block demonstrates an experimental method, its verdict
-    # printed above with its own findings
-    return code
+    # printed above with its own findings; but a failure there is never passed over as a success
+    return EXIT_STATUS["FAILURE"] if tcode == EXIT_STATUS["FAILURE"] else code
 
 
 def _show(args: argparse.Namespace) -> int:

@@ -977,7 +977,10 @@ def _flow_accuracy(fits: list[ChannelFit], keep: list[np.ndarray], by_man_inputs
         a = np.concatenate([alpha[i][keep[i]] for i in mine])
         lim = alpha_limit(a, np.concatenate(e) * _DEG, float(f0.desired_3sigma) * _DEG, opt.alpha_band_deg,
                           opt.min_band_samples)[1]
-        if lim is None:
+        # the usable range is lenient only where it holds most of the channel's samples: it is where
+        # the channel meets its accuracy by construction, and a channel usable over a sliver of its
+        # flight is judged on the whole (the paper's nose probe: up to 12 deg, most of a flight)
+        if lim is None or np.mean(a < lim) < 0.5:
             out[ch] = _Accuracy(pooled, None, {}, {})
             continue
         below, start = {}, {}
@@ -1182,34 +1185,41 @@ def _stuck_finding(st: _Stats, i: int) -> Finding:
 def _unit_finding(st: _Stats, i: int, opt: DiagnosticOptions) -> Finding | None:
     """A unit or scale error of a channel: the slope of z on y, or (flow channels) on the kinematic
     angle, a jump of the noise floor against the same channel's other maneuvers, or (absolute
-    quantities) the mean levels."""
+    quantities) the mean levels; the first that names one."""
     f = st.fits[i]
     misfits = bool(np.isfinite(st.ratio[i]) and st.ratio[i] > (opt.noise_floor_ratio if f.flow
                                                                else opt.misfit_warn_ratio))
-
-    def declare(m: tuple[float, str, str]) -> str:
-        """The advice: the unit the channel is recorded in, to declare (``m``: a UNIT_FACTORS entry)."""
-        rec = re.search(r"recorded in (.+?) but", m[1])
-        unit = {"degrees": "deg", "radians": "rad", "feet": "ft", "metres": "m", "knots": "kt",
-                "km/h": "km/h", "m/s": "m/s", "m/s^2": "m/s^2", "g": "g"}.get(rec.group(1) if rec else "")
-        return (f"declare the unit it is recorded in (unit = \"{unit}\" for {f.channel} under [columns] of "
-                "the problem file, or fix the data) and estimate again" if unit else
-                "fix the channel's unit in the problem file (or the data) and estimate again")
-
     b, se = st.slope[i], st.slope_se[i]
-    ym = float(np.mean(f.y)) if f.y.size else np.nan
-    zm = float(np.mean(f.z)) if f.z.size else np.nan
-    # an absolute quantity (one far from zero against its variation: airspeed, altitude) also
-    # tells a unit or scale mistake by its level where the model's level is its own (the airspeed)
-    absolute = bool(not f.flow and np.isfinite(ym) and abs(ym) > 10 * np.std(f.y))
     # a kinematic channel's slope names a unit or scale only where the channel as a whole is off
-    # (its median slope over the maneuvers beyond the scale tolerance, :func:`_channel_slope`), not
-    # one maneuver's anomaly (a fit a unit mistake drags leaves the maneuvers' slopes 2.8-3.4 for
-    # feet declared as metres: the median names it, each maneuver's own slope the factor)
+    # (its median slope over the maneuvers beyond the scale tolerance, signed: an inverted channel's
+    # is -1, :func:`_channel_slope`), not one maneuver's anomaly (a fit a unit mistake drags leaves
+    # the maneuvers' slopes 2.8-3.4 for feet declared as metres: the median names it, each
+    # maneuver's own slope the factor)
     own = st.slope_median[i]
     slope_ok = bool(np.isfinite(b) and np.isfinite(se) and se <= opt.slope_max_rel_se * abs(b)
                     and (f.flow or (np.isfinite(own)
-                                    and not 1 / (1 + opt.scale_tol) <= abs(own) <= 1 + opt.scale_tol)))
+                                    and not 1 / (1 + opt.scale_tol) <= own <= 1 + opt.scale_tol)))
+    return (_unit_from_slope(st, i, opt, slope_ok) or (_unit_from_floor(st, i, opt) if misfits else None)
+            or (_from_level(st, i, opt) if misfits else None)
+            or (_scale_from_slope(st, i, opt) if misfits and slope_ok else None))
+
+
+def _declare(f: ChannelFit, m: tuple[float, str, str]) -> str:
+    """The advice of a unit error: the unit the channel is recorded in, to declare (``m``: a
+    :data:`UNIT_FACTORS` entry)."""
+    rec = re.search(r"recorded in (.+?) but", m[1])
+    unit = {"degrees": "deg", "radians": "rad", "feet": "ft", "metres": "m", "knots": "kt",
+            "km/h": "km/h", "m/s": "m/s", "m/s^2": "m/s^2", "g": "g"}.get(rec.group(1) if rec else "")
+    return (f"declare the unit it is recorded in (unit = \"{unit}\" for {f.channel} under [columns] of "
+            "the problem file, or fix the data) and estimate again" if unit else
+            "fix the channel's unit in the problem file (or the data) and estimate again")
+
+
+def _unit_from_slope(st: _Stats, i: int, opt: DiagnosticOptions, slope_ok: bool) -> Finding | None:
+    """A unit named by the slope of the measurement on its model output (``slope_ok``: assessed) or,
+    for a flow channel, on the kinematic angle of the reconstructed flight path."""
+    f = st.fits[i]
+    b, se = st.slope[i], st.slope_se[i]
     bk, sek = st.slope_k[i], st.slope_k_se[i]
     # A flow channel is tested against the deg/rad factor only (>= flow_unit_min_factor): a channel
     # that moves >= 10 x its kinematic angle is resolved as well as the scale test's 0.005 rad when
@@ -1241,53 +1251,75 @@ def _unit_finding(st: _Stats, i: int, opt: DiagnosticOptions) -> Finding | None:
             "unit_error", Severity.FAILURE,
             f"{_where(f)}: the measurement is {val:.4g} x {against} (+- {err:.2g}); the channel is probably "
             f"{m[1]}{sign} (residual {_fmt(st.rms[i], f)} rms, {_ratio_text(st, i)})",
-            declare(m), channel=f.channel, maneuver=f.maneuver, parameters=tuple(f.parameters),
+            _declare(f, m), channel=f.channel, maneuver=f.maneuver, parameters=tuple(f.parameters),
             value=float(val))
-    # the noise floor against the same channel in the other maneuvers (large factors only: a floor
-    # changes with the flight condition by a few times, not by ten)
+    return None
+
+
+def _unit_from_floor(st: _Stats, i: int, opt: DiagnosticOptions) -> Finding | None:
+    """A unit named by the noise floor against the same channel's in the other maneuvers (large
+    factors only: a floor changes with the flight condition by a few times, not by ten)."""
+    f = st.fits[i]
     jump = st.floor_jump[i]
     big = math.log(opt.flow_unit_min_factor)
-    if misfits and np.isfinite(jump) and abs(math.log(jump)) > big:
-        m = _unit_match(jump, opt.floor_jump_tol, f.unit)
-        if m is not None and abs(math.log(m[0])) > big:
-            return Finding(
-                "unit_error", Severity.FAILURE,
-                f"{_where(f)}: its noise floor {_fmt(st.floor[i], f)} is {jump:.3g} x the same channel's "
-                f"median floor over the maneuvers; the channel is probably {m[1]} in this maneuver "
-                f"(residual {_fmt(st.rms[i], f)} rms, {_ratio_text(st, i)})",
-                "fix the unit of this maneuver's data (another recorder or file?) and estimate again",
-                channel=f.channel, maneuver=f.maneuver, parameters=tuple(f.parameters), value=float(jump))
-    # absolute quantities (altitude, airspeed): the mean levels
-    if misfits and absolute and ym != 0 and np.isfinite(zm):
-        lv = zm / ym
-        m = _unit_match(lv, opt.level_tol, f.unit)
-        if m is not None and abs(math.log(abs(lv))) > math.log(1.5):
-            return Finding(
-                "unit_error", Severity.FAILURE,
-                f"{_where(f)}: the measurement's mean level is {lv:.4g} x the model's "
-                f"({_fmt(zm, f)} against {_fmt(ym, f)}); the channel is probably {m[1]}",
-                declare(m),
-                channel=f.channel, maneuver=f.maneuver, parameters=tuple(f.parameters), value=lv)
-        if not (1 / (1 + opt.scale_tol) <= lv <= 1 + opt.scale_tol):
-            return Finding(
-                "scale_error", Severity.FAILURE,
-                f"{_where(f)}: the measurement's mean level is {lv:.3g} x the model's ({_fmt(zm, f)} against "
-                f"{_fmt(ym, f)}), no known unit conversion (residual {_fmt(st.rms[i], f)} rms, "
-                f"{_ratio_text(st, i)})",
-                "check the channel's scale factor, unit and sensor in the problem file and the data",
-                channel=f.channel, maneuver=f.maneuver, parameters=tuple(f.parameters), value=float(lv))
-    if misfits and slope_ok and st.y_sd[i] > opt.slope_min_signal * max(st.floor[i], 0.0):
-        if not (1 / (1 + opt.scale_tol) <= b <= 1 + opt.scale_tol):
-            extra = (" — the measurement hardly follows the model: a stuck, disconnected or wrong sensor?"
-                     if abs(b) < 0.1 else " — its sign is inverted" if abs(b + 1) < 0.1 else "")
-            return Finding(
-                "scale_error", Severity.FAILURE,
-                f"{_where(f)}: the measurement is {b:.3g} x its model output (+- {se:.2g}), "
-                f"no known unit conversion{extra} (residual {_fmt(st.rms[i], f)} rms, {_ratio_text(st, i)})",
-                "check the channel's scale factor, sign and sensor in the problem file and the data; a wrong "
-                "minimum or a fault in another channel drags a fit too: read the other findings",
-                channel=f.channel, maneuver=f.maneuver, parameters=tuple(f.parameters), value=float(b))
+    if not (np.isfinite(jump) and abs(math.log(jump)) > big):
+        return None
+    m = _unit_match(jump, opt.floor_jump_tol, f.unit)
+    if m is None or abs(math.log(m[0])) <= big:
+        return None
+    return Finding(
+        "unit_error", Severity.FAILURE,
+        f"{_where(f)}: its noise floor {_fmt(st.floor[i], f)} is {jump:.3g} x the same channel's "
+        f"median floor over the maneuvers; the channel is probably {m[1]} in this maneuver "
+        f"(residual {_fmt(st.rms[i], f)} rms, {_ratio_text(st, i)})",
+        "fix the unit of this maneuver's data (another recorder or file?) and estimate again",
+        channel=f.channel, maneuver=f.maneuver, parameters=tuple(f.parameters), value=float(jump))
+
+
+def _from_level(st: _Stats, i: int, opt: DiagnosticOptions) -> Finding | None:
+    """An absolute quantity's unit or scale named by its mean level against the model's: one far
+    from zero against its variation (airspeed, altitude), where the model's level is its own."""
+    f = st.fits[i]
+    ym = float(np.mean(f.y)) if f.y.size else np.nan
+    zm = float(np.mean(f.z)) if f.z.size else np.nan
+    if f.flow or not (np.isfinite(ym) and np.isfinite(zm) and ym != 0 and abs(ym) > 10 * np.std(f.y)):
+        return None
+    lv = zm / ym
+    m = _unit_match(lv, opt.level_tol, f.unit)
+    if m is not None and abs(math.log(abs(lv))) > math.log(1.5):
+        return Finding(
+            "unit_error", Severity.FAILURE,
+            f"{_where(f)}: the measurement's mean level is {lv:.4g} x the model's "
+            f"({_fmt(zm, f)} against {_fmt(ym, f)}); the channel is probably {m[1]}",
+            _declare(f, m), channel=f.channel, maneuver=f.maneuver, parameters=tuple(f.parameters), value=lv)
+    if not (1 / (1 + opt.scale_tol) <= lv <= 1 + opt.scale_tol):
+        return Finding(
+            "scale_error", Severity.FAILURE,
+            f"{_where(f)}: the measurement's mean level is {lv:.3g} x the model's ({_fmt(zm, f)} against "
+            f"{_fmt(ym, f)}), no known unit conversion (residual {_fmt(st.rms[i], f)} rms, "
+            f"{_ratio_text(st, i)})",
+            "check the channel's scale factor, unit and sensor in the problem file and the data",
+            channel=f.channel, maneuver=f.maneuver, parameters=tuple(f.parameters), value=float(lv))
     return None
+
+
+def _scale_from_slope(st: _Stats, i: int, opt: DiagnosticOptions) -> Finding | None:
+    """A misfitting channel that is a multiple of its model output (no unit conversion), where the
+    model output moves enough to tell."""
+    f = st.fits[i]
+    b, se = st.slope[i], st.slope_se[i]
+    if not st.y_sd[i] > opt.slope_min_signal * max(st.floor[i], 0.0) or (
+            1 / (1 + opt.scale_tol) <= b <= 1 + opt.scale_tol):
+        return None
+    extra = (" — the measurement hardly follows the model: a stuck, disconnected or wrong sensor?"
+             if abs(b) < 0.1 else " — its sign is inverted" if abs(b + 1) < 0.1 else "")
+    return Finding(
+        "scale_error", Severity.FAILURE,
+        f"{_where(f)}: the measurement is {b:.3g} x its model output (+- {se:.2g}), "
+        f"no known unit conversion{extra} (residual {_fmt(st.rms[i], f)} rms, {_ratio_text(st, i)})",
+        "check the channel's scale factor, sign and sensor in the problem file and the data; a wrong "
+        "minimum or a fault in another channel drags a fit too: read the other findings",
+        channel=f.channel, maneuver=f.maneuver, parameters=tuple(f.parameters), value=float(b))
 
 
 def _ratio_text(st: _Stats, i: int) -> str:
@@ -1323,7 +1355,7 @@ def _local_span(st: _Stats, i: int, opt: DiagnosticOptions, threshold: float
 def _unit_slug(f: ChannelFit) -> str:
     """The display unit as a name suffix of a finding's numbers (``deg``, ``m``, ``mps``)."""
     u = (f.display_unit or f.unit or "").strip().lower()
-    return {"m/s": "mps", "m/s^2": "mps2", "deg/s": "deg_s", "": "si"}.get(u, re.sub(r"\W+", "", u) or "si")
+    return {"m/s": "mps", "m/s^2": "mps2", "deg/s": "degps", "": "si"}.get(u, re.sub(r"\W+", "", u) or "si")
 
 
 def _numbers(st: _Stats, i: int) -> dict[str, float]:
@@ -1399,29 +1431,31 @@ def _ratio_finding(st: _Stats, i: int, opt: DiagnosticOptions, code: str, sev: S
 
 
 def _flow_residual_finding(st: _Stats, i: int, opt: DiagnosticOptions, acc: _Accuracy | None) -> Finding:
-    """A flow channel above its floor ("noise_floor"), judged by its effect on the channel's accuracy
-    as Table 2 measures it: a NOTE where the channel meets its desired accuracy over the estimation
-    (3 sigma pooled over its maneuvers, below the usable alpha range for a ``low_alpha_only`` channel)
-    or in this maneuver; a WARNING where neither holds, or no accuracy is stated to judge it by."""
+    """A flow channel above its floor ("noise_floor"), judged by its effect on the channel's accuracy:
+    a NOTE where the scatter of its residual (the part of Table 2 the residual shows; the workflow's
+    Table 2 adds the calibration's own uncertainty and says a miss itself, ``accuracy_miss``) meets
+    its desired accuracy over the estimation (pooled over its maneuvers, below the usable alpha range
+    for a ``low_alpha_only`` channel) or in this maneuver; a WARNING where neither holds, or no
+    accuracy is stated to judge it by."""
     f = st.fits[i]
     g = _ratio_finding(st, i, opt, "noise_floor", Severity.WARNING)
     if acc is None or f.desired_3sigma is None:
         return g
     k, unit, des = f.display_scale, f.display_unit, float(f.desired_3sigma)
     own = 3.0 * float(st.rms[i])
-    nums = {**g.numbers, "three_sigma_deg": own * k, "desired_deg": des * k, "pooled_three_sigma_deg":
-            acc.pooled * k}
+    nums = {**g.numbers, "scatter_three_sigma_deg": own * k, "desired_deg": des * k,
+            "pooled_scatter_three_sigma_deg": acc.pooled * k}
     where = ""
     if acc.limit_deg is not None:
         own = acc.below.get(i, math.nan)
-        nums.update(usable_alpha_deg=acc.limit_deg, three_sigma_below_deg=own * k)
+        nums.update(usable_alpha_deg=acc.limit_deg, scatter_three_sigma_below_deg=own * k)
         if math.isfinite(acc.alpha_from_deg.get(i, math.nan)):
             nums["alpha_from_deg"] = acc.alpha_from_deg[i]
         where = f" below alpha {acc.limit_deg:.0f} deg (its usable range, paper Fig. 7)"
     ok_here = math.isfinite(own) and own <= des
     ok_all = math.isfinite(acc.pooled) and acc.pooled <= des
-    said = (f"; 3 sigma{where} {own * k:.2g} {unit} in this maneuver, {acc.pooled * k:.2g} {unit} over the "
-            f"estimation's maneuvers, against its desired {des * k:.2g} {unit}")
+    said = (f"; 3 sigma of its residual{where} {own * k:.2g} {unit} in this maneuver, {acc.pooled * k:.2g} "
+            f"{unit} over the estimation's maneuvers, against its desired {des * k:.2g} {unit}")
     if ok_here or ok_all:
         return replace(g, severity=Severity.NOTE, advice="", message=g.message + said
                        + ": the channel meets its accuracy", numbers=nums)
@@ -1452,8 +1486,8 @@ def _outlier_finding(st: _Stats, i: int, t: np.ndarray, opt: DiagnosticOptions) 
     e_all = f.z - f.y
     e = e_all[pos]
     j = int(np.argmax(np.abs(e)))
-    total = float(np.sum(e_all * e_all))
-    share = float(np.sum(e * e) / total) if total > 0 else 1.0
+    total = float(np.nansum(e_all * e_all))
+    share = float(np.nansum(e * e) / total) if total > 0 else 1.0
     largest = float(abs(e[j]))
     matters = share > opt.outlier_warn_share or (f.desired_3sigma is not None and largest > f.desired_3sigma)
     times = ", ".join(f"{v:.3f}" for v in t[:6]) + (" ..." if t.size > 6 else "")

@@ -33,7 +33,8 @@ __all__ = ["FindingGroup", "group_findings", "groups_frame", "verdict_text"]
 #: information; the whole of each is in finding_groups.csv and the report's findings table)
 NOTE_CHARS = 240
 #: The display unit a number's name ends in (``rms_deg``, ``rms_mps``) and how it is written.
-_UNITS = {"deg": "deg", "m": "m", "mps": "m/s", "ms": "ms", "s": "s", "pa": "Pa", "mps2": "m/s^2"}
+_UNITS = {"deg": "deg", "m": "m", "mps": "m/s", "ms": "ms", "s": "s", "pa": "Pa", "mps2": "m/s^2",
+          "degps": "deg/s"}
 
 
 @dataclass(frozen=True)
@@ -110,8 +111,9 @@ def group_findings(findings: Iterable[Finding],
         sev = members[0].severity
         if any(f.severity != sev for f in members):  # the severe ones said apart, with where
             severe = [f for f in members if f.severity == sev]
-            head += (f" [{sev.name.lower()}: {len(severe)} of them, "
-                     f"{_names(severe)}; the others are notes]" if sev > Severity.NOTE else "")
+            lower = sorted({f.severity for f in members if f.severity != sev}, reverse=True)
+            rest = ", ".join(f"{sum(f.severity == s for f in members)} {s.name.lower()}(s)" for s in lower)
+            head += f" [{sev.name.lower()}: {len(severe)} of them, {_names(severe)}; the others: {rest}]"
         out.append(FindingGroup(code, sev, stage, channel, tuple(members), head, members[0].advice, n))
     return tuple(sorted(out, key=_sort_key))
 
@@ -183,14 +185,15 @@ def _residual(members: Sequence[Finding], n: int | None) -> str:
         parts.append(f"lag-1 autocorrelation {_span(_numbers(members, 'rho1'), '.2f')}")
     head = f"{worst.channel}: " + ", ".join(parts) + f" {_count(members, n)}"
     head += f"; the largest in {worst.maneuver}{_at(worst)}" if len(members) > 1 else _at(worst)
-    pooled = _numbers(members, "pooled_three_sigma_deg")
+    pooled = _numbers(members, "pooled_scatter_three_sigma_deg")
     if pooled:
         des = members[0].numbers.get("desired_deg", float("nan"))
         lim = members[0].numbers.get("usable_alpha_deg")
-        own = _numbers(members, "three_sigma_below_deg" if lim is not None else "three_sigma_deg")
+        own = _numbers(members, "scatter_three_sigma_below_deg" if lim is not None
+                       else "scatter_three_sigma_deg")
         below = f" below alpha {lim:.0f} deg (its usable range, paper Fig. 7)" if lim is not None else ""
-        head += (f"; 3 sigma{below} {_span(own, '.2g')} deg per maneuver, {_span(pooled, '.2g')} deg "
-                 f"over all, against its desired {des:.2g} deg")
+        head += (f"; 3 sigma of the residual{below} {_span(own, '.2g')} deg per maneuver, "
+                 f"{_span(pooled, '.2g')} deg over all, against its desired {des:.2g} deg")
         beyond = _numbers(members, "alpha_from_deg")
         if lim is not None and beyond:
             head += f"; the excess above alpha {_span(beyond, '.0f')} deg"

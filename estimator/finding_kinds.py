@@ -89,6 +89,7 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
          "the maneuver or over the estimation (below its usable alpha range for a low-alpha-only channel, "
          "paper Fig. 7); WARNING beyond it, or with no stated accuracy; FAILURE beyond it with the "
          "channel's own calibration parameters on a bound (the model cannot represent the sensor)"),
+    Kind("accuracy_miss", "WARNING", _W, "a Table 2 cell beyond its desired accuracy"),
     Kind("coloured", "NOTE", _D, "a slow, coloured residual: Cramér-Rao deviations optimistic",
          "NOTE: the honest (coloured-residual) deviations take it in"),
     Kind("no_floor", "NOTE", _D, "too few samples to judge a channel's residual"),
@@ -115,8 +116,8 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
     Kind("delay_weak_instrument", "NOTE", _F, "filter error: a delay's instrument is weak: widened",
          "NOTE: its honest deviation is widened to what the instrument supports", by_channel=False),
     Kind("gust_answer", "rule", _F, "filter error: innovations correlate with the IMU's answer to gusts",
-         "NOTE where the feedback check widens the delays it biases (the honest deviations take it in); "
-         "WARNING without the honest deviations", by_channel=False),
+         "NOTE where the feedback check widened every delay it names (the honest deviations take it "
+         "in); WARNING otherwise (a delay not judged, no honest deviations)", by_channel=False),
     Kind("filter_error_partial", "NOTE", _F, "filter error: what its deviations do not cover",
          "NOTE: said on every filter-error estimation (a property of the method, not of the flight; "
          "Table 2 carries the sideslip offsets' honest uncertainty)", by_channel=False),
@@ -129,6 +130,8 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
          by_channel=False),
     Kind("imu_noise", "NOTE", _U, "the IMU noise's share of the honest deviations", by_channel=False),
     Kind("excluded", "NOTE", _S, "outlier samples the robust option left out of the fit"),
+    Kind("crawled", "NOTE", _S,
+         "converged at the iteration limit, within a tenth of a deviation of the minimum", by_channel=False),
     Kind("starts", "NOTE", _S, "several starts were tried; the best kept", by_channel=False),
     Kind("start", "NOTE", _S, "how the start and the estimation went (staged start, screens)",
          by_channel=False),

@@ -28,6 +28,10 @@ if TYPE_CHECKING:  # annotations only: estimator.problem builds on this module
 SCOPES = ("global", "aircraft", "configuration", "recorder", "maneuver")
 #: What a parameter is, for reports and for the identifiability checks.
 KINDS = ("initial_condition", "imu_bias", "time_delay", "bias", "scale", "table", "other")
+#: The kinds that describe a maneuver's flight (its state equations), not the calibration: a
+#: parameter of any other kind is a calibration parameter (Table 2's calibration uncertainty, the
+#: filter-error method's unsettled estimates)
+FLIGHT_KINDS = frozenset({"initial_condition", "imu_bias"})
 
 
 @dataclass(frozen=True)

@@ -46,6 +46,7 @@ states :mod:`estimator.identifiability`, the deviations :mod:`estimator.uncertai
 from __future__ import annotations
 
 import math
+import re
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
@@ -68,6 +69,7 @@ from estimator.io.modelset import declarations_of
 from estimator.iteration import OutputErrorLikelihood, _evaluate, _gauss_newton, _Iterated, _staged_start
 from estimator.model import Evaluation, Model, ModelEvaluationError
 from estimator.normal_equations import Structure, build_normal, channel_variances, ml_cost, residual_sums
+from estimator.parameters import FLIGHT_KINDS
 from estimator.problem import SENSOR_SIGNALS, STATE_PARAMS, Problem
 from estimator.result import EstimationResult, ResidualStats
 from estimator.uncertainty import _deviations, _imu_noise_note, _imu_noise_unknown
@@ -587,11 +589,15 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
     # the filter-error method's honest deviations: the coloured innovations' and the IMU noise
     dev = _deviations(model, theta, N, st, R, cov_G, cov_L, unident,
                       replace(opt, colored=False) if filter_error else opt)
+    widened: set[str] = set()
     if filter_error and opt.colored:
         dev = lik.honest_deviations(st, evals, noise, N, dev, opt, theta)
-        # the feedback check widens the delays the aircraft's answer to the gusts biases: what the
-        # answer's findings say is then in the honest deviations, information (a NOTE)
-        wind_findings = [replace(f, severity=Severity.NOTE) if f.code == "gust_answer" else f
+        # the feedback check widens the delays the aircraft's answer to the gusts biases: where it
+        # widened every delay an answer finding names, what it says is in the honest deviations,
+        # information (a NOTE); a delay it could not judge keeps the warning
+        widened = {keys[f.parameter] for f in dev.feedback if math.isfinite(f.std_after_s)}
+        wind_findings = [replace(f, severity=Severity.NOTE)
+                         if f.code == "gust_answer" and f.parameters and set(f.parameters) <= widened else f
                          for f in wind_findings]
         wind_findings = wind_findings + feedback_findings(lik.model.problem.parameters.parameters,
                                                           dev.feedback)
@@ -613,7 +619,7 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
                                np.where(np.isfinite(dev.std_colored), dev.std_colored, dev.std_crb))
                 + wind_findings + _unsettled(refresh_move, dev.std_crb, problem, dev.std_colored)
                 + _not_invertible(problem, evals, st))
-    findings = _widened_said(findings)
+    findings = _widened_said(findings, widened)
     diagnosis_table, outliers = None, {}
     if opt.diagnose:
         # the filter-error method's measurements against its one-step predictions: the innovations
@@ -713,12 +719,11 @@ def _near_bounds(problem: Problem, theta: np.ndarray, st: Structure, state: list
     return out
 
 
-def _widened_said(findings: list[Finding]) -> list[Finding]:
+def _widened_said(findings: list[Finding], widened: set[str]) -> list[Finding]:
     """A delay near its bound whose honest deviation the filter-error method's feedback check widened
-    (``delay_feedback``, ``delay_weak_instrument``) is said by that note: its near-bound finding
-    becomes a note too (the demo's turbulent block: the airspeed delay 291 ms, widened to 5.2 s)."""
-    widened = {k for f in findings if f.code in ("delay_feedback", "delay_weak_instrument")
-               for k in f.parameters}
+    (``widened``: their keys; said by ``delay_feedback`` or ``delay_weak_instrument``) is said by
+    that note: its near-bound finding becomes a note too (the demo's turbulent block: the airspeed
+    delay 291 ms, widened to 5.2 s). A delay the check could not judge keeps its warning."""
     return [replace(f, severity=Severity.NOTE, advice="",
                     message=f"{f.message}; its honest deviation is the feedback check's widened one "
                     "(delay_feedback, delay_weak_instrument)")
@@ -748,8 +753,7 @@ def _unsettled(move: np.ndarray | None, std: np.ndarray, problem: Problem,
     # the estimate's users must know; within it, the move is covered
     with np.errstate(invalid="ignore", divide="ignore"):
         zh = z if std_honest is None else np.abs(move) / np.where(np.isfinite(std_honest), std_honest, std)
-    calibration = [i for i in np.flatnonzero(np.nan_to_num(zh) > 1.0)
-                   if ps[i].kind not in ("initial_condition", "imu_bias")]
+    calibration = [i for i in np.flatnonzero(np.nan_to_num(zh) > 1.0) if ps[i].kind not in FLIGHT_KINDS]
     named = ", ".join(f"{keys[i]} {zh[i]:.1f}" for i in sorted(calibration, key=lambda i: -zh[i])[:6])
     what = (f"; calibration parameters beyond their honest deviations: {named} of them" if calibration else
             "; the calibration parameters move within their honest deviations, the rest are the "
@@ -770,6 +774,13 @@ def _iteration_findings(it: _Iterated, stage_notes: list[str]) -> list[Finding]:
     """Findings of the start stages and the iterations: the start's notes, a poor quadratic model
     at the estimate, no convergence."""
     findings = [Finding("start", Severity.NOTE, "; ".join(stage_notes))] if stage_notes else []
+    if it.status.converged and "at the iteration limit" in it.message:
+        # accepted at the limit within a tenth of a deviation of the minimum (estimator.iteration)
+        findings.append(Finding(
+            "crawled", Severity.NOTE,
+            f"{it.message}: the iterations crawled along a weakly determined direction; the estimate "
+            "is taken, as the step left is small against every deviation",
+            value=float(it.step_sigma) if np.isfinite(it.step_sigma) else None))
     if it.poor:
         findings.append(Finding(
             "poor_model", Severity.WARNING,
@@ -817,14 +828,18 @@ def _diagnosed(problem: Problem, evals: Evaluation, st: Structure, state: list[s
 def _beyond_usable_alpha(problem: Problem, usable_alpha_deg: Mapping[str, float]) -> dict[str, str]:
     """Table values beyond the usable alpha range of the channels that use them: key -> the channel.
 
-    A table entered only by ``low_alpha_only`` channels (the nose probe's sideslip gain) whose node
-    lies at or above the usable angle of attack the diagnostics found for them is not part of the
-    calibration the workflow's Table 2 vouches for (paper Fig. 7: the nose probe is not modelled
-    there), so a bound it sits on is information."""
+    A table of the angle of attack entered only by ``low_alpha_only`` channels (the nose probe's
+    sideslip gain) whose node and the node below it lie at or above the usable angle of attack the
+    diagnostics found for them (a node shapes the table from the one below) is not part of the
+    calibration Table 2 vouches for (paper Fig. 7: the nose probe is not modelled there), so a
+    bound it sits on is information."""
     users: dict[str, set[str]] = {}
     for ch in problem.channels:
         for t in ch.expression.tables:
-            users.setdefault(t, set()).add(ch.name)
+            # only a table of the angle of attack: the usable range is one of alpha
+            arg = re.search(rf"\b{re.escape(t)}\(\s*([A-Za-z_]\w*)", ch.model)
+            if arg is not None and arg.group(1).startswith("alpha"):
+                users.setdefault(t, set()).add(ch.name)
     out = {}
     for p in problem.parameters.parameters:
         if p.kind != "table" or p.name not in users:
@@ -835,7 +850,9 @@ def _beyond_usable_alpha(problem: Problem, usable_alpha_deg: Mapping[str, float]
         spec = problem.parameters.specs[p.name]
         node = -1 if p.element is None else int(p.element)
         bps = np.asarray(spec.breakpoints, dtype=float)
-        if 0 <= node < bps.size and math.degrees(bps[node]) >= min(usable_alpha_deg[c] for c in chans):
+        # a piecewise-linear table's node shapes it from the node below: beyond the usable range
+        # only where that one already is
+        if 0 < node < bps.size and math.degrees(bps[node - 1]) >= min(usable_alpha_deg[c] for c in chans):
             out[p.key] = sorted(chans)[0]
     return out
 
@@ -890,7 +907,9 @@ def _beside_bounds(f: Finding, on_bound: dict[str, list[str]],
     if f.code == "misfit" and state and f.severity < Severity.FAILURE:
         # not the slow errors of real data: the state equations could not follow the data
         f = replace(f, severity=Severity.FAILURE, message=f.message.split(": slow, coloured errors")[0]
-                    + ": the fit does not explain this kinematic channel, whose model is exact kinematics")
+                    + ": the fit does not explain this kinematic channel, whose model is exact kinematics",
+                    advice="read the other findings first (a data fault drags the fit); otherwise start from "
+                    "better values (IMU biases, initial conditions) and check this channel's data")
     names = ", ".join(hit)
     return replace(
         f, message=f"{f.message}; or the bound{'s' if len(hit) > 1 else ''} of {names}, where "

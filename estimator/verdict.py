@@ -159,8 +159,11 @@ class Finding:
         object.__setattr__(self, "severity", Severity(self.severity))
         object.__setattr__(self, "t_s", tuple(float(t) for t in self.t_s))
         object.__setattr__(self, "parameters", tuple(self.parameters))
+        # a number that is not finite (not computed) says nothing: left out, so that a finding read
+        # back from JSON equals the one written
         object.__setattr__(self, "numbers", MappingProxyType({str(k): float(v) for k, v in
-                                                              dict(self.numbers).items()}))
+                                                              dict(self.numbers).items()
+                                                              if math.isfinite(float(v))}))
 
     def __hash__(self) -> int:  # the numbers' mapping is not hashable itself
         return hash((self.code, self.severity, self.message, self.channel, self.maneuver, self.stage))
@@ -176,18 +179,17 @@ class Finding:
                 "channel": self.channel, "maneuver": self.maneuver, "t_s": list(self.t_s),
                 "parameters": list(self.parameters), "value": self.value, "message": self.message,
                 "advice": self.advice,
-                "numbers": {k: (v if math.isfinite(v) else None) for k, v in self.numbers.items()}}
+                "numbers": dict(self.numbers)}
 
     @classmethod
     def from_dict(cls, d: dict) -> Finding:
         """The finding :meth:`to_dict` gave (severity by name, ``INFO`` read as NOTE; a ``null``
-        value is None, a ``null`` number NaN)."""
+        value is None)."""
         return cls(code=d["code"], severity=Severity[d["severity"]], message=d["message"],
                    advice=d.get("advice", ""), channel=d.get("channel"), maneuver=d.get("maneuver"),
                    t_s=tuple(d.get("t_s", ())), parameters=tuple(d.get("parameters", ())),
                    value=None if d.get("value") is None else float(d["value"]), stage=d.get("stage"),
-                   numbers={k: (math.nan if v is None else float(v))
-                            for k, v in (d.get("numbers") or {}).items()})
+                   numbers={k: float(v) for k, v in (d.get("numbers") or {}).items() if v is not None})
 
 
 def judge(status: Status, findings: Iterable[Finding]) -> Verdict:

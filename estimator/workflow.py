@@ -73,10 +73,11 @@ import pandas as pd
 from estimator.accuracy import alpha_limit, calibration_variance, three_sigma
 from estimator.filter_error import wind_responses
 from estimator.finding_groups import FindingGroup, group_findings
+from estimator.finding_kinds import kind_of
 from estimator.io import subproblem
 from estimator.io.modelset import Declarations, Requirement, declarations_of
 from estimator.model import Model
-from estimator.parameters import family_of, make_key
+from estimator.parameters import FLIGHT_KINDS, family_of, make_key
 from estimator.problem import STATE_PARAMS, Problem, ReadOnlyMapping
 from estimator.result import EstimationResult, ReadOnlyTable, _json_clean
 from estimator.solver import SolverOptions, estimate
@@ -89,8 +90,9 @@ JSON_FORMAT = "fpr-workflow-result/1"
 
 
 __all__ = [
-    "ChannelResiduals", "Requirement", "Stage", "WorkflowOptions", "WorkflowResult", "alpha_limit",
-    "apportion", "apportion_biases", "assign_bins", "hold_unexcited", "no_bins_message", "run_workflow",
+    "ChannelResiduals", "Requirement", "Stage", "WorkflowOptions", "WorkflowResult", "accuracy_misses",
+    "accuracy_table", "alpha_limit", "apportion", "apportion_biases", "assign_bins", "hold_unexcited",
+    "no_bins_message", "run_workflow",
     "calibration_deviations", "stage_residuals", "three_sigma", "vane_biases",
 ]
 
@@ -357,23 +359,30 @@ class WorkflowResult:
         groups = group_findings(self.findings, n)
         later = {_stage_label(a): _stage_label(b) for a in self.first for b in self.final
                  if (a.mach, a.gear_down) == (b.mach, b.gear_down)}
-        said = {(g.stage, g.code, g.channel, g.severity): g for g in groups}
+
+        def what(g: FindingGroup) -> tuple:
+            # the same thing: kind, channel and severity, and for a kind about parameters the same
+            # parameters (b_l on its bound is not tau_bu on its bound)
+            params = (None if kind_of(g.code).by_channel
+                      else frozenset(p for m in g.members for p in m.parameters))
+            return g.code, g.channel, g.severity, params
+
+        said = {(g.stage, *what(g)): g for g in groups}
         kept = []
         for g in groups:
-            if g.stage in later and (later[g.stage], g.code, g.channel, g.severity) in said:
+            if g.stage in later and (later[g.stage], *what(g)) in said:
                 continue
-            firsts = [said[k] for s, t in later.items()
-                      if t == g.stage and (k := (s, g.code, g.channel, g.severity)) in said]
+            firsts = [said[k] for s, t in later.items() if t == g.stage and (k := (s, *what(g))) in said]
             if firsts:
                 g = replace(g, members=g.members + firsts[0].members,
                             headline=g.headline + " (in both of the bin's estimations)")
             kept.append(g)
         alike: dict[tuple, list[FindingGroup]] = {}
         for g in kept:
-            alike.setdefault((g.code, g.channel, g.severity), []).append(g)
+            alike.setdefault(what(g), []).append(g)
         out = []
         for g in kept:
-            same = alike[(g.code, g.channel, g.severity)]
+            same = alike[what(g)]
             if len(same) == 1:
                 out.append(g)
             elif g is same[0]:  # said where the first of them is, headed by the worst
@@ -661,6 +670,32 @@ def _stage_failed(st: Stage, left_out_of: str) -> Finding:
         "read its findings, mend the data or the problem and run the workflow again")
 
 
+def accuracy_misses(accuracy: pd.DataFrame, stages: Sequence[Stage]) -> list[Finding]:
+    """A WARNING for each Table 2 cell beyond its desired accuracy (``accuracy``: :func:`accuracy_table`;
+    ``stages``: those it was computed from, for each cell's estimation): the sensor does not meet its
+    requirement there, whatever else the findings say (a residual within its floor can still miss it,
+    a noisy sensor or the calibration's own uncertainty)."""
+    label = {(st.mach, st.gear_down): _stage_label(st) for st in stages}
+    out = []
+    for r in accuracy.itertuples():
+        if r.passed:
+            continue
+        cal = getattr(r, "calibration_sd_deg", float("nan"))
+        scatter = getattr(r, "scatter_three_sigma_deg", r.three_sigma_deg)
+        out.append(Finding(
+            "accuracy_miss", Severity.WARNING,
+            f"Table 2: {r.sensor} ({r.channel}) misses its desired accuracy at Mach {r.mach:.2f} gear "
+            f"{r.gear}: 3 sigma {r.three_sigma_deg:.3g} deg against {r.desired_deg:.3g} deg (the residual's "
+            f"scatter {scatter:.3g} deg, the calibration's own deviation {cal:.2g} deg; {r.n} samples"
+            + (f", {r.note}" if r.note else "") + ")",
+            "read the channel's findings (a model that cannot follow the data, outliers, air motion); more "
+            "or cleaner maneuvers in that range, or a model term the set lacks, may bring it within",
+            channel=r.channel, stage=label.get((r.mach, r.gear == "down")),
+            value=float(r.three_sigma_deg),
+            numbers={"three_sigma_deg": float(r.three_sigma_deg), "desired_deg": float(r.desired_deg)}))
+    return out
+
+
 #: Findings about parameters (not the data): a later estimation that estimates them again says its own
 _PARAMETER_KINDS = frozenset({"on_bound", "near_bound", "correlated", "unidentifiable", "confounded",
                               "crosswind_confounded", "poor_model", "unsettled"})
@@ -840,8 +875,9 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
         if not st.result.success:
             findings.append(_stage_failed(st, "Table 2 and the gear-down correction tables"))
     # ---- step 6: from the estimations that succeeded only
-    acc, growth, limit = _accuracy(tuple(final_ok), tuple(st for st in gear if st.result.success), opt,
-                                   decl)
+    usable_gear = tuple(st for st in gear if st.result.success)
+    acc, growth, limit = accuracy_table(tuple(final_ok), usable_gear, opt, decl)
+    findings += accuracy_misses(acc, (*final_ok, *usable_gear))
     vb = pd.DataFrame(vb_rows)
     redone = {(st.mach, st.gear_down) for st in final}
     firsts = [replace(f, **_superseded(f, set(families.values())))
@@ -958,7 +994,6 @@ def stage_residuals(stage: Stage | tuple[Problem, EstimationResult], calibration
 #: Parameter kinds that are not a channel's calibration: the state equations' initial conditions
 #: (and a model set's per-maneuver steady wind, of that kind) and the IMU biases describe the
 #: maneuver's flight, which the residual sees, not the sensor's correction
-_NOT_CALIBRATION = frozenset({"initial_condition", "imu_bias"})
 
 
 def calibration_deviations(problem: Problem, result: EstimationResult, model: Model | None = None
@@ -998,7 +1033,7 @@ def calibration_deviations(problem: Problem, result: EstimationResult, model: Mo
     model = Model(problem) if model is None else model
     ps = result.parameters
     est = np.asarray(result.free_estimated if result.free_estimated is not None else ps.free_mask, dtype=bool)
-    calib = est & np.array([p.kind not in _NOT_CALIBRATION for p in ps.parameters], dtype=bool)
+    calib = est & np.array([p.kind not in FLIGHT_KINDS for p in ps.parameters], dtype=bool)
     keys = ps.keys
     n0 = len(STATE_PARAMS)  # the state-equation slots come first in every channel's slot space
     out: dict[str, tuple[np.ndarray, str]] = {}
@@ -1045,7 +1080,7 @@ def _calibration_var_deg2(r: ChannelResiduals) -> np.ndarray:
     return np.zeros(r.e.size) if r.calibration_sd is None else np.square(r.calibration_sd * RAD2DEG)
 
 
-def _accuracy(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOptions, decl: Declarations):
+def accuracy_table(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOptions, decl: Declarations):
     """Table 2 (module docstring, step 6): per sensor and stage, 3 sigma of the calibrated channel,
     ``3 sqrt(mean(e^2) + mean(s_cal^2))``, and the usable alpha range of the alpha-limit channel
     judged on the same 3 sigma per alpha band."""

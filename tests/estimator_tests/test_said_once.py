@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_diagnostics import D2R, clean_maneuver, inputs
+from test_diagnostics import D2R, clean_maneuver, fit, inputs
 
 from estimator.diagnostics import ChannelFit, DiagnosticOptions, diagnose
 from estimator.finding_groups import group_findings, verdict_text
@@ -95,7 +95,7 @@ def test_a_group_has_its_worst_members_severity_and_names_them():
     findings = [_residual("m01", 3.0), _residual("m02", 5.0, Severity.WARNING), _residual("m03", 4.0)]
     (g,) = group_findings(findings, 10)
     assert g.severity == Severity.WARNING and g.members[0].maneuver == "m02"
-    assert "[warning: 1 of them, m02; the others are notes]" in g.headline, g.headline
+    assert "[warning: 1 of them, m02; the others: 2 note(s)]" in g.headline, g.headline
 
 
 def test_kinds_about_parameters_are_one_group_over_their_parameters():
@@ -162,8 +162,8 @@ def test_a_flow_residual_is_judged_against_its_desired_accuracy(desired_deg, sev
     (f,) = [x for x in d.findings if x.channel == "alpha_zl"]
     assert f.code == "noise_floor" and f.severity == severity, f.text()
     if desired_deg is not None:
-        assert f.numbers["desired_deg"] == pytest.approx(desired_deg)
-        assert f.numbers["three_sigma_deg"] == pytest.approx(0.45, rel=0.05), "3 x rms, 3 x 0.15 deg"
+        assert f.numbers["desired_deg"] == pytest.approx(desired_deg), "the requirement said as given"
+        assert f.numbers["scatter_three_sigma_deg"] == pytest.approx(0.45, rel=0.05), "3 x rms, 3 x 0.15 deg"
 
 
 def test_a_low_alpha_channel_beyond_its_usable_range_is_a_note():
@@ -187,8 +187,10 @@ def test_a_low_alpha_channel_beyond_its_usable_range_is_a_note():
     d = diagnose([f], [m], DiagnosticOptions(min_band_samples=100))
     (g,) = [x for x in d.findings if x.code == "noise_floor"]
     assert g.severity == Severity.NOTE and "usable range" in g.message, g.text()
-    assert g.numbers["usable_alpha_deg"] == pytest.approx(12.0)
-    assert g.numbers["three_sigma_below_deg"] < 0.5 < g.numbers["three_sigma_deg"]
+    assert g.numbers["usable_alpha_deg"] == pytest.approx(12.0), (
+        "the error grows above 12 deg: the last 2-deg band that passes ends there")
+    assert g.numbers["scatter_three_sigma_below_deg"] < 0.5 < g.numbers["scatter_three_sigma_deg"], (
+        "the excess lies above the usable range: within the accuracy below it, beyond it over all")
 
 
 @pytest.mark.parametrize("spike_deg, severity", [(30.0, Severity.WARNING), (0.6, Severity.NOTE)])
@@ -228,3 +230,18 @@ def test_a_kinematic_misfit_fails_only_where_it_is_gross(channel, unit, scale, a
     assert (g.code, g.severity) == ("misfit", severity), g.text()
     if severity == Severity.NOTE:
         assert "real recorded data" in g.message and not g.advice
+
+
+def test_a_kinematic_channel_recorded_with_its_sign_inverted_is_named():
+    """The bank angle written with the wrong sign in every maneuver: its slope on the model output is
+    -1 in each, the channel's median too (a unit or scale mistake is the channel's): named as a
+    scale error whose sign is inverted, not as a misfit only."""
+    rng = np.random.default_rng(8)
+    fits = []
+    for man in ("m0", "m1", "m2"):
+        for f in clean_maneuver(man, rng):
+            fits.append(fit(man, f.channel, f.t_s, f.y, -f.z) if f.channel == "phi" else f)
+    d = diagnose(fits)
+    named = [x for x in d.findings if x.channel == "phi" and x.code == "scale_error"]
+    assert len(named) == 3 and all("sign is inverted" in x.message for x in named), [
+        x.text() for x in d.findings if x.channel == "phi"]

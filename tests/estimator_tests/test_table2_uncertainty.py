@@ -1,7 +1,7 @@
 """Table 2 as the calibrated channel's accuracy: the residual's scatter and the calibration's own
 uncertainty, ``3 sqrt(mean(e^2) + mean(s_cal^2))``, ``s_cal^2 = J_c C J_c^T``
 (estimator.accuracy.calibration_variance, estimator.workflow.calibration_deviations, Table 2 in
-estimator.workflow._accuracy).
+estimator.workflow.accuracy_table).
 
 The flight is :class:`campaigns.analytic_flight.Flight`'s two-maneuver light-turbulence flight of
 ``test_filter_error_table2.py`` (the same draws), estimated once by the filter-error method; the
@@ -22,12 +22,13 @@ from campaigns.analytic_flight import NOISE_SIGMA, Flight, truth_values
 from estimator.accuracy import calibration_variance, three_sigma
 from estimator.io.modelset import declarations_of, load_model_set
 from estimator.model import Model
+from estimator.parameters import FLIGHT_KINDS
 from estimator.solver import SolverOptions, estimate
 from estimator.workflow import (
     RAD2DEG,
     Stage,
     WorkflowOptions,
-    _accuracy,
+    accuracy_table,
     calibration_deviations,
     stage_residuals,
 )
@@ -37,7 +38,7 @@ from estimator.workflow import (
 SIGMA_MPS, L_M = 1.0, 533.4
 FLOW = ("alpha_zl", "alpha_zr", "alpha_zsp", "beta_zsp", "beta_znp")
 #: the parameter kinds that are not a channel's calibration (the flight's, which the residual sees)
-NOT_CALIBRATION = ("initial_condition", "imu_bias")
+NOT_CALIBRATION = tuple(FLIGHT_KINDS)
 
 
 @pytest.fixture(scope="module")
@@ -128,19 +129,20 @@ def test_a_bias_only_channel_adds_the_bias_variance(turbulent):
             only[i] = False
     bias = replace(res, free_estimated=only)
     var_b = float(bias.covariance(["b_l[AC1]"], colored=True)[0, 0])
-    assert var_b > 0.0
+    assert var_b > 0.0, "the bias is estimated: it has an honest variance"
     s, source = calibration_deviations(prob, bias)["alpha_zl"]
     assert source == "honest"
     np.testing.assert_array_equal(s, np.full(s.size, np.sqrt(var_b)),
                                   err_msg="1 * var(b) * 1 is var(b) in floating point too")
     stage = Stage("installation biases fixed", 0.6, False, prob, bias)
-    t2, _, _ = _accuracy((stage,), (), WorkflowOptions(), declarations_of(prob))
+    t2, _, _ = accuracy_table((stage,), (), WorkflowOptions(), declarations_of(prob))
     row = t2.set_index("channel").loc["alpha_zl"]
     e = stage.residuals["alpha_zl"].e * RAD2DEG
     assert row["three_sigma_deg"] == pytest.approx(3.0 * np.sqrt(np.mean(e ** 2) + var_b * RAD2DEG ** 2),
                                                    rel=1e-14), "the mean of n equal variances: round-off"
-    assert row["calibration_sd_deg"] == pytest.approx(np.sqrt(var_b) * RAD2DEG, rel=1e-14)
-    assert row["scatter_three_sigma_deg"] == three_sigma(e)
+    sd_deg = np.sqrt(var_b) * RAD2DEG
+    assert row["calibration_sd_deg"] == pytest.approx(sd_deg, rel=1e-14), "sqrt(var b), deg"
+    assert row["scatter_three_sigma_deg"] == three_sigma(e), "the scatter is the old Table 2, to the bit"
 
 
 def test_no_calibration_uncertainty_gives_the_scatter_to_the_bit(turbulent):
@@ -151,7 +153,7 @@ def test_no_calibration_uncertainty_gives_the_scatter_to_the_bit(turbulent):
     prob, res, _ = turbulent
     held = replace(res, free_estimated=res.free_estimated & ~_calibration_mask(res))
     stage = Stage("installation biases fixed", 0.6, False, prob, held)
-    t2, _, _ = _accuracy((stage,), (), WorkflowOptions(), declarations_of(prob))
+    t2, _, _ = accuracy_table((stage,), (), WorkflowOptions(), declarations_of(prob))
     plain = stage_residuals((prob, held), calibration=False)
     for r in t2.itertuples():
         rr = stage.residuals[r.channel]
@@ -164,7 +166,7 @@ def test_no_calibration_uncertainty_gives_the_scatter_to_the_bit(turbulent):
     assert t2.set_index("channel").loc["alpha_zl", "three_sigma_deg"] == three_sigma(e)
     # without the honest correlations (a result from an older file): Cramér-Rao, said in the note
     crb = replace(res, correlation_colored=None)
-    t2c, _, _ = _accuracy((Stage("final", 0.6, False, prob, crb),), (), WorkflowOptions(),
+    t2c, _, _ = accuracy_table((Stage("final", 0.6, False, prob, crb),), (), WorkflowOptions(),
                           declarations_of(prob))
     assert all("calibration deviation: Cramér-Rao (the result keeps no honest correlations)" in n
                for n in t2c["note"]), t2c["note"].tolist()
