@@ -377,19 +377,22 @@ class WorkflowResult:
                 g = replace(g, members=g.members + firsts[0].members,
                             headline=g.headline + " (in both of the bin's estimations)")
             kept.append(g)
+        # across bins: one kind on one channel (or, for a kind about parameters, whichever
+        # parameters) at one severity is one group, headed by the worst bin's, naming the others
+        # (and, for parameters, which ones there)
         alike: dict[tuple, list[FindingGroup]] = {}
         for g in kept:
-            alike.setdefault(what(g), []).append(g)
+            alike.setdefault((g.code, g.channel, g.severity), []).append(g)
         out = []
         for g in kept:
-            same = alike[what(g)]
+            same = alike[(g.code, g.channel, g.severity)]
             if len(same) == 1:
                 out.append(g)
             elif g is same[0]:  # said where the first of them is, headed by the worst
                 lead = max(same, key=lambda h: max(abs(m.value or 0.0) for m in h.members))
-                others = "; ".join(h.stage or "the workflow" for h in same if h is not lead)
+                others = "; ".join(_also(h) for h in same if h is not lead)
                 out.append(replace(lead, members=tuple(m for h in same for m in h.members),
-                                   headline=f"{lead.headline}; the same in {others}"))
+                                   headline=f"{lead.headline}; also in {others}"))
         return tuple(out)
 
     @property
@@ -654,6 +657,16 @@ def hold_unexcited(problem: Problem, ids: Sequence[str], held_at: str,
         f"the 95th percentile, against {min_excitation_deg:g} deg), so they cannot determine these gains, "
         "tables and delays (nor a sideslip offset from the crosswind)",
         parameters=tuple(held), numbers={f"spread_{c}_deg": spread[c] for c in quiet})
+
+
+def _also(g: FindingGroup) -> str:
+    """Another estimation's group of the same kind, said in a few words: its stage and, for a kind
+    about parameters, its own (those at the group's severity)."""
+    where = g.stage or "the workflow"
+    if kind_of(g.code).by_channel:
+        return where
+    keys = list(dict.fromkeys(k for m in g.members if m.severity == g.severity for k in m.parameters))
+    return f"{where} ({', '.join(keys[:6])}{' ...' if len(keys) > 6 else ''})" if keys else where
 
 
 def _stage_label(st: Stage) -> str:
