@@ -1,0 +1,133 @@
+"""The estimator's numbers, pinned: a refactor of :mod:`estimator` must not change a single one.
+
+Three fast fits on analytic flights (:class:`campaigns.analytic_flight.Flight`, as in
+``test_estimator.py`` and ``test_filter_error.py``) were recorded on main before the estimator's
+modules were reorganised, into ``refactor_baseline.json`` beside this file:
+
+- ``output_error``: white noise, a poor start, the default options (staged start, diagnostics,
+  coloured deviations, the IMU noise estimated);
+- ``filter_error``: light turbulence (1 m/s, 25 s), the filter-error method from the staged start;
+- ``output_error_robust``: the same turbulent data by the output-error method with ``robust``
+  (the outliers excluded and the estimation repeated).
+
+Each estimate, deviation (Cramér-Rao, coloured, IMU noise), the correlations' row sums, the cost
+history, the residual statistics, the status, the verdict and every finding (code, severity,
+message) must agree: numbers within 1e-12 relative, everything else equal.
+
+Marked slow (three estimations, about ten seconds): run it alone after each change of the estimator,
+``python -m pytest -q tests/estimator_tests/test_refactor_baseline.py``. Regenerate (only for a
+deliberate change of the numbers): ``python tests/estimator_tests/test_refactor_baseline.py``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BASELINE = Path(__file__).with_name("refactor_baseline.json")
+RTOL = 1e-12
+
+
+def _poor_start(ps) -> dict[str, float]:
+    """Every free parameter off by a sizeable amount (test_estimator.py's Cramér-Rao test)."""
+    from campaigns.analytic_flight import DEG
+
+    out = {}
+    for p in ps:
+        if not p.free:
+            continue
+        off = {"initial_condition": 0.5 if p.unit == "m/s" else 0.01, "imu_bias": 0.5 * p.value,
+               "time_delay": 0.02, "bias": 0.3 * DEG, "table": 0.2 * DEG if p.unit == "rad" else 0.05}
+        out[p.key] = p.value + off.get(p.kind, 0.0)
+    return out
+
+
+def _fits() -> dict[str, object]:
+    """name -> EstimationResult of each pinned fit."""
+    from campaigns.analytic_flight import NOISE_SIGMA, Flight, truth_values
+    from estimator.io.modelset import load_model_set
+    from estimator.solver import SolverOptions, estimate
+
+    specs = load_model_set("tejas")[1]
+    white = Flight(truth_values(np.random.default_rng(5)), specs)
+    prob = white.problem(start=_poor_start, noise=NOISE_SIGMA, rng=np.random.default_rng(11))
+    turbulent = Flight(truth_values(np.random.default_rng(5)), specs, T=25.0, turbulence=(1.0, 533.4, 7))
+    tprob = turbulent.problem(noise=NOISE_SIGMA, rng=np.random.default_rng(3))
+    return {
+        "output_error": estimate(prob, SolverOptions()),
+        "filter_error": estimate(tprob, SolverOptions(method="filter_error")),
+        "output_error_robust": estimate(tprob, SolverOptions(robust=True)),
+    }
+
+
+def _floats(a) -> list[float | None]:
+    return [None if a is None else float(x) for x in np.asarray(a, dtype=float).ravel()] \
+        if a is not None else []
+
+
+def record(res) -> dict:
+    """What a fit is pinned by (plain JSON: floats written exactly, NaN as NaN)."""
+    corr = np.asarray(res.correlation, dtype=float)
+    return {
+        "keys": list(res.parameters.keys),
+        "values": _floats(res.parameters.values),
+        "std_crb": _floats(res.std_crb),
+        "std_colored": _floats(res.std_colored),
+        "std_imu_noise": _floats(res.std_imu_noise),
+        "correlation_keys": list(res.correlation_keys),
+        "correlation_row_sums": _floats(np.abs(corr).sum(axis=1) if corr.size else []),
+        "free_estimated": [bool(b) for b in (res.free_estimated if res.free_estimated is not None else [])],
+        "iterations": int(res.iterations),
+        "cost_history": _floats(res.cost_history),
+        "residuals": [[r.maneuver, r.channel, int(r.n), float(r.mean), float(r.std), float(r.rms)]
+                      for r in res.residuals],
+        "status": res.status.name,
+        "verdict": res.verdict.name,
+        "state": list(res.state),
+        "confounding": [[list(c.parameters), c.kind, c.detail] for c in res.confounding],
+        "findings": [[f.code, f.severity.name, f.message] for f in res.findings],
+    }
+
+
+def _same_numbers(got: list, want: list, what: str) -> None:
+    assert len(got) == len(want), f"{what}: {len(got)} numbers, {len(want)} pinned"
+    g = np.array([math.nan if x is None else x for x in got], dtype=float)
+    w = np.array([math.nan if x is None else x for x in want], dtype=float)
+    np.testing.assert_allclose(g, w, rtol=RTOL, atol=0.0, equal_nan=True, err_msg=what)
+
+
+@pytest.fixture(scope="module")
+def recorded() -> dict:
+    return {name: record(res) for name, res in _fits().items()}
+
+
+@pytest.fixture(scope="module")
+def pinned() -> dict:
+    return json.loads(BASELINE.read_text(encoding="utf-8"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["output_error", "filter_error", "output_error_robust"])
+def test_the_numbers_are_the_pinned_ones(recorded, pinned, name):
+    got, want = recorded[name], pinned[name]
+    assert set(got) == set(want)
+    for field, value in want.items():
+        if field in ("values", "std_crb", "std_colored", "std_imu_noise", "correlation_row_sums",
+                     "cost_history"):
+            _same_numbers(got[field], value, f"{name}.{field}")
+        elif field == "residuals":
+            assert [r[:3] for r in got[field]] == [r[:3] for r in value], f"{name}.residuals"
+            _same_numbers([x for r in got[field] for x in r[3:]], [x for r in value for x in r[3:]],
+                          f"{name}.residuals")
+        else:
+            assert got[field] == value, f"{name}.{field}"
+
+
+if __name__ == "__main__":
+    doc = {name: record(res) for name, res in _fits().items()}
+    BASELINE.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    print(f"wrote {BASELINE}")
