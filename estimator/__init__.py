@@ -38,7 +38,7 @@ _API = {
     "Problem": "estimator.problem",
     # one estimation
     "estimate": "estimator.solver",
-    "SolverOptions": "estimator.solver",
+    "SolverOptions": "estimator.options",
     "EstimationResult": "estimator.result",
     # what to make of it
     "Status": "estimator.verdict",
@@ -47,12 +47,12 @@ _API = {
     "Severity": "estimator.verdict",
     # the Mach-bin workflow
     "run_workflow": "estimator.workflow",
-    "WorkflowOptions": "estimator.workflow",
+    "WorkflowOptions": "estimator.options",
     "WorkflowResult": "estimator.workflow",
     # the workflow and its report, as fpr calibrate does it
     "calibrate": "estimator.calibration",
     "Calibration": "estimator.calibration",
-    "CalibrationOptions": "estimator.calibration",
+    "CalibrationOptions": "estimator.options",
     "write_estimation": "estimator.calibration",
 }
 
@@ -64,14 +64,15 @@ __all__ = [  # = the keys of _API (a literal, so that linters see what is export
 ]
 
 if TYPE_CHECKING:  # what type checkers and editors see; at run time __getattr__ loads them
-    from estimator.calibration import Calibration, CalibrationOptions, calibrate, write_estimation
+    from estimator.calibration import Calibration, calibrate, write_estimation
     from estimator.io import DataError, DataWarning, load_problem, problem_from_dataset
     from estimator.io.modelset import load_model_set
+    from estimator.options import CalibrationOptions, SolverOptions, WorkflowOptions
     from estimator.problem import Problem
     from estimator.result import EstimationResult
-    from estimator.solver import SolverOptions, estimate
+    from estimator.solver import estimate
     from estimator.verdict import Finding, Severity, Status, Verdict
-    from estimator.workflow import WorkflowOptions, WorkflowResult, run_workflow
+    from estimator.workflow import WorkflowResult, run_workflow
 
 
 def __getattr__(name: str):

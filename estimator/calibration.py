@@ -29,8 +29,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from aircraft_models.schema import did_you_mean, unknown
+from aircraft_models.schema import did_you_mean
 from estimator.finding_groups import NOTE_CHARS, groups_frame
+from estimator.options import CalibrationOptions
+from estimator.options import option_tables as option_tables  # re-exported from its old home
 from estimator.problem import Problem, ReadOnlyMapping
 from estimator.report import (
     Banner,
@@ -44,76 +46,8 @@ from estimator.report import (
     write_report,
 )
 from estimator.result import ReadOnlyTable
-from estimator.solver import SolverOptions
 from estimator.verdict import Finding, Severity, Verdict
-from estimator.workflow import RAD2DEG, Stage, WorkflowOptions, WorkflowResult, run_workflow
-
-# --------------------------------------------------------------------------------------------------
-# options
-
-#: WorkflowOptions fields that are not options of a flat mapping (objects, not settings)
-_NOT_FLAT = {"declarations", "solver", "progress"}
-
-
-def _field_names(cls) -> list[str]:
-    return [f.name for f in dataclasses.fields(cls)]
-
-
-def option_tables() -> dict[str, tuple[str, ...]]:
-    """The option names by the TOML table that holds them (a problem file's, a scenario's):
-    ``workflow`` (:class:`~estimator.workflow.WorkflowOptions`), ``solver``
-    (:class:`~estimator.solver.SolverOptions`) and ``report`` (``plots``)."""
-    return {"workflow": tuple(n for n in _field_names(WorkflowOptions) if n not in _NOT_FLAT),
-            "solver": tuple(_field_names(SolverOptions)), "report": ("plots",)}
-
-
-@dataclass(frozen=True)
-class CalibrationOptions:
-    """Settings of :func:`calibrate`: the workflow's (its ``solver`` inside) and the report's.
-
-    Attributes
-    ----------
-    workflow : :class:`~estimator.workflow.WorkflowOptions` (bins, reference Mach, the solver's
-        settings in ``workflow.solver``); its ``progress`` is replaced by :func:`calibrate`'s.
-    plots : draw the report's figures.
-    """
-
-    workflow: WorkflowOptions = field(default_factory=WorkflowOptions)
-    plots: bool = True
-
-    @classmethod
-    def option_names(cls) -> tuple[str, ...]:
-        """Every name :meth:`from_mapping` accepts."""
-        wf = [n for n in _field_names(WorkflowOptions) if n not in _NOT_FLAT]
-        return (*wf, *_field_names(SolverOptions), "plots")
-
-    @classmethod
-    def from_mapping(cls, options: Mapping[str, Any] | None = None) -> CalibrationOptions:
-        """Options from one flat mapping of names (the CLI's flags, a ``[workflow]``/``[solver]`` table).
-
-        Names are the fields of :class:`~estimator.workflow.WorkflowOptions` (``max_mach_variation``,
-        ``reference_mach``, ...), of :class:`~estimator.solver.SolverOptions` (``max_iterations``,
-        ``colored``, ``start`` -- ``"both"`` meaning ``("staged", "given")`` --, ...) and ``plots``.
-        A missing name keeps its default.
-
-        Raises
-        ------
-        ValueError
-            an unknown name, with the close match and the valid names.
-        """
-        options = dict(options or {})
-        solver_names, wf_names = set(_field_names(SolverOptions)), set(cls.option_names()) - set(
-            _field_names(SolverOptions)) - {"plots"}
-        bad = [k for k in options if k not in solver_names | wf_names | {"plots"}]
-        if bad:
-            raise unknown(bad, cls.option_names(), "", ValueError, what="calibration option")
-        solver = {k: v for k, v in options.items() if k in solver_names}
-        if solver.get("start") == "both":
-            solver["start"] = ("staged", "given")
-        wf = {k: v for k, v in options.items() if k in wf_names}
-        return cls(workflow=WorkflowOptions(**wf, solver=SolverOptions(**solver)),
-                   plots=bool(options.get("plots", True)))
-
+from estimator.workflow import RAD2DEG, Stage, WorkflowResult, run_workflow
 
 # --------------------------------------------------------------------------------------------------
 # the truth hook's answer

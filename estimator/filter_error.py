@@ -122,6 +122,8 @@ from estimator.core.sensitivity import worker_threads
 from estimator.iteration import _evaluate
 from estimator.model import Evaluation, Model
 from estimator.normal_equations import NormalEquations, Structure, residual_sums
+from estimator.options import DRYDEN_SCALE_LENGTH_M as DRYDEN_SCALE_LENGTH_M  # re-exported from its old home
+from estimator.options import WindOptions
 from estimator.problem import AIR_RELATIVE_SIGNALS
 from estimator.result import WindModel
 from estimator.uncertainty import honest_std, imu_noise_psd, innovation_honest_std
@@ -130,10 +132,6 @@ from estimator.verdict import Finding, Severity
 if TYPE_CHECKING:
     from estimator.parameters import Parameter
 
-#: MIL-F-8785C scale length above 2000 ft (1750 ft), m.
-DRYDEN_SCALE_LENGTH_M = 533.4
-#: The wind states' forms (WindOptions.form).
-WIND_FORMS = ("gauss_markov", "dryden")
 #: Search bounds of the turbulence intensity, m/s: from next to nothing to severe.
 SIGMA_SEARCH_MPS = (1e-3, 15.0)
 #: The first relaxation searches all of SIGMA_SEARCH_MPS, the later ones a factor of
@@ -191,53 +189,6 @@ FEEDBACK_Z = 2.0
 #: honest deviation becomes what the instrument supports and the difference together
 #: (judge_delays)
 FEEDBACK_WEAK = 3.0
-
-
-@dataclass(frozen=True)
-class WindOptions:
-    """The turbulence model of the filter-error method.
-
-    Attributes
-    ----------
-    scale_length_m : Dryden scale length ``L``, m (1750 ft above 2000 ft).
-    sigma_mps : turbulence intensity, m/s; None: estimated per maneuver.
-    where : which maneuvers get wind states: "diagnosed" (default) — those whose output-error
-        residuals the diagnostics call turbulent (flow residuals far above their floors, coloured
-        and common to several sensors while the inertial channels fit: air motion, not a sensor's
-        model-structure error); the others are calm; "all" — every maneuver, its intensity
-        estimated (a structure error of one sensor is then taken for wind: on the demo's calm
-        data the 22-deg wind-up turns came out at 0.9-1.25 m/s from the nose probe's high-alpha
-        error, and that bin did not converge).
-    form : the wind states' form: "gauss_markov" (default) — three first-order Gauss-Markov NED
-        components (Dryden's longitudinal spectrum for all three); "dryden" — MIL-F-8785C's Dryden
-        turbulence in body axes: the longitudinal component first-order, the lateral and vertical
-        second-order (five states; :func:`estimator.core.wind_filter.dryden_body`), the form
-        JSBSim's Tustin turbulence (turb-type 4) has.
-    calm_sigma_mps : a maneuver whose estimated intensity is below this is taken as flown in calm
-        air (no wind states: its innovations are its residuals, as in the output-error method).
-        Calm data still give a small intensity — the wind states then follow what the calibration
-        model cannot (0.006-0.19 m/s in the JSBSim calm-air maneuvers, against 0.9-1.2 m/s in
-        light turbulence) — and would move the estimates by a few deviations away from the
-        output-error ones for no gain.
-    """
-
-    scale_length_m: float = DRYDEN_SCALE_LENGTH_M
-    sigma_mps: float | None = None
-    calm_sigma_mps: float = 0.3
-    where: str = "diagnosed"
-    form: str = "gauss_markov"
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.scale_length_m) and self.scale_length_m > 0):
-            raise ValueError(f"WindOptions.scale_length_m must be a positive length in m, got "
-                             f"{self.scale_length_m!r}")
-        if self.form not in WIND_FORMS:
-            raise ValueError(f"WindOptions.form must be one of {WIND_FORMS}, got {self.form!r}")
-        if self.where not in ("diagnosed", "all"):
-            raise ValueError(f"WindOptions.where must be 'diagnosed' or 'all', got {self.where!r}")
-        if self.sigma_mps is not None and not (math.isfinite(self.sigma_mps) and self.sigma_mps > 0):
-            raise ValueError(f"WindOptions.sigma_mps must be positive (m/s) or None to estimate it, got "
-                             f"{self.sigma_mps!r}")
 
 
 @dataclass

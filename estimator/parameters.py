@@ -18,12 +18,9 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
-
-if TYPE_CHECKING:  # annotations only: estimator.problem builds on this module
-    from estimator.problem import ChannelSpec, ManeuverData
 
 SCOPES = ("global", "aircraft", "configuration", "recorder", "maneuver")
 #: What a parameter is, for reports and for the identifiability checks.
@@ -32,6 +29,28 @@ KINDS = ("initial_condition", "imu_bias", "time_delay", "bias", "scale", "table"
 #: parameter of any other kind is a calibration parameter (Table 2's calibration uncertainty, the
 #: filter-error method's unsettled estimates)
 FLIGHT_KINDS = frozenset({"initial_condition", "imu_bias"})
+
+
+class ManeuverLike(Protocol):
+    """What a scope's instance is read from: a maneuver's ids (:class:`estimator.problem.ManeuverData`,
+    named by what it has: :mod:`estimator.problem` builds on this module)."""
+
+    @property
+    def id(self) -> str: ...
+
+    @property
+    def aircraft(self) -> str: ...
+
+    @property
+    def configuration(self) -> str: ...
+
+
+class ChannelLike(Protocol):
+    """What a recorder-scoped instance is read from: a channel's recorder
+    (:class:`estimator.problem.ChannelSpec`)."""
+
+    @property
+    def recorder(self) -> str: ...
 
 
 @dataclass(frozen=True)
@@ -156,7 +175,7 @@ def family_of(key: str) -> str:
     return key.split("[", 1)[0]
 
 
-def instance_of(scope: str, maneuver: ManeuverData, channel: ChannelSpec | None = None) -> str:
+def instance_of(scope: str, maneuver: ManeuverLike, channel: ChannelLike | None = None) -> str:
     """The instance of a ``scope`` family that a maneuver's data (through ``channel``) use.
 
     ``global``: "" (one value); ``aircraft``, ``configuration``: the maneuver's aircraft or
@@ -240,7 +259,7 @@ class ParameterSet:
     def __getitem__(self, key: str) -> Parameter:
         return self.parameters[self.index(key)]
 
-    def key_of(self, name: str, maneuver: ManeuverData, channel: ChannelSpec | None = None,
+    def key_of(self, name: str, maneuver: ManeuverLike, channel: ChannelLike | None = None,
                element: int | None = None) -> str:
         """The key of family ``name``'s scalar that ``maneuver`` (through ``channel``) uses.
 

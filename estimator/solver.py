@@ -49,13 +49,13 @@ import math
 import re
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from functools import partial
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from estimator.filter_error import FilterErrorLikelihood, WindOptions, feedback_findings
+from estimator.filter_error import FilterErrorLikelihood, feedback_findings
 from estimator.identifiability import (
     _covariance,
     _crosswind_findings,
@@ -69,16 +69,13 @@ from estimator.io.modelset import declarations_of
 from estimator.iteration import OutputErrorLikelihood, _evaluate, _gauss_newton, _Iterated, _staged_start
 from estimator.model import Evaluation, Model, ModelEvaluationError
 from estimator.normal_equations import Structure, build_normal, channel_variances, ml_cost, residual_sums
+from estimator.options import SolverOptions
 from estimator.parameters import FLIGHT_KINDS
 from estimator.problem import SENSOR_SIGNALS, STATE_PARAMS, Problem
 from estimator.result import EstimationResult, ResidualStats
 from estimator.uncertainty import _deviations, _imu_noise_note, _imu_noise_unknown
 from estimator.verdict import Finding, Severity, Status, judge
 
-#: Start strategies: the staged, data-driven start (:mod:`estimator.start`) or the problem's values.
-STARTS = ("staged", "given")
-#: Estimation methods: output error (calm air) and filter error (turbulence; wind states).
-METHODS = ("output_error", "filter_error")
 #: Output-error iterations at most before the filter-error method's turbulence diagnosis.
 PREFIT_ITERATIONS = 10
 #: Filter-error iterations at most before the maneuvers without wind states are diagnosed again.
@@ -97,108 +94,6 @@ MIN_CALIBRATION_SLOPE = 0.25
 #: of its physical range (the filter-error demo: the airspeed delay at 0.29 s, bound 0.3 s, deviation
 #: 0.034 s, 0.3 s off its truth; not flagged while it stayed 0.3 deviations inside the bound)
 NEAR_BOUND_DEVIATIONS = 2.0
-
-
-@dataclass(frozen=True)
-class SolverOptions:
-    """Solver settings.
-
-    Attributes
-    ----------
-    max_iterations : Gauss-Newton iterations at most (per stage of the start, and per round of
-        the estimation).
-    step_tol_sigma : converged when the undamped Gauss-Newton step is below this many Cramér-Rao
-        deviations for every parameter ...
-    decrease_tol : ... or when the cost decrease it predicts is below this (log-likelihood units:
-        0.001 is a change of 0.002 in chi-square, statistically nothing).
-    lm_lambda0 : initial Levenberg-Marquardt damping (relative to diag M).
-    rank_rtol : eigenvalues of the scaled information matrix below ``rank_rtol * max`` are treated
-        as zero (unidentifiable directions).
-    min_support_samples : a parameter that fewer samples depend on (a table breakpoint at the edge
-        of the flown range) is held at its start value and reported: a handful of samples would
-        set it to fit their noise.
-    correlation_warn : |correlation| above this is reported as a confounded pair.
-    colored : compute the Morelli-Klein coloured-residual deviations.
-    colored_cross_channel : with the residual cross-correlations between the channels of a
-        maneuver (the full matrix form); False: each channel alone.
-    colored_spectrum : the residuals' spectrum in the coloured deviations: "ar" (autoregressive
-        models fitted to the residuals, :mod:`estimator.core.residual_spectrum`) or "periodogram"
-        (their own correlation at every lag, the original plug-in: biased low).
-    imu_noise : the IMU noise whose integration adds to the coloured deviations (process noise,
-        :mod:`estimator.core.process_noise`): "estimate" (from the IMU data, per aircraft), "none",
-        or ``(accel_psd, gyro_psd)``, the white-noise densities in m^2/s^3 and rad^2/s (a
-        datasheet's velocity and angle random walk, squared, in SI).
-    start : "staged" (default), "given", or a tuple of them: one estimation from each, the best
-        verdict kept (then the lowest cost).
-    robust : exclude the residual outliers the diagnostics find and estimate again (reported).
-    diagnose : run the fit-quality diagnostics (the verdict then rests on the convergence and the
-        identifiability checks alone if False).
-    screen_rounds : estimations at most when the identifiability screen at the solution holds
-        further parameters.
-    verbose : print one line per iteration.
-    method : "output_error" (default; calm air) or "filter_error": the turbulent wind as estimated
-        Gauss-Markov states, the cost the likelihood of a Kalman filter's innovations
-        (:mod:`estimator.filter_error`). The start, the identifiability screen and a first
-        output-error fit are the output-error method's; the maneuvers whose residuals there the
-        diagnostics call turbulent get wind states (``wind.where``); the deviations are those
-        of the filter-error information matrix, Cramér-Rao and (``colored``) the coloured
-        innovations' sandwich (:func:`estimator.uncertainty.innovation_honest_std`; always the
-        autoregressive spectrum model, whatever ``colored_spectrum``).
-    wind : the filter-error method's turbulence model (:class:`~estimator.filter_error.WindOptions`;
-        None: its defaults, the intensity estimated per maneuver).
-    """
-
-    max_iterations: int = 40
-    step_tol_sigma: float = 0.01
-    decrease_tol: float = 1e-3
-    lm_lambda0: float = 1e-4
-    rank_rtol: float = 1e-10
-    correlation_warn: float = 0.995
-    min_support_samples: int = 40
-    colored: bool = True
-    colored_cross_channel: bool = True
-    colored_spectrum: str = "ar"
-    imu_noise: str | tuple[float, float] = "estimate"
-    start: str | tuple[str, ...] = "staged"
-    robust: bool = False
-    diagnose: bool = True
-    screen_rounds: int = 3
-    verbose: bool = False
-    method: str = "output_error"
-    wind: WindOptions | None = None
-
-    def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise ValueError(f"SolverOptions: method must be one of {METHODS}, got {self.method!r}")
-        if isinstance(self.wind, Mapping):  # a problem file's or scenario's [solver] table
-            try:
-                object.__setattr__(self, "wind", WindOptions(**dict(self.wind)))
-            except TypeError as exc:
-                raise ValueError(f"SolverOptions: wind = {dict(self.wind)!r}: {exc}; its keys are "
-                                 "scale_length_m, sigma_mps, calm_sigma_mps, where, form") from None
-        if self.wind is not None and not isinstance(self.wind, WindOptions):
-            raise ValueError(f"SolverOptions: wind must be WindOptions or a table of its keys, got "
-                             f"{self.wind!r}")
-        if self.wind is not None and self.method != "filter_error":
-            raise ValueError("SolverOptions: wind options are for method='filter_error' (the "
-                             "output-error method has no wind states)")
-        starts = (self.start,) if isinstance(self.start, str) else tuple(self.start)
-        bad = [s for s in starts if s not in STARTS]
-        if bad or not starts:
-            raise ValueError(f"SolverOptions: start must be one of {STARTS} or a tuple of them, "
-                             f"got {self.start!r}")
-        if isinstance(self.imu_noise, str):
-            if self.imu_noise not in ("estimate", "none"):
-                raise ValueError(f"SolverOptions: imu_noise must be 'estimate', 'none' or (accel_psd, "
-                                 f"gyro_psd), got {self.imu_noise!r}")
-        elif len(self.imu_noise) != 2 or not all(np.isfinite(v) and v >= 0 for v in self.imu_noise):
-            raise ValueError(f"SolverOptions: imu_noise = {self.imu_noise!r}: two densities >= 0, "
-                             "(m^2/s^3, rad^2/s)")
-        if self.colored_spectrum not in ("ar", "periodogram"):
-            raise ValueError(f"SolverOptions: colored_spectrum must be 'ar' or 'periodogram', got "
-                             f"{self.colored_spectrum!r}")
-        if self.max_iterations < 1:
-            raise ValueError(f"SolverOptions: max_iterations must be >= 1, got {self.max_iterations}")
 
 
 def estimate(problem: Problem, options: SolverOptions | None = None) -> EstimationResult:

@@ -62,7 +62,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -77,10 +77,11 @@ from estimator.finding_kinds import kind_of
 from estimator.io import subproblem
 from estimator.io.modelset import Declarations, Requirement, declarations_of
 from estimator.model import Model
+from estimator.options import WorkflowOptions
 from estimator.parameters import FLIGHT_KINDS, family_of, make_key
 from estimator.problem import STATE_PARAMS, Problem, ReadOnlyMapping
 from estimator.result import EstimationResult, ReadOnlyTable, _json_clean
-from estimator.solver import SolverOptions, estimate
+from estimator.solver import estimate
 from estimator.verdict import Finding, Severity, Verdict, findings_frame, judge
 from estimator.verdict import Status as _Status
 
@@ -95,38 +96,6 @@ __all__ = [
     "no_bins_message", "run_workflow",
     "calibration_deviations", "stage_residuals", "three_sigma", "vane_biases",
 ]
-
-
-@dataclass(frozen=True)
-class WorkflowOptions:
-    """Settings of :func:`run_workflow`.
-
-    Attributes
-    ----------
-    bin_width : Mach bin width; bins are centred on its multiples.
-    max_mach_variation : maneuvers whose Mach varies by more than this are left out.
-    min_maneuvers : bins with fewer maneuvers are left out.
-    reference_mach : Mach of the bin whose installation biases hold for every bin; None: the model
-        set's (``[workflow] reference_mach``, paper: 0.5).
-    alpha_band_deg : width of the alpha bands of the usable-alpha search, deg.
-    min_band_samples : bands with fewer samples are not judged.
-    declarations : what the model set declares (requirements, the bias families apportioned and
-        the tables re-estimated, the usable-alpha channel); None: those of the model set the
-        problem's channels come from (:func:`~estimator.io.modelset.declarations_of`).
-    solver : estimator settings for every estimation (the steps that start from an earlier
-        step's estimate start from it: ``start = "given"``).
-    progress : called with a line of text as the workflow proceeds.
-    """
-
-    bin_width: float = 0.1
-    max_mach_variation: float = 0.05
-    min_maneuvers: int = 3
-    reference_mach: float | None = None
-    alpha_band_deg: float = 2.0
-    min_band_samples: int = 200
-    declarations: Declarations | None = None
-    solver: SolverOptions = field(default_factory=SolverOptions)
-    progress: Callable[[str], None] | None = None
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ from estimator.io.errors import DataError
 from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
 from estimator.io.positions import check_positions, positions_of
 from estimator.io.tables import check_data_path, infer_format, numeric, pick_column, read_table
+from estimator.options import CalibrationOptions, option_tables
 from estimator.parameters import ParameterSpec
 from estimator.problem import LEVER_ARMS, STATE_SIGNALS, ChannelSpec, Problem
 
@@ -239,12 +240,10 @@ def parse_options(raw: Mapping, where: str) -> dict:
     """The ``[workflow]``, ``[solver]`` and ``[report]`` tables as one flat mapping of option names.
 
     Each table holds only its own options (``[solver]``: the fields of
-    :class:`~estimator.solver.SolverOptions`; ``[workflow]``: those of
-    :class:`~estimator.workflow.WorkflowOptions`; ``[report]``: ``plots``), checked here and then
-    by :meth:`~estimator.calibration.CalibrationOptions.from_mapping`, the one mapping the CLI uses too.
+    :class:`~estimator.options.SolverOptions`; ``[workflow]``: those of
+    :class:`~estimator.options.WorkflowOptions`; ``[report]``: ``plots``), checked here and then
+    by :meth:`~estimator.options.CalibrationOptions.from_mapping`, the one mapping the CLI uses too.
     """
-    from estimator.calibration import CalibrationOptions, option_tables
-
     tables = option_tables()
     flat: dict = {}
     for name, valid in tables.items():
