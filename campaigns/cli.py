@@ -115,9 +115,9 @@ def _add_fly(sub: argparse._SubParsersAction) -> None:
 def _fly(args: argparse.Namespace) -> int:
     from campaigns._signals import interrupt_status, sigterm_as_interrupt
     from synth.campaign import (
+        CampaignFlags,
         FlyInterrupted,
         campaign_of_dataset,
-        flags_campaign,
         fly_campaign,
         load_campaign,
         parse_campaign,
@@ -135,12 +135,12 @@ def _fly(args: argparse.Namespace) -> int:
         campaign = campaign_of_dataset(args.out)
     else:
         campaign = parse_campaign(
-            flags_campaign(
+            CampaignFlags(
                 configurations=args.config, mach=args.mach, maneuvers=args.maneuver,
                 altitude_m=args.altitude_m, gear_down=args.gear_down, seed=args.seed,
                 errors_preset=args.errors, planet=args.planet, turbulence=args.turbulence,
                 wind_ned_mps=args.wind_ned_mps, common_rate_hz=args.rate_hz,
-            ),
+            ).campaign(),
             source="command-line flags",
         )
     if args.sortie is not None:

@@ -58,6 +58,7 @@ from aircraft_models.schema import check, unknown
 from synth.dataset import (
     FORMAT,
     FORMAT_VERSION,
+    RecordedPiece,
     _jsonable,
     airframe_manifest,
     damaged_manifest,
@@ -66,7 +67,6 @@ from synth.dataset import (
     maneuver_file,
     maneuver_id,
     maneuver_key,
-    manifest_entry,
     prepare_directory,
     read_manifest_if_dataset,
     remove_temp_files,
@@ -287,9 +287,9 @@ def _run_job(job: Job) -> JobResult:
         inst = instrument(truth, fleet.airframe, cfg, errors, maneuver_key=maneuver_key(job.index, seg_no),
                           common_rate_hz=_WORKER["rate"], truth_model=_WORKER["truth_model"],
                           adc_baseline=_WORKER["adc"])
-        entry = manifest_entry(job_index=job.index, segment=seg_no, n_segments=len(segments),
-                               configuration=cfg, spec=spec, environment=env, truth=truth,
-                               instrumented=inst, sample_rate_hz=_WORKER["rate"])
+        entry = RecordedPiece(job_index=job.index, segment=seg_no, n_segments=len(segments),
+                              configuration=cfg, spec=spec, environment=env, truth=truth,
+                              instrumented=inst, sample_rate_hz=_WORKER["rate"]).manifest_entry()
         write_maneuver(_WORKER["out_dir"] / entry["file"], inst.data, entry)
         entries.append(entry)
     return JobResult(job.index, tuple(entries), elapsed_s=time.perf_counter() - t0)
@@ -457,6 +457,114 @@ def campaign_of_dataset(out_dir: str | Path) -> Campaign:
     return parse_campaign(camp["definition"], source=str(camp.get("source", out_dir)))
 
 
+def _reopen_interrupted(out_dir: Path, stored: Mapping) -> tuple[dict[int, list[dict]], list[str]]:
+    """Make an interrupted dataset ready to be completed: (job index -> manifest entries of the jobs
+    whose files are whole, notes on the damaged files removed)."""
+    maneuvers = out_dir / "maneuvers"
+    if maneuvers.is_symlink() or (maneuvers.exists() and not maneuvers.is_dir()):
+        # through a link the resume would read and write outside the dataset
+        raise FileExistsError(
+            f"{maneuvers}: {'a link' if maneuvers.is_symlink() else 'not a folder'}, not the "
+            "maneuvers/ folder `fpr fly` made; refusing to resume (nothing is read or written "
+            f"through it). Put the dataset's own maneuvers/ folder back, or fly the campaign "
+            "into a new --out")
+    remove_temp_files(out_dir)
+    maneuvers.mkdir(exist_ok=True)
+    # each whole file carries its manifest entry: the finished jobs need not be flown again
+    done, damaged = job_entries(out_dir, stored)
+    return done, _clear_damaged(out_dir, damaged)
+
+
+class _Progress:
+    """Says each finished job: on a tqdm bar (``progress=True``) or by ``progress(done, total)``."""
+
+    def __init__(self, campaign: Campaign, n_done: int, notes: Sequence[str],
+                 progress: Callable[[int, int], None] | bool) -> None:
+        self.n_done, self.total = n_done, len(campaign.jobs)
+        self.callback = progress if callable(progress) else None
+        self.bar = None
+        if progress is True:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=self.total, initial=n_done, unit="maneuver",
+                            desc=f"fly {campaign.name}", file=sys.stderr,
+                            mininterval=0.5 if sys.stderr.isatty() else 10.0)
+            for note in notes:
+                self.bar.write(note, file=sys.stderr)
+
+    def tick(self, res: JobResult) -> None:
+        self.n_done += 1
+        if self.bar is not None:
+            self.bar.update(1)
+            if res.error:
+                self.bar.write(f"maneuver {res.index} failed: {res.error.splitlines()[0]}")
+        elif self.callback is not None:
+            self.callback(self.n_done, self.total)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _fly_jobs(campaign: Campaign, out_dir: Path, todo: Sequence[Job], workers: int | None,
+              progress: _Progress) -> list[JobResult]:
+    """Fly ``todo`` (in this process, or in a pool of ``workers``), each job writing its files.
+
+    Raises
+    ------
+    FlyInterrupted
+        On KeyboardInterrupt: the workers are stopped and their maneuvers left unwritten.
+    """
+    workers = max(1, min(workers or os.cpu_count() or 1, len(todo) or 1))
+    init_args = (campaign.fleet.source, str(out_dir), campaign.common_rate_hz, campaign.seed,
+                 campaign.local_flow_truth, campaign.adc_baseline)
+    results: list[JobResult] = []
+
+    def _tick(res: JobResult) -> None:
+        results.append(res)
+        progress.tick(res)
+
+    try:
+        if workers == 1:
+            _init_worker(*init_args)
+            for job in todo:
+                _tick(_run_job(job))
+        elif todo:
+            # the workers end with this process however it ends, and leave Ctrl-C to it: on an
+            # interrupt (or an error) they are stopped at once, their maneuvers left unwritten
+            with worker_pool(workers, _init_worker, init_args) as pool:
+                for fut in as_completed([pool.submit(_run_job, job) for job in todo]):
+                    _tick(fut.result())
+    except KeyboardInterrupt:
+        progress.close()
+        remove_temp_files(out_dir)
+        raise FlyInterrupted(out_dir, dataset_status(out_dir).n_done, len(campaign.jobs)) from None
+    progress.close()
+    return results
+
+
+def _complete_manifest(campaign: Campaign, header: dict, done: Mapping[int, list[dict]],
+                       results: Sequence[JobResult]) -> tuple[dict, tuple[tuple[Job, str], ...]]:
+    """The finished dataset's manifest (entries in the campaign's job order, whether flown now or
+    before an interruption) and the failures of the jobs flown now."""
+    jobs = {j.index: j for j in campaign.jobs}
+    flown = {r.index: r for r in results}
+    entries = [e for j in campaign.jobs
+               for e in (done[j.index] if j.index in done else flown[j.index].entries)]
+    failures = tuple((jobs[r.index], r.error) for r in sorted(results, key=lambda r: r.index) if r.error)
+    manifest = {
+        **header,
+        "complete": True,
+        "maneuvers": entries,
+        "failures": [
+            {"job_index": j.index, "configuration": j.configuration_id, "maneuver": j.maneuver,
+             "error": err}
+            for j, err in failures
+        ],
+    }
+    return manifest, failures
+
+
 def fly_campaign(
     campaign: Campaign,
     out_dir: str | Path,
@@ -503,7 +611,6 @@ def fly_campaign(
     stored = read_manifest_if_dataset(out_dir) if resume and out_dir.is_dir() else None
     if resume and (damage := damaged_manifest(out_dir)) is not None:
         raise CampaignError(f"cannot resume: {damage}")
-    jobs = {j.index: j for j in campaign.jobs}
     done: dict[int, list[dict]] = {}
     notes: list[str] = []
     if stored is not None:
@@ -511,82 +618,18 @@ def fly_campaign(
         header["campaign"]["source"] = stored.get("campaign", {}).get("source", campaign.source)
         _check_same_campaign(out_dir, stored, header)
         if stored.get("complete", True) is not False:
+            jobs = {j.index: j for j in campaign.jobs}
             failures = tuple((jobs[f["job_index"]], f["error"]) for f in stored.get("failures", [])
                              if f.get("job_index") in jobs)
             return FlyResult(out_dir, stored, failures, time.perf_counter() - t0, flown=0)
-        maneuvers = out_dir / "maneuvers"
-        if maneuvers.is_symlink() or (maneuvers.exists() and not maneuvers.is_dir()):
-            # through a link the resume would read and write outside the dataset
-            raise FileExistsError(
-                f"{maneuvers}: {'a link' if maneuvers.is_symlink() else 'not a folder'}, not the "
-                "maneuvers/ folder `fpr fly` made; refusing to resume (nothing is read or written "
-                f"through it). Put the dataset's own maneuvers/ folder back, or fly the campaign "
-                "into a new --out")
-        remove_temp_files(out_dir)
-        maneuvers.mkdir(exist_ok=True)
-        # each whole file carries its manifest entry: the finished jobs need not be flown again
-        done, damaged = job_entries(out_dir, stored)
-        notes = _clear_damaged(out_dir, damaged)
+        done, notes = _reopen_interrupted(out_dir, stored)
     else:
         out_dir = prepare_directory(out_dir, overwrite=overwrite)
         # first, before any maneuver: at every moment the directory says it is an incomplete dataset
         write_manifest(out_dir, {**header, "complete": False, "maneuvers": [], "failures": []})
     todo = [j for j in campaign.jobs if j.index not in done]
-    workers = max(1, min(workers or os.cpu_count() or 1, len(todo) or 1))
-    init_args = (campaign.fleet.source, str(out_dir), campaign.common_rate_hz, campaign.seed,
-                 campaign.local_flow_truth, campaign.adc_baseline)
-    results: list[JobResult] = []
-    bar = None
-    if progress is True:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(campaign.jobs), initial=len(done), unit="maneuver",
-                   desc=f"fly {campaign.name}", file=sys.stderr,
-                   mininterval=0.5 if sys.stderr.isatty() else 10.0)
-        for note in notes:
-            bar.write(note, file=sys.stderr)
-
-    def _tick(res: JobResult) -> None:
-        results.append(res)
-        if bar is not None:
-            bar.update(1)
-            if res.error:
-                bar.write(f"maneuver {res.index} failed: {res.error.splitlines()[0]}")
-        elif callable(progress):
-            progress(len(done) + len(results), len(campaign.jobs))
-
-    try:
-        if workers == 1:
-            _init_worker(*init_args)
-            for job in todo:
-                _tick(_run_job(job))
-        elif todo:
-            # the workers end with this process however it ends, and leave Ctrl-C to it: on an
-            # interrupt (or an error) they are stopped at once, their maneuvers left unwritten
-            with worker_pool(workers, _init_worker, init_args) as pool:
-                for fut in as_completed([pool.submit(_run_job, job) for job in todo]):
-                    _tick(fut.result())
-    except KeyboardInterrupt:
-        if bar is not None:
-            bar.close()
-        remove_temp_files(out_dir)
-        raise FlyInterrupted(out_dir, dataset_status(out_dir).n_done, len(campaign.jobs)) from None
-    if bar is not None:
-        bar.close()
-    flown = {r.index: r for r in results}
-    entries = [e for j in campaign.jobs
-               for e in (done[j.index] if j.index in done else flown[j.index].entries)]
-    failures = tuple((jobs[r.index], r.error) for r in sorted(results, key=lambda r: r.index) if r.error)
-    manifest = {
-        **header,
-        "complete": True,
-        "maneuvers": entries,
-        "failures": [
-            {"job_index": j.index, "configuration": j.configuration_id, "maneuver": j.maneuver,
-             "error": err}
-            for j, err in failures
-        ],
-    }
+    results = _fly_jobs(campaign, out_dir, todo, workers, _Progress(campaign, len(done), notes, progress))
+    manifest, failures = _complete_manifest(campaign, header, done, results)
     # no wall-clock time or timing in the manifest: two identical campaigns, or an interrupted
     # one and its resumption, give the same bytes
     write_manifest(out_dir, manifest)
@@ -617,39 +660,53 @@ def summarize(manifest: Mapping) -> str:
     return "\n".join(lines)
 
 
-def flags_campaign(
-    configurations: Sequence[str] | str = "all",
-    mach: Sequence[float] = (0.5,),
-    maneuvers: Sequence[str] | str = "all",
-    altitude_m: float = 6000.0,
-    gear_down: bool = False,
-    seed: int = 0,
-    errors_preset: str = "typical",
-    planet: str = "flat",
-    turbulence: str = "none",
-    wind_ned_mps: Sequence[float] = (0.0, 0.0, 0.0),
-    common_rate_hz: float = 40.0,
-    fleet: str = "fleet_default",
-) -> dict:
-    """A one-block campaign mapping built from command-line flags (``["all"]``, as a command line
-    gives it, means "all" for the configurations and the maneuvers)."""
-    if configurations == "all" or list(configurations) == ["all"]:
-        configurations = "all"
-    if maneuvers == "all" or list(maneuvers) == ["all"]:
-        maneuvers = "all"
-    return {
-        "name": "flags",
-        "description": "campaign given by command-line flags",
-        "fleet": fleet,
-        "seed": seed,
-        "common_rate_hz": common_rate_hz,
-        "environment": {"planet": planet, "turbulence": turbulence, "wind_ned_mps": list(wind_ned_mps)},
-        "errors": {"preset": errors_preset},
-        "flights": [{
-            "configurations": configurations if configurations == "all" else list(configurations),
-            "mach": list(mach),
-            "maneuvers": maneuvers if maneuvers == "all" else list(maneuvers),
-            "altitude_m": altitude_m,
-            "gear_down": gear_down,
-        }],
-    }
+@dataclass(frozen=True)
+class CampaignFlags:
+    """A one-block campaign as command-line flags describe it (``fpr fly`` without a campaign file).
+
+    ``["all"]``, as a command line gives it, means "all" for the configurations and the maneuvers.
+    """
+
+    configurations: Sequence[str] | str = "all"
+    mach: Sequence[float] = (0.5,)
+    maneuvers: Sequence[str] | str = "all"
+    altitude_m: float = 6000.0
+    gear_down: bool = False
+    seed: int = 0
+    errors_preset: str = "typical"
+    planet: str = "flat"
+    turbulence: str = "none"
+    wind_ned_mps: Sequence[float] = (0.0, 0.0, 0.0)
+    common_rate_hz: float = 40.0
+    fleet: str = "fleet_default"
+
+    def campaign(self) -> dict:
+        """The campaign mapping (for :func:`parse_campaign`)."""
+        configurations, maneuvers = self.configurations, self.maneuvers
+        if configurations == "all" or list(configurations) == ["all"]:
+            configurations = "all"
+        if maneuvers == "all" or list(maneuvers) == ["all"]:
+            maneuvers = "all"
+        return {
+            "name": "flags",
+            "description": "campaign given by command-line flags",
+            "fleet": self.fleet,
+            "seed": self.seed,
+            "common_rate_hz": self.common_rate_hz,
+            "environment": {"planet": self.planet, "turbulence": self.turbulence,
+                            "wind_ned_mps": list(self.wind_ned_mps)},
+            "errors": {"preset": self.errors_preset},
+            "flights": [{
+                "configurations": configurations if configurations == "all" else list(configurations),
+                "mach": list(self.mach),
+                "maneuvers": maneuvers if maneuvers == "all" else list(maneuvers),
+                "altitude_m": self.altitude_m,
+                "gear_down": self.gear_down,
+            }],
+        }
+
+
+def flags_campaign(**flags) -> dict:
+    """A one-block campaign mapping built from command-line flags: ``flags`` are
+    :class:`CampaignFlags`' fields (an unknown one is a TypeError)."""
+    return CampaignFlags(**flags).campaign()

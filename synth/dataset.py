@@ -194,12 +194,11 @@ def airframe_manifest(airframe: Airframe) -> dict:
     }
 
 
-def manifest_entry(*, job_index: int, segment: int, n_segments: int, configuration: Configuration,
-                   spec: ManeuverSpec, environment: Environment, truth: TruthTrajectory,
-                   instrumented: InstrumentedManeuver, sample_rate_hz: float) -> dict:
-    """The manifest entry of one recorded maneuver (the keys listed in this module's docstring).
+@dataclass(frozen=True)
+class RecordedPiece:
+    """One recorded maneuver piece, everything its manifest entry is made of.
 
-    Parameters
+    Attributes
     ----------
     job_index, segment, n_segments : the maneuver's job, its piece and the job's number of pieces.
     configuration : the aircraft configuration flown (:class:`aircraft_models.Configuration`).
@@ -208,38 +207,58 @@ def manifest_entry(*, job_index: int, segment: int, n_segments: int, configurati
     instrumented : its recorded channels (:func:`synth.instrument.instrument`).
     sample_rate_hz : the dataset's common time base, Hz.
     """
-    mid = maneuver_id(job_index, segment, n_segments)
-    data = instrumented.data
-    mach = truth.mach
-    return {
-        "id": mid,
-        "file": maneuver_file(mid),
-        "job_index": job_index,
-        "configuration": configuration.id,
-        "aircraft": configuration.aircraft.id,
-        "nose_sensor": configuration.nose_sensor,
-        "sensors": list(configuration.sensors),
-        "kind": spec.kind,
-        "segment": segment,
-        "n_segments": n_segments,
-        "mach_nominal": spec.mach,
-        "mach_mean": float(np.mean(mach)),
-        "mach_min": float(np.min(mach)),
-        "mach_max": float(np.max(mach)),
-        "altitude_m": spec.altitude_m,
-        "gear_down": bool(spec.gear_down),
-        "duration_s": float(data["t_s"].iloc[-1] - data["t_s"].iloc[0]),
-        "n_samples": int(len(data)),
-        "sample_rate_hz": sample_rate_hz,
-        "r_cg_body_m_mean": np.mean(truth.r_cg_body_m, axis=0).tolist(),
-        "g_mps2_mean": float(np.mean(truth.g_mps2)),
-        "maneuver": spec.to_dict(),
-        "environment": environment.to_dict(),
-        "injected": instrumented.injected,
-        "channel_units": instrumented.channel_units,
-        "own_rate_columns": list(instrumented.own_rate_columns),
-        "flight_meta": {k: v for k, v in truth.meta.items() if k != "spec"},
-    }
+
+    job_index: int
+    segment: int
+    n_segments: int
+    configuration: Configuration
+    spec: ManeuverSpec
+    environment: Environment
+    truth: TruthTrajectory
+    instrumented: InstrumentedManeuver
+    sample_rate_hz: float
+
+    def manifest_entry(self) -> dict:
+        """The piece's manifest entry (the keys listed in this module's docstring)."""
+        configuration, spec, truth = self.configuration, self.spec, self.truth
+        mid = maneuver_id(self.job_index, self.segment, self.n_segments)
+        data = self.instrumented.data
+        mach = truth.mach
+        return {
+            "id": mid,
+            "file": maneuver_file(mid),
+            "job_index": self.job_index,
+            "configuration": configuration.id,
+            "aircraft": configuration.aircraft.id,
+            "nose_sensor": configuration.nose_sensor,
+            "sensors": list(configuration.sensors),
+            "kind": spec.kind,
+            "segment": self.segment,
+            "n_segments": self.n_segments,
+            "mach_nominal": spec.mach,
+            "mach_mean": float(np.mean(mach)),
+            "mach_min": float(np.min(mach)),
+            "mach_max": float(np.max(mach)),
+            "altitude_m": spec.altitude_m,
+            "gear_down": bool(spec.gear_down),
+            "duration_s": float(data["t_s"].iloc[-1] - data["t_s"].iloc[0]),
+            "n_samples": int(len(data)),
+            "sample_rate_hz": self.sample_rate_hz,
+            "r_cg_body_m_mean": np.mean(truth.r_cg_body_m, axis=0).tolist(),
+            "g_mps2_mean": float(np.mean(truth.g_mps2)),
+            "maneuver": spec.to_dict(),
+            "environment": self.environment.to_dict(),
+            "injected": self.instrumented.injected,
+            "channel_units": self.instrumented.channel_units,
+            "own_rate_columns": list(self.instrumented.own_rate_columns),
+            "flight_meta": {k: v for k, v in truth.meta.items() if k != "spec"},
+        }
+
+
+def manifest_entry(**piece) -> dict:
+    """The manifest entry of one recorded maneuver: ``piece`` are :class:`RecordedPiece`'s fields,
+    by keyword (an unknown or missing one is a TypeError)."""
+    return RecordedPiece(**piece).manifest_entry()
 
 
 def resume_command(directory: str | Path) -> str:

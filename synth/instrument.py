@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -162,6 +163,14 @@ def _sensed_local_rad(sensor: str, model: LocalFlowModel, side_sign: float, alph
     return {"sensed": loc, "local_flank": loc}
 
 
+class FlowModels(NamedTuple):
+    """The local-flow truth and the ADC's baseline (its nominal model and table grid): loaded once
+    by a caller that evaluates many channels; each None is loaded (:mod:`synth.local_flow`)."""
+
+    truth_model: LocalFlowModel | None = None
+    adc_baseline: tuple[LocalFlowModel, TableGrid] | None = None
+
+
 def _models(errors: ErrorConfig, truth_model: LocalFlowModel | None,
             adc_baseline: tuple[LocalFlowModel, TableGrid] | None
             ) -> tuple[LocalFlowModel, LocalFlowModel, AirdataComputer]:
@@ -182,8 +191,7 @@ def channel_response(
     *,
     local_flow: bool = True,
     baseline_mismatch: bool = True,
-    truth_model: LocalFlowModel | None = None,
-    adc_baseline: tuple[LocalFlowModel, TableGrid] | None = None,
+    models: FlowModels | None = None,
 ) -> np.ndarray:
     """The noise-free calibration relationship of one ADC output channel.
 
@@ -203,6 +211,7 @@ def channel_response(
     mach : free-stream Mach number (also taken as the ADC's measured Mach).
     gear_down : gear position 0..1 for the truth; the ADC's flag is ``gear_down >= 0.5``.
     local_flow, baseline_mismatch : the :class:`~synth.errors.ErrorConfig` switches.
+    models : the local-flow truth and the ADC's baseline to use (loaded when None, or each None).
 
     Returns
     -------
@@ -211,7 +220,8 @@ def channel_response(
     if channel not in CHANNEL_TRUTH:
         raise unknown([channel], CHANNEL_TRUTH, "channel_response", what="channel")
     switches = ErrorConfig(local_flow=local_flow, baseline_mismatch=baseline_mismatch)
-    _, sensing, adc = _models(switches, truth_model, adc_baseline)
+    models = models or FlowModels()
+    _, sensing, adc = _models(switches, models.truth_model, models.adc_baseline)
     alpha, beta, mach, gear = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in
                                                     (alpha_rad, beta_rad, mach, gear_down)))
     flank = np.arctan2(np.sin(beta), np.cos(beta) * np.cos(alpha))
@@ -317,12 +327,12 @@ def instrument(
     -----
     The stages, in order (module docstring): :func:`_flow_at_sensors` (flow and local-flow truth
     at each sensor), :func:`_continuous_signals` (what the other raw channels see),
-    :func:`_plan_recorders` (stamps, lags, common time base), :func:`_record_dru` (IMU, airdata,
-    gear and flow-sensor transducers), :func:`_air_data_computer` (the ADC on the DRU's samples),
-    :func:`_clean_channels` (the noise-free calibrated channels), :func:`_record_ins_dgps`,
-    :func:`_to_common_base` (preprocessing), :func:`_truth_columns` and :func:`_injected`. Every
-    random channel draws from its own generator (``channel_rng``), so the stages' order does not
-    change a draw.
+    :func:`_plan_recorders` (stamps, lags, common time base), :func:`_record_imu_airdata` and
+    :func:`_record_flow_transducers` (the DRU: IMU, airdata, gear and flow-sensor transducers),
+    :func:`_air_data_computer` (the ADC on the DRU's samples), :func:`_clean_channels` (the
+    noise-free calibrated channels), :func:`_record_ins_dgps`, :func:`_to_common_base`
+    (preprocessing), :func:`_truth_columns` and :func:`_injected`. Every random channel draws from
+    its own generator (``channel_rng``), so the stages' order does not change a draw.
     """
     _check_truth(truth, common_rate_hz)
     truth_model, sensing, adc = _models(errors, truth_model, adc_baseline)
@@ -341,7 +351,8 @@ def instrument(
     def rng(seed: int, name: str) -> np.random.Generator:
         return channel_rng(seed, maneuver_key, _RNG_INDEX[name])
 
-    dru = _record_dru(truth, sensors, errors, direct, flow, sensing, qc_true, rec, rng)
+    dru = _record_imu_airdata(truth, errors, direct, rec, rng)
+    dru.update(_record_flow_transducers(truth, sensors, errors, flow, sensing, qc_true, rec, rng))
     _air_data_computer(dru, truth, sensors, errors, adc, ports, rec, rng)
     clean_cols = _clean_channels(truth, sensors, errors, flow, sensing, adc, qc_true)
     attitude_error = _ins_attitude_errors(errors, rec, rng)
@@ -613,12 +624,11 @@ def _plan_recorders(t: np.ndarray, sensors, errors: ErrorConfig, direct: dict[st
     return _RecorderPlan(t, rec, plan, stamps, t_common, imu_window_s)
 
 
-def _record_dru(truth: TruthTrajectory, sensors, errors: ErrorConfig, direct: dict[str, np.ndarray],
-                flow: _SensorFlow, sensing: LocalFlowModel, qc_true: np.ndarray, rec: _RecorderPlan,
-                rng) -> dict[str, np.ndarray]:
-    """Stage 4 on the DRU: the IMU, airdata (qc, ps in Pa, tt in K; Mach, TAS in m/s, pressure
-    altitude in m from them), gear flag and flow-sensor transducers (vanes: rad; probes: Pa), at
-    the DRU's stamps. Returns column -> samples, in the stream's column order."""
+def _record_imu_airdata(truth: TruthTrajectory, errors: ErrorConfig, direct: dict[str, np.ndarray],
+                        rec: _RecorderPlan, rng) -> dict[str, np.ndarray]:
+    """Stage 4 on the DRU, its own instruments: the IMU, airdata (qc, ps in Pa, tt in K; Mach, TAS in
+    m/s, pressure altitude in m from them) and gear flag, at the DRU's stamps. Returns column ->
+    samples, in the stream's column order."""
     seeds = errors.seeds
     dru: dict[str, np.ndarray] = {}
     imu = errors.imu
@@ -641,14 +651,23 @@ def _record_dru(truth: TruthTrajectory, sensors, errors: ErrorConfig, direct: di
     dru["tas_mps"] = tas_from_mach_mps(mach_m, dru["tt_k"])
     dru["h_baro_m"] = pressure_altitude_m(dru["ps_pa"])
     dru["gear_down"] = (rec.at("dru", "gear_down", truth.gear_pos_norm) >= 0.5)
+    return dru
 
+
+def _record_flow_transducers(truth: TruthTrajectory, sensors, errors: ErrorConfig, flow: _SensorFlow,
+                             sensing: LocalFlowModel, qc_true: np.ndarray, rec: _RecorderPlan,
+                             rng) -> dict[str, np.ndarray]:
+    """Stage 4 on the DRU, the flow sensors' transducers (vanes: rad; probes: Pa), at the DRU's
+    stamps. Returns raw column -> samples, in the configuration's sensor order."""
+    seeds = errors.seeds
+    raw_cols: dict[str, np.ndarray] = {}
     for s in sensors:
         e = errors.sensors[s]
         raw = SENSOR_RAW_CHANNEL[s]
         theta = rec.at("dru", s, flow.sensed[s])
         if s not in PROBE_SENSORS:
-            dru[raw] = transduce(theta, scale=e.scale, noise_std=e.noise_rad,
-                                 quant_step=e.quant_rad, rng=rng(seeds.vane_noise, s))
+            raw_cols[raw] = transduce(theta, scale=e.scale, noise_std=e.noise_rad,
+                                      quant_step=e.quant_rad, rng=rng(seeds.vane_noise, s))
             continue
         qc_s, m_s = rec.at("dru", s, qc_true), rec.at("dru", s, truth.mach)
         law = sensing.side_probe_pressure if s != "nose_probe" else sensing.nose_probe_pressure
@@ -657,9 +676,9 @@ def _record_dru(truth: TruthTrajectory, sensors, errors: ErrorConfig, direct: di
             std = e.high_alpha_noise_rad_per_rad * np.maximum(alpha_s - e.high_alpha_onset_rad, 0.0)
             theta = theta + std * rng(seeds.probe_noise, "nose_probe_high_alpha").standard_normal(
                 theta.shape)
-        dru[raw] = transduce(law.dp_pa(theta, qc_s, m_s), scale=e.scale, noise_std=e.noise_pa,
-                             quant_step=e.quant_pa, rng=rng(seeds.probe_noise, s))
-    return dru
+        raw_cols[raw] = transduce(law.dp_pa(theta, qc_s, m_s), scale=e.scale, noise_std=e.noise_pa,
+                                  quant_step=e.quant_pa, rng=rng(seeds.probe_noise, s))
+    return raw_cols
 
 
 def _air_data_computer(dru: dict[str, np.ndarray], truth: TruthTrajectory, sensors,

@@ -17,7 +17,7 @@ It also
   trailing-edge-flap lift and drag (``aero/coefficient/CLDflaps``, 0.35 per rad times the
   ground-effect factor; ``CDDflaps``, 0.08 per rad) take: the flap lift followed the roll command
   (an aileron step of +-0.25 moved the flaps' lift coefficient by -+0.20 within 0.5 s at Mach 0.4,
-  6000 m; issue 13 measured -+0.49) and the flaps gave none. The sum should have been the difference
+  6000 m) and the flaps gave none. The sum should have been the difference
   of the two mirrored surfaces (each flaperon's trailing-edge-down deflection is ``tef +- ail``: the
   mean, the symmetric flap, is ``tef``; the half difference, the aileron, already drives the roll
   and yaw terms through ``fcs/aileron-pos-rad``), and 1.4324 = 2.864789 / 2 is norm per rad where
@@ -37,7 +37,7 @@ It also
   feedback of 1.047 per rad, so full aft stick balances at 17-20 deg of alpha wings level at low
   dynamic pressure and at 12-14 deg in a Mach 0.4-0.6 wind-up turn, short of the real F-16's
   25 deg limiter and of the 28-30 deg the FCS's own comments aim at; a calibration campaign needs
-  the nose probe and the tables' upper breakpoints above 20 deg (issue 13). The patch moves that
+  the nose probe and the tables' upper breakpoints above 20 deg. The patch moves that
   clip to :data:`F16_AFT_COMMAND_STOP_NORM` (-2.5): full aft command then balances at 22-24 deg in
   a 1.5 g turn at Mach 0.3-0.4 and low dynamic pressure (20.9 deg for the most forward CG at Mach
   0.3, 3000 m), still below 25 deg; the elevator's own stop (``fcs/pitch-scheduler`` clipped to

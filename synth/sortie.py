@@ -204,6 +204,103 @@ class FlownSortie:
     transitions: tuple[dict, ...]
 
 
+class _Tape:
+    """The sortie's legs as recorded, end to end: a leg's first sample is the previous leg's last."""
+
+    def __init__(self) -> None:
+        self.pieces: list[np.ndarray] = []
+        self.n_total = 0  # samples recorded so far
+
+    @property
+    def next_start(self) -> int:
+        """Index of the next leg's first sample (the last one's end)."""
+        return max(self.n_total - 1, 0)
+
+    def record(self, si: np.ndarray) -> int:
+        """Append a leg; its start index."""
+        start = self.next_start
+        self.pieces.append(si if not self.pieces else si[1:])
+        self.n_total = start + len(si)
+        return start
+
+
+@dataclass(frozen=True)
+class _SortieRun:
+    """The JSBSim run a sortie is flown in, and what it has recorded so far."""
+
+    fdm: object
+    reader: object
+    dt_s: float
+    aircraft_id: str
+    tape: _Tape
+
+
+def _check_sortie_environment(env: Environment) -> None:
+    """Refuse the air a whole sortie cannot model: what is drawn or timed per maneuver."""
+    if env.gust is not None:
+        raise FlightError("sortie: a discrete gust is not modelled in a whole sortie (its start_s "
+                          "is relative to one maneuver); remove [environment.gust]")
+    if env.vertical_air_motion is not None:
+        raise FlightError("sortie: the slow vertical air motion is drawn per maneuver, not for a "
+                          "whole sortie; remove [environment] vertical_air_motion, or fly the "
+                          "campaign without --sortie")
+
+
+def _fly_transition(run: _SortieRun, spec: ManeuverSpec, gear_down: bool, chunk: int, to_id: str) -> dict:
+    """Fly from where the last maneuver ended to ``spec``'s test point (recorded, in chunks of
+    ``chunk`` samples until it has settled); the transition's boundaries (to ``to_id``)."""
+    fdm, reader, dt_s, tape = run.fdm, run.reader, run.dt_s, run.tape
+    start_state = trim_point(reader.read_si())
+    leg = Transition(spec, start_state, dt_s, gear_down)
+    t0 = tape.next_start * dt_s
+    if leg.raise_gear:
+        io.set_gear(fdm, False)
+    try:
+        while not leg.done:
+            if leg.stage == "gear":
+                io.set_gear(fdm, True)
+            tape.record(fly_controller(fdm, reader, leg, chunk, dt_s, _TRANSITION_ADVICE))
+    except ManeuverFailure as exc:
+        raise FlightError(
+            f"sortie (aircraft {run.aircraft_id}): transition to {to_id} ({describe_spec(spec)}), "
+            f"t = {t0 + exc.t_s:.1f} s into the sortie: {exc.what}. Try: {exc.advice}."
+        ) from None
+    # the pilot trims the stick force out: the maneuvers' stick programmes are increments
+    # from a trimmed stick (the f16 FCS adds stick and pitch trim before anything else)
+    io.add_pitch_trim(fdm, leg.elevator_cmd_norm)
+    return {"to": to_id, "t_start_s": t0, "t_end_s": (tape.n_total - 1) * dt_s, "stages": list(leg.stages)}
+
+
+def _fly_test_point(run: _SortieRun, spec: ManeuverSpec, trim, job_index: int, n_seg: int) -> list[dict]:
+    """Fly and record one maneuver from its trimmed test point; its pieces' boundaries."""
+    dt_s = run.dt_s
+    controller = make_controller(spec, trim, dt_s)
+    n = int(round(spec.duration_s / dt_s)) + 1
+    try:
+        si = fly_controller(run.fdm, run.reader, controller, n, dt_s, departure_advice(spec), finish=False)
+    except ManeuverFailure as exc:
+        t_in = run.tape.next_start * dt_s
+        raise FlightError(
+            f"sortie (aircraft {run.aircraft_id}): maneuver {maneuver_id(job_index, 0, n_seg)} "
+            f"({describe_spec(spec)}), t = {exc.t_s:.2f} s into it ({t_in + exc.t_s:.1f} s into the "
+            f"sortie): {exc.what}. Try: {exc.advice}."
+        ) from None
+    start = run.tape.record(si)
+    # a maneuver that missed its goal (e.g. a wind-up turn short of its alpha) was still flown
+    # and recorded, as in a real sortie: the boundaries say so, the flight goes on
+    try:
+        controller.finish(si, np.arange(n) * dt_s)
+        missed = ""
+    except ManeuverFailure as exc:
+        missed = f"{exc.what} (t = {exc.t_s:.2f} s into it; try: {exc.advice})"
+    return [{
+        "id": maneuver_id(job_index, k, n_seg), "job_index": job_index, "segment": k,
+        "kind": spec.kind, "mach": spec.mach, "altitude_m": spec.altitude_m,
+        "gear_down": bool(spec.gear_down), "t_start_s": (start + lo) * dt_s,
+        "t_end_s": (start + hi - 1) * dt_s, "missed": missed,
+    } for k, (lo, hi) in enumerate(segment_bounds(n, n_seg))]
+
+
 def fly_sortie(
     specs: Sequence[ManeuverSpec],
     ids: Sequence[tuple[int, int]],
@@ -233,84 +330,23 @@ def fly_sortie(
     """
     if not specs:
         raise ValueError("fly_sortie: no maneuvers to fly")
-    if env.gust is not None:
-        raise FlightError("sortie: a discrete gust is not modelled in a whole sortie (its start_s "
-                          "is relative to one maneuver); remove [environment.gust]")
-    if env.vertical_air_motion is not None:
-        raise FlightError("sortie: the slow vertical air motion is drawn per maneuver, not for a "
-                          "whole sortie; remove [environment] vertical_air_motion, or fly the "
-                          "campaign without --sortie")
+    _check_sortie_environment(env)
     fdm, reader, trim, trim_meta = start_flight(specs[0], airframe, aircraft, env, dt_s)
     # the fuel load stays the aircraft's (as in a per-maneuver run): a whole campaign's
     # configuration is more flight than one tankful, and its engine would flame out
     io.freeze_fuel(fdm)
-    pieces: list[np.ndarray] = []
-    n_total = 0  # samples recorded so far; the next leg's first sample is the last one's end
-
-    def record(si: np.ndarray) -> int:
-        """Append a leg (its first sample is the previous leg's last); its start index."""
-        nonlocal n_total
-        start = max(n_total - 1, 0)
-        pieces.append(si if not pieces else si[1:])
-        n_total = start + len(si)
-        return start
-
+    run = _SortieRun(fdm, reader, dt_s, aircraft.id, _Tape())
     boundaries, transitions = [], []
     gear_down = specs[0].gear_down
     chunk = int(round(chunk_s / dt_s)) + 1
     for m, spec in enumerate(specs):
         job_index, n_seg = ids[m]
-        mid0 = maneuver_id(job_index, 0, n_seg)
         if m > 0:
-            start_state = trim_point(reader.read_si())
-            leg = Transition(spec, start_state, dt_s, gear_down)
-            t0 = max(n_total - 1, 0) * dt_s
-            if leg.raise_gear:
-                io.set_gear(fdm, False)
-            try:
-                while not leg.done:
-                    if leg.stage == "gear":
-                        io.set_gear(fdm, True)
-                    record(fly_controller(fdm, reader, leg, chunk, dt_s, _TRANSITION_ADVICE))
-            except ManeuverFailure as exc:
-                raise FlightError(
-                    f"sortie (aircraft {aircraft.id}): transition to {mid0} ({describe_spec(spec)}), "
-                    f"t = {t0 + exc.t_s:.1f} s into the sortie: {exc.what}. Try: {exc.advice}."
-                ) from None
+            transitions.append(_fly_transition(run, spec, gear_down, chunk, maneuver_id(job_index, 0, n_seg)))
             gear_down = spec.gear_down
-            transitions.append({"to": mid0, "t_start_s": t0, "t_end_s": (n_total - 1) * dt_s,
-                                "stages": list(leg.stages)})
-            # the pilot trims the stick force out: the maneuvers' stick programmes are increments
-            # from a trimmed stick (the f16 FCS adds stick and pitch trim before anything else)
-            io.add_pitch_trim(fdm, leg.elevator_cmd_norm)
             trim = trim_point(reader.read_si())
-        controller = make_controller(spec, trim, dt_s)
-        n = int(round(spec.duration_s / dt_s)) + 1
-        try:
-            si = fly_controller(fdm, reader, controller, n, dt_s, departure_advice(spec), finish=False)
-        except ManeuverFailure as exc:
-            t_in = max(n_total - 1, 0) * dt_s
-            raise FlightError(
-                f"sortie (aircraft {aircraft.id}): maneuver {mid0} ({describe_spec(spec)}), t = "
-                f"{exc.t_s:.2f} s into it ({t_in + exc.t_s:.1f} s into the sortie): {exc.what}. "
-                f"Try: {exc.advice}."
-            ) from None
-        start = record(si)
-        # a maneuver that missed its goal (e.g. a wind-up turn short of its alpha) was still flown
-        # and recorded, as in a real sortie: the boundaries say so, the flight goes on
-        try:
-            controller.finish(si, np.arange(n) * dt_s)
-            missed = ""
-        except ManeuverFailure as exc:
-            missed = f"{exc.what} (t = {exc.t_s:.2f} s into it; try: {exc.advice})"
-        for k, (lo, hi) in enumerate(segment_bounds(n, n_seg)):
-            boundaries.append({
-                "id": maneuver_id(job_index, k, n_seg), "job_index": job_index, "segment": k,
-                "kind": spec.kind, "mach": spec.mach, "altitude_m": spec.altitude_m,
-                "gear_down": bool(spec.gear_down), "t_start_s": (start + lo) * dt_s,
-                "t_end_s": (start + hi - 1) * dt_s, "missed": missed,
-            })
-    si = np.concatenate(pieces)
+        boundaries += _fly_test_point(run, spec, trim, job_index, n_seg)
+    si = np.concatenate(run.tape.pieces)
     t_s = np.arange(len(si)) * dt_s
     meta = {
         "sortie": True,

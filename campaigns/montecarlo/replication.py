@@ -51,9 +51,9 @@ from synth.campaign import software_versions
 from synth.dataset import (
     FORMAT,
     FORMAT_VERSION,
+    RecordedPiece,
     airframe_manifest,
     maneuver_key,
-    manifest_entry,
     write_maneuver,
     write_manifest,
 )
@@ -251,10 +251,10 @@ def write_scratch_dataset(scenario: Scenario, draws: Sequence[ManeuverDraw],
                               maneuver_key=maneuver_key(md.job.index, seg_no),
                               common_rate_hz=scenario.campaign.common_rate_hz,
                               truth_model=models.truth_model, adc_baseline=models.adc_baseline)
-            entry = manifest_entry(job_index=md.job.index, segment=seg_no, n_segments=len(segments),
-                                   configuration=cfg, spec=spec, environment=md.environment,
-                                   truth=truth, instrumented=inst,
-                                   sample_rate_hz=scenario.campaign.common_rate_hz)
+            entry = RecordedPiece(job_index=md.job.index, segment=seg_no, n_segments=len(segments),
+                                  configuration=cfg, spec=spec, environment=md.environment,
+                                  truth=truth, instrumented=inst,
+                                  sample_rate_hz=scenario.campaign.common_rate_hz).manifest_entry()
             write_maneuver(directory / entry["file"], inst.data, entry)
             entries.append(entry)
             tables[entry["id"]] = inst.data
