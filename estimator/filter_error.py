@@ -40,7 +40,7 @@ model (sequential scalar updates, :mod:`estimator.core.wind_filter`)::
 
 with ``s`` the innovation variances and ``L_f`` the filter acting on the Jacobian's columns, its
 gains held at the linearisation (the usual filter-error approximation). The Gauss-Newton
-iterations are the output-error ones (:func:`estimator.iteration._gauss_newton`); between their
+iterations are the output-error ones (:func:`estimator.gauss_newton.gauss_newton`); between their
 steps the noise statistics are relaxed (as ``R`` is for output error, Jategaonkar §5.5): ``sigma``
 of each maneuver maximises the likelihood with ``R`` held (Brent's search on ``ln sigma``),
 and ``R`` of each channel takes its expectation-maximisation update from the fixed-interval
@@ -116,10 +116,18 @@ import pandas as pd
 from scipy.optimize import minimize_scalar
 
 from estimator.core.cross_correlation import high_pass, lagged_correlation
-from estimator.core.instrumental import instrument_sums, iv_difference
+from estimator.core.instrumental import (  # the feedback check (its names were this module's)
+    FEEDBACK_LAGS_S,
+    FEEDBACK_WEAK,
+    DelayCheck,
+    instrument_sums,
+    iv_difference,
+    judge_delays,
+    widen_for_feedback,
+)
 from estimator.core.kinematics import rotation_ned_to_body
 from estimator.core.sensitivity import worker_threads
-from estimator.iteration import _evaluate
+from estimator.likelihood import evaluate
 from estimator.model import Evaluation, Model
 from estimator.normal_equations import NormalEquations, Structure, residual_sums
 from estimator.options import DRYDEN_SCALE_LENGTH_M as DRYDEN_SCALE_LENGTH_M  # re-exported from its old home
@@ -166,29 +174,6 @@ ANSWER_HIGH_PASS_S = 1.0
 ANSWER_LAGS_S = 0.1
 ANSWER_Z = 5.0
 ANSWER_R = 0.1
-#: The time delays' feedback check (estimator.core.instrumental): each delay's instrument is its
-#: sensitivity FEEDBACK_LAGS_S earlier (the mean over these lags; at least one sample): older than
-#: the filter's memory of the innovations (under a sample at 40-120 Hz in light turbulence), young
-#: enough to follow a maneuver's flow-angle rate (150 ms: the instrument too weak, the difference
-#: 20-40 ms of noise on the what-if data). A delay's deviation is widened where the difference to
-#: the likelihood estimate exceeds FEEDBACK_Z of its deviations (two-sided 5 % each; with 6-8
-#: flow delays judged one at a time, a fit without feedback gets a widening about a third of the
-#: time, which errs on the safe side: on the what-if data the Gauss-Markov wind drawn apart from
-#: the flight had 3 delays widened, the calm cases none). The difference's variance takes the
-#: innovations as white; where they are coloured it is too small and the check fires more often.
-FEEDBACK_LAGS_S = (0.05, 0.075, 0.1)
-FEEDBACK_Z = 2.0
-#: ... tested only where the instrumental estimate's deviation is at most FEEDBACK_WEAK times the
-#: likelihood's (the instrument's correlation with the regressor 1/3 at least; the flow delays'
-#: 1.2-2.1 times on the what-if data, the airspeed delay's 5-57: a weak instrument's difference is
-#: far from normal, no test: there it moved 0.05-0.9 s on data where the delay is 0.02-0.3 s off).
-#: A weak instrument means the likelihood draws its information on the delay from the regressor's
-#: fast part, which in gusts the aircraft answers can be that answer (the airspeed delay on
-#: JSBSim's turbulence: 0.23-0.31 s long at 5-11 honest deviations, its instrument 8-10 times less
-#: precise; with the aircraft's answer removed 2 times, and the delay right): such a delay's
-#: honest deviation becomes what the instrument supports and the difference together
-#: (judge_delays)
-FEEDBACK_WEAK = 3.0
 
 
 @dataclass
@@ -219,107 +204,6 @@ class _Answer(NamedTuple):
     delays: tuple[str, ...]  # the channel's time-delay parameters
 
 
-class DelayCheck(NamedTuple):
-    """The feedback check's judgement of one time delay (:func:`judge_delays`)."""
-
-    parameter: int  # index into the problem's parameters
-    std_before_s: float  # honest deviation before the check
-    std_after_s: float  # after it (NaN: not judged)
-    difference_s: float  # instrumental - likelihood estimate
-    difference_std_s: float  # its deviation (Hausman: sqrt(Var IV - Var ML))
-    ratio: float  # the instrumental estimate's deviation over the likelihood's
-
-    @property
-    def weak(self) -> bool:
-        """The instrument weak (``ratio`` > FEEDBACK_WEAK): no test, the deviation widened to what
-        the instrument supports and the difference together."""
-        return self.ratio > FEEDBACK_WEAK
-
-    @property
-    def differs(self) -> bool:
-        """A strong instrument's difference beyond FEEDBACK_Z of its deviations: widened by it."""
-        return not self.weak and abs(self.difference_s) > FEEDBACK_Z * self.difference_std_s
-
-
-def judge_delays(D: np.ndarray, V: np.ndarray, V_ml: np.ndarray, candidates: np.ndarray,
-                 std: np.ndarray) -> list[DelayCheck]:
-    """The time delays the feedback check widens or cannot judge.
-
-    Parameters
-    ----------
-    D, V, V_ml : per parameter, the instrumental-variable minus the likelihood estimate, its
-        variance and the likelihood's white-innovation variance, SI
-        (:func:`estimator.core.instrumental.iv_difference`).
-    candidates : the delays to judge (bool per parameter).
-    std : their honest deviations before the check, s.
-
-    Returns
-    -------
-    One :class:`DelayCheck` per delay widened or not judged (the others are left as they were).
-
-    Notes
-    -----
-    A strong instrument (its estimate's deviation at most FEEDBACK_WEAK times the likelihood's):
-    where the difference exceeds FEEDBACK_Z of its own deviations (Hausman), the deviation becomes
-    ``sqrt(std^2 + D^2 - Var D)``. A weak one: no test (its difference is far from normal); the
-    deviation becomes ``sqrt((std r)^2 + D^2)``, ``r`` the ratio of the deviations. The motive is
-    Anderson & Rubin's (1949) set: for one parameter, linear, with an instrument that is
-    exogenous and innovations white of known variance, the values the moment ``Z^T nu(tau) = 0``
-    does not reject are the instrumental estimate plus or minus c of its deviations, with exact
-    coverage whatever the instrument's strength, so that the likelihood's error is at most ``|D|``
-    plus that. Here the other parameters are estimated too, the innovations are coloured (``r``
-    keeps the sandwich's factor) and the step is linearised: an approximation, and on the
-    what-if data it covered the airspeed delay's bias in every case. Where the rank cut left the
-    difference or the likelihood no variance (or the instrumental variance came out below the
-    likelihood's), the delay is not judged (``std_after_s`` NaN).
-    """
-    out = []
-    for i in np.flatnonzero(candidates & np.isfinite(D) & np.isfinite(std)):
-        if not (V_ml[i] > 0.0 and V[i] > 1e-9 * V_ml[i]):
-            out.append(DelayCheck(int(i), float(std[i]), math.nan, float(D[i]), math.nan, math.nan))
-            continue
-        c = DelayCheck(int(i), float(std[i]), math.nan, float(D[i]), math.sqrt(V[i]),
-                       math.sqrt((V[i] + V_ml[i]) / V_ml[i]))
-        if c.weak:
-            out.append(c._replace(std_after_s=math.sqrt((std[i] * c.ratio) ** 2 + D[i] ** 2)))
-        elif c.differs:
-            out.append(c._replace(std_after_s=math.sqrt(std[i] ** 2 + D[i] ** 2 - V[i])))
-    return out
-
-
-def widen_for_feedback(std: np.ndarray, cov: np.ndarray, gpos: np.ndarray,
-                       feedback: Sequence[DelayCheck]) -> tuple[np.ndarray, np.ndarray]:
-    """The honest deviations and covariance with the feedback check's widening.
-
-    Parameters
-    ----------
-    std : (P,) honest deviations per parameter, SI.
-    cov : (G, G) their covariance over the global parameters, SI.
-    gpos : (P,) each parameter's position among the globals (-1 for a maneuver's own).
-    feedback : the check's judgements (:func:`judge_delays`); those not judged change nothing.
-
-    Returns
-    -------
-    std, cov : new arrays (the inputs are not changed), SI: every judged delay's deviation its
-    ``std_after_s``. Its variance grows by ``std_after^2 - std_before^2``: a weak instrument's as
-    the delay's own term (its difference mostly the instrument's own noise); the strong ones'
-    together as one rank-one term, its signs the differences', because their bias is common (the
-    same gusts, the same loop), so that a combination of delays is as uncertain as its parts.
-    """
-    std, cov = std.copy(), cov.copy()
-    b = np.zeros(cov.shape[0])
-    for f in feedback:
-        if math.isfinite(f.std_after_s):
-            std[f.parameter] = f.std_after_s
-            g = gpos[f.parameter]
-            grow = f.std_after_s ** 2 - f.std_before_s ** 2
-            if f.weak:
-                cov[g, g] += grow
-            else:
-                b[g] = math.copysign(math.sqrt(grow), f.difference_s)
-    return std, cov + np.outer(b, b)
-
-
 def feedback_findings(parameters: Sequence[Parameter], feedback: Sequence[DelayCheck]
                       ) -> list[Finding]:
     """The feedback check's findings.
@@ -327,7 +211,7 @@ def feedback_findings(parameters: Sequence[Parameter], feedback: Sequence[DelayC
     Parameters
     ----------
     parameters : the problem's parameters (``DelayCheck.parameter`` indexes them).
-    feedback : the check's judgements (:attr:`estimator.uncertainty._Deviations.feedback`).
+    feedback : the check's judgements (:attr:`estimator.uncertainty.Deviations.feedback`).
 
     Returns
     -------
@@ -424,7 +308,7 @@ class FilterNoise:
 
 
 class FilterErrorLikelihood:
-    """The filter-error cost for :func:`estimator.iteration._gauss_newton` (module docstring)."""
+    """The filter-error cost for :func:`estimator.gauss_newton.gauss_newton` (module docstring)."""
 
     def __init__(self, model: Model, wind: WindOptions | None = None,
                  turbulent: frozenset[str] | None = None):
@@ -464,7 +348,7 @@ class FilterErrorLikelihood:
     # --- the five methods the iterations use ------------------------------------------------
     def evaluate(self, theta: np.ndarray, jacobian: bool) -> Evaluation:
         if not jacobian:
-            return _evaluate(self.model, theta, False)
+            return evaluate(self.model, theta, False)
         return self.model.evaluate_all(theta, jacobian=True, keep_jacobian=True, wind=True)
 
     def stats(self, ev: Evaluation) -> Evaluation:
@@ -636,7 +520,7 @@ class FilterErrorLikelihood:
 
     def honest_deviations(self, st: Structure, ev: Evaluation, noise: FilterNoise, N: NormalEquations,
                           dev, opt, theta: np.ndarray):
-        """``dev`` (the Cramér-Rao :class:`estimator.uncertainty._Deviations`) with the honest
+        """``dev`` (the Cramér-Rao :class:`estimator.uncertainty.Deviations`) with the honest
         deviations and correlations: the coloured innovations' (:func:`innovation_honest_std`)
         and the IMU noise as process noise (:func:`honest_std`, ``imu_only``), propagated through
         every channel of the maneuvers without wind states (their innovations are their

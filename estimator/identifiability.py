@@ -1,11 +1,11 @@
 """Identifiability: which free parameters the data determine, and what to do with the rest.
 
-:func:`_screen` holds, at their start values, the parameters no sample depends on (a table
+:func:`screen` holds, at their start values, the parameters no sample depends on (a table
 breakpoint beyond the flown range), one member of each combination the data cannot separate (a
 free table offset beside free biases) and, judged loosely, those whose Cramér-Rao deviation exceeds
-half their allowed range (bounds). :func:`_covariance` is the undamped Cramér-Rao covariance with
-its rank checks and the correlated global-local pairs; :func:`_parameter_states` says what each
-parameter ended as (estimated, on a bound, held and why, fixed) and :func:`_parameter_findings`
+half their allowed range (bounds). :func:`covariance` is the undamped Cramér-Rao covariance with
+its rank checks and the correlated global-local pairs; :func:`parameter_states` says what each
+parameter ended as (estimated, on a bound, held and why, fixed) and :func:`parameter_findings`
 turns the holds, bounds and correlations into findings. Used by :mod:`estimator.solver` before the
 iterations and at the solution.
 """
@@ -22,11 +22,11 @@ from estimator.model import Evaluation
 from estimator.normal_equations import NormalEquations, Structure, build_normal, lm_solve, sym_inverse
 from estimator.problem import Problem
 from estimator.result import Confounding
-from estimator.uncertainty import _std_of
+from estimator.uncertainty import Covariance, std_of
 from estimator.verdict import Finding, Severity
 
 if TYPE_CHECKING:
-    from estimator.solver import SolverOptions
+    from estimator.options import SolverOptions
 
 #: A steady crosswind and a sideslip offset common to an aircraft's sensors. A steady wind ``W``
 #: (per maneuver, or hidden in its free initial velocities) adds ``-W . e_y / V`` to every sensor's
@@ -78,7 +78,7 @@ def _confounded_sets(null: np.ndarray, idx: np.ndarray, problem: Problem, where:
 
 
 @dataclass(frozen=True)
-class _Hold:
+class Hold:
     """Parameters held at their start values by the identifiability screen, and why."""
 
     params: tuple[int, ...]
@@ -86,8 +86,8 @@ class _Hold:
     confounding: Confounding
 
 
-def _screen(problem: Problem, st: Structure, evals: Evaluation, R: np.ndarray, opt: SolverOptions,
-            loose: bool, normal=None) -> tuple[Structure, list[_Hold]]:
+def screen(problem: Problem, st: Structure, evals: Evaluation, R: np.ndarray, opt: SolverOptions,
+            loose: bool, normal=None) -> tuple[Structure, list[Hold]]:
     """Hold the parameters the data do not determine; returns the new structure and the holds.
 
     Parameters no sample depends on (a table breakpoint beyond the flown range, a bias of a sensor
@@ -102,36 +102,36 @@ def _screen(problem: Problem, st: Structure, evals: Evaluation, R: np.ndarray, o
     """
     ps = problem.parameters
     keys = ps.keys
-    holds: list[_Hold] = []
+    holds: list[Hold] = []
     for _ in range(12):
         if not st.free.any():
             break
         N = build_normal(st, evals, R) if normal is None else normal(st)
-        no_data = st.free & ~_has_data(N, st, opt.min_support_samples)
+        no_data = st.free & ~has_data(N, st, opt.min_support_samples)
         if no_data.any():
             held = tuple(int(i) for i in np.nonzero(no_data)[0])
-            holds.append(_Hold(held, "no_data", Confounding(
+            holds.append(Hold(held, "no_data", Confounding(
                 parameters=tuple(keys[i] for i in held), kind="no_data",
                 detail=(f"fewer than {opt.min_support_samples} samples depend on these parameters "
                         "(e.g. a table breakpoint outside the flown range, or a sensor this aircraft "
                         "does not carry); held at their start values"))))
             st = Structure(problem, st.free & ~no_data)
             continue
-        cov_G, cov_L, unident, _ = _covariance(N, st, problem, opt)
+        cov_G, cov_L, unident, _ = covariance(N, st, problem, opt)
         if unident:
             free = st.free.copy()
             for conf, hold in unident:
                 free[hold] = False
-                holds.append(_Hold((hold,), "unidentifiable", conf))
+                holds.append(Hold((hold,), "unidentifiable", conf))
             st = Structure(problem, free)
             continue
         if loose:
-            std = _std_of(st, cov_G, cov_L, len(keys))
+            std = std_of(st, cov_G, cov_L, len(keys))
             width = st.hi - st.lo
             bad = st.free & np.isfinite(width) & (std > 0.5 * width)
             if bad.any():
                 held = tuple(int(i) for i in np.nonzero(bad)[0])
-                holds.append(_Hold(held, "undetermined", Confounding(
+                holds.append(Hold(held, "undetermined", Confounding(
                     parameters=tuple(keys[i] for i in held), kind="undetermined",
                     detail=("the data barely depend on these parameters: at the solution their "
                             "Cramér-Rao deviation exceeds half their allowed range (bounds); held at "
@@ -142,7 +142,7 @@ def _screen(problem: Problem, st: Structure, evals: Evaluation, R: np.ndarray, o
     return st, holds
 
 
-def _has_data(N: NormalEquations, st: Structure, min_support: int) -> np.ndarray:
+def has_data(N: NormalEquations, st: Structure, min_support: int) -> np.ndarray:
     """(P,) the free parameters some information and at least ``min_support`` samples depend on."""
     info = np.zeros(st.free.size)
     info[st.glob] = np.diag(N.HGG)
@@ -151,12 +151,13 @@ def _has_data(N: NormalEquations, st: Structure, min_support: int) -> np.ndarray
     return st.free & (info > 0.0) & (N.support >= min_support)
 
 
-def _covariance(N: NormalEquations, st: Structure, problem: Problem, opt: SolverOptions):
+def covariance(N: NormalEquations, st: Structure, problem: Problem, opt: SolverOptions) -> Covariance:
     """Undamped Cramér-Rao covariance of the global block and of each local block.
 
     Returns
     -------
-    (S^-1, [cov_L_k], unidentifiable sets with the member to hold, correlated global-local pairs)
+    :class:`Covariance`: S^-1, [cov_L_k], unidentifiable sets with the member to hold, correlated
+    global-local pairs
     """
     keys = problem.parameters.keys
     extra: dict = {}
@@ -193,10 +194,10 @@ def _covariance(N: NormalEquations, st: Structure, problem: Problem, opt: Solver
                 detail=(f"correlation {corr[a, b]:+.4f}: the data barely separate {keys[idx[a]]} "
                         f"from {gkeys[b]}; their individual values are uncertain"),
             ))
-    return Sinv, cov_L, unident, correlated
+    return Covariance(Sinv, cov_L, unident, correlated)
 
 
-def _high_correlations(corr: np.ndarray, keys: list[str], thr: float) -> list[Confounding]:
+def high_correlations(corr: np.ndarray, keys: list[str], thr: float) -> list[Confounding]:
     out = []
     n = corr.shape[0]
     iu = np.triu_indices(n, 1)
@@ -217,8 +218,8 @@ def maneuver_nuisance(p) -> bool:
     return p.scope == "maneuver" and p.kind in ("scale", "bias")
 
 
-def _parameter_states(problem: Problem, theta: np.ndarray, start: np.ndarray, st: Structure,
-                      holds: list[_Hold], unresolved: np.ndarray, unident: list, opt: SolverOptions
+def parameter_states(problem: Problem, theta: np.ndarray, start: np.ndarray, st: Structure,
+                      holds: list[Hold], unresolved: np.ndarray, unident: list, opt: SolverOptions
                       ) -> tuple[list[str], list[str]]:
     """What each parameter is at the estimate: "fixed", "held" (why), "unidentifiable", "on_bound"
     or "estimated"; returns the states and their reasons, one per parameter."""
@@ -257,7 +258,7 @@ def _parameter_states(problem: Problem, theta: np.ndarray, start: np.ndarray, st
     return state, reason
 
 
-def _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs) -> list[Finding]:
+def parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs) -> list[Finding]:
     """Findings of the identifiability checks: held parameters (INFO when the data simply do not
     reach them, WARNING when a confounded set was anchored), parameters on a bound (WARNING),
     highly correlated pairs (INFO: their deviations already say it)."""
@@ -366,7 +367,7 @@ def lateral_axis_turn_rad(euler_rad: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((e_y - e_y.mean(axis=0)) ** 2, axis=1))))
 
 
-def _crosswind_findings(problem: Problem, evals: Evaluation, st: Structure,
+def crosswind_findings(problem: Problem, evals: Evaluation, st: Structure,
                         informs: dict[str, set[str]]) -> list[Finding]:
     """A WARNING per set of free sideslip offsets (biases of any scope but a maneuver's in the
     channels that measure ``beta_s`` or ``flank_s``) linked through the maneuvers that inform

@@ -109,7 +109,7 @@ class ReadOnlyTable:
         """Plain JSON values, each column's dtype with it (:meth:`from_dict` reads it back; a
         number JSON cannot hold is ``null``: NaN in a float column, None in an object one)."""
         def col(a: np.ndarray) -> dict:
-            return {"dtype": a.dtype.str if a.dtype != object else "object", "values": _json_clean(a)}
+            return {"dtype": a.dtype.str if a.dtype != object else "object", "values": json_clean(a)}
 
         return {"columns": list(self.columns), "data": [col(a) for a in self.data],
                 "index_names": list(self.index_names), "index": [col(a) for a in self.index],
@@ -492,7 +492,7 @@ class EstimationResult:
             "parameter_specs": [{f.name: getattr(sp, f.name) for f in fields(sp)}
                                 for sp in self.parameters.specs.values()],
         }
-        return _json_clean(doc)
+        return json_clean(doc)
 
     @classmethod
     def from_json(cls, path: str | Path) -> EstimationResult:
@@ -637,12 +637,12 @@ class EstimationResult:
 
 
 # ------------------------------------------------------------------------------ JSON helpers
-def _json_clean(v):
+def json_clean(v):
     """Plain JSON values: mappings with string keys, lists, finite numbers or None."""
     if isinstance(v, Mapping):
-        return {str(k): _json_clean(x) for k, x in v.items()}
+        return {str(k): json_clean(x) for k, x in v.items()}
     if isinstance(v, (list, tuple, np.ndarray)):
-        return [_json_clean(x) for x in v]
+        return [json_clean(x) for x in v]
     if isinstance(v, np.generic):
         v = v.item()
     if isinstance(v, float) and not np.isfinite(v):

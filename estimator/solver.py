@@ -39,7 +39,7 @@ Standard deviations: Cramér-Rao, ``sqrt(diag(M^-1))``, with the correlations; a
 and the IMU's noise as process noise.
 
 Where each part lives: this module orchestrates (starts, screening rounds, robust pass, result);
-the iterations are :mod:`estimator.iteration`, the identifiability screen, covariance and parameter
+the iterations are :mod:`estimator.gauss_newton`, the identifiability screen, covariance and parameter
 states :mod:`estimator.identifiability`, the deviations :mod:`estimator.uncertainty`.
 """
 
@@ -56,24 +56,25 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from estimator.filter_error import FilterErrorLikelihood, feedback_findings
+from estimator.gauss_newton import Iterated, gauss_newton, staged_start
 from estimator.identifiability import (
-    _covariance,
-    _crosswind_findings,
-    _high_correlations,
-    _parameter_findings,
-    _parameter_states,
-    _screen,
+    covariance,
+    crosswind_findings,
+    high_correlations,
     maneuver_nuisance,
+    parameter_findings,
+    parameter_states,
+    screen,
 )
 from estimator.io.modelset import declarations_of
-from estimator.iteration import OutputErrorLikelihood, _evaluate, _gauss_newton, _Iterated, _staged_start
+from estimator.likelihood import OutputErrorLikelihood, evaluate
 from estimator.model import Evaluation, Model, ModelEvaluationError
 from estimator.normal_equations import Structure, build_normal, channel_variances, ml_cost, residual_sums
 from estimator.options import SolverOptions
 from estimator.parameters import FLIGHT_KINDS
 from estimator.problem import SENSOR_SIGNALS, STATE_PARAMS, Problem
 from estimator.result import EstimationResult, ResidualStats
-from estimator.uncertainty import _deviations, _imu_noise_note, _imu_noise_unknown
+from estimator.uncertainty import deviations, imu_noise_note, imu_noise_unknown
 from estimator.verdict import Finding, Severity, Status, judge
 
 #: Output-error iterations at most before the filter-error method's turbulence diagnosis.
@@ -210,7 +211,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
     start = np.clip(ps.values, lo, hi)
     theta = start.copy()
     try:
-        evals = _evaluate(model, theta, True)
+        evals = evaluate(model, theta, True)
     except ModelEvaluationError as exc:
         return _failed(problem, start, t0, f"the model cannot be evaluated at the start values: {exc}",
                        "check the units and signs of the channel named (a measurement far outside its "
@@ -220,11 +221,11 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         raise ValueError(f"{problem.source}: no channel has data in any maneuver")
     stage_notes: list[str] = []
     if opt.start == "staged":
-        staged, stage_notes = _staged_start(problem, theta, requested, opt)
+        staged, stage_notes = staged_start(problem, theta, requested, opt)
         try:
             # the stages fit subsets of the channels: an implicit channel left out may be outside
             # its domain where they ended; then the full estimation starts from the given values
-            evals = _evaluate(model, staged, True)
+            evals = evaluate(model, staged, True)
             theta = staged
         except ModelEvaluationError as exc:
             stage_notes.append(f"the staged start is left: the full model cannot be evaluated where it "
@@ -233,7 +234,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
     # the screen before the iterations also holds what looks undetermined there, which keeps a
     # parameter the data hardly see from wandering to a bound on the way; the screen at the
     # solution judges every requested parameter again, and frees what the data determine there
-    st, holds = _screen(problem, Structure(problem, requested), evals, channel_variances(sse, cnt), opt,
+    st, holds = screen(problem, Structure(problem, requested), evals, channel_variances(sse, cnt), opt,
                         loose=True)
     if not st.free.any():
         return _failed(problem, theta, t0, "no free parameter is determined by the data: "
@@ -262,7 +263,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         # are turbulent get them too (at once, not at the solution: 70 maneuvers, 4 missed by the
         # output-error fit, 18 filter-error iterations to a solution, 7 more after widening)
         try:
-            probe = _gauss_newton(model, theta, st, replace(
+            probe = gauss_newton(model, theta, st, replace(
                 opt, max_iterations=min(opt.max_iterations, PROBE_ITERATIONS)), evals, lik=lik)
         except ModelEvaluationError as exc:  # as below: a safeguard
             return _failed(problem, theta, t0, str(exc), "report this as a bug, with the data")
@@ -275,7 +276,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
     sol_held, sol_holds = np.zeros_like(requested), []  # what screens at a solution held
     for rnd in range(1, max(opt.screen_rounds, 1) + 1):
         try:
-            it = _gauss_newton(model, theta, st, opt, evals, lik=lik)
+            it = gauss_newton(model, theta, st, opt, evals, lik=lik)
         except ModelEvaluationError as exc:  # cannot happen after a successful start: a safeguard
             return _failed(problem, theta, t0, str(exc), "report this as a bug, with the data")
         theta, evals = it.theta, it.evals
@@ -296,7 +297,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         if isinstance(lik, FilterErrorLikelihood) and lik.noise is not None:
             # filtered once for the screen's widest structure; each pass takes its sub-blocks
             fem_normal = partial(lik.normal_of, blocks=lik.normal_blocks(base, evals, lik.noise))
-        st_new, holds_new = _screen(problem, base, evals, channel_variances(it.sse, it.cnt), opt,
+        st_new, holds_new = screen(problem, base, evals, channel_variances(it.sse, it.cnt), opt,
                                     loose=True, normal=fem_normal)
         holds_new = sol_holds + holds_new
         if it.status.converged:  # a solution: its holds stay (not a round that crawled)
@@ -328,7 +329,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
             lik.refresh(evals)
             before = theta
             try:
-                it = _gauss_newton(model, theta, st, opt, lik.evaluate(theta, True), lik=lik)
+                it = gauss_newton(model, theta, st, opt, lik.evaluate(theta, True), lik=lik)
             except ModelEvaluationError as exc:  # as above: a safeguard
                 return _failed(problem, theta, t0, str(exc), "report this as a bug, with the data")
             theta, evals = it.theta, it.evals
@@ -343,7 +344,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         lik, evals, missed = _widened(problem, st, theta, evals, lik)
     if missed:
         try:
-            it = _gauss_newton(model, theta, st, opt, evals, lik=lik)
+            it = gauss_newton(model, theta, st, opt, evals, lik=lik)
         except ModelEvaluationError as exc:  # as above: a safeguard
             return _failed(problem, theta, t0, str(exc), "report this as a bug, with the data")
         theta, evals = it.theta, it.evals
@@ -408,7 +409,7 @@ def _turbulent_maneuvers(problem: Problem, model: Model, theta: np.ndarray, st: 
     # the diagnostics need the residuals' pattern, not a converged fit: in turbulence the
     # output-error iterations crawl (planning study (c): 3 of 8 light-turbulence fits then started
     # the filter-error iterations from a fit stopped at the 40-iteration limit, and failed)
-    it = _gauss_newton(model, theta, st, replace(opt, max_iterations=min(opt.max_iterations,
+    it = gauss_newton(model, theta, st, replace(opt, max_iterations=min(opt.max_iterations,
                                                                          PREFIT_ITERATIONS)))
     # any spread between the sensors' residuals: the verdict's turbulence finding asks them to
     # agree within 3x (one gust moves every sensor alike), but a maneuver's gusts can be mostly
@@ -432,7 +433,7 @@ def _restore_held(model: Model, theta: np.ndarray, start: np.ndarray, held: np.n
     trial = theta.copy()
     trial[moved] = start[moved]
     try:
-        _evaluate(model, trial, False)
+        evaluate(model, trial, False)
     except ModelEvaluationError as exc:
         keys = model.problem.parameters.keys
         return [f"{', '.join(keys[i] for i in np.flatnonzero(moved))} held at the values the estimation "
@@ -480,10 +481,10 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
         R = channel_variances(it.sse, it.cnt)
         history = history + [ml_cost(it.sse, it.cnt, R)]
         N = build_normal(st, evals, R)
-    cov_G, cov_L, unident, correlated = _covariance(N, st, problem, opt)
+    cov = covariance(N, st, problem, opt)
+    unident, correlated = cov.unident, cov.correlated
     # the filter-error method's honest deviations: the coloured innovations' and the IMU noise
-    dev = _deviations(model, theta, N, st, R, cov_G, cov_L, unident,
-                      replace(opt, colored=False) if filter_error else opt)
+    dev = deviations(model, theta, N, st, R, cov, replace(opt, colored=False) if filter_error else opt)
     widened: set[str] = set()
     if filter_error and opt.colored:
         dev = lik.honest_deviations(st, evals, noise, N, dev, opt, theta)
@@ -496,20 +497,20 @@ def _finish(problem, model, theta, start, st, holds, evals, it, iterations, hist
                          for f in wind_findings]
         wind_findings = wind_findings + feedback_findings(lik.model.problem.parameters.parameters,
                                                           dev.feedback)
-    correlated = correlated + _high_correlations(dev.correlation, [keys[i] for i in st.glob],
+    correlated = correlated + high_correlations(dev.correlation, [keys[i] for i in st.glob],
                                                  opt.correlation_warn)
     # a set still unidentifiable here (the screen's rounds ran out) is reported with the holds
     confounding = [h.confounding for h in holds] + [conf for conf, _ in unident] + correlated
     # what each parameter is: estimated, on a bound, held (why) or fixed
-    state, reason = _parameter_states(problem, theta, start, st, holds, dev.unresolved, unident, opt)
+    state, reason = parameter_states(problem, theta, start, st, holds, dev.unresolved, unident, opt)
     # which maneuvers inform each global parameter (its coupling block with their locals)
     informs = {keys[g]: {problem.maneuvers[k].id for k in range(len(problem.maneuvers))
                          if N.HGL[k].shape[1] and np.any(N.HGL[k][j] != 0.0)}
                for j, g in enumerate(st.glob)}
-    findings = (_imu_noise_unknown(dev.imu_psd)
-                + _parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs)
-                + _crosswind_findings(problem, evals, st, informs)
-                + _imu_noise_note(dev, st, keys, opt) + _iteration_findings(it, stage_notes)
+    findings = (imu_noise_unknown(dev.imu_psd)
+                + parameter_findings(problem, holds, unident, correlated, state, reason, opt, informs)
+                + crosswind_findings(problem, evals, st, informs)
+                + imu_noise_note(dev, st, keys, opt) + _iteration_findings(it, stage_notes)
                 + _near_bounds(problem, theta, st, state,
                                np.where(np.isfinite(dev.std_colored), dev.std_colored, dev.std_crb))
                 + wind_findings + _unsettled(refresh_move, dev.std_crb, problem, dev.std_colored)
@@ -665,12 +666,12 @@ def _unsettled(move: np.ndarray | None, std: np.ndarray, problem: Problem,
         parameters=tuple(dict.fromkeys([keys[i] for i in calibration] + worst)), value=float(z.max()))]
 
 
-def _iteration_findings(it: _Iterated, stage_notes: list[str]) -> list[Finding]:
+def _iteration_findings(it: Iterated, stage_notes: list[str]) -> list[Finding]:
     """Findings of the start stages and the iterations: the start's notes, a poor quadratic model
     at the estimate, no convergence."""
     findings = [Finding("start", Severity.NOTE, "; ".join(stage_notes))] if stage_notes else []
     if it.status.converged and "at the iteration limit" in it.message:
-        # accepted at the limit within a tenth of a deviation of the minimum (estimator.iteration)
+        # accepted at the limit within a tenth of a deviation of the minimum (estimator.gauss_newton)
         findings.append(Finding(
             "crawled", Severity.NOTE,
             f"{it.message}: the iterations crawled along a weakly determined direction; the estimate "

@@ -21,7 +21,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from scipy import fft as sfft
@@ -39,8 +39,9 @@ from estimator.problem import Problem
 from estimator.verdict import Finding, Severity
 
 if TYPE_CHECKING:
-    from estimator.filter_error import DelayCheck
-    from estimator.solver import SolverOptions
+    from estimator.core.instrumental import DelayCheck
+    from estimator.options import SolverOptions
+    from estimator.result import Confounding
 
 
 def _one_sided_weights(L: int) -> np.ndarray:
@@ -461,7 +462,7 @@ def sandwich_std(N: NormalEquations, st: Structure, C: NormalEquations, Sinv: np
     return std, covG
 
 
-def _std_of(st: Structure, cov_G: np.ndarray, cov_L: list[np.ndarray], n: int) -> np.ndarray:
+def std_of(st: Structure, cov_G: np.ndarray, cov_L: list[np.ndarray], n: int) -> np.ndarray:
     """(n,) the Cramér-Rao deviations ``sqrt(diag(cov))`` of the free parameters (global block and each
     local block); NaN for the others."""
     std = np.full(n, np.nan)
@@ -472,9 +473,19 @@ def _std_of(st: Structure, cov_G: np.ndarray, cov_L: list[np.ndarray], n: int) -
     return std
 
 
+class Covariance(NamedTuple):
+    """The undamped Cramér-Rao covariance at an estimate
+    (:func:`estimator.identifiability.covariance`)."""
+
+    cov_G: np.ndarray  # S^-1, the global block's
+    cov_L: list[np.ndarray]  # each maneuver's local block's
+    unident: list  # unidentifiable sets, each with the member to hold: (Confounding, index)
+    correlated: list[Confounding]  # global-local pairs beyond the correlation threshold
+
+
 @dataclass(frozen=True)
-class _Deviations:
-    """The deviations at the estimate (:func:`_deviations`), one per parameter (NaN: not estimated).
+class Deviations:
+    """The deviations at the estimate (:func:`deviations`), one per parameter (NaN: not estimated).
 
     Attributes
     ----------
@@ -485,7 +496,7 @@ class _Deviations:
     unresolved : parameters of a set still unidentifiable at the solution (their deviations NaN).
     imu_psd : the IMU noise densities used, per aircraft (None without ``colored``).
     feedback : the filter-error method's feedback check of the time delays, one
-        :class:`estimator.filter_error.DelayCheck` per delay it widened or could not judge
+        :class:`estimator.core.instrumental.DelayCheck` per delay it widened or could not judge
         (:meth:`estimator.filter_error.FilterErrorLikelihood.honest_deviations`).
     """
 
@@ -499,15 +510,16 @@ class _Deviations:
     feedback: tuple[DelayCheck, ...] = ()
 
 
-def _deviations(model: Model, theta: np.ndarray, N: NormalEquations, st: Structure, R: np.ndarray,
-                cov_G: np.ndarray, cov_L: list[np.ndarray], unident: list, opt: SolverOptions
-                ) -> _Deviations:
+def deviations(model: Model, theta: np.ndarray, N: NormalEquations, st: Structure, R: np.ndarray,
+               cov: Covariance, opt: SolverOptions) -> Deviations:
     """Cramér-Rao and honest deviations and correlations at the estimate, from the undamped
-    covariance (``cov_G``, ``cov_L``) and the still-unidentifiable sets ``unident``."""
+    covariance (:func:`estimator.identifiability.covariance`: ``cov_G``, ``cov_L``) and the
+    still-unidentifiable sets (its ``unident``)."""
+    cov_G, cov_L, unident = cov.cov_G, cov.cov_L, cov.unident
     problem = model.problem
     ps = problem.parameters
     n = len(ps.keys)
-    std = _std_of(st, cov_G, cov_L, n)
+    std = std_of(st, cov_G, cov_L, n)
     # a set still unidentifiable here (the screen's rounds ran out): no deviation means anything
     unresolved = np.zeros(n, dtype=bool)
     for conf, _ in unident:
@@ -528,10 +540,10 @@ def _deviations(model: Model, theta: np.ndarray, N: NormalEquations, st: Structu
         std_imu[unresolved] = np.nan
         dh = np.sqrt(np.maximum(np.diag(cov_hon), 1e-300))
         corr_honest = cov_hon / np.outer(dh, dh)
-    return _Deviations(std, std_col, std_imu, corr_G, corr_honest, unresolved, imu_psd)
+    return Deviations(std, std_col, std_imu, corr_G, corr_honest, unresolved, imu_psd)
 
 
-def _imu_noise_unknown(imu_psd: dict[str, np.ndarray] | None) -> list[Finding]:
+def imu_noise_unknown(imu_psd: dict[str, np.ndarray] | None) -> list[Finding]:
     """A warning when the IMU noise could not be read off an aircraft's data (nothing otherwise)."""
     unread = sorted(a for a, v in (imu_psd or {}).items() if not np.all(np.isfinite(v)))
     if not unread:
@@ -544,7 +556,7 @@ def _imu_noise_unknown(imu_psd: dict[str, np.ndarray] | None) -> list[Finding]:
         "give the IMU's noise densities (SolverOptions.imu_noise: datasheet random walks, squared, SI)")]
 
 
-def _imu_noise_note(dev: _Deviations, st: Structure, keys: list[str], opt: SolverOptions) -> list[Finding]:
+def imu_noise_note(dev: Deviations, st: Structure, keys: list[str], opt: SolverOptions) -> list[Finding]:
     """A note of the IMU noise integrated as process noise and how much it adds (nothing without)."""
     imu_psd, std, std_imu = dev.imu_psd, dev.std_crb, dev.std_imu
     if imu_psd is None or not np.isfinite(std_imu).any():

@@ -80,7 +80,7 @@ from estimator.model import Model
 from estimator.options import WorkflowOptions
 from estimator.parameters import FLIGHT_KINDS, family_of, make_key
 from estimator.problem import STATE_PARAMS, Problem, ReadOnlyMapping
-from estimator.result import EstimationResult, ReadOnlyTable, _json_clean
+from estimator.result import EstimationResult, ReadOnlyTable, json_clean
 from estimator.solver import estimate
 from estimator.verdict import Finding, Severity, Verdict, findings_frame, judge
 from estimator.verdict import Status as _Status
@@ -254,7 +254,7 @@ class WorkflowResult:
             "tables": {n: type(self).__dict__[n].frozen(self).to_dict() for n in tables},
             "stages": {n: [st.to_dict() for st in getattr(self, n)] for n in ("first", "final", "gear_down")},
         }
-        Path(path).write_text(json.dumps(_json_clean(doc), indent=1, allow_nan=False))
+        Path(path).write_text(json.dumps(json_clean(doc), indent=1, allow_nan=False))
 
     @classmethod
     def from_json(cls, path: str | Path, problem: Problem | None = None) -> WorkflowResult:

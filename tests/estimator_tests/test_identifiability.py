@@ -21,9 +21,9 @@ import pytest
 
 from campaigns.analytic_flight import DEG, Flight
 from campaigns.analytic_flight import truth_values as _truth_values
-from estimator.identifiability import _screen
+from estimator.identifiability import screen
 from estimator.io.modelset import load_model_set
-from estimator.iteration import _evaluate
+from estimator.likelihood import evaluate
 from estimator.model import Model
 from estimator.normal_equations import Structure, channel_variances, residual_sums
 from estimator.parameters import ParameterSet
@@ -58,9 +58,9 @@ def test_a_delay_determined_at_the_solution_is_estimated(flight, start):
     prob = flight.problem(start=_zero_start, noise=NOISE, rng=np.random.default_rng(3))
     prob = _with_bounds(prob, "tau_alpha_zl", (-0.039, 0.039))
     # the case of the issue: judged at the start values, the delay looks undetermined
-    ev = _evaluate(Model(prob), prob.parameters.values, True)
+    ev = evaluate(Model(prob), prob.parameters.values, True)
     sse, cnt = residual_sums(ev, len(prob.channels))
-    _, holds = _screen(prob, Structure(prob, prob.parameters.free_mask), ev, channel_variances(sse, cnt),
+    _, holds = screen(prob, Structure(prob, prob.parameters.free_mask), ev, channel_variances(sse, cnt),
                        SolverOptions(), loose=True)
     assert any("tau_alpha_zl" in h.confounding.parameters and h.kind == "undetermined" for h in holds), \
         "the test needs a start where the delay looks undetermined"
@@ -226,11 +226,11 @@ def test_sideslip_offsets_on_maneuvers_of_constant_heading_are_flagged(flight):
     its heading changes) nothing is said; one turning maneuver anchors the set (the largest turn
     counts, not the smallest); an offset linked to no turning maneuver is named on its own; a
     vane's AOA bias is never named; a maneuver the evaluation lacks leaves its set unjudged."""
-    from estimator.identifiability import CROSSWIND_TURN_MIN_RAD, _crosswind_findings, lateral_axis_turn_rad
+    from estimator.identifiability import CROSSWIND_TURN_MIN_RAD, crosswind_findings, lateral_axis_turn_rad
 
     prob = flight.problem(noise=NOISE, rng=np.random.default_rng(3))
     model = Model(prob)
-    ev = _evaluate(model, prob.parameters.values, False)
+    ev = evaluate(model, prob.parameters.values, False)
     st = Structure(prob, prob.parameters.free_mask)
     ids = [m.id for m in prob.maneuvers]
     free = prob.parameters.free_mask
@@ -240,12 +240,12 @@ def test_sideslip_offsets_on_maneuvers_of_constant_heading_are_flagged(flight):
     informs = {k: set(ids) for k in keys + [vane]}
     turns = [lateral_axis_turn_rad(ev.X[ev.seg[i]:ev.seg[i + 1], 3:6]) for i in range(len(ids))]
     assert min(turns) > CROSSWIND_TURN_MIN_RAD, "the analytic flight turns its heading in both maneuvers"
-    assert not _crosswind_findings(prob, ev, st, informs)
+    assert not crosswind_findings(prob, ev, st, informs)
     X = ev.X.copy()
     X[:, 3] = 0.0
     X[:, 5] = 0.3
     flat = replace(ev, X=X)
-    (f,) = _crosswind_findings(prob, flat, st, informs)
+    (f,) = crosswind_findings(prob, flat, st, informs)
     assert f.code == "crosswind_confounded" and f.severity == Severity.WARNING
     assert set(f.parameters) == set(keys), "both offsets, not the vane's AOA bias"
     assert f.value == pytest.approx(0.0, abs=1e-9)
@@ -254,15 +254,15 @@ def test_sideslip_offsets_on_maneuvers_of_constant_heading_are_flagged(flight):
     X1 = ev.X.copy()
     s0, s1 = ev.seg[0], ev.seg[1]
     X1[s0:s1, 3], X1[s0:s1, 5] = 0.0, 0.3
-    assert not _crosswind_findings(prob, replace(ev, X=X1), st, informs)
+    assert not crosswind_findings(prob, replace(ev, X=X1), st, informs)
     # the side probe informed by the flat maneuver only, the nose probe by the turning one only:
     # not linked, and the side probe's offset is named alone
     side, nose = keys if keys[0].startswith("b_sb") else keys[::-1]
     split = {side: {ids[0]}, nose: {ids[1]}}
-    (g,) = _crosswind_findings(prob, replace(ev, X=X1), st, split)
+    (g,) = crosswind_findings(prob, replace(ev, X=X1), st, split)
     assert g.parameters == (side,)
     # a maneuver the evaluation does not cover: not judged
-    assert not _crosswind_findings(prob, flat, st, {k: set(ids) | {"elsewhere"} for k in keys})
+    assert not crosswind_findings(prob, flat, st, {k: set(ids) | {"elsewhere"} for k in keys})
 
 
 def test_an_estimate_within_two_deviations_of_its_bound_is_a_warning(flight):
