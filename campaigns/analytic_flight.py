@@ -18,8 +18,9 @@ Two users build on these pieces:
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -161,19 +162,29 @@ def truth_tables(breakpoints: dict[str, np.ndarray], z: dict[str, np.ndarray]) -
     return out
 
 
+class ChannelTruth(NamedTuple):
+    """The true parameters of the ``tejas`` channels: ``taus``, the time delays by parameter name
+    (``tau_phi``, ..., ``tau_alpha_zl``, ``tau_sp``, ``tau_np``); ``biases``: ``b_l``, ``b_r``,
+    ``b_sa``, ``b_sb`` (and ``b_n`` with the nose probe), and the vanes' sideslip reference offset
+    ``c_vb`` of ``tejas_ins`` if given (0 otherwise: the ``tejas`` model has none); the correction
+    ``tables`` f1..f5 by name and their ``breakpoints``."""
+
+    taus: Mapping[str, float]
+    biases: Mapping[str, float]
+    tables: Mapping[str, np.ndarray]
+    breakpoints: Mapping[str, np.ndarray]
+
+
 def tejas_channels(t_s: np.ndarray, states_at: States, inputs: Inputs, sensors: dict[str, np.ndarray],
-                   r_cg_m: np.ndarray, taus: dict[str, float], biases: dict[str, float],
-                   tables: dict[str, np.ndarray], breakpoints: dict[str, np.ndarray],
-                   nose_probe: bool = True) -> dict[str, np.ndarray]:
+                   r_cg_m: np.ndarray, truth: ChannelTruth, nose_probe: bool = True) -> dict[str, np.ndarray]:
     """Noise-free channels of the ``tejas`` model set at ``t_s`` (SI), applied by hand.
 
-    ``states_at(t)``: (N, 7) states with altitude; ``taus``: the time delays by parameter name
-    (``tau_phi``, ..., ``tau_alpha_zl``, ``tau_sp``, ``tau_np``); ``biases``: ``b_l``, ``b_r``,
-    ``b_sa``, ``b_sb`` (and ``b_n`` with ``nose_probe``), and the vanes' sideslip reference offset
-    ``c_vb`` of ``tejas_ins`` if given (0 otherwise: the ``tejas`` model has none). Attitude,
-    altitude and airspeed; the two vanes; the side probe (its angle-of-attack model is implicit:
-    a fixed point, a contraction); with ``nose_probe``, its sideslip.
+    ``states_at(t)``: (N, 7) states with altitude; ``truth``: the channels' delays, biases and
+    tables. Attitude, altitude and airspeed; the two vanes; the side probe (its angle-of-attack
+    model is implicit: a fixed point, a contraction); with ``nose_probe``, its sideslip.
     """
+    taus, biases, tables, breakpoints = truth
+
     def flow(ts, sensor):
         return local_flow(states_at(ts), inputs(ts)[1], sensors[sensor] - r_cg_m if sensor else None)
 
@@ -385,7 +396,8 @@ class Flight:
 
         # the attitude and altitude channels are the same either way (flow_states changes the
         # velocity only)
-        meas = tejas_channels(t, flow_states, inputs, FLIGHT_SENSORS, R_CG, tr, tr, self.tables, self.bp)
+        meas = tejas_channels(t, flow_states, inputs, FLIGHT_SENSORS, R_CG,
+                              ChannelTruth(tr, tr, self.tables, self.bp))
         if self.ins:
             r_ins = SENSORS["ins"] - R_CG
             for name in INS_CHANNELS:

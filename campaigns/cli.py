@@ -221,7 +221,8 @@ def _demo(args: argparse.Namespace) -> int:
         problem = problem_from_dataset(out)
     # the workflow's defaults (the model set's reference Mach), as `fpr calibrate DATASET` runs it
     code = _workflow(problem, report_dir, {}, overwrite=True, tool="fpr demo", source=out)
-    # the light-turbulence block (issue 14): the filter-error method with the INS velocities, as
+    # the light-turbulence block: the filter-error method (the gusts as estimated states, which the
+    # output-error fit would take for sensor errors) with the INS velocities, as
     # `fpr calibrate DATASET --method filter_error --model tejas_ins` runs it
     turbulent = load_campaign("demo_turbulence")
     print(f"\nfpr demo: the light-turbulence block: {len(turbulent.jobs)} maneuvers of two configurations "
@@ -488,7 +489,7 @@ def _calibration_options(args: argparse.Namespace) -> dict:
 
 def _workflow(problem, out: Path, options: dict, *, overwrite: bool, tool: str = "fpr calibrate",
               source: Path | None = None) -> int:
-    """The Mach-bin calibration workflow and its report (issue 4): :func:`estimator.calibrate`, then
+    """The Mach-bin calibration workflow and its report: :func:`estimator.calibrate`, then
     :meth:`~estimator.calibration.Calibration.write` with the truth sections of a synthetic dataset."""
     from campaigns.truth_report import truth_sections
     from estimator.calibration import CalibrationOptions, calibrate

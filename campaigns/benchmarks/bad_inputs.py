@@ -1,4 +1,4 @@
-"""Bad-input corpus: what a user sees when their own flight-data files are wrong (issue 11).
+"""Bad-input corpus: what a user sees when their own flight-data files are wrong.
 
     python campaigns/benchmarks/bad_inputs.py [--out DIR] [--only NAME ...] [--write FILE]
 
@@ -64,7 +64,7 @@ import sys
 import time
 import traceback
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -72,7 +72,7 @@ import numpy as np
 import pandas as pd
 
 from aircraft_models.schema import unknown
-from campaigns.benchmarks.user_files import DEG, G0, KT, USER_COLUMNS, write_user_files
+from campaigns.benchmarks.user_files import DEG, G0, KT, USER_COLUMNS, CsvLayout, write_user_files
 from campaigns.benchmarks.user_files import column_line as user_column_line
 
 # ----------------------------------------------------------------------------------------------
@@ -179,9 +179,10 @@ def fly_base(root: Path, variant: str = "base") -> Path:
 
 def write_base(ds_dir: Path, dest: Path, variant: str = "base") -> None:
     """The user's files: one CSV of every maneuver in engineering units and its problem file."""
-    write_user_files(ds_dir, dest, COLUMNS, CHANNELS, "PV1 vane calibration, flight 421", csv_name=DATA,
-                     t_first_s=T_FIRST_S, float_format=FLOAT_FORMAT, configuration="PV1-NP",
-                     time_format=".3f", tail=VARIANTS[variant].tail)
+    write_user_files(ds_dir, dest, COLUMNS, CHANNELS, "PV1 vane calibration, flight 421",
+                     tail=VARIANTS[variant].tail,
+                     layout=CsvLayout(name=DATA, float_format=FLOAT_FORMAT, t_first_s=T_FIRST_S,
+                                      time_format=".3f", configuration="PV1-NP"))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1288,7 +1289,7 @@ def first_line(run: Run) -> str:
     return text.strip().splitlines()[0] if text.strip() else ""
 
 
-def main(argv: list[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=Path("fpr-out/bad_inputs"),
                     help="working folder: the cached dataset and base files, one folder per case")
@@ -1296,14 +1297,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--write", type=Path, help="also write the table to this file")
     ap.add_argument("--width", type=int, default=100, help="message column width")
     ap.add_argument("--full", action="store_true", help="print each message whole after the table")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def _check_cases(only: Sequence[str] | None) -> None:
+    """Refuse a corpus with two cases of one name, and an --only naming none of them."""
     names = {c.name for c in CASES}
     if len(names) != len(CASES):
         raise SystemExit("corpus bug: duplicate case names")
-    bad = [n for n in args.only or () if n not in names]
+    bad = [n for n in only or () if n not in names]
     if bad:
         raise unknown(bad, [c.name for c in CASES], "--only", SystemExit, what="case")
-    root = args.out.resolve()
+
+
+def _working_folder(out: Path) -> Path:
+    """The working folder, made and marked as this script's (it replaces its base/ and cases/)."""
+    root = out.resolve()
     marker = root / MARKER
     if root.exists() and any(root.iterdir()) and not marker.is_file():
         # the folder's base/ and cases/ are replaced on every run: only in a folder of our own
@@ -1312,32 +1321,26 @@ def main(argv: list[str] | None = None) -> int:
     root.mkdir(parents=True, exist_ok=True)
     marker.write_text("working folder of campaigns/benchmarks/bad_inputs.py: base/ and cases/ are "
                       "replaced on every run, dataset/ is kept\n")
-    t_start = time.perf_counter()
-    ds = fly_base(root)
-    base_dir = root / "base"
-    if base_dir.exists():
-        shutil.rmtree(base_dir)
-    write_base(ds, base_dir / "input")
-    runs = root / "cases"
-    if runs.exists():
-        shutil.rmtree(runs)  # this script's own case folders of an earlier run
-    runs.mkdir()
+    return root
 
-    lines: list[str] = []
 
-    def emit(s: str = "") -> None:
+class _Log:
+    """The report: printed as it goes, and kept for ``--write``."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def __call__(self, s: str = "") -> None:
         print(s, flush=True)
-        lines.append(s)
+        self.lines.append(s)
 
-    emit("fpr bad-input corpus: fpr calibrate problem.toml --single --out RES --no-plots, per case (on a "
-         "variant base, as it says: the _3man cases without --single, the Mach-bin workflow)")
-    emit(f"machine: {platform.machine()}, Python {platform.python_version()}; working folder {args.out}")
-    base_run = run_cli(base_dir / "input" / PROBLEM, base_dir / "results")
-    base_class, base_reason = judge_base(base_run, ds)
-    emit(f"base: {base_class}: {base_reason} (exit {base_run.status}, {base_run.seconds:.1f} s)")
-    base = base_run.result if base_class == "correct result" else None
-    variant_dirs = {"base": base_dir}
-    for name in dict.fromkeys(c.base for c in CASES if not args.only or c.name in args.only):
+
+def _run_variant_bases(root: Path, only: Sequence[str] | None,
+                       emit: _Log) -> tuple[dict[str, Path], list[str]]:
+    """Write and run the variant bases the selected cases start from: (variant -> its folder, what
+    is wrong with those that did not give a correct result)."""
+    variant_dirs, wrong = {}, []
+    for name in dict.fromkeys(c.base for c in CASES if not only or c.name in only):
         if name == "base":
             continue
         v = VARIANTS[name]
@@ -1350,8 +1353,14 @@ def main(argv: list[str] | None = None) -> int:
         vclass, vreason = judge_variant_base(vrun)
         emit(f"base {name} ({v.what}): {vclass}: {vreason} (exit {vrun.status}, {vrun.seconds:.1f} s)")
         if vclass != "correct result":
-            base_class = f"{base_class}; base {name}: {vclass}"
-    emit()
+            wrong.append(f"base {name}: {vclass}")
+    return variant_dirs, wrong
+
+
+def _run_cases(runs: Path, variant_dirs: Mapping[str, Path], args: argparse.Namespace, base_run: Run,
+               base: dict | None, emit: _Log) -> list[tuple[Case, Run, str, str]]:
+    """Each selected case on a copy of its base, judged; its table row emitted. (case, run,
+    outcome, reason) per case."""
     w = args.width
     header = f"{'case':<34}{'category':<15}{'expected':<14}{'outcome':<15}{'exit':>4}  message / verdict"
     emit(header)
@@ -1371,6 +1380,51 @@ def main(argv: list[str] | None = None) -> int:
         if outcome != "clear error":
             emit(f"{'':<34}{'':<15}{'':<14}{'':<15}{'':>4}  -> {reason}")
         rows.append((c, run, outcome, reason))
+    return rows
+
+
+def _emit_messages(rows: Sequence[tuple[Case, Run, str, str]], full: bool, emit: _Log) -> None:
+    """The messages in full: every case's (``--full``) or those of the cases judged anything else."""
+    emit()
+    emit("messages in full" + ("" if full else " (anything else)") + ":")
+    for c, run, o, r in rows:
+        if not full and o != "anything else":
+            continue
+        emit(f"\n[{c.name}] {c.doc}\n  expected {c.expect}; {o}: {r}")
+        text = run.error if run.status in (2, None) else re.search(
+            r"VERDICT:.*", run.stdout, re.S).group(0) if "VERDICT:" in run.stdout else run.stdout[-1500:]
+        emit("  " + "\n  ".join(text.strip().splitlines()[:12]))
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    _check_cases(args.only)
+    root = _working_folder(args.out)
+    t_start = time.perf_counter()
+    ds = fly_base(root)
+    base_dir = root / "base"
+    if base_dir.exists():
+        shutil.rmtree(base_dir)
+    write_base(ds, base_dir / "input")
+    runs = root / "cases"
+    if runs.exists():
+        shutil.rmtree(runs)  # this script's own case folders of an earlier run
+    runs.mkdir()
+
+    emit = _Log()
+    emit("fpr bad-input corpus: fpr calibrate problem.toml --single --out RES --no-plots, per case (on a "
+         "variant base, as it says: the _3man cases without --single, the Mach-bin workflow)")
+    emit(f"machine: {platform.machine()}, Python {platform.python_version()}; working folder {args.out}")
+    base_run = run_cli(base_dir / "input" / PROBLEM, base_dir / "results")
+    base_class, base_reason = judge_base(base_run, ds)
+    emit(f"base: {base_class}: {base_reason} (exit {base_run.status}, {base_run.seconds:.1f} s)")
+    base = base_run.result if base_class == "correct result" else None
+    variant_dirs, wrong = _run_variant_bases(root, args.only, emit)
+    variant_dirs["base"] = base_dir
+    for what in wrong:
+        base_class = f"{base_class}; {what}"
+    emit()
+    rows = _run_cases(runs, variant_dirs, args, base_run, base, emit)
     counts = {k: sum(o == k for _, _, o, _ in rows) for k in CLASSES}
     emit()
     emit(f"{len(rows)} cases, {counts['clear error']} clear errors, {counts['correct result']} correct "
@@ -1378,17 +1432,9 @@ def main(argv: list[str] | None = None) -> int:
          f"{time.perf_counter() - t_start:.0f} s")
     bad = [(c, run, r) for c, run, o, r in rows if o == "anything else"]
     if bad or args.full:
-        emit()
-        emit("messages in full" + ("" if args.full else " (anything else)") + ":")
-        for c, run, o, r in rows:
-            if not args.full and o != "anything else":
-                continue
-            emit(f"\n[{c.name}] {c.doc}\n  expected {c.expect}; {o}: {r}")
-            text = run.error if run.status in (2, None) else re.search(
-                r"VERDICT:.*", run.stdout, re.S).group(0) if "VERDICT:" in run.stdout else run.stdout[-1500:]
-            emit("  " + "\n  ".join(text.strip().splitlines()[:12]))
+        _emit_messages(rows, args.full, emit)
     if args.write:
-        args.write.write_text("\n".join(lines) + "\n")
+        args.write.write_text("\n".join(emit.lines) + "\n")
     return 1 if bad or base_class != "correct result" else 0
 
 

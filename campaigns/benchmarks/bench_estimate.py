@@ -34,7 +34,7 @@ with the first run reported beside them.
 (default), the filter-error one (the turbulent wind as Gauss-Markov states,
 :mod:`estimator.filter_error`), or ``both``: each size then runs both methods, each in its own
 process, on the same problem, and a line gives the filter-error / output-error wall-time ratio per
-size against the target of issue 14 (at most 3x). ``--turbulence SIGMA`` flies the campaign in
+size against its target (at most 3x). ``--turbulence SIGMA`` flies the campaign in
 turbulence of that intensity (m/s per NED component, Dryden scale length 533.4 m; each maneuver its
 own draw, seeded by ``--seed`` and the maneuver's number; :func:`synthetic_fpr.synthetic_problem`);
 the status line then records what each fit found of the turbulence (the filter-error fit's
@@ -289,7 +289,7 @@ def main() -> None:
     if len(methods) == 2:
         wall = {(r["maneuvers"], r["method"]): r["wall_s"] for r in rows}
         ratios = [(n, wall[n, "filter_error"] / wall[n, "output_error"]) for n in a.sizes]
-        lines += ["", "filter-error / output-error wall time (target of issue 14: at most 3x): " + "; ".join(
+        lines += ["", "filter-error / output-error wall time (target: at most 3x): " + "; ".join(
             f"{n} maneuvers: {q:.2f}x ({'met' if q <= 3.0 else f'{q / 3.0:.2f} x the target'})"
             for n, q in ratios)]
     lines += ["", "wall s: best of the runs, everything estimate() does (screening, iterations, "

@@ -39,6 +39,7 @@ from campaigns.analytic_flight import (
     NOISE_SIGMA,
     SENSORS,
     TABLES,
+    ChannelTruth,
     G,
     Sinus,
     gauss_markov_wind,
@@ -132,8 +133,8 @@ def _maneuver(mid: str, aircraft: str, duration_s: float, rate_hz: float, truth:
     ac = truth["aircraft"][aircraft]
     # the attitude and altitude channels are the same either way (flow_states changes the
     # velocity only)
-    meas = tejas_channels(t, flow_states, inputs, SENSORS, r_cg, TAUS, ac, truth["tables"],
-                          truth["breakpoints"], nose_probe=not boom)
+    meas = tejas_channels(t, flow_states, inputs, SENSORS, r_cg,
+                          ChannelTruth(TAUS, ac, truth["tables"], truth["breakpoints"]), nose_probe=not boom)
     # DGPS height: geometric (pressure altitude here is geometric too: k_h = 0), its own offset;
     # listed after h (the noise below is drawn in this order)
     dgps = states_at(t - TAUS["tau_dgps"])[:, 6] + rng.uniform(-30.0, 30.0)

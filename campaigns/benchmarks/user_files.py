@@ -8,6 +8,7 @@ column names and units (:data:`USER_COLUMNS`), the problem file's layout (:func:
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
@@ -72,11 +73,28 @@ def problem_text(channels: Sequence[str], sensors: Mapping[str, Sequence[float]]
         "[[files]]", files, ""]) + tail
 
 
+@dataclass(frozen=True)
+class CsvLayout:
+    """How :func:`write_user_files` lays out the CSV and its ``[[files]]`` entry.
+
+    ``name``, ``float_format``: the CSV's name and number format (None: full precision);
+    ``t_first_s``: maneuver id -> the recorder time of its first sample, s; None: 1000 s for the
+    first, then 100 s after the previous one ends (a gap outside every time range);
+    ``time_format``: format of the maneuvers' time ranges in the problem file; ``configuration``:
+    the file's configuration, if any.
+    """
+
+    name: str = "flight.csv"
+    float_format: str | None = None
+    t_first_s: Mapping[str, float] | None = None
+    time_format: str = ".6f"
+    configuration: str | None = None
+
+
 def write_user_files(dataset_dir: Path, dest: Path, columns: Mapping[str, Sequence], channels: Sequence[str],
-                     title: str, csv_name: str = "flight.csv", t_first_s: Mapping[str, float] | None = None,
-                     float_format: str | None = None, configuration: str | None = None,
-                     sensors: Sequence[str] = PV1_SENSORS, time_format: str = ".6f", tail: str = "") -> Path:
-    """Every maneuver of a flown dataset in one CSV, ``dest/csv_name``, and ``dest/problem.toml``.
+                     title: str, sensors: Sequence[str] = PV1_SENSORS, tail: str = "",
+                     layout: CsvLayout | None = None) -> Path:
+    """Every maneuver of a flown dataset in one CSV, ``dest/<layout.name>``, and ``dest/problem.toml``.
 
     Parameters
     ----------
@@ -86,13 +104,10 @@ def write_user_files(dataset_dir: Path, dest: Path, columns: Mapping[str, Sequen
         :data:`USER_COLUMNS`: each written as ``SI value * factor`` and declared in ``unit``.
     channels : the problem's fitted channels.
     title : the problem's title.
-    csv_name, float_format : the CSV's name and number format (None: full precision).
-    t_first_s : maneuver id -> the recorder time of its first sample, s; None: 1000 s for the
-        first, then 100 s after the previous one ends (a gap outside every time range).
-    configuration : the file's configuration, if any.
     sensors : the sensors whose positions (the dataset's) the problem declares.
-    time_format : format of the maneuvers' time ranges in the problem file.
     tail : text appended to the problem file.
+    layout : the CSV's name, number and time formats, time ranges and configuration (None: the
+        defaults of :class:`CsvLayout`).
 
     Returns
     -------
@@ -100,22 +115,23 @@ def write_user_files(dataset_dir: Path, dest: Path, columns: Mapping[str, Sequen
     """
     from synth.dataset import load_dataset
 
+    layout = layout or CsvLayout()
     ds = load_dataset(dataset_dir)
     frames, ranges, t0 = [], [], 1000.0
     for entry, df in ds:
-        start = t0 if t_first_s is None else t_first_s[entry["id"]]
+        start = t0 if layout.t_first_s is None else layout.t_first_s[entry["id"]]
         t = df["t_s"].to_numpy() - df["t_s"].iloc[0] + start
         cols = {c[0]: df[c[1]].to_numpy(dtype=float) * c[2] for c in columns.values()}
         frames.append(pd.DataFrame({"Time": t, **cols}))
         ranges.append((entry["id"], t[0], t[-1]))
         t0 = t[-1] + 100.0
     dest.mkdir(parents=True)
-    pd.concat(frames).to_csv(dest / csv_name, index=False, float_format=float_format)
+    pd.concat(frames).to_csv(dest / layout.name, index=False, float_format=layout.float_format)
     pos = ds.manifest["airframe"]["positions_body_m"]
-    mans = ",\n  ".join(f'{{ id = "{i}", t_start_s = {a:{time_format}}, t_end_s = {b:{time_format}} }}'
-                        for i, a, b in ranges)
-    files = "\n".join([f'path = "{csv_name}"', 'aircraft = "PV1"',
-                       *([f'configuration = "{configuration}"'] if configuration else []),
+    tf = layout.time_format
+    mans = ",\n  ".join(f'{{ id = "{i}", t_start_s = {a:{tf}}, t_end_s = {b:{tf}} }}' for i, a, b in ranges)
+    files = "\n".join([f'path = "{layout.name}"', 'aircraft = "PV1"',
+                       *([f'configuration = "{layout.configuration}"'] if layout.configuration else []),
                        f"maneuvers = [\n  {mans},\n]"])
     problem = dest / "problem.toml"
     problem.write_text(problem_text(channels, {k: pos[k] for k in sensors},

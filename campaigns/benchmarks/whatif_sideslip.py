@@ -1,4 +1,4 @@
-"""What-if study of the filter-error method's sideslip offsets and delays on JSBSim data (issue 14).
+"""What-if study of the filter-error method's sideslip offsets and delays on JSBSim data.
 
 JSBSim flies PT1-BOOM's maneuvers of the demo's light-turbulence block (Mach 0.6, 6000 m, a 7-m/s
 steady wind); before the sensors see it, the wind in the truth is replaced, and the filter-error

@@ -1,4 +1,4 @@
-"""Planning studies (issue 5): which maneuvers to fly, judged by Cramér-Rao bounds and Monte Carlo.
+"""Planning studies: which maneuvers to fly, judged by Cramér-Rao bounds and Monte Carlo.
 
 Each study is a runnable script that builds Monte Carlo scenarios (:mod:`campaigns.montecarlo`),
 runs them (resumably: the same command again skips finished replications) and writes a text
@@ -21,7 +21,7 @@ table and a PNG plot; the committed results are in ``campaigns/studies/results/`
 
 (d) :mod:`campaigns.studies.robustness` — IMU biases of 1, 2, 3 and -3 times the typical values
     from zero start values: does the estimator reach the true minimum, and does it ever call a
-    wrong one a success (issue 10)::
+    wrong one a success::
 
         python -m campaigns.studies.robustness --out runs/robustness --results campaigns/studies/results
 

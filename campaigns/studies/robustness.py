@@ -1,7 +1,7 @@
-"""Robustness study (issue 10): do fits from the default (zero) start reach the true minimum when
+"""Robustness study: do fits from the default (zero) start reach the true minimum when
 the IMU biases are large, and is a fit that does not reported as a failure?
 
-Setting (the issue's): one aircraft (PV1-NP) at Mach 0.5, 6000 m, a pitch doublet, a wind-up turn
+Setting: one aircraft (PV1-NP) at Mach 0.5, 6000 m, a pitch doublet, a wind-up turn
 and a steady-heading sideslip (105 s, split into its 35 s segments as usual), the default
 campaign's world (typical errors of SPEC §6, the realistic local-flow truth and airdata-computer
 baseline, a steady wind of (6, -4, 0) m/s, calm air), the IMU biases scaled to ``k`` times the
@@ -36,12 +36,12 @@ covariance at its maximum-likelihood value, ``J = 1/2 sum_c N_c (1 + ln R_c)``. 
 the Cramér-Rao covariance (the worst direction), so ``Delta J <= 0.1`` means the two fits are less
 than 0.45 of a Cramér-Rao deviation apart in any combination of the parameters (a likelihood ratio
 of 1.1: statistically the same estimate). It is well above what the solver's own convergence test
-leaves (a predicted further decrease below 1e-3; before issue 10, a relative decrease of 1e-7 of
-``|J|`` ~ 4e5, i.e. 0.04, per iteration), and more than five orders of magnitude below a wrong
-minimum of the kind the issue reports (attitude residuals of 10 deg against 0.03 deg of noise:
-``Delta J`` ~ 1/2 N ln(R_wrong / R_true) ~ 3e4 per attitude channel). A judged fit whose cost
-lies *below* the reference's by more than the tolerance found a better minimum than the fit from
-the truth; it is counted apart ("below the reference"), not as a wrong minimum.
+leaves (a predicted further decrease below 1e-3), and more than five orders of magnitude below a
+wrong minimum of the kind large IMU biases lead a fit from zero to (attitude residuals of 10 deg
+against 0.03 deg of noise: ``Delta J`` ~ 1/2 N ln(R_wrong / R_true) ~ 3e4 per attitude channel).
+A judged fit whose cost lies *below* the reference's by more than the tolerance found a better
+minimum than the fit from the truth; it is counted apart ("below the reference"), not as a wrong
+minimum.
 
 Reported beside the cost, not part of the definition: the largest difference of a parameter
 estimated by both fits, in units of the reference fit's Cramér-Rao deviation,
@@ -158,7 +158,7 @@ class StudyConfig:
 
 
 SIZES: dict[str, StudyConfig] = {
-    # the issue's setting: PV1-NP at Mach 0.5 flies a pitch doublet, a wind-up turn and the SHSS
+    # the study's setting: PV1-NP at Mach 0.5 flies a pitch doublet, a wind-up turn and the SHSS
     # (105 s in 35 s segments), each with the defaults of synth.maneuvers
     "full": StudyConfig(scales=(1.0, 2.0, 3.0, -3.0), replications=10, flights=(
         {"configurations": ["PV1-NP"], "mach": [0.5], "altitude_m": 6000.0,
@@ -190,7 +190,7 @@ def scenario_raw(scale: float, config: StudyConfig, replications: int) -> dict:
     """
     raw: dict[str, Any] = {
         "name": f"{STUDY}_x{scale_label(scale)}",
-        "description": f"issue 10 robustness: IMU biases {scale_label(scale)} x typical, zero start",
+        "description": f"robustness: IMU biases {scale_label(scale)} x typical, zero start",
         "seed": SEED, "replications": int(replications), "fleet": "fleet_default",
         "local_flow_truth": "local_flow_truth", "adc_baseline": "adc_baseline", "common_rate_hz": 40.0,
         "environment": {"planet": "flat", "wind_ned_mps": list(WIND_NED_MPS), "turbulence": "none"},
@@ -815,7 +815,7 @@ def plot(df: pd.DataFrame, scales: Sequence[float], path: Path, replications: in
     handles += [Line2D([], [], color="0.4", marker="o", ls="", label="result says success"),
                 Line2D([], [], color="0.4", marker="x", ls="", label="result says failure")]
     fig.legend(handles=handles, fontsize=8, loc="outside lower center", ncol=4)
-    fig.suptitle("Robustness (issue 10): fits from the default (zero) start against a fit from the truth, "
+    fig.suptitle("Robustness: fits from the default (zero) start against a fit from the truth, "
                  f"{replications} replications per scale (shaded: |dJ| <= {COST_TOL_NLL:g}, the true "
                  "minimum)", fontsize=10)
     fig.savefig(path, dpi=100)
@@ -836,7 +836,7 @@ def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: st
     shss = " (SHSS split into its segments)" if any("shss" in b["maneuvers"] for b in config.flights) else ""
     lines = [
         *scaffold.header_lines(
-            "Robustness (issue 10): fits from the estimator's default (zero) start with the IMU biases at "
+            "Robustness: fits from the estimator's default (zero) start with the IMU biases at "
             "k x typical, judged against a fit started from the truth (the true minimum).", command, __file__,
             f"{replications} replications per scale, {len(config.scales)} scales", invocations),
         *paragraph(f"setting: {flights}{shss}; the default campaign's world: "
@@ -880,7 +880,7 @@ def report(df: pd.DataFrame, config: StudyConfig, replications: int, command: st
 
 STUDY_SPEC = scaffold.Study(
     name=STUDY, file=__file__, sizes=SIZES, unit="scale",
-    description="Issue 10 robustness: IMU biases at k x typical (1, 2, 3, -3), fits from the default "
+    description="Robustness: IMU biases at k x typical (1, 2, 3, -3), fits from the default "
     "(zero) start judged against a fit from the truth: the fraction at the true minimum and the fits "
     "reported as success at a wrong minimum. Resumable: run the same command again.",
     workers_help="replications run at once, one process each (default: 2; 1 runs in this process)",

@@ -192,7 +192,7 @@ FULL = StudyConfig(FULL_BASE, make_factors(
 TINY = StudyConfig(TINY_BASE, make_factors(
     imu_scales=(1.0, 3.0), imu_started_scales=(3.0,), flow_delays_ms=("typical", 100.0),
     ins_delays_ms=(0.0, 100.0), winds_mps=(0.0, 10.0), turbulence=("none", "light")), replications=1)
-#: Issue 14: the turbulence rows again, estimated by the filter-error method (the wind as states;
+#: The turbulence rows again, estimated by the filter-error method (the wind as states;
 #: estimator/filter_error.py): calm, light and moderate, 8 replications each, on the full base
 #: The model set adds the INS ground velocities (estimator/models/tejas_ins.toml): the
 #: accelerometer biases are then measured, not told by the flow sensors the wind also moves
