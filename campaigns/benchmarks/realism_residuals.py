@@ -236,26 +236,28 @@ def _code_state() -> str:
     return head + (f" with uncommitted changes in {', '.join(dirty)}" if dirty else " (clean tree)")
 
 
-def main(argv: list[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", required=True, help="folder for the datasets (reused when complete)")
     ap.add_argument("--workers", type=int, default=None, help="worker processes for flying")
     ap.add_argument("--results", default=None, help="also write the printed text to this file")
     ap.add_argument("--no-sources", action="store_true", help="skip the one-source-at-a-time datasets")
-    args = ap.parse_args(argv)
-    t_start = time.perf_counter()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    with open(CAMPAIGN, "rb") as fh:
-        raw = tomllib.load(fh)
-    from estimator.io.modelset import read_model_set
+    return ap
 
-    lines: list[str] = []
 
-    def say(s: str = "") -> None:
+class _Say:
+    """The report: printed as it goes, and kept for ``--results``."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def __call__(self, s: str = "") -> None:
         print(s, flush=True)
-        lines.append(s)
+        self.lines.append(s)
 
+
+def _say_header(say: _Say, argv: list[str] | None, raw: dict) -> None:
+    """What was run, where, on which code, and how each dataset is estimated."""
     sw = software_versions()
     mem = memory_gib()
     given = argv if argv is not None else sys.argv[1:]
@@ -275,6 +277,122 @@ def main(argv: list[str] | None = None) -> int:
         "estimate(problem, SolverOptions()) (default options), one per Mach bin (0.5, 0.7)")
     say()
 
+
+def _say_model(say: _Say, model: str, summaries: dict, runs: dict) -> None:
+    """One model set's residuals, realism level beside typical beside the real flights, and its
+    estimations' verdicts."""
+    say()
+    say("=" * 150)
+    say(f"model set {model}" + (" (the paper's; the INS velocities not fitted)" if model == "tejas" else
+                                " (also fits the INS NED velocities, with a steady wind per maneuver)"))
+    say(f"against {REAL_FLIGHTS}")
+    say("ratio: rms(residual) / white-noise floor per maneuver and channel (median [min-max] over the "
+        "maneuvers); rho1: lag-1 autocorrelation of the residual at 40 Hz; rms, floor: display units")
+    say("(the real flights' height floor is 4.2 m / 22 = 0.19 m; this testbed's is its static "
+        "transducer's typical 10 Pa of noise, about 1.3 m at 6 km: compare the rms too)")
+    say()
+    for line in comparison_table(channel_summary(summaries[("realism", model)]),
+                                 channel_summary(summaries[("typical", model)])):
+        say(line)
+    say()
+    for name in ("realism", "typical"):
+        for r in runs[(name, model)]:
+            say(f"  {name:8s} Mach {r['mach']}: {r['maneuvers']} maneuvers, verdict {r['verdict']}, "
+                f"{r['status']}, {r['wall_s']:.1f} s; findings: {r['findings'] or 'no warnings'}"
+                + (f"; import's data warnings: {r['data_warnings']}" if r["data_warnings"] else ""))
+
+
+def _say_sources(say: _Say, datasets: dict, summaries: dict, runs: dict) -> dict:
+    """Each realism source alone on top of typical: its residuals and verdicts; its fits by source."""
+    say()
+    say("=" * 150)
+    say("each realism source alone on top of typical (model set tejas, both Mach bins): "
+        "ratio median / rho1 median per channel")
+    src_rows, src_fits = {}, {}
+    for k, label in enumerate(SOURCES):
+        fq, r, f = estimate_bins(datasets[f"source{k}"], "tejas")
+        src_rows[label] = (channel_summary(fq), r)
+        src_fits[label] = f
+    chans = [c for c in KINEMATIC if c in src_rows[next(iter(SOURCES))][0].index]
+    head = f"{'source':24s} | " + " ".join(f"{c:>12s}" for c in chans) + " | verdicts (Mach 0.5, 0.7)"
+    say(head)
+    say("-" * len(head))
+    for label, (s, r) in [("typical (none)", (channel_summary(summaries[("typical", "tejas")]),
+                                              runs[("typical", "tejas")])),
+                          *src_rows.items(),
+                          ("realism level (all)", (channel_summary(summaries[("realism", "tejas")]),
+                                                   runs[("realism", "tejas")]))]:
+        cells = " ".join(f"{s.loc[c, 'ratio_med']:5.2f} / {s.loc[c, 'rho1_med']:4.2f}" for c in chans)
+        say(f"{label:24s} | {cells} | {', '.join(x['verdict'].lower() for x in r)}")
+    return src_fits
+
+
+def _say_truth(say: _Say, fits: dict, model_raw: dict) -> list:
+    """Table 2 against the truth per sensor and Mach bin, realism level beside typical; its rows."""
+    say()
+    say("=" * 150)
+    say(f"Table 2 against the truth (model set tejas, one estimation per Mach bin): 3 sigma of the "
+        f"calibrated channel minus the true flow angle at its sensor, deg (nose probe: alpha < "
+        f"{NOSE_PROBE_ALPHA_MAX_DEG:.0f} deg)")
+    t_real = truth_table(fits[("realism", "tejas")], model_raw)
+    t_typ = {(r[1], r[2]): r for r in truth_table(fits[("typical", "tejas")], model_raw)}
+    head = (f"{'sensor':28s} {'channel':10s} {'Mach':>4s} | {'realism: 3 sigma (mean)':>24s} | "
+            f"{'typical: 3 sigma (mean)':>24s} | desired | realism within")
+    say(head)
+    say("-" * len(head))
+    for sensor, ch, mach, s3, mean, desired in sorted(t_real, key=lambda r: (r[1], r[2])):
+        ty = t_typ.get((ch, mach))
+        tcell = f"{ty[3]:.3f} ({ty[4]:+.3f})" if ty else "-"
+        say(f"{sensor:28s} {ch:10s} {mach:4.1f} | {f'{s3:.3f} ({mean:+.3f})':>24s} | {tcell:>24s} | "
+            f"{desired:7.2f} | {'yes' if s3 <= desired else 'NO'}")
+    return t_real
+
+
+def _say_truth_per_source(say: _Say, datasets: dict, fits: dict, src_fits: dict, t_real: list,
+                          model_raw: dict) -> None:
+    """Table 2 against the truth per realism source alone, and without the wind-up turns."""
+    say()
+    say("Table 2 against the truth per realism source alone (model set tejas): the larger 3 sigma of "
+        "the two Mach bins, deg, and its mean error; * = beyond the desired accuracy")
+    chans = sorted({r[1] for r in t_real})
+    head = f"{'source':38s} | " + " ".join(f"{c:>16s}" for c in chans)
+    say(head)
+    say("-" * len(head))
+    # the wind-up turns left out: banked at 65-78 deg, their height rate carries the lateral
+    # velocity (h' = ... - v cos(theta) sin(phi)), so a height error becomes a sideslip error
+    gentle = ["pitch_doublet", "3211", "shss"]
+    _, static_runs, src_fits["static error + lag, no wind-up turns"] = estimate_bins(
+        datasets["source2"], "tejas", gentle)
+    _, realism_runs, no_windup = estimate_bins(datasets["realism"], "tejas", gentle)
+    for label, fit in [("typical (none)", fits[("typical", "tejas")]), *src_fits.items(),
+                       ("realism level (all)", fits[("realism", "tejas")]),
+                       ("realism, no wind-up turns", no_windup)]:
+        worst = {}
+        for _, ch, _, s3, mean, desired in truth_table(fit, model_raw):
+            if ch not in worst or s3 > worst[ch][0]:
+                worst[ch] = (s3, mean, desired)
+        cells = " ".join(
+            f"{worst[c][0]:6.3f} ({worst[c][1]:+.3f}){'*' if worst[c][0] > worst[c][2] else ' '}"
+            if c in worst else f"{'-':>16s}" for c in chans)
+        say(f"{label:38s} | {cells}")
+    say("the estimations without the wind-up turns:")
+    for label, rr in (("static error + lag", static_runs), ("realism level", realism_runs)):
+        for r in rr:
+            say(f"  {label:18s} Mach {r['mach']}: {r['maneuvers']} maneuvers, verdict {r['verdict']}; "
+                f"findings: {r['findings'] or 'no warnings'}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    t_start = time.perf_counter()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    with open(CAMPAIGN, "rb") as fh:
+        raw = tomllib.load(fh)
+    from estimator.io.modelset import read_model_set
+
+    say = _Say()
+    _say_header(say, argv, raw)
     datasets = {}
     fly_wall = 0.0
     for name, v in variants(raw, not args.no_sources).items():
@@ -291,104 +409,20 @@ def main(argv: list[str] | None = None) -> int:
             summaries[(name, model)] = fq
             runs[(name, model)] = r
             fits[(name, model)] = f
-
     for model in MODELS:
-        say()
-        say("=" * 150)
-        say(f"model set {model}" + (" (the paper's; the INS velocities not fitted)" if model == "tejas" else
-                                    " (also fits the INS NED velocities, with a steady wind per maneuver)"))
-        say(f"against {REAL_FLIGHTS}")
-        say("ratio: rms(residual) / white-noise floor per maneuver and channel (median [min-max] over the "
-            "maneuvers); rho1: lag-1 autocorrelation of the residual at 40 Hz; rms, floor: display units")
-        say("(the real flights' height floor is 4.2 m / 22 = 0.19 m; this testbed's is its static "
-            "transducer's typical 10 Pa of noise, about 1.3 m at 6 km: compare the rms too)")
-        say()
-        for line in comparison_table(channel_summary(summaries[("realism", model)]),
-                                     channel_summary(summaries[("typical", model)])):
-            say(line)
-        say()
-        for name in ("realism", "typical"):
-            for r in runs[(name, model)]:
-                say(f"  {name:8s} Mach {r['mach']}: {r['maneuvers']} maneuvers, verdict {r['verdict']}, "
-                    f"{r['status']}, {r['wall_s']:.1f} s; findings: {r['findings'] or 'no warnings'}"
-                    + (f"; import's data warnings: {r['data_warnings']}" if r["data_warnings"] else ""))
-
-    if not args.no_sources:
-        say()
-        say("=" * 150)
-        say("each realism source alone on top of typical (model set tejas, both Mach bins): "
-            "ratio median / rho1 median per channel")
-        src_rows, src_fits = {}, {}
-        for k, label in enumerate(SOURCES):
-            fq, r, f = estimate_bins(datasets[f"source{k}"], "tejas")
-            src_rows[label] = (channel_summary(fq), r)
-            src_fits[label] = f
-        chans = [c for c in KINEMATIC if c in src_rows[next(iter(SOURCES))][0].index]
-        head = f"{'source':24s} | " + " ".join(f"{c:>12s}" for c in chans) + " | verdicts (Mach 0.5, 0.7)"
-        say(head)
-        say("-" * len(head))
-        for label, (s, r) in [("typical (none)", (channel_summary(summaries[("typical", "tejas")]),
-                                                  runs[("typical", "tejas")])),
-                              *src_rows.items(),
-                              ("realism level (all)", (channel_summary(summaries[("realism", "tejas")]),
-                                                       runs[("realism", "tejas")]))]:
-            cells = " ".join(f"{s.loc[c, 'ratio_med']:5.2f} / {s.loc[c, 'rho1_med']:4.2f}" for c in chans)
-            say(f"{label:24s} | {cells} | {', '.join(x['verdict'].lower() for x in r)}")
-
-    say()
-    say("=" * 150)
-    say(f"Table 2 against the truth (model set tejas, one estimation per Mach bin): 3 sigma of the "
-        f"calibrated channel minus the true flow angle at its sensor, deg (nose probe: alpha < "
-        f"{NOSE_PROBE_ALPHA_MAX_DEG:.0f} deg)")
+        _say_model(say, model, summaries, runs)
+    src_fits = {} if args.no_sources else _say_sources(say, datasets, summaries, runs)
     model_raw = read_model_set("tejas")[0]
-    t_real = truth_table(fits[("realism", "tejas")], model_raw)
-    t_typ = {(r[1], r[2]): r for r in truth_table(fits[("typical", "tejas")], model_raw)}
-    head = (f"{'sensor':28s} {'channel':10s} {'Mach':>4s} | {'realism: 3 sigma (mean)':>24s} | "
-            f"{'typical: 3 sigma (mean)':>24s} | desired | realism within")
-    say(head)
-    say("-" * len(head))
-    for sensor, ch, mach, s3, mean, desired in sorted(t_real, key=lambda r: (r[1], r[2])):
-        ty = t_typ.get((ch, mach))
-        tcell = f"{ty[3]:.3f} ({ty[4]:+.3f})" if ty else "-"
-        say(f"{sensor:28s} {ch:10s} {mach:4.1f} | {f'{s3:.3f} ({mean:+.3f})':>24s} | {tcell:>24s} | "
-            f"{desired:7.2f} | {'yes' if s3 <= desired else 'NO'}")
+    t_real = _say_truth(say, fits, model_raw)
     if not args.no_sources:
-        say()
-        say("Table 2 against the truth per realism source alone (model set tejas): the larger 3 sigma of "
-            "the two Mach bins, deg, and its mean error; * = beyond the desired accuracy")
-        chans = sorted({r[1] for r in t_real})
-        head = f"{'source':38s} | " + " ".join(f"{c:>16s}" for c in chans)
-        say(head)
-        say("-" * len(head))
-        # the wind-up turns left out: banked at 65-78 deg, their height rate carries the lateral
-        # velocity (h' = ... - v cos(theta) sin(phi)), so a height error becomes a sideslip error
-        gentle = ["pitch_doublet", "3211", "shss"]
-        _, static_runs, src_fits["static error + lag, no wind-up turns"] = estimate_bins(
-            datasets["source2"], "tejas", gentle)
-        _, realism_runs, no_windup = estimate_bins(datasets["realism"], "tejas", gentle)
-        for label, fit in [("typical (none)", fits[("typical", "tejas")]), *src_fits.items(),
-                           ("realism level (all)", fits[("realism", "tejas")]),
-                           ("realism, no wind-up turns", no_windup)]:
-            worst = {}
-            for _, ch, _, s3, mean, desired in truth_table(fit, model_raw):
-                if ch not in worst or s3 > worst[ch][0]:
-                    worst[ch] = (s3, mean, desired)
-            cells = " ".join(
-                f"{worst[c][0]:6.3f} ({worst[c][1]:+.3f}){'*' if worst[c][0] > worst[c][2] else ' '}"
-                if c in worst else f"{'-':>16s}" for c in chans)
-            say(f"{label:38s} | {cells}")
-        say("the estimations without the wind-up turns:")
-        for label, rr in (("static error + lag", static_runs), ("realism level", realism_runs)):
-            for r in rr:
-                say(f"  {label:18s} Mach {r['mach']}: {r['maneuvers']} maneuvers, verdict {r['verdict']}; "
-                    f"findings: {r['findings'] or 'no warnings'}")
+        _say_truth_per_source(say, datasets, fits, src_fits, t_real, model_raw)
     est_wall = time.perf_counter() - est_wall
     say()
     say(f"wall time: {time.perf_counter() - t_start:.0f} s (flying {fly_wall:.0f} s, estimating and "
         f"tabulating {est_wall:.0f} s); load average at the end: "
         f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     if args.results:
-        Path(args.results).write_text("\n".join(lines) + "\n")
+        Path(args.results).write_text("\n".join(say.lines) + "\n")
     return 0
 
 
