@@ -73,11 +73,17 @@ def reconstruct(kind: str, planet: str, lever_arm: str = "differentiated") -> di
     }
 
 
+def _plain(res: dict) -> dict:
+    """The figures as Python floats and lists: a test's recorded properties travel to the
+    controlling process under pytest-xdist, which serializes only plain types."""
+    return {k: np.asarray(v).tolist() for k, v in res.items()}
+
+
 @pytest.mark.parametrize("lever_arm", ["differentiated", "imu_point"])
 @pytest.mark.parametrize("kind", ["pitch_doublet", "windup_turn"])
 def test_flat_earth_reconstruction_reproduces_truth(kind, lever_arm, record_property):
     res = reconstruct(kind, "flat", lever_arm)
-    record_property("flat", res)
+    record_property("flat", _plain(res))
     print(f"\n{kind} flat earth ({lever_arm}): |du,dv,dw| max = {np.round(res['uvw_mps'], 4)} m/s, "
           f"alpha {res['alpha_deg']:.4f} deg, beta {res['beta_deg']:.4f} deg, "
           f"euler {np.round(res['euler_deg'], 4)} deg over {res['duration_s']:.1f} s")
@@ -91,7 +97,7 @@ def test_flat_earth_reconstruction_reproduces_truth(kind, lever_arm, record_prop
 def test_wgs84_drift_is_reported_and_larger(record_property):
     flat = reconstruct("pitch_doublet", "flat")
     wgs = reconstruct("pitch_doublet", "wgs84")
-    record_property("wgs84", wgs)
+    record_property("wgs84", _plain(wgs))
     print(f"\npitch doublet, flat-earth equations on JSBSim's WGS84 earth: |du,dv,dw| max = "
           f"{np.round(wgs['uvw_mps'], 3)} m/s, alpha {wgs['alpha_deg']:.3f} deg, "
           f"beta {wgs['beta_deg']:.3f} deg over {wgs['duration_s']:.1f} s "
