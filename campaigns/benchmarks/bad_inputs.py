@@ -38,10 +38,11 @@ A case may also require a specific fix in the message (``own_rate``, ``skip_rows
 correct result: verdict SUCCESS or SUCCESS WITH WARNINGS and every compared estimate within 4
 deviations of the testbed's truth.
 
-A few cases run on a variant base instead (``Case.base``, :data:`VARIANTS`): ``three``, the
-user's report of issue "four bad inputs still not named": the same campaign with a third
-maneuver at Mach 0.5 (a 3211) and the rudder doublets at 0.2 (the sideslip within +-0.7 deg),
-``[workflow] max_mach_variation = 0.1`` in its problem file so that the three maneuvers make one
+A few cases run on a variant base instead (``Case.base``, :data:`VARIANTS`): ``three``, a flight
+whose small sideslip and single Mach bin hide a wrong input best (a sideslip in degrees declared
+rad stays a plausible angle): the same campaign with a third maneuver at Mach 0.5 (a 3211) and
+the rudder doublets at 0.2 (the sideslip within +-0.7 deg), ``[workflow] max_mach_variation =
+0.1`` in its problem file so that the three maneuvers make one
 Mach bin, run with the Mach-bin workflow (``fpr calibrate problem.toml``, no ``--single``: its
 results have no result.json, so a flag is judged on its findings.csv and printed verdict). A
 variant base must itself be good data: a verdict that is no failure, no data-fault finding.
