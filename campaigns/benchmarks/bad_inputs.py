@@ -42,10 +42,10 @@ A few cases run on a variant base instead (``Case.base``, :data:`VARIANTS`): ``t
 whose small sideslip and single Mach bin hide a wrong input best (a sideslip in degrees declared
 rad stays a plausible angle): the same campaign with a third maneuver at Mach 0.5 (a 3211) and
 the rudder doublets at 0.2 (the sideslip within +-0.7 deg), ``[workflow] max_mach_variation =
-0.1`` in its problem file so that the three maneuvers make one
-Mach bin, run with the Mach-bin workflow (``fpr calibrate problem.toml``, no ``--single``: its
-results have no result.json, so a flag is judged on its findings.csv and printed verdict). A
-variant base must itself be good data: a verdict that is no failure, no data-fault finding.
+0.1`` in its problem file so that the three maneuvers make one Mach bin, run with the Mach-bin
+workflow (``fpr calibrate problem.toml``, no ``--single``: its results have no result.json, so a
+flag is judged on its findings.csv and printed verdict). A variant base must itself be good data:
+a verdict that is no failure, no data-fault finding.
 
 The script exits 1 if any case is "anything else". A full run takes about a minute on 2
 cores. ``--out`` must be empty or a folder this script made (it holds a ``.bad_inputs`` marker):

@@ -92,7 +92,7 @@ class CsvLayout:
 
 
 def write_user_files(dataset_dir: Path, dest: Path, columns: Mapping[str, Sequence], channels: Sequence[str],
-                     title: str, sensors: Sequence[str] = PV1_SENSORS, tail: str = "",
+                     title: str, *, sensors: Sequence[str] = PV1_SENSORS, tail: str = "",
                      layout: CsvLayout | None = None) -> Path:
     """Every maneuver of a flown dataset in one CSV, ``dest/<layout.name>``, and ``dest/problem.toml``.
 
