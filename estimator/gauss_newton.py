@@ -8,13 +8,13 @@ Convergence is judged on the *undamped* Gauss-Newton step (module docstring of
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from estimator.identifiability import has_data
-from estimator.likelihood import OutputErrorLikelihood, evaluate
+from estimator.likelihood import Iterated, OutputErrorLikelihood, evaluate
 from estimator.model import Evaluation, Model, ModelEvaluationError
 from estimator.normal_equations import (
     Structure,
@@ -29,22 +29,6 @@ from estimator.verdict import Status
 
 if TYPE_CHECKING:
     from estimator.options import SolverOptions
-
-
-@dataclass
-class Iterated:
-    """What a Gauss-Newton run left: the iterate, its evaluation and how it ended."""
-
-    theta: np.ndarray
-    evals: Evaluation
-    sse: np.ndarray
-    cnt: np.ndarray
-    status: Status
-    message: str
-    iterations: int
-    history: list[float]
-    step_sigma: float  # the last undamped Gauss-Newton step, in deviations (largest)
-    poor: tuple[str, ...] = ()  # where that step exceeded a deviation at convergence (poor model)
 
 
 class _Linearised(NamedTuple):
@@ -235,6 +219,25 @@ def gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpti
         status, message = _at_the_limit(moved_max, opt)
     sse, cnt = residual_sums(evals, nch)
     return Iterated(theta, evals, sse, cnt, status, message, it, history, moved_max, poor)
+
+
+class IterationError(Exception):
+    """Iterations that started where the model could be evaluated left its domain on the way (a
+    safeguard: it does not happen after a successful start). ``theta``: where they started."""
+
+    def __init__(self, theta: np.ndarray, message: str):
+        super().__init__(message)
+        self.theta = theta
+
+
+def iterate(model: Model, theta: np.ndarray, st: Structure, opt: SolverOptions,
+            evals: Evaluation | None, lik) -> Iterated:
+    """:func:`gauss_newton` with ``lik`` from ``theta`` (``evals`` there, or None: evaluated
+    first), the model failing on the way an :class:`IterationError`."""
+    try:
+        return gauss_newton(model, theta, st, opt, evals, lik=lik)
+    except ModelEvaluationError as exc:
+        raise IterationError(theta, str(exc)) from None
 
 
 def staged_start(problem: Problem, theta: np.ndarray, free: np.ndarray, opt: SolverOptions

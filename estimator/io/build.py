@@ -150,3 +150,23 @@ def subproblem(problem: Problem, maneuver_ids: Sequence[str], *,
     if free:
         params = params.with_free(free)
     return replace(problem, maneuvers=tuple(mans), channels=tuple(chans), parameters=params)
+
+
+def without_samples(problem: Problem, samples: dict[tuple[str, str], np.ndarray]) -> Problem:
+    """The problem with some samples of some channels removed (NaN: not in the cost): ``samples``
+    maps (maneuver id, channel name) to the sample times to remove (the solver's robust pass)."""
+    col = {c.name: c.column for c in problem.channels}
+    mans = []
+    for m in problem.maneuvers:
+        meas = dict(m.measurements)
+        for (man, ch), t in samples.items():
+            if man != m.id or col.get(ch) not in meas:
+                continue
+            v = np.array(meas[col[ch]], dtype=float)
+            idx = np.searchsorted(m.t_s, t)
+            idx = idx[(idx < m.t_s.size)]
+            idx = idx[np.isclose(m.t_s[idx], t[: idx.size], atol=1e-9 + 1e-6 * m.dt_s)]
+            v[idx] = np.nan
+            meas[col[ch]] = v
+        mans.append(replace(m, measurements=meas))
+    return replace(problem, maneuvers=tuple(mans))

@@ -257,7 +257,7 @@ def test_noise_statistics_are_held_after_a_few_relaxations(turbulent):
     drift = lik.noise_drift(ev)
     assert lik.relax(ev, lik.stats(ev)) is noise, "noise_drift must not change what is held"
     assert all(np.isfinite(drift)) and drift[1] > 0.0
-    (air,) = [f for f in lik.findings(noise, drift=drift) if f.code == "turbulence"]
+    (air,) = [f for f in lik.turbulence_findings(noise, drift=drift) if f.code == "turbulence"]
     assert f"held after {HOLD_AFTER} relaxations" in air.message
 
 
@@ -302,7 +302,6 @@ def test_turbulent_maneuvers_without_wind_states_are_found_on_their_innovations(
     new maneuvers' intensities over the whole range (1 m/s here, to 0.15)."""
     from estimator.filter_error import FilterErrorLikelihood
     from estimator.normal_equations import Structure
-    from estimator.solver import _widened
 
     _, prob = turbulent
     model = Model(prob)
@@ -310,7 +309,7 @@ def test_turbulent_maneuvers_without_wind_states_are_found_on_their_innovations(
     lik = FilterErrorLikelihood(model, turbulent=frozenset())
     ev = lik.evaluate(theta, True)
     st = Structure(prob, prob.parameters.free_mask)
-    wide, ev2, missed = _widened(prob, st, theta, ev, lik)
+    wide, ev2, missed = lik.widened_where_turbulent(st, theta, ev)
     assert missed == {m.id for m in prob.maneuvers}
     assert wide is not lik and wide.windy.all() and not lik.windy.any()
     assert np.array_equal(wide._R, lik._R) and wide._placement.keys() == lik._placement.keys()
@@ -318,7 +317,7 @@ def test_turbulent_maneuvers_without_wind_states_are_found_on_their_innovations(
     noise = wide.relax(ev2, wide.stats(ev2))
     assert np.all(np.abs(noise.sigma_mps - SIGMA_MPS) < 0.15), noise.sigma_mps
     # nothing left to find: the same likelihood back
-    again, _, none = _widened(prob, st, theta, ev2, wide)
+    again, _, none = wide.widened_where_turbulent(st, theta, ev2)
     assert again is wide and not none
 
 

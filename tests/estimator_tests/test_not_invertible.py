@@ -1,4 +1,4 @@
-"""A calibration that cannot be applied fails the verdict (solver._not_invertible).
+"""A calibration that cannot be applied fails the verdict (estimator.checks.not_invertible).
 
 Where a channel model's slope with respect to the flow angle it measures nearly vanishes (below a
 quarter) or changes sign, flow angles far apart give nearly one reading and the flight-control
