@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import copy
 import json
+import shutil
+import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
@@ -46,6 +48,16 @@ def fly_once(tmp_path_factory) -> Callable[..., Path]:
         return flown[key]
 
     return fly
+
+
+@pytest.fixture
+def short_tmp() -> Path:
+    """An empty folder with a short path, for a child process's system temporary folder
+    (``TMPDIR``): multiprocessing's fork server puts its socket there, and a socket path may not
+    exceed 107 characters, which a test's ``tmp_path`` under pytest-xdist can."""
+    folder = Path(tempfile.mkdtemp(prefix="fpr-"))
+    yield folder
+    shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

@@ -230,10 +230,9 @@ run_montecarlo(_scenario(), {out!r}, replications=40, workers=2)
 
 @pytest.mark.slow
 @pytest.mark.skipif(not HAVE_PROC, reason="reads /proc")
-def test_worker_processes_end_when_the_run_is_killed(tmp_path):
+def test_worker_processes_end_when_the_run_is_killed(tmp_path, short_tmp):
     out = tmp_path / "killed"
-    tmp = tmp_path / "tmp"  # the system's temporary folder, for the run: nothing may leak there
-    tmp.mkdir()
+    tmp = short_tmp  # the system's temporary folder, for the run: nothing may leak there
     script = _RUN_IN_CHILD.format(here=str(HERE), tests=str(ROOT / "tests"), out=str(out))
     child = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT,
                              env=dict(os.environ, TMPDIR=str(tmp)))
@@ -452,11 +451,10 @@ replication.write_scratch_dataset = held
 
 @pytest.mark.slow
 @pytest.mark.skipif(not HAVE_PROC, reason="reads /proc")
-def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp_path, capsys):
+def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp_path, short_tmp, capsys):
     toml, whole = run3
     out = tmp_path / "cut"
-    scratch = tmp_path / "scratch"
-    scratch.mkdir()
+    scratch = short_tmp
     args = ["montecarlo", str(toml), "--out", str(out), "--workers", "2", "--replications", "3",
             "--no-summary"]
     hook = tmp_path / "hook"

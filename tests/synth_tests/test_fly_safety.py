@@ -292,7 +292,8 @@ def kill_campaign(tmp_path_factory):
 @pytest.mark.slow
 @pytest.mark.skipif(not HAVE_PROC, reason="finds worker processes in /proc")
 @pytest.mark.parametrize("how", ["SIGINT", "SIGKILL"])
-def test_a_killed_fly_leaves_no_worker_and_resumes_to_the_same_bytes(kill_campaign, tmp_path, how, capsys):
+def test_a_killed_fly_leaves_no_worker_and_resumes_to_the_same_bytes(kill_campaign, tmp_path, short_tmp, how,
+                                                                     capsys):
     toml, reference = kill_campaign
     out = tmp_path / "ds"
     log_out, log_err = tmp_path / "stdout.txt", tmp_path / "stderr.txt"
@@ -301,7 +302,7 @@ def test_a_killed_fly_leaves_no_worker_and_resumes_to_the_same_bytes(kill_campai
             [sys.executable, "-m", "campaigns.cli", "fly", str(toml), "--out", str(out), "--workers", "2"],
             stdout=fo, stderr=fe, cwd=REPO, start_new_session=True, preexec_fn=sigint_default,
             # multiprocessing's own folder (the fork server's socket), which a killed parent leaves
-            env=dict(os.environ, TMPDIR=str(tmp_path)))
+            env=dict(os.environ, TMPDIR=str(short_tmp)))
     try:
         # wait for the first maneuver file (bounded: a stuck start fails instead of hanging)
         deadline = time.monotonic() + 120.0

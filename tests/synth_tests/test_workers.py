@@ -50,7 +50,7 @@ if __name__ == "__main__":
 @linux_only
 @pytest.mark.parametrize("method", [m for m in ("fork", "spawn", "forkserver")
                                     if m in multiprocessing.get_all_start_methods()])
-def test_workers_end_within_5_s_of_a_sigkill_of_the_pools_process(tmp_path, method):
+def test_workers_end_within_5_s_of_a_sigkill_of_the_pools_process(tmp_path, short_tmp, method):
     held = tmp_path / "held"
     held.mkdir()
     script = tmp_path / "parent.py"
@@ -58,7 +58,7 @@ def test_workers_end_within_5_s_of_a_sigkill_of_the_pools_process(tmp_path, meth
     # TMPDIR: multiprocessing's own folder (the fork server's socket), which a killed parent leaves
     proc = subprocess.Popen([sys.executable, str(script)], cwd=ROOT, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, start_new_session=True,
-                            env=dict(os.environ, TMPDIR=str(tmp_path)))
+                            env=dict(os.environ, TMPDIR=str(short_tmp)))
     below: list[tuple[int, str]] = []
     try:
         deadline = time.monotonic() + 60.0
