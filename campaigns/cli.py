@@ -287,8 +287,8 @@ def _show(args: argparse.Namespace) -> int:
 
 CALIBRATE_EPILOG = """\
 PROBLEM.toml is a problem file: your flight data (CSV, text or Parquet), column names and units,
-sensor positions, CG, the channel models and which parameters are free; see the README section
-"Calibrating flight data" and the problem-file schema in estimator/io/__init__.py. A dataset
+sensor positions, CG, the channel models and which parameters are free; see docs/user-guide.md
+section "Problem files" and the problem-file schema in estimator/io/__init__.py. A dataset
 directory written by `fpr fly` works too (then --kind, --config, --aircraft, --mach-min,
 --mach-max and --gear pick maneuvers, and the recovery table compares each estimate with the
 injected truth).

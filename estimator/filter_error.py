@@ -23,7 +23,7 @@ longitudinal component as above, the lateral and vertical second-order (five sta
 :func:`estimator.core.wind_filter.dryden_body`; ``h = -(dy/dV) D``, ``D`` the states' map to the
 body-axis wind, and the wind history turned back to NED with the attitude). On JSBSim's
 turbulence (turb-type 4, Tustin: that form), it leaves the flow delays as long as the
-first-order form does (README).
+first-order form does (docs/method.md, the filter-error method).
 
 ``L`` the scale length (1750 ft = 533.4 m above 2000 ft), ``sigma`` the turbulence intensity
 (estimated per maneuver), ``V`` the maneuver's mean true airspeed. The IMU senses what the gusts
@@ -66,7 +66,7 @@ on the innovations (:func:`estimator.uncertainty.innovation_honest_std`): the Cr
 where the innovations are white, larger where the model leaves them coloured (a scale length ten
 times too short: 2.5 times, ``tests/estimator_tests/test_filter_error.py``). Neither sees an error
 the innovations do not show: a systematic one the filter fits away as white (on JSBSim's
-turbulence, the sideslip biases; README). The fit-quality diagnostics judge the innovations
+turbulence, the sideslip biases; docs/method.md). The fit-quality diagnostics judge the innovations
 scaled to the measurement noise, ``nu sqrt(R / s)`` (:meth:`FilterErrorLikelihood.predictions`):
 outliers, stuck channels, unit errors and gross misfits are found as in the output-error
 residuals, and air motion the wind states do not follow still reads as turbulence; a moderate
@@ -987,7 +987,7 @@ class FilterErrorLikelihood:
         gust at once (lift, side force, drag) and the IMU that drives the state equations measures
         that answer; the part of each gust the filter has not yet followed is then correlated with
         the IMU, and the flow channels' time delays (whose sensitivity is the flow angles' rate)
-        take that correlation up (README; campaigns/benchmarks/results/whatif_sideslip.txt). Per
+        take that correlation up (docs/method.md; campaigns/benchmarks/results/whatif_sideslip.txt). Per
         turbulent maneuver and flow channel: the normalised innovations against the IMU's specific
         force along the body axis of the channel's largest wind sensitivity, high-passed
         (:data:`ANSWER_HIGH_PASS_S`), at lags 0 to :data:`ANSWER_LAGS_S` (IMU after innovation);

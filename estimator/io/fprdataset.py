@@ -1,7 +1,7 @@
 """Read datasets written by ``fpr fly`` (manifest.json + maneuvers/*.parquet) without ``synth``.
 
 The estimator must run on real flight data alone, so this module reads the documented format
-(README, "The dataset format") with json and pyarrow directly.
+(docs/user-guide.md, "The dataset format") with json and pyarrow directly.
 """
 
 from __future__ import annotations

@@ -498,9 +498,11 @@ def test_calibrate_help_points_only_at_what_exists():
     options = {s for a in cal._actions for s in a.option_strings}
     for flag in re.findall(r"(?<![\w-])--[a-z][a-z-]*\*?", CALIBRATE_EPILOG):
         assert flag in options, f"{flag} in `fpr calibrate --help` is not an option"
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    headings = [h.strip() for h in re.findall(r"^#+ (.*)$", readme, flags=re.M)]
-    for section in re.findall(r'README section\s+"([^"]+)"', CALIBRATE_EPILOG):
-        assert any(h.startswith(section) for h in headings), f"no README section {section!r}"
+    root = Path(__file__).resolve().parents[2]
+    refs = re.findall(r'(README\.md|docs/[\w-]+\.md)\s+section\s+"([^"]+)"', CALIBRATE_EPILOG)
+    assert refs, "the help names the user guide's section on problem files"
+    for doc, section in refs:
+        headings = [h.strip() for h in re.findall(r"^#+ (.*)$", (root / doc).read_text(), flags=re.M)]
+        assert any(h.startswith(section) for h in headings), f"no section {section!r} in {doc}"
     for path in re.findall(r"\b((?:estimator|campaigns|synth)/[\w/]+\.py)\b", CALIBRATE_EPILOG):
         assert (Path(__file__).resolve().parents[2] / path).is_file(), path
