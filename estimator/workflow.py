@@ -723,102 +723,103 @@ def vane_biases(problem: Problem, result: EstimationResult, names: Sequence[str]
     return ok, vals, result.covariance(keys), result.covariance(keys, colored=True)
 
 
-def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> WorkflowResult:
-    """Run the calibration workflow (module docstring) on a problem holding a fleet's maneuvers."""
-    opt = options or WorkflowOptions()
-    t_start = time.perf_counter()
-    notes: list[str] = []
-    bins = assign_bins(problem, opt)
+def _left_out_note(bins: pd.DataFrame) -> str | None:
+    """The note naming the maneuvers the bins leave out (None: none left out)."""
     left = bins[~bins["used"]]
-    if len(left):
-        per_kind = ", ".join(f"{n} {k}" for k, n in left["kind"].fillna("?").value_counts().items())
-        notes.append(f"{len(left)} maneuver(s) left out ({per_kind}): " + "; ".join(
-            f"{r.id} ({r.reason})" for r in left.head(8).itertuples())
-            + (" ... (all in maneuvers.csv)" if len(left) > 8 else ""))
-    up = bins[bins["used"] & ~bins["gear_down"]]
-    if up.empty:
-        raise ValueError(no_bins_message(problem.source, bins, opt))
-    decl = opt.declarations or declarations_of(problem)
-    ref_mach = opt.reference_mach if opt.reference_mach is not None else decl.reference_mach
-    families = dict(decl.apportion)  # label -> bias family
-    apportioned = bool(families) and all(f in problem.parameters.specs for f in families.values())
-    if apportioned and ref_mach is None:
-        raise ValueError(f"{problem.source}: apportioning {', '.join(families.values())} needs a reference "
-                         "Mach: declare [workflow] reference_mach in the model set or pass reference_mach")
-    # ---- step 2
-    _say(opt, "step 2: every aircraft together, vane biases free")
-    first = tuple(_run(problem, g["id"].tolist(), "biases free", float(b), False, opt)
-                  for b, g in up.groupby("bin"))
-    findings: list[Finding] = []
-    failed = [st for st in first if not st.result.success]
-    for st in failed:
-        findings.append(_stage_failed(st, "the vane-bias apportionment and the later steps"))
-    first_ok = tuple(st for st in first if st.result.success)
-    # ---- step 3
-    vb_rows, inst = [], pd.DataFrame()
-    inst_keys = [*(f"installation_{k}" for k in families), "installation_mean"]
-    if apportioned:
-        per_bin = {}
-        for st in first_ok:
-            ac, vals, cov, cov_col = vane_biases(st.problem, st.result, list(families.values()))
-            if not ac:
-                continue
-            n = len(ac)
-            per_family = {k: dict(zip(ac, vals[i * n:(i + 1) * n], strict=True))
-                          for i, k in enumerate(families)}
-            ap = apportion_biases(per_family, cov)
-            col = apportion_biases(per_family, cov_col)
-            for k in inst_keys:
-                ap[f"std_colored_{k}"] = col[f"std_{k}"]
-            per_bin[st.mach] = ap
-            for a, r in ap.iterrows():
-                vb_rows.append({"mach": st.mach, "aircraft": a,
-                                **{f"{fam}_deg": r[k] * RAD2DEG for k, fam in families.items()},
-                                "mean_bias_deg": r["mean_bias"] * RAD2DEG,
-                                "std_deg": r["std_mean_bias"] * RAD2DEG,
-                                "fleet_mean_deg": r["fleet_mean"] * RAD2DEG,
-                                "deviation_deg": r["installation_mean"] * RAD2DEG,
-                                "std_deviation_deg": r["std_installation_mean"] * RAD2DEG})
-        if not per_bin and not failed:
-            raise ValueError(f"{problem.source}: no bin determines the vane biases "
-                             f"{', '.join(families.values())}")
-    if apportioned and per_bin:
-        ref = min(per_bin, key=lambda m: (abs(m - ref_mach), m))
-        if abs(ref - ref_mach) > 1e-9:
-            why = ("its estimation failed" if any(abs(st.mach - ref_mach) < 1e-9 for st in failed)
-                   else "there is none")
-            notes.append(f"no Mach {ref_mach} bin to take the installation biases from ({why}): "
-                         f"taken at Mach {ref:.2f}")
-        rows = []
-        all_ac = sorted({m.aircraft for m in problem.maneuvers})
-        for a in all_ac:
-            src = [m for m in sorted(per_bin, key=lambda m: (abs(m - ref), m)) if a in per_bin[m].index]
-            if not src:
-                notes.append(f"aircraft {a}: no bin determines its vane biases; they stay free")
-                continue
-            m = src[0]
-            if m != ref:
-                notes.append(f"aircraft {a} has no vane biases at Mach {ref:.2f}: its installation "
-                             f"biases are taken at Mach {m:.2f}")
-            r = per_bin[m].loc[a]
-            rows.append({"aircraft": a, "mach": m,
-                         **{f"{k}_deg": r[k] * RAD2DEG for k in inst_keys},
-                         **{f"std_{k}_deg": r[f"std_{k}"] * RAD2DEG for k in inst_keys},
-                         **{f"std_colored_{k}_deg": r[f"std_colored_{k}"] * RAD2DEG for k in inst_keys},
-                         "n_aircraft_in_bin": len(per_bin[m])})
-        inst = pd.DataFrame(rows).set_index("aircraft") if rows else pd.DataFrame()
-        if len(all_ac) < 2:
-            notes.append("one aircraft only: its vane biases cannot be split into installation and "
-                         "correction-model biases (the split needs a fleet); installation biases are 0")
-    # ---- step 4
+    if not len(left):
+        return None
+    per_kind = ", ".join(f"{n} {k}" for k, n in left["kind"].fillna("?").value_counts().items())
+    return (f"{len(left)} maneuver(s) left out ({per_kind}): " + "; ".join(
+        f"{r.id} ({r.reason})" for r in left.head(8).itertuples())
+        + (" ... (all in maneuvers.csv)" if len(left) > 8 else ""))
+
+
+def _bias_split(first_ok: Sequence[Stage], families: Mapping[str, str], inst_keys: Sequence[str]
+                ) -> tuple[dict[float, pd.DataFrame], list[dict]]:
+    """Step 3's apportionment per bin: the table of each bin that determines the vane biases (by
+    Mach) and the rows of the vane-bias table (deg)."""
+    per_bin, vb_rows = {}, []
+    for st in first_ok:
+        ac, vals, cov, cov_col = vane_biases(st.problem, st.result, list(families.values()))
+        if not ac:
+            continue
+        n = len(ac)
+        per_family = {k: dict(zip(ac, vals[i * n:(i + 1) * n], strict=True))
+                      for i, k in enumerate(families)}
+        ap = apportion_biases(per_family, cov)
+        col = apportion_biases(per_family, cov_col)
+        for k in inst_keys:
+            ap[f"std_colored_{k}"] = col[f"std_{k}"]
+        per_bin[st.mach] = ap
+        for a, r in ap.iterrows():
+            vb_rows.append({"mach": st.mach, "aircraft": a,
+                            **{f"{fam}_deg": r[k] * RAD2DEG for k, fam in families.items()},
+                            "mean_bias_deg": r["mean_bias"] * RAD2DEG,
+                            "std_deg": r["std_mean_bias"] * RAD2DEG,
+                            "fleet_mean_deg": r["fleet_mean"] * RAD2DEG,
+                            "deviation_deg": r["installation_mean"] * RAD2DEG,
+                            "std_deviation_deg": r["std_installation_mean"] * RAD2DEG})
+    return per_bin, vb_rows
+
+
+def _installation_biases(problem: Problem, per_bin: Mapping[float, pd.DataFrame], ref_mach: float,
+                         failed: Sequence[Stage], inst_keys: Sequence[str], notes: list[str]
+                         ) -> pd.DataFrame:
+    """Step 3's installation biases (deg), one row per aircraft, each taken at the bin nearest the
+    reference Mach that determines its vane biases; what is taken elsewhere is added to ``notes``."""
+    ref = min(per_bin, key=lambda m: (abs(m - ref_mach), m))
+    if abs(ref - ref_mach) > 1e-9:
+        why = ("its estimation failed" if any(abs(st.mach - ref_mach) < 1e-9 for st in failed)
+               else "there is none")
+        notes.append(f"no Mach {ref_mach} bin to take the installation biases from ({why}): "
+                     f"taken at Mach {ref:.2f}")
+    rows = []
+    all_ac = sorted({m.aircraft for m in problem.maneuvers})
+    for a in all_ac:
+        src = [m for m in sorted(per_bin, key=lambda m: (abs(m - ref), m)) if a in per_bin[m].index]
+        if not src:
+            notes.append(f"aircraft {a}: no bin determines its vane biases; they stay free")
+            continue
+        m = src[0]
+        if m != ref:
+            notes.append(f"aircraft {a} has no vane biases at Mach {ref:.2f}: its installation "
+                         f"biases are taken at Mach {m:.2f}")
+        r = per_bin[m].loc[a]
+        rows.append({"aircraft": a, "mach": m,
+                     **{f"{k}_deg": r[k] * RAD2DEG for k in inst_keys},
+                     **{f"std_{k}_deg": r[f"std_{k}"] * RAD2DEG for k in inst_keys},
+                     **{f"std_colored_{k}_deg": r[f"std_colored_{k}"] * RAD2DEG for k in inst_keys},
+                     "n_aircraft_in_bin": len(per_bin[m])})
+    if len(all_ac) < 2:
+        notes.append("one aircraft only: its vane biases cannot be split into installation and "
+                     "correction-model biases (the split needs a fleet); installation biases are 0")
+    return pd.DataFrame(rows).set_index("aircraft") if rows else pd.DataFrame()
+
+
+@dataclass(frozen=True)
+class _Held:
+    """Step 4's hold: the installation biases fixed (rad, by parameter key), the free mask."""
+
+    fixed_bias_rad: dict[str, float]
+    free: dict[str, bool]
+
+
+def _held_installation(problem: Problem, inst: pd.DataFrame, families: Mapping[str, str],
+                       decl: Declarations) -> _Held:
+    """Step 4's installation biases held (rad) and correction tables freed."""
     fixed_bias: dict[str, float] = {}
     for a, r in inst.iterrows():
         for k, fam in families.items():
             fixed_bias[make_key(fam, a)] = r[f"installation_{k}_deg"] / RAD2DEG
     free4 = {k: False for k in fixed_bias} | {t: True for t in decl.correction_model
                                                if t in problem.parameters.specs}
-    ident = decl.identity_table
-    _say(opt, "step 4: installation biases fixed, correction tables free")
+    return _Held(fixed_bias, free4)
+
+
+def _final_stages(problem: Problem, first_ok: Sequence[Stage], vb_rows: Sequence[dict], held: _Held,
+                  ident: str, opt: WorkflowOptions) -> tuple[Stage, ...]:
+    """Step 4: each bin again, installation biases held, the identity table started where the
+    fleet-mean bias puts it."""
     final = []
     for st in first_ok:
         start = dict(zip(st.result.parameters.keys, st.result.values, strict=True))
@@ -828,18 +829,15 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
                 start[k] += fm[0] / RAD2DEG
         ids = [m.id for m in st.problem.maneuvers]
         final.append(_run(problem, ids, "installation biases fixed", st.mach, False, opt,
-                          values={**start, **fixed_bias}, free=free4))
-    final = tuple(final)
-    # ---- step 5
-    down = bins[bins["used"] & bins["gear_down"]]
-    gear = []
-    if len(down):
-        _say(opt, "step 5: gear-down maneuvers, installation biases fixed")
-    final_ok = [st for st in final if st.result.success]
-    for st in final:
-        if not st.result.success:
-            findings.append(_stage_failed(st, "Table 2 and the correction tables"))
-    gear_notes: list[Finding] = []
+                          values={**start, **held.fixed_bias_rad}, free=held.free))
+    return tuple(final)
+
+
+def _gear_down_stages(problem: Problem, down: pd.DataFrame, final_ok: Sequence[Stage], held: _Held,
+                      opt: WorkflowOptions, notes: list[str]) -> tuple[list[Stage], list[Finding]]:
+    """Step 5: each gear-down bin started from the nearest gear-up final estimate, installation
+    biases held; the stages and the notes on what they hold unexcited."""
+    gear, gear_notes = [], []
     for b, g in down.groupby("bin"):
         if not final_ok:
             notes.append(f"Mach {b:.2f} gear down: no gear-up bin succeeded to start it from; left out")
@@ -847,28 +845,83 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
         near = min(final_ok, key=lambda s: (abs(s.mach - b), s.mach))
         start = dict(zip(near.result.parameters.keys, near.result.values, strict=True))
         ids = g["id"].tolist()
-        held, note = hold_unexcited(problem, ids, f"the Mach {near.mach:.2f} gear-up estimates")
-        st = _run(problem, ids, "gear down", float(b), True, opt, values={**start, **fixed_bias},
-                  free={**free4, **dict.fromkeys(held, False)})
+        unexcited, note = hold_unexcited(problem, ids, f"the Mach {near.mach:.2f} gear-up estimates")
+        st = _run(problem, ids, "gear down", float(b), True, opt,
+                  values={**start, **held.fixed_bias_rad},
+                  free={**held.free, **dict.fromkeys(unexcited, False)})
         gear.append(st)
         if note is not None:
             gear_notes.append(replace(note, stage=_stage_label(st)))
-    for st in gear:
-        if not st.result.success:
-            findings.append(_stage_failed(st, "Table 2 and the gear-down correction tables"))
+    return gear, gear_notes
+
+
+def _reference_mach(problem: Problem, opt: WorkflowOptions, decl: Declarations
+                    ) -> tuple[float | None, dict[str, str], bool]:
+    """The reference Mach, the bias families apportioned (label -> family) and whether the problem
+    apportions them; raises when apportioning lacks a reference Mach."""
+    ref_mach = opt.reference_mach if opt.reference_mach is not None else decl.reference_mach
+    families = dict(decl.apportion)  # label -> bias family
+    apportioned = bool(families) and all(f in problem.parameters.specs for f in families.values())
+    if apportioned and ref_mach is None:
+        raise ValueError(f"{problem.source}: apportioning {', '.join(families.values())} needs a reference "
+                         "Mach: declare [workflow] reference_mach in the model set or pass reference_mach")
+    return ref_mach, families, apportioned
+
+
+def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> WorkflowResult:
+    """Run the calibration workflow (module docstring) on a problem holding a fleet's maneuvers."""
+    opt = options or WorkflowOptions()
+    t_start = time.perf_counter()
+    bins = assign_bins(problem, opt)
+    notes = [n for n in (_left_out_note(bins),) if n is not None]
+    up = bins[bins["used"] & ~bins["gear_down"]]
+    if up.empty:
+        raise ValueError(no_bins_message(problem.source, bins, opt))
+    decl = opt.declarations or declarations_of(problem)
+    ref_mach, families, apportioned = _reference_mach(problem, opt, decl)
+    # ---- step 2
+    _say(opt, "step 2: every aircraft together, vane biases free")
+    first = tuple(_run(problem, g["id"].tolist(), "biases free", float(b), False, opt)
+                  for b, g in up.groupby("bin"))
+    failed = [st for st in first if not st.result.success]
+    findings = [_stage_failed(st, "the vane-bias apportionment and the later steps") for st in failed]
+    first_ok = tuple(st for st in first if st.result.success)
+    # ---- step 3
+    vb_rows, inst = [], pd.DataFrame()
+    inst_keys = [*(f"installation_{k}" for k in families), "installation_mean"]
+    if apportioned:
+        per_bin, vb_rows = _bias_split(first_ok, families, inst_keys)
+        if not per_bin and not failed:
+            raise ValueError(f"{problem.source}: no bin determines the vane biases "
+                             f"{', '.join(families.values())}")
+        if per_bin:
+            inst = _installation_biases(problem, per_bin, ref_mach, failed, inst_keys, notes)
+    # ---- step 4
+    held = _held_installation(problem, inst, families, decl)
+    _say(opt, "step 4: installation biases fixed, correction tables free")
+    final = _final_stages(problem, first_ok, vb_rows, held, decl.identity_table, opt)
+    # ---- step 5
+    down = bins[bins["used"] & bins["gear_down"]]
+    if len(down):
+        _say(opt, "step 5: gear-down maneuvers, installation biases fixed")
+    final_ok = [st for st in final if st.result.success]
+    findings += [_stage_failed(st, "Table 2 and the correction tables")
+                 for st in final if not st.result.success]
+    gear, gear_notes = _gear_down_stages(problem, down, final_ok, held, opt, notes)
+    findings += [_stage_failed(st, "Table 2 and the gear-down correction tables")
+                 for st in gear if not st.result.success]
     # ---- step 6: from the estimations that succeeded only
     usable_gear = tuple(st for st in gear if st.result.success)
     acc, growth, limit = accuracy_table(tuple(final_ok), usable_gear, opt, decl)
     findings += accuracy_misses(acc, (*final_ok, *usable_gear))
-    vb = pd.DataFrame(vb_rows)
     redone = {(st.mach, st.gear_down) for st in final}
     firsts = [replace(f, **_superseded(f, set(families.values())))
               if (st.mach, st.gear_down) in redone else f
               for st in first for f in _stage_findings((st,))]
     findings += firsts + _stage_findings((*final, *gear)) + gear_notes
-    return WorkflowResult(maneuvers=bins, first=first, final=final, gear_down=tuple(gear), vane_bias=vb,
-                          installation=inst, accuracy=acc, alpha_limit_growth=growth,
-                          alpha_limit_deg=limit, notes=tuple(notes),
+    return WorkflowResult(maneuvers=bins, first=first, final=final, gear_down=tuple(gear),
+                          vane_bias=pd.DataFrame(vb_rows), installation=inst, accuracy=acc,
+                          alpha_limit_growth=growth, alpha_limit_deg=limit, notes=tuple(notes),
                           elapsed_s=time.perf_counter() - t_start, findings=tuple(findings),
                           declarations=decl, reference_mach=ref_mach)
 
