@@ -568,6 +568,93 @@ def _floors(ts: Sequence[np.ndarray], xs: Sequence[np.ndarray], opt: DiagnosticO
 # ================================================================================================
 
 
+def _common_correlation(fits: Sequence[ChannelFit], keep: Sequence[np.ndarray], stuck: np.ndarray
+                        ) -> tuple[np.ndarray, dict[int, list[tuple[int, float]]]]:
+    """Correlation of the flow-channel residuals within each maneuver: each row's largest
+    |correlation| with another flow channel's (NaN: none) and, by row, every partner's row and
+    correlation."""
+    common = np.full(len(fits), np.nan)
+    flow_rows: dict[str, list[int]] = {}
+    for i, f in enumerate(fits):
+        if f.flow and not stuck[i]:
+            flow_rows.setdefault(f.maneuver, []).append(i)
+    partners: dict[int, list[tuple[int, float]]] = {}
+    for rows in flow_rows.values():
+        if len(rows) < 2:
+            continue
+        t_common = fits[rows[0]].t_s
+        for i in rows[1:]:
+            t_common = np.intersect1d(t_common, fits[i].t_s, assume_unique=True)
+        if t_common.size < 10:
+            continue
+        M = np.empty((len(rows), t_common.size))
+        for j, i in enumerate(rows):
+            pos = np.searchsorted(fits[i].t_s, t_common)
+            M[j] = np.where(keep[i], fits[i].z - fits[i].y, np.nan)[pos]
+        M = M - _nanmean_rows(M)
+        M = np.where(np.isnan(M), 0.0, M)
+        norm = np.sqrt(np.sum(M * M, axis=1))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            C = (M @ M.T) / np.outer(norm, norm)
+        np.fill_diagonal(C, np.nan)
+        for j, i in enumerate(rows):
+            common[i] = np.nanmax(np.abs(C[j])) if np.any(np.isfinite(C[j])) else np.nan
+            partners[i] = [(rows[jj], float(C[j, jj])) for jj in range(len(rows)) if jj != j]
+    return common, partners
+
+
+def _fit_table(fits: Sequence[ChannelFit], cols: Mapping[str, np.ndarray], bandwidth_factor: np.ndarray,
+               common: np.ndarray, scale: np.ndarray) -> pd.DataFrame:
+    """The fit-quality table (:func:`diagnose`) from the per-row statistics."""
+    stuck, mean, rms, floor = cols["stuck"], cols["mean"], cols["rms"], cols["floor"]
+    return pd.DataFrame({
+        "maneuver": [f.maneuver for f in fits], "channel": [f.channel for f in fits],
+        "flow": [bool(f.flow) for f in fits], "unit": [f.unit for f in fits], "n": cols["n"],
+        "n_measured": cols["n_meas"], "mean": mean, "rms": rms, "rms_all": cols["rms_all"],
+        "noise_floor": floor, "quantum": cols["quantum"], "ratio": cols["ratio"], "rho1": cols["rho1"],
+        "bandwidth_factor": bandwidth_factor, "n_outliers": cols["n_out"],
+        "slope": cols["slope"], "slope_se": cols["slope_se"], "slope_kinematic": cols["slope_k"],
+        "slope_kinematic_se": cols["slope_k_se"], "common_corr": common, "stuck": stuck,
+        "stuck_t0_s": np.where(stuck, cols["run_t0"], np.nan),
+        "stuck_t1_s": np.where(stuck, cols["run_t1"], np.nan),
+        "stuck_value": cols["stuck_value"], "display_unit": [f.display_unit for f in fits],
+        "mean_display": mean * scale, "rms_display": rms * scale, "noise_floor_display": floor * scale,
+    }, columns=_COLUMNS)
+
+
+def _row_findings(st: _Stats, out: Sequence[np.ndarray], done: np.ndarray,
+                  accuracy: Mapping[str, _Accuracy], opt: DiagnosticOptions
+                  ) -> tuple[list[Finding], dict[tuple[str, str], np.ndarray]]:
+    """Each row's outlier finding and, for a row no finding explains yet (``done`` false), its
+    residual's: no floor, misfit, flow residual or coloured. Also the outliers' times (s) by
+    (maneuver, channel)."""
+    findings: list[Finding] = []
+    outliers: dict[tuple[str, str], np.ndarray] = {}
+    fits, ratio, rho1, stuck = st.fits, st.ratio, st.rho1, st.stuck
+    for i, f in enumerate(fits):
+        if st.n_out[i] and not stuck[i] and not st.many[i]:
+            t = f.t_s[out[i]]
+            outliers[(f.maneuver, f.channel)] = t
+            findings.append(_outlier_finding(st, i, t, opt))
+        if done[i]:
+            continue
+        if not np.isfinite(ratio[i]):
+            if not stuck[i]:  # a stuck channel has its own finding; this one simply has too few samples
+                findings.append(Finding(
+                    "no_floor", Severity.NOTE,
+                    f"{_where(f)}: its noise floor could not be estimated ({f.z.size} samples in the "
+                    "cost): its residual is not judged", channel=f.channel, maneuver=f.maneuver))
+            continue
+        if not f.flow and ratio[i] > opt.misfit_warn_ratio:
+            sev = Severity.FAILURE if _gross(st, i, opt) else Severity.NOTE
+            findings.append(_ratio_finding(st, i, opt, "misfit", sev))
+        elif f.flow and ratio[i] > opt.noise_floor_ratio:
+            findings.append(_flow_residual_finding(st, i, opt, accuracy.get(f.channel)))
+        elif ratio[i] > opt.coloured_min_ratio and rho1[i] > opt.coloured_rho1:
+            findings.append(_coloured_finding(st, i, Severity.NOTE))
+    return findings, outliers
+
+
 def diagnose(channels: Sequence[ChannelFit], inputs: Sequence[ManeuverInputs] = (),
              options: DiagnosticOptions | None = None) -> Diagnosis:
     """Judge a finished fit against the data: findings and the fit-quality table.
@@ -595,74 +682,30 @@ def diagnose(channels: Sequence[ChannelFit], inputs: Sequence[ManeuverInputs] = 
     by_man_inputs = {m.maneuver: m for m in inputs}
     R = len(fits)
     findings: list[Finding] = []
-    outliers: dict[tuple[str, str], np.ndarray] = {}
     if R == 0:
         findings += _input_findings(inputs, opt)
-        return Diagnosis(tuple(_ordered(findings)), pd.DataFrame(columns=_COLUMNS), outliers)
+        return Diagnosis(tuple(_ordered(findings)), pd.DataFrame(columns=_COLUMNS), {})
 
     # per-row statistics, a block of rows at a time (the working set stays in the cache)
     parts = [_row_stats(fits[i:i + _CHUNK], by_man_inputs, opt) for i in range(0, R, _CHUNK)]
     cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0] if k not in ("keep", "out")}
     keep = [k for p in parts for k in p["keep"]]
     out = [o for p in parts for o in p["out"]]
-    n, n_meas, floor, quantum = cols["n"], cols["n_meas"], cols["floor"], cols["quantum"]
-    mean, rms, rms_all, ratio, rho1 = cols["mean"], cols["rms"], cols["rms_all"], cols["ratio"], cols["rho1"]
-    slope, slope_se, y_sd = cols["slope"], cols["slope_se"], cols["y_sd"]
-    slope_k, slope_k_se, ref_sd = cols["slope_k"], cols["slope_k_se"], cols["ref_sd"]
-    stuck, stuck_value, run_t0, run_t1 = cols["stuck"], cols["stuck_value"], cols["run_t0"], cols["run_t1"]
-    n_out, many = cols["n_out"], cols["many"]
+    floor, ratio, rho1, stuck = cols["floor"], cols["ratio"], cols["rho1"], cols["stuck"]
+    slope, slope_se, slope_k = cols["slope"], cols["slope_se"], cols["slope_k"]
     with np.errstate(invalid="ignore", divide="ignore"):
         bw = (1 + rho1) / (1 - rho1)
-
-    # correlation of the flow-channel residuals within each maneuver
-    common = np.full(R, np.nan)
-    flow_rows: dict[str, list[int]] = {}
-    for i, f in enumerate(fits):
-        if f.flow and not stuck[i]:
-            flow_rows.setdefault(f.maneuver, []).append(i)
-    partners: dict[int, list[tuple[int, float]]] = {}
-    for rows in flow_rows.values():
-        if len(rows) < 2:
-            continue
-        t_common = fits[rows[0]].t_s
-        for i in rows[1:]:
-            t_common = np.intersect1d(t_common, fits[i].t_s, assume_unique=True)
-        if t_common.size < 10:
-            continue
-        M = np.empty((len(rows), t_common.size))
-        for j, i in enumerate(rows):
-            pos = np.searchsorted(fits[i].t_s, t_common)
-            M[j] = np.where(keep[i], fits[i].z - fits[i].y, np.nan)[pos]
-        M = M - _nanmean_rows(M)
-        M = np.where(np.isnan(M), 0.0, M)
-        norm = np.sqrt(np.sum(M * M, axis=1))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            C = (M @ M.T) / np.outer(norm, norm)
-        np.fill_diagonal(C, np.nan)
-        for j, i in enumerate(rows):
-            common[i] = np.nanmax(np.abs(C[j])) if np.any(np.isfinite(C[j])) else np.nan
-            partners[i] = [(rows[jj], float(C[j, jj])) for jj in range(len(rows)) if jj != j]
-
-    # ---- the table -------------------------------------------------------------------------------
+    common, partners = _common_correlation(fits, keep, stuck)
     scale = np.array([f.display_scale for f in fits])
-    table = pd.DataFrame({
-        "maneuver": [f.maneuver for f in fits], "channel": [f.channel for f in fits],
-        "flow": [bool(f.flow) for f in fits], "unit": [f.unit for f in fits], "n": n, "n_measured": n_meas,
-        "mean": mean, "rms": rms, "rms_all": rms_all, "noise_floor": floor, "quantum": quantum,
-        "ratio": ratio, "rho1": rho1, "bandwidth_factor": bw, "n_outliers": n_out,
-        "slope": slope, "slope_se": slope_se, "slope_kinematic": slope_k, "slope_kinematic_se": slope_k_se,
-        "common_corr": common, "stuck": stuck,
-        "stuck_t0_s": np.where(stuck, run_t0, np.nan), "stuck_t1_s": np.where(stuck, run_t1, np.nan),
-        "stuck_value": stuck_value, "display_unit": [f.display_unit for f in fits],
-        "mean_display": mean * scale, "rms_display": rms * scale, "noise_floor_display": floor * scale,
-    }, columns=_COLUMNS)
+    table = _fit_table(fits, cols, bw, common, scale)
 
     # ---- findings --------------------------------------------------------------------------------
-    st = _Stats(fits=fits, floor=floor, quantum=quantum, rms=rms, mean=mean, ratio=ratio, rho1=rho1,
-                slope=slope, slope_se=slope_se, y_sd=y_sd, slope_k=slope_k, slope_k_se=slope_k_se,
-                ref_sd=ref_sd, floor_jump=_floor_jump(fits, floor, stuck), stuck=stuck,
-                stuck_value=stuck_value, run_t0=run_t0, run_t1=run_t1, n_out=n_out, many=many, keep=keep,
-                common=common, partners=partners, scale=scale,
+    st = _Stats(fits=fits, floor=floor, quantum=cols["quantum"], rms=cols["rms"], mean=cols["mean"],
+                ratio=ratio, rho1=rho1, slope=slope, slope_se=slope_se, y_sd=cols["y_sd"], slope_k=slope_k,
+                slope_k_se=cols["slope_k_se"], ref_sd=cols["ref_sd"],
+                floor_jump=_floor_jump(fits, floor, stuck), stuck=stuck, stuck_value=cols["stuck_value"],
+                run_t0=cols["run_t0"], run_t1=cols["run_t1"], n_out=cols["n_out"], many=cols["many"],
+                keep=keep, common=common, partners=partners, scale=scale,
                 slope_median=_channel_slope(fits, slope, slope_se, opt))
     findings += _input_findings(inputs, opt)
     accuracy = _flow_accuracy(fits, keep, by_man_inputs, opt)
@@ -683,29 +726,8 @@ def diagnose(channels: Sequence[ChannelFit], inputs: Sequence[ManeuverInputs] = 
     findings = _beside_turbulence(findings, turb[0])
     findings += turb[0]
     done |= turb[1]
-    for i in range(R):
-        f = fits[i]
-        if n_out[i] and not stuck[i] and not many[i]:
-            t = f.t_s[out[i]]
-            outliers[(f.maneuver, f.channel)] = t
-            findings.append(_outlier_finding(st, i, t, opt))
-        if done[i]:
-            continue
-        if not np.isfinite(ratio[i]):
-            if not stuck[i]:  # a stuck channel has its own finding; this one simply has too few samples
-                findings.append(Finding(
-                    "no_floor", Severity.NOTE,
-                    f"{_where(f)}: its noise floor could not be estimated ({f.z.size} samples in the "
-                    "cost): its residual is not judged", channel=f.channel, maneuver=f.maneuver))
-            continue
-        if not f.flow and ratio[i] > opt.misfit_warn_ratio:
-            sev = Severity.FAILURE if _gross(st, i, opt) else Severity.NOTE
-            findings.append(_ratio_finding(st, i, opt, "misfit", sev))
-        elif f.flow and ratio[i] > opt.noise_floor_ratio:
-            findings.append(_flow_residual_finding(st, i, opt, accuracy.get(f.channel)))
-        elif ratio[i] > opt.coloured_min_ratio and rho1[i] > opt.coloured_rho1:
-            findings.append(_coloured_finding(st, i, Severity.NOTE))
-    findings = _outliers_beyond_accuracy(findings, fits, keep)
+    per_row, outliers = _row_findings(st, out, done, accuracy, opt)
+    findings = _outliers_beyond_accuracy(findings + per_row, fits, keep)
     usable = {ch: a.limit_deg for ch, a in accuracy.items() if a.limit_deg is not None}
     return Diagnosis(tuple(_ordered(_attribute(findings))), table, outliers, usable)
 
