@@ -138,7 +138,14 @@ from estimator.options import DRYDEN_SCALE_LENGTH_M as DRYDEN_SCALE_LENGTH_M  # 
 from estimator.options import WindOptions
 from estimator.problem import AIR_RELATIVE_SIGNALS
 from estimator.result import WindModel
-from estimator.uncertainty import deviations, honest_std, imu_noise_psd, innovation_honest_std
+from estimator.uncertainty import (
+    HonestOptions,
+    ManeuverGrid,
+    deviations,
+    honest_std,
+    imu_noise_psd,
+    innovation_honest_std,
+)
 from estimator.verdict import Finding, Severity, Status
 
 if TYPE_CHECKING:
@@ -738,9 +745,9 @@ class FilterErrorLikelihood:
             for m in noise.maneuvers:
                 calm[m.k] = noise.sigma_mps[m.k] == 0.0
             ground = np.array([not (ch.expression.names & AIR_RELATIVE_SIGNALS) for ch in p.channels])
-            std_imu, _, cov_imu = honest_std(self.model, theta, N, st, noise.R, dev.std_crb, imu_psd,
-                                             rank_rtol=opt.rank_rtol, imu_only=True,
-                                             imu_channels=calm[:, None] | ground[None, :])
+            std_imu, _, cov_imu = honest_std(
+                self.model, theta, N, st, noise.R, dev.std_crb, imu_psd,
+                HonestOptions(opt.rank_rtol, imu_only=True, imu_channels=calm[:, None] | ground[None, :]))
         mans = {m.k: m for m in noise.maneuvers}
         is_delay = np.array([q.kind == "time_delay" for q in p.parameters.parameters])
         air = np.array([bool(ch.expression.names & AIR_RELATIVE_SIGNALS) for ch in p.channels])
@@ -767,7 +774,7 @@ class FilterErrorLikelihood:
             return cols, chans
 
         std, cov = innovation_honest_std(
-            N, st, series, np.array([m.n for m in p.maneuvers]), self.dt_s, dev.std_crb,
+            N, st, series, ManeuverGrid(np.array([m.n for m in p.maneuvers]), self.dt_s), dev.std_crb,
             rank_rtol=opt.rank_rtol, cross_channel=opt.colored_cross_channel,
             map_fn=lambda fn, ks: self._map(fn, list(ks)))
         std = np.sqrt(std ** 2 + std_imu ** 2)

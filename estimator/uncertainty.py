@@ -54,10 +54,218 @@ def _one_sided_weights(L: int) -> np.ndarray:
     return wt
 
 
+@dataclass(frozen=True, eq=False)
+class HonestOptions:
+    """How :func:`honest_std` computes the honest deviations.
+
+    Attributes
+    ----------
+    rank_rtol : relative eigenvalue threshold of the inverses.
+    cross_channel : with the cross-channel terms.
+    spectrum : "ar" (modelled) or "periodogram" (the all-lags plug-in).
+    imu_only : the IMU noise's share alone (the first two returns equal; the covariance its own).
+    imu_maneuvers : (K,) bool, the maneuvers whose IMU noise is counted (None: every one).
+    imu_channels : (K, C) bool, the (maneuver, channel) pairs whose sensitivities carry it (None:
+        every one).
+    """
+
+    rank_rtol: float
+    cross_channel: bool = True
+    spectrum: str = "ar"
+    imu_only: bool = False
+    imu_maneuvers: np.ndarray | None = None
+    imu_channels: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Per maneuver: samples ``n_of``, padded FFT length ``L_of``, the free parameters its channels
+    depend on (``union``, sorted indices) and its channel count ``n_chan``."""
+
+    n_of: np.ndarray
+    L_of: np.ndarray
+    union: list[np.ndarray]
+    n_chan: np.ndarray
+
+    def chunks(self) -> list[tuple[int, ...]]:
+        """The maneuvers in chunks whose Jacobian spectra (or factor Y) stay below
+        ``_COLORED_CHUNK_BYTES``."""
+        chunks, cur, size = [], [], 0.0
+        for k in range(len(self.n_of)):
+            cur.append(k)
+            # the Jacobian spectra held until the maneuver's model is fitted, or the factor Y
+            size += self.union[k].size * (int(self.L_of[k]) // 2 + 1) * max(int(self.n_chan[k]), 1) * 16.0
+            if size >= _COLORED_CHUNK_BYTES:
+                chunks.append(tuple(cur))
+                cur, size = [], 0.0
+        if cur:
+            chunks.append(tuple(cur))
+        return chunks
+
+
+def _layout(model: Model, st: Structure) -> _Layout:
+    """Each maneuver's sample grid and the free parameters its channels depend on."""
+    p = model.problem
+    nman = len(p.maneuvers)
+    n_of = np.array([m.n for m in p.maneuvers], dtype=np.int64)
+    L_of = np.array([sfft.next_fast_len(max(2 * int(n) - 1, 1), real=True) for n in n_of], dtype=np.int64)
+    members: list[set[int]] = [set() for _ in range(nman)]
+    n_chan = np.zeros(nman, dtype=np.int64)
+    for _, mans, colmap, _ in model.channel_layout():
+        for b, k in enumerate(mans):
+            members[int(k)].update(int(i) for i in colmap[b] if st.free[i])
+            n_chan[int(k)] += 1
+    return _Layout(n_of, L_of, [np.array(sorted(s), dtype=np.intp) for s in members], n_chan)
+
+
+class _Shared(NamedTuple):
+    """What every chunk shares: the structure, the channels' residual variances (SI^2), the layout,
+    the options, the coloured middle being gathered and the lock guarding it."""
+
+    st: Structure
+    R: np.ndarray
+    lay: _Layout
+    opt: HonestOptions
+    C: NormalEquations
+    lock: threading.Lock
+
+
+@dataclass
+class _ChunkMiddles:
+    """One chunk of maneuvers' middle matrices in the making: each channel's spectra, added by
+    :meth:`spectra` on the evaluation's worker threads, then reduced per maneuver (:meth:`reduce`).
+
+    ``held``: "ar", each channel's spectra by maneuver; ``Y``: the periodogram's cross-channel
+    factor; ``V``, ``dEq``: the IMU noise's factor and input increments (scaled by Q^1/2)."""
+
+    shared: _Shared
+    held: dict[int, list]
+    Y: dict[int, np.ndarray]
+    V: dict[int, np.ndarray]
+    dEq: dict[int, np.ndarray]
+
+    def spectra(self, ce) -> None:
+        """Take one evaluated channel's Jacobian spectra (its Jacobian dropped once used)."""
+        st, R, lay, opt, C, lock = self.shared
+        ar = opt.spectrum == "ar"
+        # only the slots that are free somewhere: fixed columns drop out of the sandwich
+        keep = np.nonzero(st.free[ce.colmap].any(axis=0))[0]
+        if keep.size:
+            w = 1.0 / R[ce.channel]
+            JT = ce.JT
+            e = ce.e
+            for b, k in enumerate(ce.mans):
+                k = int(k)
+                r0, r1 = int(ce.rseg[b]), int(ce.rseg[b + 1])
+                if r1 == r0:
+                    continue
+                rows = ce.rows[r0:r1]
+                pidx = ce.colmap[b, keep]
+                ok = st.free[pidx]
+                Jb = JT[keep[ok], r0:r1]
+                pos = np.searchsorted(lay.union[k], pidx[ok])
+                if k in self.V and (opt.imu_channels is None or opt.imu_channels[k, ce.channel]):
+                    # the IMU noise: J^T W J_IC on the grid, its suffix sums times dE Q^1/2
+                    bb = np.zeros((int(lay.n_of[k]), Jb.shape[0], 7))
+                    bb[rows] = np.einsum("sn,cn->nsc", Jb, JT[:7, r0:r1]) * w
+                    Vc = suffix_middle_factor(bb, self.dEq[k])
+                    with lock:
+                        _scatter_add(self.V[k], pos, Vc, axis=1)
+                if opt.imu_only:
+                    continue
+                Lk = int(lay.L_of[k])
+                Jp = np.zeros((Jb.shape[0], Lk))
+                Jp[:, rows] = Jb
+                F = sfft.rfft(Jp, axis=-1)
+                ep = np.zeros(Lk)
+                ep[rows] = e[r0:r1]
+                Ef = sfft.rfft(ep)
+                if ar:
+                    with lock:
+                        self.held[k].append((ce.channel, pos, F, Ef, rows, e[r0:r1].copy(), w))
+                    continue
+                F *= np.conj(Ef) * (w * np.sqrt(lay.n_of[k] / (r1 - r0)))
+                if opt.cross_channel:
+                    with lock:
+                        _scatter_add(self.Y[k], pos, F)
+                else:
+                    Yc = (F * np.sqrt(_one_sided_weights(Lk) / (lay.n_of[k] * Lk))).view(np.float64)
+                    with lock:
+                        C.add_blocks((Yc @ Yc.T)[None], np.zeros((1, pos.size)),
+                                     np.ascontiguousarray(pidx[ok][None, :]), np.array([k]), 1.0)
+        ce.JT = None  # used once: do not hold every channel's Jacobian at the same time
+
+    def reduce(self, chunk: tuple[int, ...], problem: Problem, N: NormalEquations, Sinv: np.ndarray,
+               Ainv: list[np.ndarray], Cp: NormalEquations | None) -> None:
+        """Add each maneuver's coloured middle to the shared ``C`` and its IMU noise's to ``Cp``
+        (``Sinv``, ``Ainv``: the inverses of ``N``'s Schur complement and local blocks)."""
+        st, _, lay, opt, C, _ = self.shared
+        ar = opt.spectrum == "ar"
+        for k in chunk:
+            u = lay.union[k]
+            if not u.size:
+                continue
+            Lk = int(lay.L_of[k])
+            if ar and self.held[k]:
+                items = sorted(self.held.pop(k), key=lambda it: it[0])
+                cov_u = _union_covariance(st, Sinv, Ainv, N, k, u)
+                Yk = _ar_factor(items, cov_u, u.size, int(lay.n_of[k]), Lk, problem.maneuvers[k].dt_s,
+                                opt.cross_channel)
+                norm = 1.0 / Lk
+            elif k in self.Y:
+                Yk, norm = self.Y.pop(k)[:, :, None], 1.0 / (lay.n_of[k] * Lk)
+            else:
+                Yk = None
+            if Yk is not None:
+                Yk = Yk * np.sqrt(_one_sided_weights(Lk) * norm)[None, :, None]
+                Yr = np.ascontiguousarray(Yk).view(np.float64).reshape(u.size, -1)
+                C.add_blocks((Yr @ Yr.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
+                             np.array([k]), 1.0)
+            if k in self.V:
+                Yv = np.ascontiguousarray(self.V.pop(k).transpose(1, 0, 2)).reshape(u.size, -1)
+                Cp.add_blocks((Yv @ Yv.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
+                              np.array([k]), 1.0)
+
+
+def _chunk_middles(model: Model, theta: np.ndarray, chunk: tuple[int, ...], imu_psd: dict | None,
+                   shared: _Shared) -> _ChunkMiddles:
+    """A chunk's empty accumulators, with its IMU noise's input increments computed."""
+    lay, opt = shared.lay, shared.opt
+    V: dict[int, np.ndarray] = {}
+    dEq: dict[int, np.ndarray] = {}
+    imu_chunk = tuple(k for k in chunk if opt.imu_maneuvers is None or opt.imu_maneuvers[k])
+    if imu_psd is not None and imu_chunk:
+        p = model.problem
+        for k, Sk in zip(imu_chunk, model.state_sensitivities(theta, imu_chunk), strict=True):
+            m = p.maneuvers[k]
+            q = np.sqrt(np.nan_to_num(imu_psd[m.aircraft]) / m.dt_s)  # unknown: left out
+            dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
+            V[k] = np.zeros((m.n, lay.union[k].size, 6))
+    Y = ({k: np.zeros((lay.union[k].size, int(lay.L_of[k]) // 2 + 1), dtype=complex) for k in chunk}
+         if opt.cross_channel and opt.spectrum != "ar" else {})
+    # "ar": each channel's spectra, for later
+    return _ChunkMiddles(shared, {k: [] for k in chunk}, Y, V, dEq)
+
+
+def _floored(std_crb: np.ndarray, sandwiches: tuple, glob: np.ndarray, imu_only: bool
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`honest_std`'s returns from the coloured and IMU sandwiches ``((std, cov), (std, cov))``:
+    the coloured deviation floored at the Cramér-Rao bound plus the IMU noise's variance."""
+    (std_mk, cov_mk), (std_imu, cov_imu) = sandwiches
+    if imu_only:
+        return std_imu, std_imu, cov_imu
+    floor = np.where(np.isfinite(std_crb), std_crb, 0.0)
+    honest = np.sqrt(np.maximum(std_mk, floor) ** 2 + std_imu ** 2)
+    # the globals' honest covariance: the coloured one with each deviation raised to its floor
+    # (correlations kept), plus the IMU noise's
+    g = glob
+    raise_to = np.maximum(1.0, floor[g] / np.where(std_mk[g] > 0, std_mk[g], np.inf))
+    cov_g = raise_to[:, None] * cov_mk * raise_to[None, :] + cov_imu
+    return honest, std_imu, cov_g
+
+
 def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structure, R: np.ndarray,
-               std_crb: np.ndarray, imu_psd: dict[str, np.ndarray] | None, *, rank_rtol: float,
-               cross_channel: bool = True, spectrum: str = "ar", imu_only: bool = False,
-               imu_maneuvers: np.ndarray | None = None, imu_channels: np.ndarray | None = None
+               std_crb: np.ndarray, imu_psd: dict[str, np.ndarray] | None, options: HonestOptions
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r"""Honest standard deviations: coloured, cross-correlated residuals and the IMU's noise.
 
@@ -99,13 +307,7 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
     R : (C,) the channels' residual variances, SI^2.
     std_crb : (P,) the Cramér-Rao deviations (the floor).
     imu_psd : aircraft -> (6,) the IMU's white-noise densities, or None (no IMU noise term).
-    rank_rtol : relative eigenvalue threshold of the inverses.
-    cross_channel : with the cross-channel terms.
-    spectrum : "ar" (modelled) or "periodogram" (the all-lags plug-in).
-    imu_only : the IMU noise's share alone (the first two returns equal; the covariance its own).
-    imu_maneuvers : (K,) bool, the maneuvers whose IMU noise is counted (None: every one).
-    imu_channels : (K, C) bool, the (maneuver, channel) pairs whose sensitivities carry it (None:
-        every one).
+    options : the threshold, spectrum and IMU noise's scope (:class:`HonestOptions`).
 
     Returns
     -------
@@ -113,142 +315,36 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
     the honest covariance of the global parameters (G, G), in ``st.glob`` order.
     """
     nparam = theta.size
-    _, _, Sinv, Ainv = lm_solve(N, 0.0, rank_rtol)
-    p = model.problem
-    nman = len(p.maneuvers)
-    n_of = np.array([m.n for m in p.maneuvers], dtype=np.int64)
-    L_of = np.array([sfft.next_fast_len(max(2 * int(n) - 1, 1), real=True) for n in n_of], dtype=np.int64)
-    members: list[set[int]] = [set() for _ in range(nman)]
-    n_chan = np.zeros(nman, dtype=np.int64)
-    for _, mans, colmap, _ in model.channel_layout():
-        for b, k in enumerate(mans):
-            members[int(k)].update(int(i) for i in colmap[b] if st.free[i])
-            n_chan[int(k)] += 1
-    union = [np.array(sorted(s), dtype=np.intp) for s in members]
-    cross = cross_channel
-    ar = spectrum == "ar"
+    _, _, Sinv, Ainv = lm_solve(N, 0.0, options.rank_rtol)
+    lay = _layout(model, st)
     C = NormalEquations(st)
     Cp = NormalEquations(st) if imu_psd is not None else None
-    lock = threading.Lock()
-    chunks, cur, size = [], [], 0.0
-    for k in range(nman):
-        cur.append(k)
-        # the Jacobian spectra held until the maneuver's model is fitted, or the factor Y
-        size += union[k].size * (int(L_of[k]) // 2 + 1) * max(int(n_chan[k]), 1) * 16.0
-        if size >= _COLORED_CHUNK_BYTES:
-            chunks.append(tuple(cur))
-            cur, size = [], 0.0
-    if cur:
-        chunks.append(tuple(cur))
-    for chunk in chunks:
-        held: dict[int, list] = {k: [] for k in chunk}  # "ar": each channel's spectra, for later
-        Y = ({k: np.zeros((union[k].size, int(L_of[k]) // 2 + 1), dtype=complex) for k in chunk}
-             if cross and not ar else {})
-        V: dict[int, np.ndarray] = {}
-        dEq: dict[int, np.ndarray] = {}
-        imu_chunk = tuple(k for k in chunk if imu_maneuvers is None or imu_maneuvers[k])
-        if Cp is not None and imu_chunk:
-            for k, Sk in zip(imu_chunk, model.state_sensitivities(theta, imu_chunk), strict=True):
-                m = p.maneuvers[k]
-                q = np.sqrt(np.nan_to_num(imu_psd[m.aircraft]) / m.dt_s)  # unknown: left out
-                dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
-                V[k] = np.zeros((m.n, union[k].size, 6))
-
-        def spectra(ce, held=held, Y=Y, V=V, dEq=dEq) -> None:
-            # only the slots that are free somewhere: fixed columns drop out of the sandwich
-            keep = np.nonzero(st.free[ce.colmap].any(axis=0))[0]
-            if keep.size:
-                w = 1.0 / R[ce.channel]
-                JT = ce.JT
-                e = ce.e
-                for b, k in enumerate(ce.mans):
-                    k = int(k)
-                    r0, r1 = int(ce.rseg[b]), int(ce.rseg[b + 1])
-                    if r1 == r0:
-                        continue
-                    rows = ce.rows[r0:r1]
-                    pidx = ce.colmap[b, keep]
-                    ok = st.free[pidx]
-                    Jb = JT[keep[ok], r0:r1]
-                    pos = np.searchsorted(union[k], pidx[ok])
-                    if k in V and (imu_channels is None or imu_channels[k, ce.channel]):
-                        # the IMU noise: J^T W J_IC on the grid, its suffix sums times dE Q^1/2
-                        bb = np.zeros((int(n_of[k]), Jb.shape[0], 7))
-                        bb[rows] = np.einsum("sn,cn->nsc", Jb, JT[:7, r0:r1]) * w
-                        Vc = suffix_middle_factor(bb, dEq[k])
-                        with lock:
-                            _scatter_add(V[k], pos, Vc, axis=1)
-                    if imu_only:
-                        continue
-                    Lk = int(L_of[k])
-                    Jp = np.zeros((Jb.shape[0], Lk))
-                    Jp[:, rows] = Jb
-                    F = sfft.rfft(Jp, axis=-1)
-                    ep = np.zeros(Lk)
-                    ep[rows] = e[r0:r1]
-                    Ef = sfft.rfft(ep)
-                    if ar:
-                        with lock:
-                            held[k].append((ce.channel, pos, F, Ef, rows, e[r0:r1].copy(), w))
-                        continue
-                    F *= np.conj(Ef) * (w * np.sqrt(n_of[k] / (r1 - r0)))
-                    if cross:
-                        with lock:
-                            _scatter_add(Y[k], pos, F)
-                    else:
-                        Yc = (F * np.sqrt(_one_sided_weights(Lk) / (n_of[k] * Lk))).view(np.float64)
-                        with lock:
-                            C.add_blocks((Yc @ Yc.T)[None], np.zeros((1, pos.size)),
-                                         np.ascontiguousarray(pidx[ok][None, :]), np.array([k]), 1.0)
-            ce.JT = None  # used once: do not hold every channel's Jacobian at the same time
-
+    shared = _Shared(st, R, lay, options, C, threading.Lock())
+    for chunk in lay.chunks():
+        mid = _chunk_middles(model, theta, chunk, imu_psd, shared)
         # the chunk once more, now with its Jacobian, each channel's spectra computed (on the
         # evaluation's worker threads) as soon as the channel is done
-        model.evaluate_all(theta, jacobian=True, keep_jacobian=True, maneuvers=chunk, on_channel=spectra)
-        for k in chunk:
-            u = union[k]
-            if not u.size:
-                continue
-            Lk = int(L_of[k])
-            if ar and held[k]:
-                items = sorted(held.pop(k), key=lambda it: it[0])
-                cov_u = _union_covariance(st, Sinv, Ainv, N, k, u)
-                Yk = _ar_factor(items, cov_u, u.size, int(n_of[k]), Lk, p.maneuvers[k].dt_s, cross)
-                norm = 1.0 / Lk
-            elif k in Y:
-                Yk, norm = Y.pop(k)[:, :, None], 1.0 / (n_of[k] * Lk)
-            else:
-                Yk = None
-            if Yk is not None:
-                Yk = Yk * np.sqrt(_one_sided_weights(Lk) * norm)[None, :, None]
-                Yr = np.ascontiguousarray(Yk).view(np.float64).reshape(u.size, -1)
-                C.add_blocks((Yr @ Yr.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
-                             np.array([k]), 1.0)
-            if k in V:
-                Yv = np.ascontiguousarray(V.pop(k).transpose(1, 0, 2)).reshape(u.size, -1)
-                Cp.add_blocks((Yv @ Yv.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
-                              np.array([k]), 1.0)
+        model.evaluate_all(theta, jacobian=True, keep_jacobian=True, maneuvers=chunk, on_channel=mid.spectra)
+        mid.reduce(chunk, model.problem, N, Sinv, Ainv, Cp)
     std_mk, cov_mk = sandwich_std(N, st, C, Sinv, Ainv, nparam)
     if Cp is not None:
         std_imu, cov_imu = sandwich_std(N, st, Cp, Sinv, Ainv, nparam)
     else:
         std_imu, cov_imu = np.where(np.isfinite(std_mk), 0.0, np.nan), np.zeros_like(cov_mk)
-    if imu_only:
-        return std_imu, std_imu, cov_imu
-    floor = np.where(np.isfinite(std_crb), std_crb, 0.0)
-    honest = np.sqrt(np.maximum(std_mk, floor) ** 2 + std_imu ** 2)
-    # the globals' honest covariance: the coloured one with each deviation raised to its floor
-    # (correlations kept), plus the IMU noise's
-    g = st.glob
-    raise_to = np.maximum(1.0, floor[g] / np.where(std_mk[g] > 0, std_mk[g], np.inf))
-    cov_g = raise_to[:, None] * cov_mk * raise_to[None, :] + cov_imu
-    return honest, std_imu, cov_g
+    return _floored(std_crb, ((std_mk, cov_mk), (std_imu, cov_imu)), st.glob, options.imu_only)
+
+
+class ManeuverGrid(NamedTuple):
+    """Each maneuver's sample grid: ``n`` (K,) samples and ``dt_s`` (K,) sample interval, s."""
+
+    n: np.ndarray
+    dt_s: np.ndarray
 
 
 def innovation_honest_std(N: NormalEquations, st: Structure, series: Callable[[int], tuple],
-                          n_of: np.ndarray, dt_of: np.ndarray, std_crb: np.ndarray, *,
-                          rank_rtol: float, cross_channel: bool = True,
-                          map_fn: Callable = map) -> tuple[np.ndarray, np.ndarray]:
+                          grid: ManeuverGrid, std_crb: np.ndarray, *, rank_rtol: float,
+                          cross_channel: bool = True, map_fn: Callable = map
+                          ) -> tuple[np.ndarray, np.ndarray]:
     r"""Coloured-innovation deviations of the filter-error method (Jategaonkar 2006, §5.8; the
     Morelli-Klein sandwich of :func:`honest_std` on the innovations).
 
@@ -269,7 +365,7 @@ def innovation_honest_std(N: NormalEquations, st: Structure, series: Callable[[i
     N, st : the filter-error normal equations at the estimate and which parameters are free.
     series : maneuver index -> (free parameter indices ``cols``, per channel ``(channel, samples,
         nu~, J~ (n_c, cols))``), SI (:meth:`estimator.filter_error.FilterErrorLikelihood.innovation_series`).
-    n_of, dt_of : (K,) each maneuver's samples and sample interval, s.
+    grid : each maneuver's samples and sample interval (:class:`ManeuverGrid`).
     std_crb : (P,) the Cramér-Rao deviations (the floor).
     rank_rtol : relative eigenvalue threshold of the inverses.
     cross_channel : with the cross-channel coherence.
@@ -281,6 +377,7 @@ def innovation_honest_std(N: NormalEquations, st: Structure, series: Callable[[i
     """
     nparam = std_crb.size
     _, _, Sinv, Ainv = lm_solve(N, 0.0, rank_rtol)
+    n_of, dt_of = grid
 
     def middle(k: int):
         cols, chans = series(k)
@@ -532,10 +629,10 @@ def deviations(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
     corr_honest = np.full_like(corr_G, np.nan)
     imu_psd = imu_noise_psd(problem, opt.imu_noise) if opt.colored else None
     if opt.colored:
-        std_col, std_imu, cov_hon = honest_std(model, theta, N, st, R, std, imu_psd,
-                                               rank_rtol=opt.rank_rtol,
-                                               cross_channel=opt.colored_cross_channel,
-                                               spectrum=opt.colored_spectrum)
+        std_col, std_imu, cov_hon = honest_std(
+            model, theta, N, st, R, std, imu_psd,
+            HonestOptions(opt.rank_rtol, cross_channel=opt.colored_cross_channel,
+                          spectrum=opt.colored_spectrum))
         std_col[unresolved] = np.nan
         std_imu[unresolved] = np.nan
         dh = np.sqrt(np.maximum(np.diag(cov_hon), 1e-300))
