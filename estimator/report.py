@@ -36,6 +36,8 @@ from matplotlib.lines import Line2D
 
 __all__ = [
     "Banner",
+    "CrossplotSampling",
+    "ReportStyle",
     "Section",
     "accuracy_table_html",
     "figure_bias_vs_mach",
@@ -286,6 +288,23 @@ def figure_bias_vs_mach(bias: pd.DataFrame, reference_mach: float | None = None,
     return fig
 
 
+@dataclass(frozen=True)
+class CrossplotSampling:
+    """What :func:`figure_crossplot` draws of a large cloud.
+
+    Attributes
+    ----------
+    max_points : at most this many points are drawn, a deterministic random subsample (the raster
+        stays small); the statistics in the figure use every finite point.
+    bins : the abscissa's range is cut into this many equal bins; the mean +- 3 sigma of the error in
+        each bin holding at least 20 points is drawn, which shows how the scatter grows with the
+        angle where a cloud of 1e5 points saturates.
+    """
+
+    max_points: int = DEFAULT_MAX_POINTS
+    bins: int = 20
+
+
 def figure_crossplot(
     x_deg: np.ndarray,
     err_deg: np.ndarray,
@@ -295,8 +314,7 @@ def figure_crossplot(
     limit_deg: float | None = None,
     x_limit_deg: float | None = None,
     *,
-    max_points: int = DEFAULT_MAX_POINTS,
-    bins: int = 20,
+    sampling: CrossplotSampling = CrossplotSampling(),  # noqa: B008 (frozen, so one shared default is safe)
 ) -> Figure:
     """Error against flow angle, the paper's cross-plots (Figs. 5 and 7).
 
@@ -307,16 +325,13 @@ def figure_crossplot(
     title, xlabel, ylabel : texts of the axes (put the units in the labels).
     limit_deg : desired 3-sigma accuracy [deg]; drawn as +-limit lines.
     x_limit_deg : usable limit of the abscissa [deg] (e.g. the nose probe's AOA limit); a vertical line.
-    max_points : at most this many points are drawn, a deterministic random subsample (the raster
-        stays small); the statistics in the figure use every finite point.
-    bins : the abscissa's range is cut into this many equal bins; the mean +- 3 sigma of the error in
-        each bin holding at least 20 points is drawn, which shows how the scatter grows with the
-        angle where a cloud of 1e5 points saturates.
+    sampling : the points drawn and the envelope's bins (:class:`CrossplotSampling`).
 
     Returns
     -------
     The figure: one axes, the scatter (rasterized) plus the bin envelope and limit lines.
     """
+    max_points, bins = sampling.max_points, sampling.bins
     x = np.asarray(x_deg, dtype=float).ravel()
     e = np.asarray(err_deg, dtype=float).ravel()
     if x.shape != e.shape:
@@ -693,17 +708,112 @@ def _frame_html(frame: pd.DataFrame, float_format: Callable[[float], str], max_r
                          classes="data", escape=True)
 
 
+@dataclass(frozen=True)
+class ReportStyle:
+    """How :func:`write_report` renders.
+
+    Attributes
+    ----------
+    dpi : resolution of the embedded PNGs [dots per inch].
+    float_format : formats floats in DataFrame tables.
+    max_banner_lines : reasons shown in the banner (the rest are counted).
+    """
+
+    dpi: float = DEFAULT_DPI
+    float_format: Callable[[float], str] = "{:.4g}".format
+    max_banner_lines: int = 25
+
+
+class _CsvFiles:
+    """The report's CSV files, each written once (``record`` called with its path first)."""
+
+    def __init__(self, out: Path, record: Callable[[Path], object] | None) -> None:
+        self.out = out
+        self.record = record
+        self.written: dict[str, pd.DataFrame] = {}
+
+    def put(self, name: str, frame: pd.DataFrame) -> None:
+        """Write ``frame`` as ``name`` (a second, different frame under one name raises)."""
+        _check_csv_name(name)
+        if not isinstance(frame, pd.DataFrame):
+            raise TypeError(f"CSV {name!r}: expected a DataFrame, got {type(frame).__name__}")
+        written = self.written
+        if name in written and written[name] is not frame and not written[name].equals(frame):
+            # two sections claiming one file name would silently lose one of the frames
+            raise ValueError(f"CSV file name {name!r} is used for two different frames")
+        written[name] = frame
+        if self.record is not None:
+            self.record(self.out / name)
+        _write_csv(frame, self.out / name)
+
+
+def _table_html(i: int, j: int, sec: Section, csv_files: _CsvFiles, csv_names: list[str],
+                style: ReportStyle, max_table_rows: int) -> str:
+    """The ``j``-th table of section ``i``: its HTML, a long one's first rows pointing at the CSV
+    holding all of them (written here when the section has none of the same frame)."""
+    e = html.escape
+    caption, table = sec.tables[j - 1]
+    parts = ['<div class="tablewrap">\n']
+    if caption:
+        parts.append(f'<p class="caption">{e(caption)}</p>\n')
+    if isinstance(table, str):
+        # already rendered by the caller (e.g. accuracy_table_html): inserted as is
+        parts.append(f"{table}</div>\n")
+        return "".join(parts)
+    if not isinstance(table, pd.DataFrame):
+        raise TypeError(f"section {sec.title!r}, table {caption!r}: expected a DataFrame or an "
+                        f"HTML string, got {type(table).__name__}")
+    parts.append(f"{_frame_html(table, style.float_format, max_table_rows)}\n")
+    if len(table) > max_table_rows:
+        name = next((n for n, f in sec.csv if f is table), None)
+        if name is None:
+            name = f"s{i}-table{j}-{_slug(caption)}.csv"
+            csv_files.put(name, table)
+            csv_names.append(name)
+        parts.append(f'<p class="note">first {max_table_rows} rows shown (all {len(table):,} rows '
+                     f'in <a href="{quote(name)}">{e(name)}</a>)</p>\n')
+    parts.append("</div>\n")
+    return "".join(parts)
+
+
+def _section_html(i: int, sec: Section, csv_files: _CsvFiles, style: ReportStyle, max_table_rows: int
+                  ) -> str:
+    """Section ``i``'s HTML (its CSV files written): text, tables, figures, the list of its CSVs."""
+    e = html.escape
+    anchor = f"s{i}"
+    parts = [f'<section id="{anchor}">\n<h2>{i}. {e(sec.title)}</h2>\n']
+    if sec.text:
+        parts.append(_paragraphs(sec.text))
+    # the section's CSV first, so a long table can point at the file holding the same frame
+    csv_names: list[str] = []
+    for name, frame in sec.csv:
+        csv_files.put(name, frame)
+        csv_names.append(name)
+    for j in range(1, len(sec.tables) + 1):
+        parts.append(_table_html(i, j, sec, csv_files, csv_names, style, max_table_rows))
+    for caption, fig in sec.figures:
+        data = base64.b64encode(_png_bytes(fig, style.dpi)).decode("ascii")
+        _close(fig)
+        parts.append(f'<figure><img src="data:image/png;base64,{data}" alt="{e(caption)}">'
+                     f"<figcaption>{e(caption)}</figcaption></figure>\n")
+    if csv_names:
+        written = csv_files.written
+        parts.append('<ul class="csv">' + "".join(
+            f'<li><a href="{quote(n)}">{e(n)}</a> ({len(written[n]):,} rows)</li>' for n in csv_names)
+            + "</ul>\n")
+    parts.append("</section>\n")
+    return "".join(parts)
+
+
 def write_report(
     out_dir: str | Path,
     title: str,
     sections: Sequence[Section],
     *,
-    dpi: float = DEFAULT_DPI,
     max_table_rows: int = DEFAULT_MAX_TABLE_ROWS,
-    float_format: Callable[[float], str] = "{:.4g}".format,
     banner: Banner | None = None,
-    max_banner_lines: int = 25,
     record: Callable[[Path], object] | None = None,
+    style: ReportStyle = ReportStyle(),  # noqa: B008 (frozen, so one shared default is safe)
 ) -> Path:
     """Write the report: ``out_dir/report.html`` and the sections' CSV files.
 
@@ -718,13 +828,12 @@ def write_report(
     out_dir : the directory, created if needed; existing files of the same names are replaced.
     title : the report's title.
     sections : the sections, in order.
-    dpi : resolution of the embedded PNGs [dots per inch].
     max_table_rows : rows of a DataFrame shown in the HTML.
-    float_format : formats floats in DataFrame tables.
     banner : the verdict, shown above everything else.
-    max_banner_lines : reasons shown in the banner (the rest are counted).
     record : called with each file's path before it is written (e.g.
         :meth:`estimator.io.outdir.OutputFolder.record`, so the output folder lists what it holds).
+    style : the figures' resolution, the tables' float format and the banner's length
+        (:class:`ReportStyle`).
 
     Returns
     -------
@@ -733,72 +842,19 @@ def write_report(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     e = html.escape
-    written: dict[str, pd.DataFrame] = {}
-
-    def put_csv(name: str, frame: pd.DataFrame) -> None:
-        _check_csv_name(name)
-        if not isinstance(frame, pd.DataFrame):
-            raise TypeError(f"CSV {name!r}: expected a DataFrame, got {type(frame).__name__}")
-        if name in written and written[name] is not frame and not written[name].equals(frame):
-            # two sections claiming one file name would silently lose one of the frames
-            raise ValueError(f"CSV file name {name!r} is used for two different frames")
-        written[name] = frame
-        if record is not None:
-            record(out / name)
-        _write_csv(frame, out / name)
-
+    csv_files = _CsvFiles(out, record)
     body: list[str] = []
     toc: list[str] = []
     for i, sec in enumerate(sections, start=1):
-        anchor = f"s{i}"
-        toc.append(f'<li><a href="#{anchor}">{e(sec.title)}</a></li>')
-        parts = [f'<section id="{anchor}">\n<h2>{i}. {e(sec.title)}</h2>\n']
-        if sec.text:
-            parts.append(_paragraphs(sec.text))
-        # the section's CSV first, so a long table can point at the file holding the same frame
-        csv_names: list[str] = []
-        for name, frame in sec.csv:
-            put_csv(name, frame)
-            csv_names.append(name)
-        for j, (caption, table) in enumerate(sec.tables, start=1):
-            parts.append('<div class="tablewrap">\n')
-            if caption:
-                parts.append(f'<p class="caption">{e(caption)}</p>\n')
-            if isinstance(table, str):
-                # already rendered by the caller (e.g. accuracy_table_html): inserted as is
-                parts.append(f"{table}</div>\n")
-                continue
-            if not isinstance(table, pd.DataFrame):
-                raise TypeError(f"section {sec.title!r}, table {caption!r}: expected a DataFrame or an "
-                                f"HTML string, got {type(table).__name__}")
-            parts.append(f"{_frame_html(table, float_format, max_table_rows)}\n")
-            if len(table) > max_table_rows:
-                name = next((n for n, f in sec.csv if f is table), None)
-                if name is None:
-                    name = f"s{i}-table{j}-{_slug(caption)}.csv"
-                    put_csv(name, table)
-                    csv_names.append(name)
-                parts.append(f'<p class="note">first {max_table_rows} rows shown (all {len(table):,} rows '
-                             f'in <a href="{quote(name)}">{e(name)}</a>)</p>\n')
-            parts.append("</div>\n")
-        for caption, fig in sec.figures:
-            data = base64.b64encode(_png_bytes(fig, dpi)).decode("ascii")
-            _close(fig)
-            parts.append(f'<figure><img src="data:image/png;base64,{data}" alt="{e(caption)}">'
-                         f"<figcaption>{e(caption)}</figcaption></figure>\n")
-        if csv_names:
-            parts.append('<ul class="csv">' + "".join(
-                f'<li><a href="{quote(n)}">{e(n)}</a> ({len(written[n]):,} rows)</li>' for n in csv_names)
-                + "</ul>\n")
-        parts.append("</section>\n")
-        body.append("".join(parts))
+        toc.append(f'<li><a href="#s{i}">{e(sec.title)}</a></li>')
+        body.append(_section_html(i, sec, csv_files, style, max_table_rows))
 
     now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     page = (
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
         f"<title>{e(title)}</title>\n<style>{_CSS}</style>\n</head>\n<body>\n"
         f"<header><h1>{e(title)}</h1><p>generated {now}</p></header>\n"
-        + _banner_html(banner, max_banner_lines)
+        + _banner_html(banner, style.max_banner_lines)
         + f"<nav><h2>Contents</h2><ol>{''.join(toc)}</ol></nav>\n"
         + "".join(body)
         + "</body>\n</html>\n"
