@@ -35,6 +35,14 @@ def turbulent(specs):
     return fl, fl.problem(noise=NOISE_SIGMA, rng=np.random.default_rng(3))
 
 
+@pytest.fixture(scope="module")
+def turbulent_fit(turbulent):
+    """The filter-error fit of :func:`turbulent` from the truth, diagnostics off: computed once for
+    the tests that read it (a result is immutable)."""
+    _, prob = turbulent
+    return estimate(prob, SolverOptions(method="filter_error", diagnose=False, start="given"))
+
+
 def _calibration_z(prob, res) -> np.ndarray:
     df = res.to_pandas()
     keys = prob.parameters.keys
@@ -105,12 +113,12 @@ def test_calm_air_gives_the_output_error_estimates(specs):
     assert "every maneuver calm" in air.message
 
 
-def test_light_turbulence_is_recovered_within_its_deviations(turbulent):
+def test_light_turbulence_is_recovered_within_its_deviations(turbulent, turbulent_fit):
     """Light turbulence: the filter-error estimates of the calibration parameters lie within
     their Cramér-Rao deviations as a Gaussian's would (most within 3, none beyond 4.5), the
     intensity is found; on the same data the output-error method is off by many deviations."""
     fl, prob = turbulent
-    fem = estimate(prob, SolverOptions(method="filter_error", diagnose=False, start="given"))
+    fem = turbulent_fit
     assert fem.status.converged, fem.message
     z = _calibration_z(prob, fem)
     assert np.mean(np.abs(z) <= 3.0) >= 0.85, f"|z| = {np.round(np.sort(np.abs(z)), 1)}"
@@ -155,7 +163,7 @@ def test_a_wrong_wind_model_shows_in_the_honest_deviations(turbulent):
     assert "coloured innovations' sandwich and the IMU noise" in partial.message
 
 
-def test_smoothed_wind_follows_the_true_wind(turbulent):
+def test_smoothed_wind_follows_the_true_wind(turbulent, turbulent_fit):
     """The smoother's wind history against the drawn one: per axis the rms error (after removing
     each maneuver's mean, which the free initial velocities share with the wind) is within three
     times the smoother's own rms deviation — which is conditional on the parameters: the errors
@@ -163,7 +171,7 @@ def test_smoothed_wind_follows_the_true_wind(turbulent):
     0.11 horizontally here) — and below 0.35 of the wind's intensity (the smoothed wind explains
     nine tenths of the wind's variance)."""
     fl, prob = turbulent
-    res = estimate(prob, SolverOptions(method="filter_error", diagnose=False, start="given"))
+    res = turbulent_fit
     table = res.wind_history
     assert list(table["maneuver"].unique()) == [m.id for m in prob.maneuvers]
     for man in prob.maneuvers:
@@ -344,7 +352,7 @@ def test_imu_noise_is_in_the_honest_deviations_of_turbulent_maneuvers(turbulent)
     assert np.all(res.std_imu_noise[gyro] > 0.0), "the IMU noise's share of the gyro biases' deviations"
 
 
-def test_a_scale_error_the_wind_takes_up_leaves_the_estimate_unsettled(turbulent):
+def test_a_scale_error_the_wind_takes_up_leaves_the_estimate_unsettled(turbulent, turbulent_fit):
     """A vane scaled by 1.1 in turbulence: the wind states take up part of it (its innovations stay
     near the noise), the noise statistics end held, and each fresh linearisation of the wind
     sensitivities moves the estimate by several deviations: the result says so (a WARNING naming
@@ -362,8 +370,7 @@ def test_a_scale_error_the_wind_takes_up_leaves_the_estimate_unsettled(turbulent
                    SolverOptions(method="filter_error", start="given", diagnose=False))
     (w,) = [f for f in res.findings if f.code == "unsettled"]
     assert w.severity.name == "WARNING" and w.value > 3.0 and w.parameters, w.message
-    clean = estimate(base, SolverOptions(method="filter_error", start="given", diagnose=False))
-    assert not [f for f in clean.findings if f.code == "unsettled"]
+    assert not [f for f in turbulent_fit.findings if f.code == "unsettled"]
 
 
 def test_the_dryden_form_recovers_dryden_turbulence_and_reports_it_in_ned(specs):
