@@ -180,23 +180,9 @@ def workflow_tables(wf: WorkflowResult) -> dict[str, pd.DataFrame]:
     return out
 
 
-def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: TruthHook | None = None,
-                 record: Callable[[Path], object] | None = None, plots: bool = True) -> dict:
-    """Write ``out_dir/report.html`` and its CSV files; return the tables it printed from.
-
-    ``truth`` adds the truth sections (:class:`TruthSections`); ``record`` is called with each
-    file's path before it is written (e.g. :meth:`estimator.io.outdir.OutputFolder.record`, so the
-    output folder lists what it holds); ``plots`` false draws no figure.
-
-    Returns
-    -------
-    dict with ``accuracy`` (Table 2, model), ``report`` (the HTML path), and the truth hook's
-    ``tables`` (``true_accuracy``, ``installation_recovery``, ``recovery``: None without truth).
-    """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    tab = workflow_tables(wf)
-    sections = []
+def _summary_section(wf: WorkflowResult, tab: Mapping[str, pd.DataFrame]) -> Section:
+    """The findings and estimations: the maneuvers used per bin, the wall time, the verdict, the
+    notes, the findings said once and the estimations."""
     used = wf.maneuvers[wf.maneuvers["used"]]
     counts = used.groupby(["bin", "gear_down"]).size()
     per_bin = ", ".join(f"M{b:.2f} gear {'down' if g else 'up'}: {n}" for (b, g), n in counts.items())
@@ -216,16 +202,12 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: TruthHook
         csvs.append(("held_parameters.csv", tab["held_parameters"]))
     if "fit_quality" in tab:
         csvs.append(("fit_quality.csv", tab["fit_quality"]))
-    # the first screen is the verdict (the banner), its findings and Table 2; the details follow
-    summary_section = Section("Findings and estimations", summary, tables=tables, csv=csvs)
-    out: dict = {"accuracy": wf.accuracy, "true_accuracy": None, "installation_recovery": None,
-                 "recovery": None}
-    final = [st for st in wf.final if st.result.success]  # what Table 2 and the figures rest on
-    if not final:
-        sections.append(summary_section)
-        out["report"] = write_report(out_dir, title, sections, banner=verdict_banner(wf), record=record)
-        return out
-    sections.append(Section(
+    return Section("Findings and estimations", summary, tables=tables, csv=csvs)
+
+
+def _table2_section(wf: WorkflowResult, tab: Mapping[str, pd.DataFrame]) -> Section:
+    """Table 2 against the model: 3 sigma of measurement minus model per sensor and Mach bin."""
+    return Section(
         "Table 2: 3-sigma of measurement minus model",
         "Per sensor and Mach bin at the final estimate (installation biases fixed), 3 x rms about zero, "
         "with the calibration's own uncertainty added (3 sqrt(mean(e^2) + mean(s_cal^2)), s_cal its "
@@ -234,17 +216,14 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: TruthHook
         + "".join(f"; {r.sensor} below the usable angle of attack"
                   for r in wf.declarations.requirements.values() if r.low_alpha_only) + ".",
         tables=[("", accuracy_table_html(wf.accuracy, "3-sigma of measurement - model (deg)"))],
-        csv=[("table2_model.csv", tab["table2_model"])]))
-    extra = truth(wf) if truth is not None else None
-    if extra is None:
-        extra = TruthSections()
-    out.update(extra.tables)
-    sections.extend(extra.after_table2)
-    sections.append(summary_section)
-    # Fig. 4 and the apportionment
+        csv=[("table2_model.csv", tab["table2_model"])])
+
+
+def _apportionment_section(wf: WorkflowResult, tab: Mapping[str, pd.DataFrame], extra: TruthSections,
+                           plots: bool) -> Section:
+    """Fig. 4 and the vane-bias apportionment (paper §4.1)."""
     fig4 = []
-    decl = wf.declarations
-    bias_text, bias_math = _mean_bias_label(decl.apportion.values())
+    bias_text, bias_math = _mean_bias_label(wf.declarations.apportion.values())
     if plots and not wf.vane_bias.empty:
         vb = wf.vane_bias.copy()
         fig4.append((f"Fig. 4: average vane bias {bias_text} vs Mach per aircraft, fleet mean",
@@ -254,11 +233,14 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: TruthHook
             *extra.apportionment_tables]
     csvs = [("vane_biases.csv", tab["vane_biases"]), ("installation_biases.csv", tab["installation_biases"]),
             *extra.apportionment_csv]
-    sections.append(Section("Vane bias apportionment (paper §4.1)",
-                            f"Per Mach bin the fleet mean of {bias_text} is the correction model's update; "
-                            "each aircraft's deviation from it is its mean installation bias.",
-                            tables=tabs, figures=fig4, csv=csvs))
-    # Figs. 6 and 8: table updates, and the tables for the flight-control team
+    return Section("Vane bias apportionment (paper §4.1)",
+                   f"Per Mach bin the fleet mean of {bias_text} is the correction model's update; "
+                   "each aircraft's deviation from it is its mean installation bias.",
+                   tables=tabs, figures=fig4, csv=csvs)
+
+
+def _correction_section(wf: WorkflowResult, tab: Mapping[str, pd.DataFrame], plots: bool) -> Section:
+    """Figs. 6 and 8 (the table updates) and the correction tables for the flight-control team."""
     figs, csvs = [], []
     if "table_updates" in tab:
         upd = tab["table_updates"]
@@ -269,22 +251,51 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: TruthHook
                          "down dashed", figure_table_updates(upd)))
         csvs.append(("table_updates.csv", upd))
     csvs.extend((f"{name}.csv", frame) for name, frame in tab.items() if name.startswith("correction_table_"))
-    sections.append(Section("Correction tables", "The updated tables, breakpoints x Mach, in "
-                             "correction_table_<name>.csv (display units: deg for angle tables), from "
-                             "the estimations whose verdict is a success only. A value the data did not "
-                             "determine (held at its start value) or that sits on its bound is left empty; "
-                             "correction_table_<name>_state.csv says which, cell by cell, and "
-                             "table_updates.csv why, with the honest deviations (std) and the Cramér-Rao "
-                             "ones (std_crb).",
-                             figures=figs, csv=csvs))
-    # Figs. 5 and 7: error cross-plots; Fig. 3: a time-history match, at the reference Mach
-    ref = _figure_stage(final, wf.reference_mach)
+    return Section("Correction tables", "The updated tables, breakpoints x Mach, in "
+                   "correction_table_<name>.csv (display units: deg for angle tables), from "
+                   "the estimations whose verdict is a success only. A value the data did not "
+                   "determine (held at its start value) or that sits on its bound is left empty; "
+                   "correction_table_<name>_state.csv says which, cell by cell, and "
+                   "table_updates.csv why, with the honest deviations (std) and the Cramér-Rao "
+                   "ones (std_crb).",
+                   figures=figs, csv=csvs)
+
+
+def _alpha_limit_crossplot(wf: WorkflowResult, final: Sequence[Stage]) -> tuple[str, Any] | None:
+    """Fig. 7: the alpha-limit channel's error against angle of attack over every Mach bin (None:
+    no stage has its residuals)."""
+    reqs, lim_ch = wf.declarations.requirements, wf.declarations.alpha_limit_channel
+    pooled = [s.residuals[lim_ch] for s in final if lim_ch in s.residuals]
+    if not pooled:
+        return None
+    a = np.concatenate([p.alpha_t_rad for p in pooled]) * RAD2DEG
+    e = np.concatenate([p.e for p in pooled]) * RAD2DEG
+    # no limit: the lowest judged alpha band misses the desired accuracy, or no band has
+    # the samples to be judged (workflow.alpha_limit)
+    judged = wf.alpha_limit_growth.get("passed", pd.Series(dtype=object)).notna().any()
+    usable = (f"its usable range ends at alpha = {wf.alpha_limit_deg:g} deg"
+              if wf.alpha_limit_deg is not None else
+              "no usable range: its lowest judged alpha band already misses the desired "
+              "accuracy" if judged else "no alpha band has enough samples to be judged")
+    return (f"Fig. 7: {reqs[lim_ch].sensor} ({lim_ch}) error vs angle of attack, all Mach "
+            f"bins; {usable}",
+            figure_crossplot(a, e, reqs[lim_ch].sensor, "alpha (deg)",
+                             "measurement - model (deg)", limit_deg=_desired_deg(reqs, lim_ch),
+                             x_limit_deg=wf.alpha_limit_deg))
+
+
+def _desired_deg(reqs: Mapping, name: str) -> float | None:
+    """The channel's desired accuracy, deg (None: no requirement)."""
+    return reqs[name].desired_deg if name in reqs else None
+
+
+def _crossplot_section(wf: WorkflowResult, final: Sequence[Stage], ref: Stage, extra: TruthSections,
+                       plots: bool) -> Section:
+    """Figs. 5 and 7: the error cross-plots (Fig. 5 at the reference Mach ``ref``) and the alpha
+    limit channel's error growth with alpha."""
     res = ref.residuals
+    decl = wf.declarations
     reqs = decl.requirements
-
-    def limit(name: str) -> float | None:
-        return reqs[name].desired_deg if name in reqs else None
-
     figs = []
     lim_ch = decl.alpha_limit_channel
     if plots:
@@ -294,29 +305,55 @@ def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: TruthHook
                 figs.append((f"Fig. 5: {name} measurement - model vs model at Mach {ref.mach:.2f}",
                              figure_crossplot(r.y * RAD2DEG, r.e * RAD2DEG, f"{name}, Mach {ref.mach:.2f}",
                                               "model (deg)", "measurement - model (deg)",
-                                              limit_deg=limit(name))))
-        pooled = [s.residuals[lim_ch] for s in final if lim_ch in s.residuals]
-        if pooled:
-            a = np.concatenate([p.alpha_t_rad for p in pooled]) * RAD2DEG
-            e = np.concatenate([p.e for p in pooled]) * RAD2DEG
-            # no limit: the lowest judged alpha band misses the desired accuracy, or no band has
-            # the samples to be judged (workflow.alpha_limit)
-            judged = wf.alpha_limit_growth.get("passed", pd.Series(dtype=object)).notna().any()
-            usable = (f"its usable range ends at alpha = {wf.alpha_limit_deg:g} deg"
-                      if wf.alpha_limit_deg is not None else
-                      "no usable range: its lowest judged alpha band already misses the desired "
-                      "accuracy" if judged else "no alpha band has enough samples to be judged")
-            figs.append((f"Fig. 7: {reqs[lim_ch].sensor} ({lim_ch}) error vs angle of attack, all Mach "
-                         f"bins; {usable}",
-                         figure_crossplot(a, e, reqs[lim_ch].sensor, "alpha (deg)",
-                                          "measurement - model (deg)", limit_deg=limit(lim_ch),
-                                          x_limit_deg=wf.alpha_limit_deg)))
+                                              limit_deg=_desired_deg(reqs, name))))
+        fig7 = _alpha_limit_crossplot(wf, final)
+        if fig7 is not None:
+            figs.append(fig7)
         if extra.crossplots is not None:
             figs.extend(extra.crossplots(ref))
     growth = ([(f"{reqs[lim_ch].sensor} ({lim_ch}): error growth with alpha", wf.alpha_limit_growth)]
               if lim_ch else [])
-    sections.append(Section("Error cross-plots", "", figures=figs, tables=growth))
-    chans, mid, t = _time_history(ref, decl.time_history) if plots else ({}, None, None)
+    return Section("Error cross-plots", "", figures=figs, tables=growth)
+
+
+def build_report(wf: WorkflowResult, out_dir: Path, title: str, truth: TruthHook | None = None,
+                 record: Callable[[Path], object] | None = None, plots: bool = True) -> dict:
+    """Write ``out_dir/report.html`` and its CSV files; return the tables it printed from.
+
+    ``truth`` adds the truth sections (:class:`TruthSections`); ``record`` is called with each
+    file's path before it is written (e.g. :meth:`estimator.io.outdir.OutputFolder.record`, so the
+    output folder lists what it holds); ``plots`` false draws no figure.
+
+    Returns
+    -------
+    dict with ``accuracy`` (Table 2, model), ``report`` (the HTML path), and the truth hook's
+    ``tables`` (``true_accuracy``, ``installation_recovery``, ``recovery``: None without truth).
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    tab = workflow_tables(wf)
+    # the first screen is the verdict (the banner), its findings and Table 2; the details follow
+    summary_section = _summary_section(wf, tab)
+    out: dict = {"accuracy": wf.accuracy, "true_accuracy": None, "installation_recovery": None,
+                 "recovery": None}
+    final = [st for st in wf.final if st.result.success]  # what Table 2 and the figures rest on
+    if not final:
+        out["report"] = write_report(out_dir, title, [summary_section], banner=verdict_banner(wf),
+                                     record=record)
+        return out
+    sections = [_table2_section(wf, tab)]
+    extra = truth(wf) if truth is not None else None
+    if extra is None:
+        extra = TruthSections()
+    out.update(extra.tables)
+    sections.extend(extra.after_table2)
+    sections.append(summary_section)
+    sections.append(_apportionment_section(wf, tab, extra, plots))
+    sections.append(_correction_section(wf, tab, plots))
+    # Figs. 5 and 7: error cross-plots; Fig. 3: a time-history match, at the reference Mach
+    ref = _figure_stage(final, wf.reference_mach)
+    sections.append(_crossplot_section(wf, final, ref, extra, plots))
+    chans, mid, t = _time_history(ref, wf.declarations.time_history) if plots else ({}, None, None)
     if chans:
         sections.append(Section("Time-history match (paper Fig. 3)", f"Maneuver {mid}, Mach {ref.mach:.2f}",
                                 figures=[(f"Fig. 3: {mid}", figure_time_history(mid, t, chans))]))
