@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -37,6 +37,25 @@ def select_channels(channels: Sequence[ChannelSpec], explicit: Sequence[str] | N
     return [by_name[n] for n in dict.fromkeys(explicit)]
 
 
+@dataclass(frozen=True)
+class StateSetup:
+    """What the state equations take besides the data.
+
+    Attributes
+    ----------
+    sensors : sensor positions, body axes, m (the model set's midpoint sensors are added:
+        :func:`~estimator.io.modelset.sensor_positions`).
+    imu_position_body_m : accelerometer position, body axes, m.
+    g_mps2 : gravity of the flat-earth equations.
+    lever_arm : the state equations' lever-arm formulation (:class:`Problem`).
+    """
+
+    sensors: Mapping[str, np.ndarray]
+    imu_position_body_m: np.ndarray
+    g_mps2: float
+    lever_arm: str = LEVER_ARMS[0]
+
+
 def build_problem(
     pairs: Sequence[tuple[SourceTable, ManeuverRequest]],
     channels: Sequence[ChannelSpec],
@@ -44,11 +63,8 @@ def build_problem(
     *,
     user_declared: set[str],
     explicit_channels: Sequence[str] | None,
-    sensors: Mapping[str, np.ndarray],
-    imu_position_body_m: np.ndarray,
-    g_mps2: float,
+    setup: StateSetup,
     source: str,
-    lever_arm: str = LEVER_ARMS[0],
 ) -> Problem:
     """Check and assemble the problem.
 
@@ -58,13 +74,12 @@ def build_problem(
     channels, specs : the model set with the problem's changes.
     user_declared : parameter names the problem file declared or changed (warned about if unused).
     explicit_channels : the problem's ``channels`` list, or None for "every channel with data".
-    sensors : sensor positions, body axes, m (the model set's midpoint sensors are added:
-        :func:`~estimator.io.modelset.sensor_positions`).
-    imu_position_body_m : accelerometer position, body axes, m.
-    g_mps2 : gravity of the flat-earth equations.
+    setup : the sensors' and accelerometer's positions, gravity and the lever-arm formulation
+        (:class:`StateSetup`).
     source : problem file or dataset, for messages.
-    lever_arm : the state equations' lever-arm formulation (:class:`Problem`).
     """
+    sensors, imu_position_body_m, g_mps2, lever_arm = (
+        setup.sensors, setup.imu_position_body_m, setup.g_mps2, setup.lever_arm)
     if lever_arm not in LEVER_ARMS:
         raise DataError(f"{source}: lever_arm = {lever_arm!r}; one of {', '.join(map(repr, LEVER_ARMS))}")
     if not 9.7 <= g_mps2 <= 9.9:

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from estimator.io.assemble import ManeuverRequest, SourceTable
-from estimator.io.build import build_problem
+from estimator.io.build import StateSetup, build_problem
 from estimator.io.errors import DataError
 from estimator.io.fprdataset import (
     canonical_name,
@@ -114,6 +114,6 @@ def problem_from_dataset(
     if "imu" not in pos:
         raise DataError(f"{path}: the manifest's airframe has no imu position; "
                         "pass sensors={'imu': [x, y, z]}")
+    setup = StateSetup(sensors=pos, imu_position_body_m=pos["imu"], g_mps2=g_mps2, lever_arm=lever_arm)
     return build_problem(pairs, chans, specs, user_declared=declared, explicit_channels=channels,
-                         sensors=pos, imu_position_body_m=pos["imu"], g_mps2=g_mps2, source=str(path),
-                         lever_arm=lever_arm)
+                         setup=setup, source=str(path))

@@ -42,6 +42,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -292,7 +293,8 @@ def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s
     v, tk, rk, raw = values_si[keep], t_s[keep], rows[keep], raw_all[keep]
     if v.size and _ok(check, v, tk):
         if spike.any():
-            _raise_spikes(check, label, unit, raw_all, raw, t_s, rows, np.flatnonzero(spike), where)
+            _raise_spikes(check, label, unit, _Recorded(raw_all, t_s, rows), raw, np.flatnonzero(spike),
+                          where)
         if per is not None and name != "t":
             x, lo, hi = _per_sample(check, v)
             bad = np.flatnonzero((x < lo - 1e-9) | (x > hi + 1e-9))
@@ -308,8 +310,8 @@ def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s
     if out.any() and v.size and _ok(check, to_si(_bulk(check, raw), unit, label), tk):
         # the bulk is plausible in the declared unit: a few samples out of range (spikes that
         # jump less than the threshold, or a short excursion) are the problem, never the unit
-        _raise_spikes(check, label, unit, raw_all, raw_all[~out], t_s, rows, np.flatnonzero(out), where,
-                      spikes_only=False)
+        _raise_spikes(check, label, unit, _Recorded(raw_all, t_s, rows), raw_all[~out], np.flatnonzero(out),
+                      where, spikes_only=False)
     stat, i = _statistic(check, v, tk)
     raw_stat, _ = _statistic(check, raw, from_si(tk, unit, label) if name == "t" else tk)
     t_of = (lambda q: q) if name == "t" else (lambda q: tk)
@@ -334,12 +336,21 @@ def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s
     )
 
 
-def _raise_spikes(check: Check, label: str, unit: str, raw_all: np.ndarray, raw_rest: np.ndarray,
-                  t_s: np.ndarray, rows: np.ndarray, idx: np.ndarray, where: Where,
-                  spikes_only: bool = True) -> None:
-    """Raise :class:`SpikeError` naming the samples ``idx`` (spikes, or with ``spikes_only``
-    False, out-of-range samples some of which may not jump) and the fix; ``raw_rest`` is the
-    rest of the channel, plausible in the declared unit."""
+class _Recorded(NamedTuple):
+    """A channel's samples as recorded: ``raw`` values in the declared unit ((N,) or (N, 3)), times
+    ``t_s`` (N,) and data rows ``rows`` (N,) in the file."""
+
+    raw: np.ndarray
+    t_s: np.ndarray
+    rows: np.ndarray
+
+
+def _raise_spikes(check: Check, label: str, unit: str, recorded: _Recorded, raw_rest: np.ndarray,
+                  idx: np.ndarray, where: Where, spikes_only: bool = True) -> None:
+    """Raise :class:`SpikeError` naming the samples ``idx`` of ``recorded`` (spikes, or with
+    ``spikes_only`` False, out-of-range samples some of which may not jump) and the fix;
+    ``raw_rest`` is the rest of the channel, plausible in the declared unit."""
+    raw_all, t_s, rows = recorded
     shown, rest, what = _scalar(raw_all), _scalar(raw_rest), "magnitude" if raw_all.ndim == 2 else "value"
     rest_text = (f"median {what} {np.median(rest):.4g} {unit}" if check.statistic in ("median", "mean_norm")
                  else f"values {np.min(rest):.4g} to {np.max(rest):.4g} {unit}")

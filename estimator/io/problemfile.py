@@ -13,7 +13,7 @@ import numpy as np
 
 from aircraft_models.schema import SUFFIXES, Key, check, did_you_mean
 from estimator.io.assemble import DIMENSIONS, REQUIRED, ManeuverRequest, SourceTable
-from estimator.io.build import build_problem
+from estimator.io.build import StateSetup, build_problem
 from estimator.io.dataset_problem import load_dataset_maneuvers
 from estimator.io.errors import DataError
 from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
@@ -320,8 +320,8 @@ def load_problem(path: str | Path) -> Problem:
     g = raw.get("g_mps2", 9.80665)
     if isinstance(g, bool) or not isinstance(g, (int, float)):
         raise DataError(f"{where}: g_mps2 must be a number (m/s^2), got {g!r}")
+    setup = StateSetup(sensors=sensors, imu_position_body_m=sensors["imu"], g_mps2=float(g),
+                       lever_arm=raw.get("lever_arm", LEVER_ARMS[0]))
     problem = build_problem(pairs, chans, specs, user_declared=declared,
-                            explicit_channels=raw.get("channels"), sensors=sensors,
-                            imu_position_body_m=sensors["imu"], g_mps2=float(g), source=where,
-                            lever_arm=raw.get("lever_arm", LEVER_ARMS[0]))
+                            explicit_channels=raw.get("channels"), setup=setup, source=where)
     return dataclasses.replace(problem, options=options) if options else problem
