@@ -39,8 +39,10 @@ blocks) is a view of :meth:`Model.evaluate_all`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -48,7 +50,14 @@ from estimator.core.assembly import channel_normals, shift_index, shift_values
 from estimator.core.expressions import Table
 from estimator.core.kinematics import smoothed_derivative
 from estimator.core.observations import flow_signal_batch
-from estimator.core.sensitivity import LEVER_ARMS, N_SENS, Inputs, integrate_many, worker_threads
+from estimator.core.sensitivity import (
+    LEVER_ARMS,
+    N_SENS,
+    ImuSamples,
+    Inputs,
+    integrate_many,
+    worker_threads,
+)
 from estimator.problem import AIR_RELATIVE_SIGNALS, STATE_PARAMS, STATE_SIGNALS, Problem
 
 _EULER_INDEX = {"phi": 3, "theta": 4, "psi": 5, "h": 6}
@@ -174,11 +183,11 @@ class Evaluation:
     channels: list[ChannelEval]
 
 
-
 def _signal_key(name: str, sensor: str | None) -> tuple[str, str | None]:
     """A state signal's identity: a sensor signal (``*_s``: flow angles, velocity components)
     differs per sensor, the others do not."""
     return name, (sensor if name.endswith("_s") else None)
+
 
 
 class ModelEvaluationError(ValueError):
@@ -296,8 +305,9 @@ class _Layout:
             self.inputs = full
         else:
             idx = np.concatenate([np.arange(full.seg[k], full.seg[k + 1]) for k in ks])
-            self.inputs = Inputs(self.seg, full.t_s[idx], full.a_m[idx], full.om_m[idx], full.omd[idx],
-                                 full.a_mid[idx], full.om_mid[idx], full.omd_mid[idx],
+            self.inputs = Inputs(self.seg, full.t_s[idx],
+                                 ImuSamples(full.a_m[idx], full.om_m[idx], full.omd[idx]),
+                                 ImuSamples(full.a_mid[idx], full.om_mid[idx], full.omd_mid[idx]),
                                  full.r_imu_cg[list(ks)], lever_arm=full.lever_arm)
         self.lens = lens
         self.r_cg = np.repeat(np.array([p.maneuvers[k].r_cg_body_m for k in ks], dtype=float).reshape(-1, 3),
@@ -316,6 +326,35 @@ class _Layout:
         keys = {_signal_key(n, cl.ch.sensor) for cl in self.channels for n in cl.state_names}
         self.sig_id = {k: i for i, k in enumerate(sorted(keys, key=str))}
         self.SA = self.SB = self.SV = None
+
+
+class _TimeShift(NamedTuple):
+    """A channel's samples at ``t - tau`` on its maneuvers' grids: each sample's left grid index
+    ``P0`` and the weight ``w`` of the right one (linear interpolation)."""
+
+    P0: np.ndarray
+    w: np.ndarray
+
+
+def _signals_then_channels(lay: _Layout, state_signal: Callable, channel: Callable) -> list:
+    """Every state signal first (the channels then only read them), then the channels (``channel``
+    evaluates one), which are independent: on two threads for a large problem (the compiled kernels
+    and numpy's array loops release the GIL; the threads end before this returns). The channels'
+    evaluations in ``lay.channels`` order."""
+    # one request per signal identity (a CG signal is the same for every sensor)
+    needed = list({_signal_key(name, cl.ch.sensor): (name, cl.ch.sensor)
+                   for cl in lay.channels for name in cl.state_names}.values())
+    if worker_threads() > 1 and lay.inputs.t_s.size >= _THREADED_SAMPLES and len(lay.channels) > 1:
+        with ThreadPoolExecutor(worker_threads()) as ex:
+            # distinct signals write distinct rows of the stacks and cache keys
+            list(ex.map(lambda ns: state_signal(*ns), needed))
+            # longest first, so that the two threads finish together
+            order = sorted(range(len(lay.channels)), key=lambda i: -lay.channels[i].cost)
+            done = dict(zip(order, ex.map(lambda i: channel(lay.channels[i]), order), strict=True))
+        return [done[i] for i in range(len(lay.channels))]
+    for ns in needed:
+        state_signal(*ns)
+    return [channel(cl) for cl in lay.channels]
 
 
 class Model:
@@ -510,31 +549,13 @@ class Model:
             cache[ck] = out
             return out
 
-        # every state signal first (the channels then only read them), then the channels, which
-        # are independent: on two threads for a large problem (the compiled kernels and numpy's
-        # array loops release the GIL; the threads end before this returns)
-        # one request per signal identity (a CG signal is the same for every sensor)
-        needed = list({_signal_key(name, cl.ch.sensor): (name, cl.ch.sensor)
-                       for cl in lay.channels for name in cl.state_names}.values())
-
         def channel(cl):
             ce = self._evaluate_channel(cl, lay, values, S, state_signal, keep_jacobian, wind)
             if on_channel is not None:
                 on_channel(ce)
             return ce
 
-        if worker_threads() > 1 and lay.inputs.t_s.size >= _THREADED_SAMPLES and len(lay.channels) > 1:
-            with ThreadPoolExecutor(worker_threads()) as ex:
-                # distinct signals write distinct rows of the stacks and cache keys
-                list(ex.map(lambda ns: state_signal(*ns), needed))
-                # longest first, so that the two threads finish together
-                order = sorted(range(len(lay.channels)), key=lambda i: -lay.channels[i].cost)
-                done = dict(zip(order, ex.map(lambda i: channel(lay.channels[i]), order), strict=True))
-            channels = [done[i] for i in range(len(lay.channels))]
-        else:
-            for ns in needed:
-                state_signal(*ns)
-            channels = [channel(cl) for cl in lay.channels]
+        channels = _signals_then_channels(lay, state_signal, channel)
         if lay.imu_point:  # report the CG's states
             X = X.copy()
             X[:, :3] += np.cross(omega, lay.r_cg - lay.r_ref)
@@ -570,7 +591,8 @@ class Model:
         y = np.broadcast_to(value, cl.z.shape)[cl.rows]
         J, normal, dydv, shift, slope = None, None, None, None, None
         if jacobian:
-            J, normal = self._jacobian(cl, lay, dual, S, state_signal, w, P0, cl.z_rows - y, keep)
+            J, normal = self._jacobian(cl, lay, dual, S, state_signal, _TimeShift(P0, w), cl.z_rows - y,
+                                       keep)
             if ch.measures is not None and ch.measures in dual.dsignal:
                 slope = np.broadcast_to(dual.dsignal[ch.measures], (n_all,))[cl.rows].copy()
             if wind:
@@ -598,9 +620,11 @@ class Model:
         return out
 
     @staticmethod
-    def _jacobian(cl: _ChannelLayout, lay: _Layout, dual, S, state_signal, w, P0, e, keep: bool):
+    def _jacobian(cl: _ChannelLayout, lay: _Layout, dual, S, state_signal, shift: _TimeShift, e,
+                  keep: bool):
         """Slot-space Jacobian of a channel and its per-block normal-equation terms
         (see :func:`estimator.core.assembly.channel_normals`)."""
+        P0, w = shift
         rows = cl.rows
         n = rows.size
         n_all = cl.z.size

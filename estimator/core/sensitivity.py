@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -122,6 +123,15 @@ def _rhs(x, S, a_m, om_m, omd, r, rh, da, dw, g, xd, Sd):
     Sd[6, 12] += rh[0] * n1 - rh[1] * n0
 
 
+class ImuSamples(NamedTuple):
+    """(N, 3) each: specific force at the IMU ``a`` (m/s^2), rates ``om`` (rad/s) and angular
+    accelerations ``omd`` (rad/s^2)."""
+
+    a: np.ndarray
+    om: np.ndarray
+    omd: np.ndarray
+
+
 class Inputs:
     """The measured IMU inputs of many maneuvers, concatenated, with their half-step values.
 
@@ -131,19 +141,22 @@ class Inputs:
     ----------
     seg : (K+1,) sample offsets: maneuver k is samples ``seg[k]:seg[k+1]``.
     t_s : (N,) sample times, s (each maneuver's own time base).
-    a_m, om_m, omd : (N, 3) measured specific force at the IMU, rates, angular accelerations.
-    a_mid, om_mid, omd_mid : (N, 3) their half-step values: row ``i`` holds the midpoint between
-        samples ``i`` and ``i + 1`` of the same maneuver (the last row of a maneuver is unused).
+    measured : the measured specific force at the IMU, rates, angular accelerations (attributes
+        ``a_m, om_m, omd``).
+    half_steps : their half-step values (attributes ``a_mid, om_mid, omd_mid``): row ``i`` holds the
+        midpoint between samples ``i`` and ``i + 1`` of the same maneuver (the last row of a
+        maneuver is unused).
     r_imu_cg : (K, 3) IMU position minus CG position of each maneuver, body, m.
     lever_arm : the formulation, one of :data:`LEVER_ARMS`.
     """
 
-    def __init__(self, seg, t_s, a_m, om_m, omd, a_mid, om_mid, omd_mid, r_imu_cg,
+    def __init__(self, seg, t_s, measured: ImuSamples, half_steps: ImuSamples, r_imu_cg,
                  lever_arm="differentiated"):
         if lever_arm not in LEVER_ARMS:
             raise ValueError(f"lever_arm must be one of {LEVER_ARMS}, got {lever_arm!r}")
-        self.seg, self.t_s, self.a_m, self.om_m, self.omd = seg, t_s, a_m, om_m, omd
-        self.a_mid, self.om_mid, self.omd_mid, self.r_imu_cg = a_mid, om_mid, omd_mid, r_imu_cg
+        self.seg, self.t_s, self.r_imu_cg = seg, t_s, r_imu_cg
+        self.a_m, self.om_m, self.omd = measured
+        self.a_mid, self.om_mid, self.omd_mid = half_steps
         self.lever_arm = lever_arm
         # the kernels' two lever arms: of the accelerations, and of the altitude's velocity
         zero = np.zeros_like(r_imu_cg)
@@ -162,7 +175,7 @@ class Inputs:
 
         mids = [cat([_padded_midpoints(np.asarray(v, dtype=f64), midpoint) for v in parts])
                 for parts in (a_m, om_m, omd)]
-        return cls(seg, cat(t_s), cat(a_m), cat(om_m), cat(omd), *mids,
+        return cls(seg, cat(t_s), ImuSamples(cat(a_m), cat(om_m), cat(omd)), ImuSamples(*mids),
                    np.ascontiguousarray(np.reshape(r_imu_cg, (-1, 3)), dtype=f64), lever_arm=lever_arm)
 
 
