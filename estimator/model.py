@@ -46,7 +46,16 @@ from typing import NamedTuple
 
 import numpy as np
 
-from estimator.core.assembly import channel_normals, shift_index, shift_values
+from estimator.core.assembly import (
+    BlockNormals,
+    ChannelSignals,
+    RowShift,
+    SignalStacks,
+    SparseTerms,
+    channel_normals,
+    shift_index,
+    shift_values,
+)
 from estimator.core.expressions import Table
 from estimator.core.kinematics import smoothed_derivative
 from estimator.core.observations import flow_signal_batch
@@ -654,10 +663,11 @@ class Model:
         g = np.empty((nb, cl.m))
         cnt = np.empty((nb, cl.m), dtype=np.int64)
         JT = np.empty((cl.m, n if keep else 0))
-        channel_normals(S, P0[rows], w[rows], G, sig_q, sig_id, has_b, lay.SA, lay.SB,
-                        lay.SV, np.array(sorted(qs), dtype=np.int64), cl.dt[rows],
-                        cl.dslot if cl.didx is not None else -1, tslot, tcoef, e,
-                        cl.rseg.astype(np.int64), cl.m, H, g, cnt, JT)
+        channel_normals(S, RowShift(P0[rows], w[rows], cl.dt[rows]),
+                        ChannelSignals(G, sig_q, sig_id, has_b, np.array(sorted(qs), dtype=np.int64)),
+                        SignalStacks(lay.SA, lay.SB, lay.SV), SparseTerms(tslot, tcoef),
+                        cl.dslot if cl.didx is not None else -1, e, cl.rseg.astype(np.int64), cl.m,
+                        BlockNormals(H, g, cnt, JT))
         return (JT if keep else None), (H, g, cnt)
 
     def _implicit(self, cl: _ChannelLayout, signals, params, tables, state, jacobian: bool):

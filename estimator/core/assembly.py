@@ -23,13 +23,65 @@ independent channels can run on two threads.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
 
+class RowShift(NamedTuple):
+    """Each Jacobian row's time-shifted sample: it interpolates between samples ``P0`` and
+    ``P0 + 1`` (int64) with weight ``W`` on the second; ``dt_s`` its maneuver's sample interval, s.
+    (n,) each."""
+
+    P0: np.ndarray
+    W: np.ndarray
+    dt_s: np.ndarray
+
+
+class ChannelSignals(NamedTuple):
+    """The state signals a channel's model reads: ``G`` (n_sig, n) d output / d signal per row;
+    ``sig_q`` (n_sig,) the state index of an Euler angle or the altitude, or -1 for a velocity
+    signal; ``sig_id`` (n_sig,) each signal's row in the :class:`SignalStacks`; ``has_b`` (n_sig,)
+    the gyro-bias derivative ``B`` applies; ``qlist`` the states any signal depends on."""
+
+    G: np.ndarray
+    sig_q: np.ndarray
+    sig_id: np.ndarray
+    has_b: np.ndarray
+    qlist: np.ndarray
+
+
+class SignalStacks(NamedTuple):
+    """Every state signal of an evaluation: ``A``, ``B`` (n_all, N, 3) a velocity signal's
+    derivatives with respect to (u, v, w) and, directly, to the gyro biases; ``V`` (n_all, N) the
+    signals' values."""
+
+    A: np.ndarray
+    B: np.ndarray
+    V: np.ndarray
+
+
+class SparseTerms(NamedTuple):
+    """(n, T) each: a row's sparse Jacobian terms, ``coef`` added at slot ``slot`` (int64)."""
+
+    slot: np.ndarray
+    coef: np.ndarray
+
+
+class BlockNormals(NamedTuple):
+    """:func:`channel_normals`' outputs: ``H`` (B, m, m) ``J^T J``, ``g`` (B, m) ``J^T e``, ``cnt``
+    (B, m) int64 non-zeros per slot, and ``JT`` (m, n) the Jacobian slot by slot, or an (m, 0)
+    array not to keep it."""
+
+    H: np.ndarray
+    g: np.ndarray
+    cnt: np.ndarray
+    JT: np.ndarray
+
+
 @njit(cache=True, nogil=True)
-def channel_normals(S, P0, W, G, sig_q, sig_id, has_b, A, B, V, qlist, dt, dslot, tslot, tcoef, e,
-                    rseg, m, H, g, cnt, JT):
+def channel_normals(S, shift, signals, stacks, sparse, dslot, e, rseg, m, out):
     """Jacobian rows of a channel, block by block, and each block's normal-equation terms.
 
     Row ``r`` (interpolating between samples ``P0[r]`` and ``P0[r] + 1`` with weight ``W[r]``)::
@@ -40,23 +92,24 @@ def channel_normals(S, P0, W, G, sig_q, sig_id, has_b, A, B, V, qlist, dt, dslot
     with ``a_sig`` the signal's derivative with respect to the state (``A[sig]`` for a velocity
     signal, a unit vector for an Euler angle or the altitude, ``sig_q[sig] >= 0``); the time-shift
     slot ``dslot`` gets ``sum_sig G[sig, r] * -(V[sig, P0 + 1] - V[sig, P0]) / dt[r]``; the sparse
-    terms add ``tcoef`` at ``tslot``. A block's columns are built in a small buffer that stays in
-    cache, and its ``J^T J`` follows from it (:func:`_gram`).
+    terms add ``coef`` at ``slot``. A block's columns are built in a small buffer that stays in
+    cache, and its ``J^T J`` follows from it (:func:`_gram`). The rows are built here, not in a
+    function of their own: called per row, one made the kernel three times slower.
 
     Parameters
     ----------
-    S : (N, 7, 13) sensitivities; P0, W, dt : (n,) per row.
-    G : (n_sig, n) d output / d signal; sig_q : (n_sig,) state index, or -1 for velocity signals.
-    sig_id : (n_sig,) each signal's row in ``A``, ``B``, ``V``; has_b : (n_sig,) ``B`` applies.
-    A, B : (n_all, N, 3) velocity-signal derivatives with respect to (u, v, w) and, directly, to
-        the gyro biases; V : (n_all, N) signal values (the stacks of all signals of an evaluation).
-    qlist : states any signal depends on.
+    S : (N, 7, 13) sensitivities.
+    shift, signals, stacks, sparse : :class:`RowShift` (per row), :class:`ChannelSignals`,
+        :class:`SignalStacks` (every signal of the evaluation), :class:`SparseTerms`.
     dslot : slot of the time shift, or -1.
-    tslot, tcoef : (n, T) sparse terms.
     e : (n,) residuals; rseg : (B+1,) block row offsets; m : number of slots.
-    H (B, m, m), g (B, m), cnt (B, m) : outputs, ``J^T J``, ``J^T e`` and non-zeros per slot.
-    JT : (m, n) output Jacobian, slot by slot, or an (m, 0) array not to keep it.
+    out : :class:`BlockNormals`, written.
     """
+    P0, W, dt = shift
+    G, sig_q, sig_id, has_b, qlist = signals
+    A, B, V = stacks
+    tslot, tcoef = sparse
+    H, g, cnt, JT = out
     nsig = G.shape[0]
     nq = qlist.shape[0]
     nt = tslot.shape[1]
@@ -122,25 +175,31 @@ def channel_normals(S, P0, W, G, sig_q, sig_id, has_b, A, B, V, qlist, dt, dslot
                 buf[tslot[r, t], i] += tcoef[r, t]
             if dslot >= 0:
                 buf[dslot, i] += dyt
-        # non-zero rows of each column: table columns are zero where the argument is elsewhere
-        for s in range(m):
-            col = buf[s]
-            lo = 0
-            while lo < nb and col[lo] == 0.0:
-                lo += 1
-            hi = nb - 1
-            while hi >= lo and col[hi] == 0.0:
-                hi -= 1
-            c = 0
-            for i in range(lo, hi + 1):
-                c += col[i] != 0.0
-            cnt[b, s] = c
-            first[s] = lo
-            last[s] = hi
+        _column_extents(buf, nb, first, last, cnt[b])
         _gram(buf, first, last, e[r0:r0 + nb], H[b], g[b])
         if keep:
             for s in range(m):
                 JT[s, r0:r0 + nb] = buf[s, :nb]
+
+
+@njit(cache=True, nogil=True)
+def _column_extents(buf, nb, first, last, cnt):
+    """Non-zero rows of each column of the block's first ``nb`` rows (table columns are zero where
+    the argument is elsewhere): the first and last (``first``, ``last``) and the count (``cnt``)."""
+    for s in range(buf.shape[0]):
+        col = buf[s]
+        lo = 0
+        while lo < nb and col[lo] == 0.0:
+            lo += 1
+        hi = nb - 1
+        while hi >= lo and col[hi] == 0.0:
+            hi -= 1
+        c = 0
+        for i in range(lo, hi + 1):
+            c += col[i] != 0.0
+        cnt[s] = c
+        first[s] = lo
+        last[s] = hi
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
