@@ -189,6 +189,7 @@ def stuck(base, tmp_path_factory):
     return path, (t[i], t[-1]), estimate(_problem(path))
 
 
+@pytest.mark.slow
 def test_stuck_vane(stuck):
     _, (t0, t1), res = stuck
     f = _assert_named(res, "stuck_channel", Severity.FAILURE, "alpha_zl", DOUBLET, {("alpha_zl", DOUBLET)})
@@ -306,6 +307,7 @@ def test_zero_gyros(base, tmp_path_factory, maneuver):
         assert f.t_s == pytest.approx((t[0], t[-1]), abs=0.0126), f.message  # the whole maneuver
 
 
+@pytest.mark.slow
 def test_light_turbulence(flights):
     """The calibration maneuvers flown in light turbulence: each maneuver is reported, once, as
     turbulence (the output-error method models no air motion), not as a sensor fault."""
@@ -360,6 +362,7 @@ def test_the_base_user_file_is_a_success_with_only_its_own_warning(base, tmp_pat
     # side-probe AOA written in radians, declared deg: a few hundredths of a degree pass any range check
     (("alpha_zsp", 1.0, "deg"), "recorded in radians but declared as degrees", None),
 ], ids=["beta_deg_declared_rad", "h_ft_declared_m", "alpha_rad_declared_deg"])
+@pytest.mark.slow
 def test_unit_mistake_in_the_problem_file(base, tmp_path, wrong, phrase, maneuver):
     problem = load_problem(_write_user_files(base, tmp_path / "user", wrong))  # the import lets it pass
     res = estimate(problem)
@@ -374,6 +377,7 @@ def test_unit_mistake_in_the_problem_file(base, tmp_path, wrong, phrase, maneuve
 # the command line
 
 
+@pytest.mark.slow
 def test_cli_exit_status_and_findings_name_the_stuck_vane(stuck, tmp_path, capsys):
     path, _, _ = stuck
     out = tmp_path / "res"

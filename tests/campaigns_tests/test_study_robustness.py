@@ -64,6 +64,7 @@ def test_tiny_run_writes_table_plot_csv_and_conclusions(tiny_run):
     assert f"{at}/1 ({100 * at} %)" in text and row["outcome"] in text
 
 
+@pytest.mark.slow
 def test_tiny_run_resumes_without_recomputing(tiny_run):
     out, args = tiny_run
     record = rob.record_file(out / "work", 3.0, 0)
@@ -112,6 +113,7 @@ def test_classification_of_constructed_fits():
     assert [rob.location(d) for d in (0.0, 0.5, -0.5, math.nan)] == ["true", "wrong", "below", "unknown"]
 
 
+@pytest.mark.slow
 def test_table_and_conclusions_follow_the_numbers(tmp_path):
     records = [_record(1.0, 0, True, 2e-4), _record(1.0, 1, True, -1e-3),
                _record(3.0, 0, True, 1e-5),

@@ -19,6 +19,9 @@ CAMPAIGN = linear_campaign("wind-truth", 31, [
     {"configurations": ["PV1-NP"], "mach": [0.6], "maneuvers": ["pitch_doublet", "3211", "windup_turn"],
      "altitude_m": 6000.0}], wind_ned_mps=[6.0, -4.0, 0.0], turbulence="light")
 
+#: every test here flies or estimates for seconds: the full suite, not the fast lane
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def problem(fly_once):

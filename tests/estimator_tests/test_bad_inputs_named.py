@@ -218,6 +218,7 @@ def test_euler_rate_check_passes_real_flight_like_data_and_names_rates_read_57_x
 # 2. a small sideslip in degrees declared as radians
 
 
+@pytest.mark.slow
 def test_small_sideslip_in_degrees_declared_as_radians_is_a_unit_error(small_beta, tmp_path):
     path = user_files(small_beta, tmp_path / "user", {"beta_zsp": (DEG, "rad")})
     problem = load_problem(path)  # within +-0.7 "rad": the import's range check lets it pass

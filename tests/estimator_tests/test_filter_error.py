@@ -86,6 +86,7 @@ def test_wind_sensitivity_is_the_outputs_velocity_derivative(specs):
     assert np.all(np.concatenate([ce.shift_s for ce in ev.channels]) == 0.0)
 
 
+@pytest.mark.slow
 def test_calm_air_gives_the_output_error_estimates(specs):
     """In calm air every maneuver's intensity comes out below the calm threshold, the wind states
     are dropped and the estimates are the output-error ones (issue 14: within 0.2 deviations;
@@ -113,6 +114,7 @@ def test_calm_air_gives_the_output_error_estimates(specs):
     assert "every maneuver calm" in air.message
 
 
+@pytest.mark.slow
 def test_light_turbulence_is_recovered_within_its_deviations(turbulent, turbulent_fit):
     """Light turbulence: the filter-error estimates of the calibration parameters lie within
     their Cramér-Rao deviations as a Gaussian's would (most within 3, none beyond 4.5), the
@@ -142,6 +144,7 @@ def test_light_turbulence_is_recovered_within_its_deviations(turbulent, turbulen
     assert np.abs(z_oem).max() > 8.0, "the output-error method cannot follow the wind"
 
 
+@pytest.mark.slow
 def test_a_wrong_wind_model_shows_in_the_honest_deviations(turbulent):
     """Fitted with a scale length ten times too short (50 m against 533.4 m), the filter's wind
     decorrelates too fast, its innovations stay coloured, and the Cramér-Rao deviations are too
@@ -163,6 +166,7 @@ def test_a_wrong_wind_model_shows_in_the_honest_deviations(turbulent):
     assert "coloured innovations' sandwich and the IMU noise" in partial.message
 
 
+@pytest.mark.slow
 def test_smoothed_wind_follows_the_true_wind(turbulent, turbulent_fit):
     """The smoother's wind history against the drawn one: per axis the rms error (after removing
     each maneuver's mean, which the free initial velocities share with the wind) is within three
@@ -187,6 +191,7 @@ def test_smoothed_wind_follows_the_true_wind(turbulent, turbulent_fit):
         assert np.all(rms <= 0.35 * SIGMA_MPS), f"{man.id}: rms error {rms} m/s"
 
 
+@pytest.mark.slow
 def test_wind_history_survives_json_and_csv(turbulent, tmp_path):
     """The wind history is part of the result: written to wind.csv, read back from JSON."""
     from estimator.result import EstimationResult
@@ -243,6 +248,7 @@ def test_a_scale_error_beside_turbulence_says_so():
     assert out[1] == other, "a maneuver without turbulence keeps its finding as it was"
 
 
+@pytest.mark.slow
 def test_noise_statistics_are_held_after_a_few_relaxations(turbulent):
     """After HOLD_AFTER relaxations the noise statistics stay as they are whatever the residuals do
     (the Gauss-Newton iterations then converge on a fixed cost), and noise_drift says how far a
@@ -269,6 +275,7 @@ def test_noise_statistics_are_held_after_a_few_relaxations(turbulent):
     assert f"held after {HOLD_AFTER} relaxations" in air.message
 
 
+@pytest.mark.slow
 def test_the_diagnostics_judge_the_innovations(turbulent):
     """The fit-quality diagnostics run on the innovations (scaled to the measurement noise): on the
     turbulent flight they find nothing to say about the air (the wind states follow it) and no
@@ -329,6 +336,7 @@ def test_turbulent_maneuvers_without_wind_states_are_found_on_their_innovations(
     assert again is wide and not none
 
 
+@pytest.mark.slow
 def test_imu_noise_is_in_the_honest_deviations_of_turbulent_maneuvers(turbulent):
     """MEMS-like IMU noise (0.05 m/s^2, 0.1 deg/s per sample) on the turbulent flight: the gyro
     noise integrates into the attitude, which no wind state follows, so the honest deviations
@@ -352,6 +360,7 @@ def test_imu_noise_is_in_the_honest_deviations_of_turbulent_maneuvers(turbulent)
     assert np.all(res.std_imu_noise[gyro] > 0.0), "the IMU noise's share of the gyro biases' deviations"
 
 
+@pytest.mark.slow
 def test_a_scale_error_the_wind_takes_up_leaves_the_estimate_unsettled(turbulent, turbulent_fit):
     """A vane scaled by 1.1 in turbulence: the wind states take up part of it (its innovations stay
     near the noise), the noise statistics end held, and each fresh linearisation of the wind
@@ -373,6 +382,7 @@ def test_a_scale_error_the_wind_takes_up_leaves_the_estimate_unsettled(turbulent
     assert not [f for f in turbulent_fit.findings if f.code == "unsettled"]
 
 
+@pytest.mark.slow
 def test_the_dryden_form_recovers_dryden_turbulence_and_reports_it_in_ned(specs):
     """MIL-F-8785C Dryden turbulence in body axes (second-order laterally and vertically) and the
     filter's Dryden form (``WindOptions(form="dryden")``, five body-axis states): the calibration

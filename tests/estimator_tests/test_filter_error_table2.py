@@ -30,6 +30,9 @@ SIGMA_MPS, L_M = 1.0, 533.4
 FLOW = ("alpha_zl", "alpha_zr", "alpha_zsp", "beta_zsp", "beta_znp")
 STEP_DEG = 1.0
 
+#: every test here flies or estimates for seconds: the full suite, not the fast lane
+pytestmark = pytest.mark.slow
+
 
 def _flight(step_channel: str | None = None):
     """The two-maneuver light-turbulence flight (30 s each), noisy, with a ``STEP_DEG`` step in

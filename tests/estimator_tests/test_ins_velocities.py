@@ -73,6 +73,7 @@ def windy():
     return Flight(truth_values(np.random.default_rng(5)), specs, T=30.0, steady_wind_ned_mps=W0, ins=True)
 
 
+@pytest.mark.slow
 def test_the_ins_channels_are_the_ground_velocity_in_a_steady_wind(windy):
     """At the truth (the air-relative initial velocities, the steady wind) the model gives the
     hand-made INS velocities and every other channel, the same flight in a wind, to the state
@@ -140,6 +141,7 @@ def test_an_inertial_velocity_does_not_see_the_turbulent_wind(windy):
             assert np.abs(ce.dydv).max() > 0.0, name
 
 
+@pytest.mark.slow
 def test_filter_error_with_the_ins_velocities_recovers_wind_and_calibration():
     """Light turbulence (Gauss-Markov, the filter's own model) on a steady wind: the filter-error
     method with the INS velocities recovers the steady wind of each maneuver, the accelerometer

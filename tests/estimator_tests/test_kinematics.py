@@ -78,6 +78,7 @@ def test_rk4_with_cubic_midpoints_keeps_fourth_order_on_sampled_inputs():
     au=st.floats(0.0, 20.0), av=st.floats(0.0, 10.0), aw=st.floats(0.0, 10.0),
     aphi=st.floats(0.0, 1.2), ath=st.floats(0.0, 0.4),
 )
+@pytest.mark.slow
 def test_zero_error_inputs_reproduce_the_trajectory(au, av, aw, aphi, ath):
     params = dict(au=au, av=av, aw=aw, aphi=aphi, ath=ath)
     err = _run(0.02, T=10.0, params=params)

@@ -92,6 +92,7 @@ def _same(a, b):
     return a.shape == b.shape and bool(np.all((a == b) | (pd.isna(a) & pd.isna(b))))
 
 
+@pytest.mark.slow
 def test_from_json_gives_back_the_result(result, tmp_path):
     result.to_json(tmp_path / "result.json")
     back = EstimationResult.from_json(tmp_path / "result.json")

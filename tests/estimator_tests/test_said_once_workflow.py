@@ -1,7 +1,7 @@
 """The workflow says each thing once: what its gear-down maneuvers cannot determine is held and said
 as one note; the same finding in a bin's two estimations, or in several bins, is one group.
 
-Fast: the analytic flight (no JSBSim) and hand-made stages.
+The analytic flight (no JSBSim) and hand-made stages; the two estimations are marked slow.
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from campaigns.analytic_flight import DEG, Flight
 from campaigns.analytic_flight import truth_values as _truth_values
@@ -43,6 +44,7 @@ def _quiet(problem, channels):
     return replace(problem, maneuvers=tuple(mans))
 
 
+@pytest.mark.slow
 def test_what_the_maneuvers_do_not_excite_is_held_and_said_once():
     problem = _problem()
     ids = [m.id for m in problem.maneuvers]
@@ -91,6 +93,7 @@ def test_a_bins_two_estimations_and_several_bins_say_a_thing_once():
     assert "in both of the bin's estimations" in g.headline and "also in Mach 0.50" in g.headline
 
 
+@pytest.mark.slow
 def test_a_fit_held_away_from_its_minimum_is_never_a_success():
     """A fit converged with one gyro bias held 0.3 deg/s off its estimate (the rest free) is at a
     wrong point: its attitude misfit is gross (degrees, beyond any working attitude reference) and

@@ -163,6 +163,7 @@ def problem(uav_problem_file):
         return load_problem(uav_problem_file[0])
 
 
+@pytest.mark.slow
 def test_the_problem_file_reads_with_the_uav_channels_and_declarations(problem, uav_problem_file):
     assert [c.name for c in problem.channels] == ["phi", "theta", "psi", "tas", "h", "alpha_v", "beta_v"]
     decl = declarations_of(problem)

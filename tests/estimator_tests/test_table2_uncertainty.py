@@ -75,6 +75,7 @@ def test_kernel_is_the_quadratic_form():
         calibration_variance(J, C[:3, :3])
 
 
+@pytest.mark.slow
 def test_propagation_matches_finite_differences(turbulent):
     """Every channel's s_cal^2 against the same quadratic form with J from central differences of
     the model output in each of the channel's estimated calibration parameters (biases, tables,

@@ -89,6 +89,7 @@ def test_overwrite_removes_exactly_the_datasets_own_files(tmp_path):
     assert (out / "maneuvers" / "m0007.parquet").read_bytes() == b"mine"
 
 
+@pytest.mark.slow
 def test_demo_replaces_only_its_own_dataset(tmp_path, monkeypatch, capsys):
     import campaigns.cli as cli
     import synth.campaign
@@ -156,6 +157,7 @@ def test_fly_and_show_help_point_only_at_things_that_exist(capsys):
     assert "incomplete" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_show_into_a_closed_pipe_ends_quietly(tmp_path):
     out = tmp_path / "ds"
     _fly_tiny(out)

@@ -128,6 +128,7 @@ def test_default_campaign_flies_a_windup_turn_at_every_clean_mach():
         (c, 0.5) for c in FLEET.configurations}
 
 
+@pytest.mark.slow
 def test_fpr_show_prints_the_alpha_coverage_per_mach(tmp_path, capsys):
     out = tmp_path / "ds"
     assert main(["fly", "--config", "PV1-NP", "--mach", "0.3", "0.4", "--maneuver", "windup_turn",

@@ -49,6 +49,7 @@ def sortie(tmp_path_factory):
     return campaign, result, load_sortie(out)
 
 
+@pytest.mark.slow
 def test_written_and_loadable_with_boundaries(sortie, capsys):
     campaign, result, s = sortie
     for rel in SORTIE_FILES.values():
@@ -154,6 +155,7 @@ def test_directory_rules(sortie, tmp_path):
     assert main(["fly", "--sortie", "NOPE", "--config", "PV1-NP", "--out", str(tmp_path / "n")]) == 2
 
 
+@pytest.mark.slow
 def test_same_campaign_same_bytes(sortie, tmp_path):
     """Flown again (over a copy, with --overwrite), the sortie gives the same files, byte for byte."""
     import shutil

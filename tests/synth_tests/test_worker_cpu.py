@@ -65,6 +65,7 @@ def _allocate(mib: int) -> float:
     return after_mib
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 def test_the_workers_cpu_time_reaches_the_pools_process(monkeypatch, method):
     monkeypatch.setattr(workers, "pool_context", lambda: multiprocessing.get_context(method))
@@ -122,6 +123,7 @@ def test_a_studys_record_counts_its_pool_workers(tmp_path):
     assert ", CPU at least 14 s, code " in lines[2] and f", CPU {now_s:.0f} s, code " in lines[3]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 def test_children_and_workers_together_count_each_worker_once(method, monkeypatch):
     # A study adds RUSAGE_CHILDREN and workers_cpu_s(not_in_children=True): under fork/spawn the
