@@ -234,9 +234,24 @@ def integrate_many(inputs: Inputs, params: np.ndarray, g: float, sensitivities: 
     if len(parts) == 1:
         run(parts[0])
     else:
-        with ThreadPoolExecutor(len(parts)) as ex:
-            list(ex.map(run, parts))
+        # the second half on the helper thread, the first here; each writes its own rows
+        second = _helper_thread().submit(run, parts[1])
+        run(parts[0])
+        second.result()
     return X, (out_S if sensitivities else None)
+
+
+_HELPER: tuple[int, ThreadPoolExecutor] | None = None
+
+
+def _helper_thread() -> ThreadPoolExecutor:
+    """One thread kept for :func:`integrate_many`'s second half: an estimation integrates a
+    thousand times and more, and starting a thread each time cost about a sixth of a small
+    problem's estimation. Made anew in a forked child (the parent's thread is not there)."""
+    global _HELPER
+    if _HELPER is None or _HELPER[0] != os.getpid():
+        _HELPER = (os.getpid(), ThreadPoolExecutor(1, thread_name_prefix="fpr-rk4"))
+    return _HELPER[1]
 
 
 def worker_threads() -> int:
