@@ -44,6 +44,7 @@ steps need only the states, which cost about a tenth.
 from __future__ import annotations
 
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
@@ -214,7 +215,7 @@ def integrate_many(inputs: Inputs, params: np.ndarray, g: float, sensitivities: 
             raise ValueError(f"out_S must be a C-contiguous ({n}, 7, {N_SENS}) array")
     K = inputs.seg.size - 1
     # maneuvers are independent: two halves (by samples) on two threads when there are two
-    # cores (the kernels release the GIL; the threads end before this returns)
+    # cores (the kernels release the GIL; the second half is done before this returns)
     parts = [(0, K)]
     if worker_threads() > 1 and K > 1:
         half = int(np.searchsorted(inputs.seg, inputs.seg[-1] / 2))
@@ -236,12 +237,15 @@ def integrate_many(inputs: Inputs, params: np.ndarray, g: float, sensitivities: 
     else:
         # the second half on the helper thread, the first here; each writes its own rows
         second = _helper_thread().submit(run, parts[1])
-        run(parts[0])
-        second.result()
+        try:
+            run(parts[0])
+        finally:  # never return (or raise) while the helper still writes into X and out_S
+            second.result()
     return X, (out_S if sensitivities else None)
 
 
 _HELPER: tuple[int, ThreadPoolExecutor] | None = None
+_HELPER_LOCK = threading.Lock()
 
 
 def _helper_thread() -> ThreadPoolExecutor:
@@ -249,9 +253,10 @@ def _helper_thread() -> ThreadPoolExecutor:
     thousand times and more, and starting a thread each time cost about a sixth of a small
     problem's estimation. Made anew in a forked child (the parent's thread is not there)."""
     global _HELPER
-    if _HELPER is None or _HELPER[0] != os.getpid():
-        _HELPER = (os.getpid(), ThreadPoolExecutor(1, thread_name_prefix="fpr-rk4"))
-    return _HELPER[1]
+    with _HELPER_LOCK:
+        if _HELPER is None or _HELPER[0] != os.getpid():
+            _HELPER = (os.getpid(), ThreadPoolExecutor(1, thread_name_prefix="fpr-rk4"))
+        return _HELPER[1]
 
 
 def worker_threads() -> int:
