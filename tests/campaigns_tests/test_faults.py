@@ -189,7 +189,6 @@ def stuck(base, tmp_path_factory):
     return path, (t[i], t[-1]), estimate(_problem(path))
 
 
-@pytest.mark.slow
 def test_stuck_vane(stuck):
     _, (t0, t1), res = stuck
     f = _assert_named(res, "stuck_channel", Severity.FAILURE, "alpha_zl", DOUBLET, {("alpha_zl", DOUBLET)})

@@ -89,7 +89,6 @@ def test_overwrite_removes_exactly_the_datasets_own_files(tmp_path):
     assert (out / "maneuvers" / "m0007.parquet").read_bytes() == b"mine"
 
 
-@pytest.mark.slow
 def test_demo_replaces_only_its_own_dataset(tmp_path, monkeypatch, capsys):
     import campaigns.cli as cli
     import synth.campaign
