@@ -891,7 +891,8 @@ class FilterErrorLikelihood:
                 return None
             Phi, Qd, P0 = self._process(m, sigma)
             p, _ = self._wf.smooth_left_out(m.sample, self._residuals(ev, m, es), m.h, noise.R[m.channel],
-                                            group[m.channel], Phi, Qd, P0, m.n_samples)
+                                            group[m.channel], self._wf.WindModel(Phi, Qd, P0),
+                                            m.n_samples)
             back = np.empty_like(p)
             back[m.order] = p  # back to the pieces' order
             return back
@@ -1166,7 +1167,7 @@ class FilterErrorLikelihood:
         if sigma == 0.0:
             return np.zeros((m.n_samples, ns)), np.zeros((m.n_samples, ns, ns))
         Phi, Qd, P0 = self._process(m, sigma)
-        return self._wf.smooth(m.sample, e, m.h, R[m.channel], Phi, Qd, P0, m.n_samples)
+        return self._wf.smooth(m.sample, e, m.h, R[m.channel], self._wf.WindModel(Phi, Qd, P0), m.n_samples)
 
     @staticmethod
     def wind_ned(m: _Maneuver, xs: np.ndarray, Ps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1197,7 +1198,8 @@ class FilterErrorLikelihood:
         if sigma == 0.0:
             return e, r, -J
         Phi, Qd, P0 = self._process(m, sigma)
-        nu, s, dnu, _ = self._wf.innovations(m.sample, e, m.h, r, J, Phi, Qd, P0, m.n_samples)
+        nu, s, dnu, _ = self._wf.innovations(m.sample, e, m.h, r, J, self._wf.WindModel(Phi, Qd, P0),
+                                             m.n_samples)
         return nu, s, dnu
 
     def _nll(self, m: _Maneuver, e: np.ndarray, R: np.ndarray, sigma: float) -> float:

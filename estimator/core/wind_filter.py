@@ -135,11 +135,23 @@ MIL-HDBK-1797 (1997), Dryden turbulence.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 from scipy.special import gammainc
 from threadpoolctl import threadpool_limits
+
+
+class WindModel(NamedTuple):
+    """A wind-state model per sample, SI: ``Phi`` (ns, ns) state transition, ``Qd`` (ns, ns)
+    process-noise covariance and ``P0`` (ns, ns) initial state covariance, prior mean zero (as
+    :func:`gauss_markov` and :func:`dryden_body` give)."""
+
+    Phi: np.ndarray
+    Qd: np.ndarray
+    P0: np.ndarray
+
 
 #: Below this ``x = V dt / L`` the integrated state's ``g(x)`` is summed as its series (the closed
 #: form loses ~1/x of its digits to cancellation; the series converges to rounding in 30 terms).
@@ -175,7 +187,7 @@ def _g_integrated(x: float) -> float:
 
 
 def gauss_markov(v_mps: float, L_m, sigma_mps, dt_s: float,
-                 integrated_down: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 integrated_down: bool = False) -> WindModel:
     """Exact discretisation of three independent first-order Gauss-Markov wind components.
 
     Parameters
@@ -217,7 +229,7 @@ def gauss_markov(v_mps: float, L_m, sigma_mps, dt_s: float,
         Phi[3, 3] = 1.0
         Qd[2, 3] = Qd[3, 2] = s2 * tc * em[2] ** 2
         Qd[3, 3] = 2.0 * s2 * tc * tc * _g_integrated(float(x[2]))
-    return Phi, Qd, P0
+    return WindModel(Phi, Qd, P0)
 
 
 #: The body-axis wind (u, v, w) from :func:`dryden_body`'s five states (u, v_1, v_2, w_1, w_2).
@@ -227,7 +239,7 @@ DRYDEN_OUTPUT = np.array([[1.0, 0.0, 0.0, 0.0, 0.0],
 
 
 def dryden_body(v_mps: float, L_m: float, sigma_mps: float, dt_s: float
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                ) -> WindModel:
     """Exact discretisation of MIL-F-8785C's Dryden turbulence in body axes (module docstring).
 
     Parameters
@@ -270,7 +282,7 @@ def dryden_body(v_mps: float, L_m: float, sigma_mps: float, dt_s: float
         Qd[i, i] = q * p3
         Qd[i + 1, i + 1] = q * (p3 + 2.0 * y * E * E)
         Qd[i, i + 1] = Qd[i + 1, i] = 0.5 * q * E * E * y * y
-    return Phi, Qd, P0
+    return WindModel(Phi, Qd, P0)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -508,8 +520,9 @@ def _solve_in_place(M, B, X):
 # Public functions
 # ----------------------------------------------------------------------------------------------
 
-def _check_model(obs_sample, e, h, r, Phi, Qd, P0, n_samples):
+def _check_model(obs_sample, e, h, r, model: WindModel, n_samples):
     """Validated, contiguous float64 / int64 copies of the common inputs."""
+    Phi, Qd, P0 = model
     obs = np.asarray(obs_sample)
     if obs.ndim != 1 or (obs.size and not np.issubdtype(obs.dtype, np.integer)):
         raise ValueError(f"obs_sample must be a 1-D integer array of sample indices; got dtype "
@@ -559,8 +572,7 @@ def _check_model(obs_sample, e, h, r, Phi, Qd, P0, n_samples):
 
 
 def innovations(obs_sample: np.ndarray, e: np.ndarray, h: np.ndarray, r: np.ndarray, J: np.ndarray,
-                Phi: np.ndarray, Qd: np.ndarray, P0: np.ndarray,
-                n_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+                model: WindModel, n_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Kalman-filter innovations of the residuals, their variances and Jacobian, and the likelihood.
 
     Parameters
@@ -572,8 +584,9 @@ def innovations(obs_sample: np.ndarray, e: np.ndarray, h: np.ndarray, r: np.ndar
         e.g. rad per m/s).
     r : (n,) measurement-noise variances, > 0 (channel unit squared).
     J : (n, m) Jacobian rows ``dy/dtheta`` (m may be 0).
-    Phi, Qd, P0 : (ns, ns) state transition per sample, process-noise covariance per sample, and
-        initial state covariance (e.g. from :func:`gauss_markov`); prior mean zero.
+    model : :class:`WindModel` ``(Phi, Qd, P0)``, each (ns, ns): state transition per sample,
+        process-noise covariance per sample and initial state covariance (e.g. from
+        :func:`gauss_markov`); prior mean zero.
     n_samples : number of samples of the maneuver.
 
     Returns
@@ -583,7 +596,7 @@ def innovations(obs_sample: np.ndarray, e: np.ndarray, h: np.ndarray, r: np.ndar
     dnu : (n, m) ``d nu / d theta = -L J`` (gains fixed).
     nll : the negative log-likelihood ``0.5 sum(nu^2 / s + log(2 pi s))``.
     """
-    obs, e, h, r, Phi, Qd, P0, n_samples = _check_model(obs_sample, e, h, r, Phi, Qd, P0, n_samples)
+    obs, e, h, r, Phi, Qd, P0, n_samples = _check_model(obs_sample, e, h, r, model, n_samples)
     n = obs.shape[0]
     J = np.ascontiguousarray(J, dtype=float)
     if J.ndim != 2 or J.shape[0] != n:
@@ -629,13 +642,13 @@ def normal_equations(nu: np.ndarray, s: np.ndarray, dnu: np.ndarray) -> tuple[np
     return H, g, cost
 
 
-def smooth(obs_sample: np.ndarray, e: np.ndarray, h: np.ndarray, r: np.ndarray, Phi: np.ndarray,
-           Qd: np.ndarray, P0: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+def smooth(obs_sample: np.ndarray, e: np.ndarray, h: np.ndarray, r: np.ndarray, model: WindModel,
+           n_samples: int) -> tuple[np.ndarray, np.ndarray]:
     """Rauch-Tung-Striebel fixed-interval smoother: the wind states given all the residuals.
 
     Parameters
     ----------
-    obs_sample, e, h, r, Phi, Qd, P0, n_samples : as :func:`innovations`. The predicted
+    obs_sample, e, h, r, model, n_samples : as :func:`innovations`. The predicted
         covariances ``Phi P Phi^T + Qd`` must be non-singular (true for a positive-definite ``Qd``,
         as :func:`gauss_markov` gives).
 
@@ -649,7 +662,7 @@ def smooth(obs_sample: np.ndarray, e: np.ndarray, h: np.ndarray, r: np.ndarray, 
     numpy.linalg.LinAlgError
         If a predicted covariance is singular.
     """
-    obs, e, h, r, Phi, Qd, P0, n_samples = _check_model(obs_sample, e, h, r, Phi, Qd, P0, n_samples)
+    obs, e, h, r, Phi, Qd, P0, n_samples = _check_model(obs_sample, e, h, r, model, n_samples)
     ns = Phi.shape[0]
     xs = np.zeros((n_samples, ns))
     Ps = np.zeros((n_samples, ns, ns))
@@ -665,13 +678,12 @@ def smooth(obs_sample: np.ndarray, e: np.ndarray, h: np.ndarray, r: np.ndarray, 
 
 
 def smooth_left_out(obs_sample: np.ndarray, e: np.ndarray, h: np.ndarray, r: np.ndarray,
-                    group: np.ndarray, Phi: np.ndarray, Qd: np.ndarray, P0: np.ndarray,
-                    n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+                    group: np.ndarray, model: WindModel, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
     """Each observation's prediction by the wind smoothed from the other groups' observations.
 
     Parameters
     ----------
-    obs_sample, e, h, r, Phi, Qd, P0, n_samples : as :func:`smooth` (``e`` the residuals, the
+    obs_sample, e, h, r, model, n_samples : as :func:`smooth` (``e`` the residuals, the
         channel's SI unit; ``h`` their sensitivity to the wind states, e.g. rad per m/s).
     group : (n,) int, each observation's group (e.g. its sensor): the observations of a group are
         left out of the smoother that predicts them.
@@ -691,7 +703,7 @@ def smooth_left_out(obs_sample: np.ndarray, e: np.ndarray, h: np.ndarray, r: np.
     numpy.linalg.LinAlgError
         If a predicted covariance is singular (as :func:`smooth`).
     """
-    obs, e, h, r, Phi, Qd, P0, n_samples = _check_model(obs_sample, e, h, r, Phi, Qd, P0, n_samples)
+    obs, e, h, r, Phi, Qd, P0, n_samples = _check_model(obs_sample, e, h, r, model, n_samples)
     g = np.asarray(group)
     if g.shape != obs.shape or (g.size and not np.issubdtype(g.dtype, np.integer)):
         raise ValueError(f"group must be one integer per observation, shape ({obs.size},); got dtype "
@@ -704,7 +716,7 @@ def smooth_left_out(obs_sample: np.ndarray, e: np.ndarray, h: np.ndarray, r: np.
             continue  # nothing of the group sees the wind: its prediction is zero
         other = ~own
         # the subset keeps the observations' order, so obs_sample stays non-decreasing
-        xs, Ps = smooth(obs[other], e[other], h[other], r[other], Phi, Qd, P0, n_samples)
+        xs, Ps = smooth(obs[other], e[other], h[other], r[other], WindModel(Phi, Qd, P0), n_samples)
         at, hk = obs[own], h[own]
         p[own] = np.einsum("ni,ni->n", hk, xs[at])
         v[own] = np.einsum("ni,nij,nj->n", hk, Ps[at], hk)

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from campaigns.analytic_flight import NOISE_SIGMA, Flight, truth_values
-from estimator.core.wind_filter import gauss_markov, smooth, smooth_left_out
+from estimator.core.wind_filter import WindModel, gauss_markov, smooth, smooth_left_out
 from estimator.filter_error import wind_responses
 from estimator.io.modelset import declarations_of, load_model_set
 from estimator.model import Model
@@ -176,18 +176,18 @@ def test_left_out_smoother_keeps_a_channel_out_of_its_own_wind():
     sample, ch = np.repeat(np.arange(n_s), 5), np.tile(np.arange(5), n_s)
     h, r, group = H[ch], r_of[ch], group_of[ch]
     e = np.einsum("ni,ni->n", h, w[sample]) + rng.normal(0.0, np.sqrt(r))
-    p, var = smooth_left_out(sample, e, h, r, group, Phi, Qd, P0, n_s)
+    p, var = smooth_left_out(sample, e, h, r, group, WindModel(Phi, Qd, P0), n_s)
     bad = e + np.where(ch == 0, 0.5, 0.0)
-    p_bad, var_bad = smooth_left_out(sample, bad, h, r, group, Phi, Qd, P0, n_s)
+    p_bad, var_bad = smooth_left_out(sample, bad, h, r, group, WindModel(Phi, Qd, P0), n_s)
     own = ch == 0
     np.testing.assert_array_equal(p_bad[own], p[own], err_msg="the channel's error entered its own wind")
     np.testing.assert_array_equal(var_bad, var)
     # by definition: the smoother run on the other groups' observations only
-    xs, _ = smooth(sample[~own], bad[~own], h[~own], r[~own], Phi, Qd, P0, n_s)
+    xs, _ = smooth(sample[~own], bad[~own], h[~own], r[~own], WindModel(Phi, Qd, P0), n_s)
     np.testing.assert_allclose(p_bad[own], np.einsum("ni,ni->n", h[own], xs[sample[own]]), rtol=0, atol=1e-15)
     # the smoother of everything takes about half of the error for a gust (two equal vanes)
-    xa, _ = smooth(sample, bad, h, r, Phi, Qd, P0, n_s)
-    xc, _ = smooth(sample, e, h, r, Phi, Qd, P0, n_s)
+    xa, _ = smooth(sample, bad, h, r, WindModel(Phi, Qd, P0), n_s)
+    xc, _ = smooth(sample, e, h, r, WindModel(Phi, Qd, P0), n_s)
     absorbed = np.mean(np.einsum("ni,ni->n", h[own], xa[sample[own]] - xc[sample[own]]))
     assert 0.3 < absorbed / 0.5 < 0.7, f"the full smoother took {absorbed / 0.5:.2f} of the error"
     other = ch == 1
@@ -197,4 +197,4 @@ def test_left_out_smoother_keeps_a_channel_out_of_its_own_wind():
     assert np.sqrt(np.mean(err ** 2)) < 0.07 / RAD2DEG, "the other vane should fix the down wind"
     assert np.all(p[ch == 4] == 0.0) and np.all(var[ch == 4] == 0.0)
     with pytest.raises(ValueError, match="group must be one integer per observation"):
-        smooth_left_out(sample, e, h, r, group[:-1], Phi, Qd, P0, n_s)
+        smooth_left_out(sample, e, h, r, group[:-1], WindModel(Phi, Qd, P0), n_s)

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from estimator.core.wind_filter import (
     DRYDEN_OUTPUT,
+    WindModel,
     dryden_body,
     gauss_markov,
     innovations,
@@ -95,7 +96,7 @@ def test_likelihood_equals_dense_gaussian(seed, integrated, general):
     obs, e, h, r, J, Phi, Qd, P0, N = random_problem(seed, integrated_down=integrated, general_phi=general)
     assert np.any(np.bincount(obs, minlength=N) == 0) and np.any(np.bincount(obs, minlength=N) > 1), \
         "the problem must have gaps and several observations per sample to exercise both paths"
-    nu, s, dnu, nll = innovations(obs, e, h, r, J, Phi, Qd, P0, N)
+    nu, s, dnu, nll = innovations(obs, e, h, r, J, WindModel(Phi, Qd, P0), N)
     C, _, _ = dense_covariance(obs, h, r, Phi, Qd, P0, N)
     ref = dense_nll(e, C)
     assert nll == pytest.approx(ref, rel=1e-10), \
@@ -112,7 +113,7 @@ def test_innovations_whiten_the_dense_covariance(seed, integrated, general):
     # nu = L e for every e, so L C L^T = diag(s): run the filter on the columns of I via J
     obs, e, h, r, _, Phi, Qd, P0, N = random_problem(seed, integrated_down=integrated, general_phi=general)
     n = e.size
-    _, s, dnu, _ = innovations(obs, e, h, r, -np.eye(n), Phi, Qd, P0, N)  # dnu = -L(-I) = L
+    _, s, dnu, _ = innovations(obs, e, h, r, -np.eye(n), WindModel(Phi, Qd, P0), N)  # dnu = -L(-I) = L
     C, _, _ = dense_covariance(obs, h, r, Phi, Qd, P0, N)
     L = dnu
     assert np.allclose(np.triu(L, 1), 0.0) and np.allclose(np.diag(L), 1.0), \
@@ -124,11 +125,11 @@ def test_innovations_whiten_the_dense_covariance(seed, integrated, general):
 @pytest.mark.parametrize("seed, integrated, general", PROBLEMS)
 def test_innovation_jacobian_is_exact_for_the_linear_map(seed, integrated, general):
     obs, e, h, r, J, Phi, Qd, P0, N = random_problem(seed, integrated_down=integrated, general_phi=general)
-    nu0, _, dnu, _ = innovations(obs, e, h, r, J, Phi, Qd, P0, N)
+    nu0, _, dnu, _ = innovations(obs, e, h, r, J, WindModel(Phi, Qd, P0), N)
     rng = np.random.default_rng(seed + 100)
     for _ in range(3):
         d = rng.normal(size=J.shape[1])
-        nu1, *_ = innovations(obs, e - J @ d, h, r, J, Phi, Qd, P0, N)
+        nu1, *_ = innovations(obs, e - J @ d, h, r, J, WindModel(Phi, Qd, P0), N)
         np.testing.assert_allclose(nu1, nu0 + dnu @ d, rtol=0, atol=1e-12 * (1 + np.max(np.abs(nu1))),
                                    err_msg="nu is linear in e with e-independent gains: "
                                            "nu(e - J d) = nu(e) + dnu d exactly")
@@ -150,14 +151,14 @@ def test_innovation_jacobian_against_central_differences():
         return (np.cos(u + c) + 0.2 * u)[:, None] * A
 
     theta0 = np.array([0.3, -0.2, 0.5])
-    _, _, dnu, _ = innovations(obs, z - y(theta0), h, r, jac(theta0), Phi, Qd, P0, N)
+    _, _, dnu, _ = innovations(obs, z - y(theta0), h, r, jac(theta0), WindModel(Phi, Qd, P0), N)
     step = 1e-5
     fd = np.empty_like(dnu)
     for j in range(3):
         dt = np.zeros(3)
         dt[j] = step
-        nup, *_ = innovations(obs, z - y(theta0 + dt), h, r, jac(theta0), Phi, Qd, P0, N)
-        num, *_ = innovations(obs, z - y(theta0 - dt), h, r, jac(theta0), Phi, Qd, P0, N)
+        nup, *_ = innovations(obs, z - y(theta0 + dt), h, r, jac(theta0), WindModel(Phi, Qd, P0), N)
+        num, *_ = innovations(obs, z - y(theta0 - dt), h, r, jac(theta0), WindModel(Phi, Qd, P0), N)
         fd[:, j] = (nup - num) / (2 * step)
     # central differences: truncation ~ step^2 |y'''| |A|^3 / 6, ~1e-10 here; rounding ~1e-16/1e-5
     np.testing.assert_allclose(dnu, fd, rtol=0, atol=1e-8 * np.max(np.abs(dnu)),
@@ -167,7 +168,7 @@ def test_innovation_jacobian_against_central_differences():
 def test_gauss_newton_step_is_generalised_least_squares():
     obs, z, h, r, J, Phi, Qd, P0, N = random_problem(6, integrated_down=True, m=4)
     theta0 = np.zeros(J.shape[1])
-    nu, s, dnu, _ = innovations(obs, z - J @ theta0, h, r, J, Phi, Qd, P0, N)
+    nu, s, dnu, _ = innovations(obs, z - J @ theta0, h, r, J, WindModel(Phi, Qd, P0), N)
     H, g, _ = normal_equations(nu, s, dnu)
     step = np.linalg.solve(H, g)
     C, _, _ = dense_covariance(obs, h, r, Phi, Qd, P0, N)
@@ -177,7 +178,7 @@ def test_gauss_newton_step_is_generalised_least_squares():
                                err_msg="L^T diag(1/s) L = C^-1, so one step from the filter's normal "
                                        "equations must be the GLS estimate with the full covariance")
     # and the step lands at the minimum: the gradient there vanishes
-    nu2, s2, dnu2, _ = innovations(obs, z - J @ (theta0 + step), h, r, J, Phi, Qd, P0, N)
+    nu2, s2, dnu2, _ = innovations(obs, z - J @ (theta0 + step), h, r, J, WindModel(Phi, Qd, P0), N)
     g2 = normal_equations(nu2, s2, dnu2)[1]
     assert np.max(np.abs(g2)) < 1e-9 * np.max(np.abs(g)), \
         "for a linear model the cost is quadratic: after the Gauss-Newton step its gradient is zero"
@@ -185,16 +186,16 @@ def test_gauss_newton_step_is_generalised_least_squares():
 
 def test_m_zero_and_no_observations():
     obs, e, h, r, _, Phi, Qd, P0, N = random_problem(7)
-    nu, s, dnu, nll = innovations(obs, e, h, r, np.zeros((e.size, 0)), Phi, Qd, P0, N)
+    nu, s, dnu, nll = innovations(obs, e, h, r, np.zeros((e.size, 0)), WindModel(Phi, Qd, P0), N)
     assert dnu.shape == (e.size, 0) and np.isfinite(nll), "m = 0 (no parameters) must be allowed"
     H, g, cost = normal_equations(nu, s, dnu)
     assert H.shape == (0, 0) and g.shape == (0,) and cost == pytest.approx(nll, rel=1e-14), \
         "the normal equations of no parameters are empty, the cost is still the likelihood"
     empty = np.zeros(0, dtype=np.int64)
     nu, s, dnu, nll = innovations(empty, np.zeros(0), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 2)),
-                                  Phi, Qd, P0, 5)
+                                  WindModel(Phi, Qd, P0), 5)
     assert nu.size == 0 and nll == 0.0, "no observations: an empty likelihood (zero)"
-    xs, Ps = smooth(empty, np.zeros(0), np.zeros((0, 3)), np.zeros(0), Phi, Qd, P0, 5)
+    xs, Ps = smooth(empty, np.zeros(0), np.zeros((0, 3)), np.zeros(0), WindModel(Phi, Qd, P0), 5)
     np.testing.assert_allclose(Ps, np.broadcast_to(P0, (5, 3, 3)), rtol=1e-12,
                                err_msg="no observations: the smoothed covariance is the (stationary) prior")
 
@@ -207,7 +208,7 @@ def test_m_zero_and_no_observations():
 @pytest.mark.parametrize("seed, integrated, general", PROBLEMS)
 def test_smoother_equals_dense_posterior(seed, integrated, general):
     obs, e, h, r, _, Phi, Qd, P0, N = random_problem(seed, integrated_down=integrated, general_phi=general)
-    xs, Ps = smooth(obs, e, h, r, Phi, Qd, P0, N)
+    xs, Ps = smooth(obs, e, h, r, WindModel(Phi, Qd, P0), N)
     C, Pbig, Hbig = dense_covariance(obs, h, r, Phi, Qd, P0, N)
     PHt = Pbig @ Hbig.T
     mean = PHt @ np.linalg.solve(C, e)
@@ -346,8 +347,8 @@ def test_likelihood_independent_of_order_within_a_sample(seed, integrated):
     obs, e, h, r, J, Phi, Qd, P0, N = random_problem(seed, n_samples=15, integrated_down=integrated)
     rng = np.random.default_rng(seed)
     perm = np.concatenate([rng.permutation(np.flatnonzero(obs == k)) for k in range(N)]).astype(np.int64)
-    nll = innovations(obs, e, h, r, J, Phi, Qd, P0, N)[3]
-    nll_p = innovations(obs[perm], e[perm], h[perm], r[perm], J[perm], Phi, Qd, P0, N)[3]
+    nll = innovations(obs, e, h, r, J, WindModel(Phi, Qd, P0), N)[3]
+    nll_p = innovations(obs[perm], e[perm], h[perm], r[perm], J[perm], WindModel(Phi, Qd, P0), N)[3]
     assert nll_p == pytest.approx(nll, rel=1e-11), \
         "the joint density of one sample's observations does not depend on the processing order"
 
@@ -356,7 +357,7 @@ def test_likelihood_independent_of_order_within_a_sample(seed, integrated):
 @given(seed=st.integers(0, 2**31 - 1))
 def test_no_wind_sensitivity_leaves_the_residuals(seed):
     obs, e, h, r, J, Phi, Qd, P0, N = random_problem(seed, n_samples=12)
-    nu, s, dnu, nll = innovations(obs, e, np.zeros_like(h), r, J, Phi, Qd, P0, N)
+    nu, s, dnu, nll = innovations(obs, e, np.zeros_like(h), r, J, WindModel(Phi, Qd, P0), N)
     np.testing.assert_array_equal(nu, e, err_msg="h = 0: nothing to predict, the innovations are e")
     np.testing.assert_array_equal(s, r, err_msg="h = 0: the innovation variance is the noise variance")
     np.testing.assert_array_equal(dnu, -J, err_msg="h = 0: dnu = -J (plain output error)")
@@ -386,7 +387,8 @@ def test_gauss_markov_validation_names_the_argument(kwargs, name):
 
 def test_filter_validation_names_the_argument():
     obs, e, h, r, J, Phi, Qd, P0, N = random_problem(8, n_samples=10)
-    good = dict(obs_sample=obs, e=e, h=h, r=r, J=J, Phi=Phi, Qd=Qd, P0=P0, n_samples=N)
+    model = WindModel(Phi, Qd, P0)
+    good = dict(obs_sample=obs, e=e, h=h, r=r, J=J, model=model, n_samples=N)
     bad = [
         ("obs_sample", obs[::-1].copy()),
         ("obs_sample", obs.astype(float)),
@@ -395,13 +397,14 @@ def test_filter_validation_names_the_argument():
         ("h", h[:, :2]),
         ("r", np.where(np.arange(r.size) == 0, 0.0, r)),
         ("J", J[:-1]),
-        ("Phi", Phi[:2]),
-        ("Qd", Qd + np.triu(np.ones_like(Qd), 1)),
-        ("P0", P0[:2, :2]),
+        ("Phi", model._replace(Phi=Phi[:2])),
+        ("Qd", model._replace(Qd=Qd + np.triu(np.ones_like(Qd), 1))),
+        ("P0", model._replace(P0=P0[:2, :2])),
     ]
     for name, value in bad:
+        key = "model" if name in WindModel._fields else name
         with pytest.raises(ValueError, match=name):
-            innovations(**(good | {name: value}))
+            innovations(**(good | {key: value}))
     smooth_good = {k: v for k, v in good.items() if k != "J"}
     with pytest.raises(ValueError, match="r"):
         smooth(**(smooth_good | {"r": -r}))
@@ -412,5 +415,5 @@ def test_a_singular_predicted_covariance_is_a_linear_algebra_error():
     covariance and says so (a LinAlgError the solver turns into a verdict), not a division by zero."""
     obs = np.repeat(np.arange(10), 2)
     with pytest.raises(np.linalg.LinAlgError, match="singular"):
-        smooth(obs, np.zeros(20), np.ones((20, 3)), np.ones(20), np.eye(3), np.zeros((3, 3)),
-               np.zeros((3, 3)), 10)
+        smooth(obs, np.zeros(20), np.ones((20, 3)), np.ones(20),
+               WindModel(np.eye(3), np.zeros((3, 3)), np.zeros((3, 3))), 10)
