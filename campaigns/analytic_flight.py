@@ -286,6 +286,19 @@ def dryden_body_wind(t_s: np.ndarray, sigma_mps: float, L_m: float, v_mps: float
     return x @ DRYDEN_OUTPUT.T
 
 
+def poor_start(ps) -> dict[str, float]:
+    """Start values for a recovery test: every free parameter off its truth by a sizeable amount
+    (``Flight.problem(start=poor_start)``; SI, as the parameters)."""
+    out = {}
+    for p in ps:
+        if not p.free:
+            continue
+        off = {"initial_condition": 0.5 if p.unit == "m/s" else 0.01, "imu_bias": 0.5 * p.value,
+               "time_delay": 0.02, "bias": 0.3 * DEG, "table": 0.2 * DEG if p.unit == "rad" else 0.05}
+        out[p.key] = p.value + off.get(p.kind, 0.0)
+    return out
+
+
 def truth_values(rng: np.random.Generator) -> dict:
     """Injected parameter values of :class:`Flight` (SI); the tables from ``_table_noise``."""
     return {

@@ -607,6 +607,21 @@ class Dataset:
         return len(self.manifest["maneuvers"])
 
 
+def copy_with_edits(base: str | Path, dest: str | Path, edits: Mapping) -> Path:
+    """A copy of the dataset ``base`` at ``dest`` (which must not exist) with
+    ``edits[maneuver id](DataFrame) -> DataFrame`` applied to its maneuver files, each manifest
+    entry (also in the file's metadata) kept: a fault injected into a flown dataset."""
+    import shutil
+
+    dest = Path(dest)
+    shutil.copytree(base, dest)
+    ds = load_dataset(dest)
+    for mid, edit in edits.items():
+        entry = ds.entry(mid)
+        write_maneuver(dest / entry["file"], edit(ds.load(mid)), entry)
+    return dest
+
+
 def load_dataset(path: str | Path) -> Dataset:
     """Open a campaign directory written by ``fpr fly``.
 

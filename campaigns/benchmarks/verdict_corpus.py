@@ -311,16 +311,11 @@ def _faults_base(root: Path, turbulence: str, workers: int | None) -> Path:
 
 
 def _faulted(base: Path, dest: Path, edits: dict[str, Callable[[pd.DataFrame], pd.DataFrame]]) -> Path:
-    from synth.dataset import load_dataset, write_maneuver
+    from synth.dataset import copy_with_edits
 
-    if dest.exists():
+    if dest.exists():  # this script's own earlier copy (its --out is a folder it made)
         shutil.rmtree(dest)
-    shutil.copytree(base, dest)
-    ds = load_dataset(dest)
-    for mid, edit in edits.items():
-        entry = ds.entry(mid)
-        write_maneuver(dest / entry["file"], edit(ds.load(mid)), entry)
-    return dest
+    return copy_with_edits(base, dest, edits)
 
 
 def _at(df: pd.DataFrame, seconds: float) -> int:

@@ -38,7 +38,6 @@ into a damped crawl (~8 s each).
 from __future__ import annotations
 
 import re
-import shutil
 import tomllib
 import warnings
 from pathlib import Path
@@ -53,7 +52,7 @@ from estimator.io import load_problem, problem_from_dataset
 from estimator.solver import SolverOptions, estimate
 from estimator.verdict import Finding, Severity, Verdict
 from synth.campaign import resolve_campaign_path
-from synth.dataset import load_dataset, write_maneuver
+from synth.dataset import copy_with_edits, load_dataset
 
 #: The shipped campaign campaigns/faults_base.toml, which the bad-input corpus
 #: (campaigns/benchmarks/bad_inputs.py) flies too: the nose probe's irregularity and high-AOA noise
@@ -98,14 +97,8 @@ def clean(base):
 
 
 def _faulted_copy(base: Path, dest: Path, edits) -> Path:
-    """A copy of the dataset with ``edits[maneuver id](DataFrame) -> DataFrame`` applied to the
-    Parquet files (the manifest entry, also in the file's metadata, kept)."""
-    shutil.copytree(base, dest)
-    ds = load_dataset(dest)
-    for mid, edit in edits.items():
-        entry = ds.entry(mid)
-        write_maneuver(dest / entry["file"], edit(ds.load(mid)), entry)
-    return dest
+    """A copy of the dataset with ``edits[maneuver id](DataFrame) -> DataFrame`` applied."""
+    return copy_with_edits(base, dest, edits)
 
 
 def _times(base: Path, mid: str) -> np.ndarray:

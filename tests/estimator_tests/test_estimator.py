@@ -20,7 +20,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from campaigns.analytic_flight import DEG, NOISE_SIGMA, Flight
+from campaigns.analytic_flight import NOISE_SIGMA, Flight, poor_start
 from campaigns.analytic_flight import truth_values as _truth_values
 from estimator.io.modelset import load_model_set
 from estimator.model import Model
@@ -110,18 +110,7 @@ def test_known_time_shift_is_recovered(tau):
 def test_recovery_within_cramer_rao_bounds_with_white_noise(flight):
     rng = np.random.default_rng(11)
 
-    def start(ps):
-        # a poor start: every free parameter off by a sizeable amount
-        out = {}
-        for p in ps:
-            if not p.free:
-                continue
-            off = {"initial_condition": 0.5 if p.unit == "m/s" else 0.01, "imu_bias": 0.5 * p.value,
-                   "time_delay": 0.02, "bias": 0.3 * DEG, "table": 0.2 * DEG if p.unit == "rad" else 0.05}
-            out[p.key] = p.value + off.get(p.kind, 0.0)
-        return out
-
-    prob = flight.problem(start=start, noise=NOISE_SIGMA, rng=rng)
+    prob = flight.problem(start=poor_start, noise=NOISE_SIGMA, rng=rng)
     truth = flight.problem().parameters
     res = estimate(prob, SolverOptions())
     assert res.success, res.message

@@ -35,29 +35,15 @@ BASELINE = Path(__file__).with_name("refactor_baseline.json")
 RTOL = 1e-12
 
 
-def _poor_start(ps) -> dict[str, float]:
-    """Every free parameter off by a sizeable amount (test_estimator.py's Cramér-Rao test)."""
-    from campaigns.analytic_flight import DEG
-
-    out = {}
-    for p in ps:
-        if not p.free:
-            continue
-        off = {"initial_condition": 0.5 if p.unit == "m/s" else 0.01, "imu_bias": 0.5 * p.value,
-               "time_delay": 0.02, "bias": 0.3 * DEG, "table": 0.2 * DEG if p.unit == "rad" else 0.05}
-        out[p.key] = p.value + off.get(p.kind, 0.0)
-    return out
-
-
 def _fits() -> dict[str, object]:
     """name -> EstimationResult of each pinned fit."""
-    from campaigns.analytic_flight import NOISE_SIGMA, Flight, truth_values
+    from campaigns.analytic_flight import NOISE_SIGMA, Flight, poor_start, truth_values
     from estimator.io.modelset import load_model_set
     from estimator.solver import SolverOptions, estimate
 
     specs = load_model_set("tejas")[1]
     white = Flight(truth_values(np.random.default_rng(5)), specs)
-    prob = white.problem(start=_poor_start, noise=NOISE_SIGMA, rng=np.random.default_rng(11))
+    prob = white.problem(start=poor_start, noise=NOISE_SIGMA, rng=np.random.default_rng(11))
     turbulent = Flight(truth_values(np.random.default_rng(5)), specs, T=25.0, turbulence=(1.0, 533.4, 7))
     tprob = turbulent.problem(noise=NOISE_SIGMA, rng=np.random.default_rng(3))
     return {
