@@ -78,20 +78,23 @@ def _converged(at: _Linearised, opt: SolverOptions) -> tuple[Status, str] | None
     return None
 
 
-def _search(lik, st: Structure, at: _Linearised, lam: float, opt: SolverOptions):
-    """``(best, evaluated, lam)``: the step taken from ``at`` — ``best`` (decrease, iterate, its
-    evaluation, its stats, evaluated with the Jacobian) or None —, how many trial points the model
-    could be evaluated at, and the damping after the search."""
+def _search(lik, st: Structure, at: _Linearised, lam: float, opt: SolverOptions, scanned: bool):
+    """``(best, evaluated, lam, scan)``: the step taken from ``at`` — ``best`` (decrease, iterate,
+    its evaluation, its stats, evaluated with the Jacobian) or None —, how many trial points the
+    model could be evaluated at, the damping after the search and whether it scanned the undamped
+    direction (``scanned``: whether the last search did)."""
     theta, cost0, noise = at.theta, at.cost0, at.noise
     best = None
     evaluated = 0
     for attempt in range(12):
         step = bounded_solve(at.N, st, theta, lam, opt.rank_rtol)[0]
         trial = np.clip(theta + step, st.lo, st.hi)
+        # the first trial is usually accepted and is then the next iterate: evaluate it with
+        # the Jacobian right away (the values are the same either way) — unless the last search
+        # had to scan: this one most likely will too, and the Jacobian would be thrown away
+        with_jac = attempt == 0 and not scanned
         try:
-            # the first trial is usually accepted and is then the next iterate: evaluate it
-            # with the Jacobian right away (the values are the same either way)
-            trial_ev = lik.evaluate(trial, attempt == 0)
+            trial_ev = lik.evaluate(trial, with_jac)
         except ModelEvaluationError:
             # the step left the model's domain (e.g. a table steeper than 1:1 in an implicit
             # model): a rejected step, damped further
@@ -101,10 +104,11 @@ def _search(lik, st: Structure, at: _Linearised, lam: float, opt: SolverOptions)
         stats_t = lik.stats(trial_ev)
         cost_t = lik.cost(stats_t, noise)
         if np.isfinite(cost_t) and cost_t < cost0:
-            best = (cost0 - cost_t, trial, trial_ev, stats_t, attempt == 0)
+            best = (cost0 - cost_t, trial, trial_ev, stats_t, with_jac)
             break
         lam = max(lam, 1e-6) * 10.0
-    if best is None or best[0] < max(opt.decrease_tol, 0.1 * at.predicted):
+    scan = best is None or best[0] < max(opt.decrease_tol, 0.1 * at.predicted)
+    if scan:
         # the damped steps achieve (next to) nothing: search along the undamped Gauss-Newton
         # direction itself, whose quadratic model can be poor along a parameter the data barely
         # determine (one that enters the outputs only to second order, like v0 without a
@@ -131,7 +135,7 @@ def _search(lik, st: Structure, at: _Linearised, lam: float, opt: SolverOptions)
             if cost_t > previous and cost_t < cost0:
                 break
             previous = cost_t
-    return best, evaluated, lam
+    return best, evaluated, lam, scan
 
 
 def _no_decrease(best, at: _Linearised, lam: float, opt: SolverOptions, keys: list[str],
@@ -192,6 +196,7 @@ def gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpti
         evals = lik.evaluate(theta, True)
     stats = lik.stats(evals)
     lam = opt.lm_lambda0
+    scanned = False
     history: list[float] = []
     status, message = Status.ITERATION_LIMIT, ""
     moved_max = np.inf
@@ -206,7 +211,7 @@ def gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpti
         if converged is not None:
             status, message = converged
             break
-        best, evaluated, lam = _search(lik, st, at, lam, opt)
+        best, evaluated, lam, scanned = _search(lik, st, at, lam, opt, scanned)
         if not evaluated:
             status = Status.STALLED
             message = ("stalled: the model cannot be evaluated at any step from here (each leaves its "
