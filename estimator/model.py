@@ -81,6 +81,11 @@ _THREADED_SAMPLES = 20000
 IMPLICIT_ITERATIONS = 30
 IMPLICIT_FIXED_POINT_ITERATIONS = 300
 IMPLICIT_TOL = 1e-13
+#: An implicit model's iterations that keep a step this large (rad) without shrinking it — Newton's
+#: largest step not halved in 8 iterations, the fixed point's not down by a tenth in 30 — cycle
+#: (a table steeper than 1:1 between two breakpoints) and are given up at once: the steps such a
+#: cycle repeats never reach IMPLICIT_TOL, and the budgets above would only be spent to say so.
+IMPLICIT_STALLED_STEP = 1e-6
 
 
 @dataclass(frozen=True)
@@ -692,13 +697,22 @@ class Model:
         starts = cl.cseg[:-1]
         zhat = frozenset({"zhat"})
 
+        largest: list[float] = []  # the largest step of a still iterating maneuver, per iteration
+
         def settle(step: np.ndarray) -> bool:
             """Apply a step where the maneuver is still iterating; True when all have converged."""
             nonlocal y, active
             dev = np.maximum.reduceat(np.abs(step), starts) if starts.size else np.zeros(0)
+            largest.append(float(dev[active].max()) if active.any() else 0.0)
             y = np.where(np.repeat(active, cl.lens), y - step, y)
             active &= ~(dev < IMPLICIT_TOL)
             return not active.any()
+
+        def cycling(span: int, factor: float) -> bool:
+            """The largest step still above IMPLICIT_STALLED_STEP and not below ``factor`` times
+            itself ``span`` iterations earlier."""
+            return (len(largest) > span and largest[-1] > IMPLICIT_STALLED_STEP
+                    and largest[-1] > factor * largest[-1 - span])
 
         done = False
         # Newton on y - F(y) = 0: a plain fixed-point iteration contracts only by |dF/dzhat| per
@@ -712,11 +726,16 @@ class Model:
             if settle(np.where(np.abs(denom) > 1e-3, r / np.where(denom == 0.0, 1.0, denom), r)):
                 done = True
                 break
+            if cycling(8, 0.5):
+                break
         # a safeguard for a piecewise-linear table whose kinks make Newton cycle: the fixed point
+        largest.clear()
         for _ in range(0 if done else IMPLICIT_FIXED_POINT_ITERATIONS):
             sig["zhat"] = y
             if settle(y - np.broadcast_to(expr.value(sig, params, tables), y.shape)):
                 done = True
+                break
+            if cycling(30, 0.9):
                 break
         if not done:
             raise ModelEvaluationError(
