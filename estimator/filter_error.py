@@ -114,7 +114,6 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import minimize_scalar
 
 from estimator.checks import fit_traces
 from estimator.core.cross_correlation import high_pass, lagged_correlation
@@ -1221,6 +1220,9 @@ class FilterErrorLikelihood:
             x = _parabolic_minimum(f, math.log(start_mps), a, b, SIGMA_STEP, SIGMA_XTOL)
         if x is not None:
             return math.exp(x)
+        # imported here: scipy.optimize takes half a second to import, and only this search needs it
+        from scipy.optimize import minimize_scalar
+
         res = minimize_scalar(f, bounds=(a, b), method="bounded", options={"xatol": SIGMA_XTOL})
         return math.exp(float(res.x))
 

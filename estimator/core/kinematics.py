@@ -37,7 +37,6 @@ sampled inputs (one-sided cubics at the two end intervals).
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 
 def midpoints(y: np.ndarray, method: str = "cubic") -> np.ndarray:
@@ -87,6 +86,10 @@ def smoothed_derivative(
     window = max(polyorder + 2, int(round(window_s / dt)) | 1)
     if window > len(t_s):
         window = len(t_s) if len(t_s) % 2 else len(t_s) - 1
+    # imported here: scipy.signal takes about a second to import and only the differentiated
+    # lever arm needs it, while every process that reads a problem file imports this module
+    from scipy.signal import savgol_filter
+
     return savgol_filter(y, window, polyorder, deriv=1, delta=dt, axis=0, mode="interp")
 
 
