@@ -36,7 +36,6 @@ JIT_DECORATORS = frozenset({"jit", "njit", "vectorize", "guvectorize", "cfunc", 
 #: a function here must still offend (a fixed one fails the test until its name is removed), and
 #: no name is ever added; synth/ and campaigns/ have none.
 KNOWN = frozenset({
-    "estimator.io.dataset_problem.problem_from_dataset",
 })
 
 

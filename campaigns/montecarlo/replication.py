@@ -40,7 +40,6 @@ from threadpoolctl import threadpool_limits
 
 from campaigns.truth import TruthProjection, recovery_table, true_parameters
 from campaigns.workflow_truth import calibrated_errors
-from estimator.io import problem_from_dataset
 from estimator.parameters import family_of
 from estimator.problem import Problem
 from estimator.result import STATUS_TEXT, EstimationResult
@@ -470,9 +469,7 @@ def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequen
         write_scratch_dataset(scenario, draw.maneuvers, own, models, Path(tmp))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            problem = problem_from_dataset(
-                tmp, select=est.select, model=est.model, channels=est.channels,
-                overrides=est.parameters or None, lever_arm=est.lever_arm, g_mps2=est.g_mps2)
+            problem = est.problem(tmp)
             # every [estimator.solver] option (the shipped scenarios: max_iterations 40, colored)
             result = estimate(problem, est.solver)
             truth = _truth_of(problem, result) if result.success else None

@@ -68,6 +68,8 @@ import numpy as np
 
 from aircraft_models.schema import SUFFIXES, check, did_you_mean
 from estimator.calibration import CalibrationOptions, option_tables
+from estimator.io import StateEquations, problem_from_dataset
+from estimator.problem import Problem
 from estimator.solver import SolverOptions
 from synth.campaign import CAMPAIGN_DIR, Campaign, Job, parse_campaign
 from synth.environment import Environment
@@ -219,6 +221,12 @@ class EstimatorSettings:
     #: the solver's options (``[estimator.solver]`` and the flat ``max_iterations``/``colored``,
     #: mapped by :meth:`estimator.calibration.CalibrationOptions.from_mapping`)
     solver: SolverOptions = field(default_factory=SolverOptions)
+
+    def problem(self, dataset: str | Path) -> Problem:
+        """The estimation problem of a replication's ``dataset`` folder, as these settings ask."""
+        return problem_from_dataset(dataset, select=self.select, model=self.model, channels=self.channels,
+                                    overrides=self.parameters or None,
+                                    equations=StateEquations(self.g_mps2, self.lever_arm))
 
 
 @dataclass(frozen=True)

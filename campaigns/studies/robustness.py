@@ -105,7 +105,6 @@ from campaigns.studies.common import (
 )
 from campaigns.studies.scaffold import Invocations, fmt, paragraph
 from campaigns.truth import true_parameters
-from estimator.io import problem_from_dataset
 from estimator.problem import Problem
 from estimator.result import STATUS_TEXT, EstimationResult
 from estimator.solver import SolverOptions, estimate
@@ -379,9 +378,7 @@ def run_pair(scenario: Scenario, index: int, truths: Mapping[int, Sequence],
             write_scratch_dataset(scenario, draw.maneuvers, truths, models, Path(tmp))
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                problem = problem_from_dataset(tmp, select=est.select, model=est.model, channels=est.channels,
-                                               overrides=est.parameters or None, lever_arm=est.lever_arm,
-                                               g_mps2=est.g_mps2)
+                problem = est.problem(tmp)
                 truth = dict(true_parameters(problem).values)
                 judged = estimate(problem, judged_options(scenario))
                 reference, kept = reference_fit(scenario, problem, judged, truth)

@@ -230,7 +230,7 @@ Start values of the initial conditions ``u0 v0 w0 phi0 theta0 psi0 h0`` come fro
 measured flow angles, Euler angles, altitude); values given in the problem file win.
 """
 
-from estimator.io.build import subproblem
+from estimator.io.build import StateEquations, subproblem
 from estimator.io.dataset_problem import load_dataset_maneuvers, problem_from_dataset
 from estimator.io.errors import DataError, DataWarning
 from estimator.io.fprdataset import FPR_COLUMNS, dataset_column, load_truth
@@ -247,6 +247,6 @@ from estimator.io.units import UNITS, to_si
 __all__ = [
     "FPR_COLUMNS", "GAP_FACTOR", "IC_AVERAGE_SAMPLES", "JITTER_FRACTION", "MIN_DURATION_S",
     "MIN_SAMPLES_PER_FREE_PARAMETER", "STAMP_TOLERANCE", "UNITS", "DataError", "DataWarning",
-    "dataset_column", "initial_condition_starts", "load_dataset_maneuvers", "load_problem", "load_truth",
-    "problem_from_dataset", "subproblem", "to_si",
+    "StateEquations", "dataset_column", "initial_condition_starts", "load_dataset_maneuvers",
+    "load_problem", "load_truth", "problem_from_dataset", "subproblem", "to_si",
 ]

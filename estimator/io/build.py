@@ -38,6 +38,20 @@ def select_channels(channels: Sequence[ChannelSpec], explicit: Sequence[str] | N
 
 
 @dataclass(frozen=True)
+class StateEquations:
+    """The flat-earth state equations' constants: gravity and the lever-arm formulation.
+
+    Attributes
+    ----------
+    g_mps2 : gravity, m/s^2.
+    lever_arm : "imu_point" or "differentiated" (:class:`~estimator.problem.Problem`).
+    """
+
+    g_mps2: float = 9.80665
+    lever_arm: str = LEVER_ARMS[0]
+
+
+@dataclass(frozen=True)
 class StateSetup:
     """What the state equations take besides the data.
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from estimator.io.assemble import ManeuverRequest, SourceTable
-from estimator.io.build import StateSetup, build_problem
+from estimator.io.build import StateEquations, StateSetup, build_problem
 from estimator.io.errors import DataError
 from estimator.io.fprdataset import (
     canonical_name,
@@ -20,7 +20,7 @@ from estimator.io.fprdataset import (
 )
 from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
 from estimator.io.tables import numeric
-from estimator.problem import LEVER_ARMS, STATE_SIGNALS, ChannelSpec, Problem
+from estimator.problem import STATE_SIGNALS, ChannelSpec, Problem
 
 
 def data_names(channels: Iterable[ChannelSpec]) -> set[str]:
@@ -79,6 +79,10 @@ def load_dataset_maneuvers(path: str | Path, select: Mapping | None = None,
     return pairs, dataset_sensors(manifest)
 
 
+#: The default state equations: standard gravity, the IMU-point lever arm.
+EARTH = StateEquations()
+
+
 def problem_from_dataset(
     path: str | Path,
     select: Mapping | None = None,
@@ -88,8 +92,7 @@ def problem_from_dataset(
     *,
     extra_channels: Sequence[Mapping] | None = None,
     sensors: Mapping[str, Sequence[float]] | None = None,
-    g_mps2: float = 9.80665,
-    lever_arm: str = LEVER_ARMS[0],
+    equations: StateEquations = EARTH,
 ) -> Problem:
     """The estimation problem of (a selection of) an ``fpr fly`` dataset.
 
@@ -103,9 +106,8 @@ def problem_from_dataset(
     overrides : parameter name -> keys as in ``[parameter.NAME]`` (e.g. ``{"b_l": {"free": False}}``).
     extra_channels : channel tables as in ``[[channel]]``.
     sensors : sensor positions (body axes, m) added to or replacing the manifest's airframe ones.
-    g_mps2 : gravity of the flat-earth equations.
-    lever_arm : the state equations' lever-arm formulation, "imu_point" or "differentiated"
-        (:class:`~estimator.problem.Problem`).
+    equations : gravity and the lever-arm formulation of the state equations
+        (:class:`~estimator.io.build.StateEquations`; default: 9.80665 m/s^2, "imu_point").
     """
     raw, msource = read_model_set(model)
     chans, specs, declared = merge_model_set(raw, overrides, extra_channels, msource, str(path))
@@ -114,6 +116,7 @@ def problem_from_dataset(
     if "imu" not in pos:
         raise DataError(f"{path}: the manifest's airframe has no imu position; "
                         "pass sensors={'imu': [x, y, z]}")
-    setup = StateSetup(sensors=pos, imu_position_body_m=pos["imu"], g_mps2=g_mps2, lever_arm=lever_arm)
+    setup = StateSetup(sensors=pos, imu_position_body_m=pos["imu"], g_mps2=equations.g_mps2,
+                       lever_arm=equations.lever_arm)
     return build_problem(pairs, chans, specs, user_declared=declared, explicit_channels=channels,
                          setup=setup, source=str(path))

@@ -19,7 +19,6 @@ from campaigns.montecarlo.summary import CALIBRATION_KINDS, load_results, summar
 from campaigns.studies.common import VANE_BIAS_FAMILIES
 from campaigns.studies.tolerance.config import DESIRED_3SIGMA_DEG, SENSOR_GROUPS, SHORT_TITLE, Factor, Point
 from campaigns.truth import true_parameters
-from estimator.io import problem_from_dataset
 from estimator.io.modelset import load_model_set
 from estimator.parameters import family_of
 
@@ -165,9 +164,7 @@ def swept_truth(point: Point) -> dict[str, tuple[np.ndarray, list[str]]]:
     est = scenario.estimator
     with tempfile.TemporaryDirectory(prefix="fpr-tolerance-truth-") as tmp:
         write_scratch_dataset(scenario, draw.maneuvers, truths, Models.of(scenario), Path(tmp))
-        problem = problem_from_dataset(tmp, select=est.select, model=est.model, channels=est.channels,
-                                       overrides=est.parameters or None, lever_arm=est.lever_arm,
-                                       g_mps2=est.g_mps2)
+        problem = est.problem(tmp)
         values = true_parameters(problem).values
     specs = problem.parameters.specs
     out = {}
