@@ -32,6 +32,7 @@ _API = {
     # reading flight data into a problem
     "load_problem": "estimator.io",
     "problem_from_dataset": "estimator.io",
+    "StateEquations": "estimator.io",
     "load_model_set": "estimator.io.modelset",
     "DataError": "estimator.io",
     "DataWarning": "estimator.io",
@@ -58,14 +59,15 @@ _API = {
 
 __all__ = [  # = the keys of _API (a literal, so that linters see what is exported)
     "Calibration", "CalibrationOptions", "DataError", "DataWarning", "EstimationResult", "Finding",
-    "Problem", "Severity", "SolverOptions", "Status", "Verdict", "WorkflowOptions", "WorkflowResult",
+    "Problem", "Severity", "SolverOptions", "StateEquations", "Status", "Verdict", "WorkflowOptions",
+    "WorkflowResult",
     "calibrate", "estimate", "load_model_set", "load_problem", "problem_from_dataset", "run_workflow",
     "write_estimation",
 ]
 
 if TYPE_CHECKING:  # what type checkers and editors see; at run time __getattr__ loads them
     from estimator.calibration import Calibration, calibrate, write_estimation
-    from estimator.io import DataError, DataWarning, load_problem, problem_from_dataset
+    from estimator.io import DataError, DataWarning, StateEquations, load_problem, problem_from_dataset
     from estimator.io.modelset import load_model_set
     from estimator.options import CalibrationOptions, SolverOptions, WorkflowOptions
     from estimator.problem import Problem

@@ -113,9 +113,11 @@ def _search(lik, st: Structure, at: _Linearised, lam: float, opt: SolverOptions,
         # direction itself, whose quadratic model can be poor along a parameter the data barely
         # determine (one that enters the outputs only to second order, like v0 without a
         # sideslip channel). What no step achieves, the minimum does not offer either.
-        # The steps shrink tenfold; once the cost rises from one step to the next, the smaller
-        # steps lie further up the same slope towards cost0 (the cost along a ray is unimodal
-        # this close to the iterate), so the search ends there instead of trying them all.
+        # The steps shrink tenfold; once the cost rises from one step to the next (still below
+        # cost0), the search ends: where the cost has one dip along the ray, as a smooth cost
+        # has, the smaller steps lie further up the slope back to cost0 and the step taken is
+        # the one trying all nine would take; along a ray with several dips (a kink) it may be
+        # a step of smaller decrease, still a decrease.
         previous = np.inf
         for t in 10.0 ** -np.arange(0, 9):
             trial = np.clip(theta + t * at.gn, st.lo, st.hi)
@@ -132,7 +134,7 @@ def _search(lik, st: Structure, at: _Linearised, lam: float, opt: SolverOptions,
                 continue
             if cost0 - cost_t > (best[0] if best else 0.0):
                 best = (cost0 - cost_t, trial, trial_ev, stats_t, False)
-            if cost_t > previous and cost_t < cost0:
+            if previous < cost_t < cost0:
                 break
             previous = cost_t
     return best, evaluated, lam, scan

@@ -81,10 +81,11 @@ _THREADED_SAMPLES = 20000
 IMPLICIT_ITERATIONS = 30
 IMPLICIT_FIXED_POINT_ITERATIONS = 300
 IMPLICIT_TOL = 1e-13
-#: An implicit model's iterations that keep a step this large (rad) without shrinking it — Newton's
-#: largest step not halved in 8 iterations, the fixed point's not down by a tenth in 30 — cycle
-#: (a table steeper than 1:1 between two breakpoints) and are given up at once: the steps such a
-#: cycle repeats never reach IMPLICIT_TOL, and the budgets above would only be spent to say so.
+#: An implicit model's iterations that keep a step this large (the channel's SI unit) without
+#: shrinking it — Newton's largest step not halved in 8 iterations, the fixed point's not down by a
+#: tenth in 30 — cycle (a table steeper than 1:1 between two breakpoints) and are given up at once:
+#: a cycle's steps never reach IMPLICIT_TOL, and the budgets above would only be spent to say so
+#: (a fixed point contracting by less than 0.35 % per step would not reach it within them either).
 IMPLICIT_STALLED_STEP = 1e-6
 
 
@@ -683,7 +684,8 @@ class Model:
         measurement ``z`` as argument causes (SPEC §5). Newton's method on ``y - F(y) = 0`` from
         ``z`` (then, should it not settle, fixed-point iteration), each maneuver until its own steps
         are below ``IMPLICIT_TOL`` (the iteration is sample-wise, so all maneuvers iterate together
-        and a converged one is held); the derivatives follow from ``dy = dF + F_zhat dy``, i.e.
+        and a converged one is held); either phase ends early where its steps cycle
+        (``IMPLICIT_STALLED_STEP``). The derivatives follow from ``dy = dF + F_zhat dy``, i.e.
         ``dy = dF / (1 - F_zhat)``.
 
         Returns

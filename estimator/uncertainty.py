@@ -167,8 +167,7 @@ class _ChunkMiddles:
                 if k in self.V and (opt.imu_channels is None or opt.imu_channels[k, ce.channel]):
                     # the IMU noise: J^T W J_IC on the grid, its suffix sums times dE Q^1/2
                     bb = np.zeros((int(lay.n_of[k]), Jb.shape[0], 7))
-                    # the outer product per sample, broadcast (twice as fast as the same einsum,
-                    # the same numbers: each element is one product, then times w)
+                    # the outer product per sample: each element one product, then times w
                     outer = Jb.T[:, :, None] * JT[:7, r0:r1].T[:, None, :]
                     outer *= w
                     bb[rows] = outer

@@ -14,6 +14,7 @@ import json
 import math
 import shutil
 import tomllib
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -33,7 +34,7 @@ from campaigns.montecarlo import replication as replication_module
 from campaigns.montecarlo.flight_cache import flight_file, read_flight
 from campaigns.montecarlo.runner import finished_replications, read_replication, replication_file
 from campaigns.montecarlo.summary import kind_table, load_results
-from estimator import workflow
+from estimator import StateEquations, problem_from_dataset, workflow
 
 RAW = {
     "name": "mc_test",
@@ -451,3 +452,17 @@ def test_calibrated_channels_are_the_workflow_reports_and_a_flat_segment_is_a_no
     r = replication_module.run_replication(scenario, 0, truths)
     assert r.ok and len(r.parameters) and not (r.channels["kind"] == "calibrated").any()
     assert any("calibrated channels not computed" in w and "alpha_zl" in w for w in r.warnings)
+
+
+def test_a_replications_problem_has_the_scenarios_gravity_and_lever_arm(tiny_dataset):
+    """``[estimator] g_mps2`` and ``lever_arm`` reach the problem each replication estimates."""
+    est = _scenario(estimator={**RAW["estimator"], "g_mps2": 9.79, "lever_arm": "differentiated"}).estimator
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        problem = est.problem(tiny_dataset)
+        direct = problem_from_dataset(tiny_dataset, channels=est.channels, overrides=est.parameters,
+                                      equations=StateEquations(g_mps2=9.79, lever_arm="differentiated"))
+    assert (problem.g_mps2, problem.lever_arm) == (9.79, "differentiated")
+    assert [c.name for c in problem.channels] == list(RAW["estimator"]["channels"])
+    assert problem.parameters.keys == direct.parameters.keys
+    assert (direct.g_mps2, direct.lever_arm) == (9.79, "differentiated")

@@ -20,7 +20,6 @@ from campaigns.montecarlo import parse_scenario
 from campaigns.montecarlo.replication import Models, fly, write_scratch_dataset
 from campaigns.studies import robustness as rob
 from campaigns.truth import true_parameters
-from estimator.io import problem_from_dataset
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -155,8 +154,7 @@ def test_reference_problem_starts_at_the_truth_and_holds_what_the_judged_fit_hel
     with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
         warnings.simplefilter("ignore")
         write_scratch_dataset(scenario, draw.maneuvers, truths, Models.of(scenario), Path(tmp))
-        problem = problem_from_dataset(tmp, channels=scenario.estimator.channels,
-                                       overrides=scenario.estimator.parameters)
+        problem = scenario.estimator.problem(tmp)
         truth = dict(true_parameters(problem).values)
     ps = problem.parameters
     keys = list(ps.keys)

@@ -17,16 +17,16 @@ from campaigns.analytic_flight import Flight, truth_values
 from estimator.io.modelset import load_model_set
 from estimator.model import IMPLICIT_FIXED_POINT_ITERATIONS, IMPLICIT_ITERATIONS, Model, ModelEvaluationError
 
-#: f3 at its breakpoints -8, 0, 8, 16, 24 deg (rad): 0.2 rad per 8 deg (0.14 rad) is a slope of
-#: 1.43 between each pair, alternating in sign: steeper than 1:1 everywhere the flight's alpha goes
+#: f3 at its breakpoints -8, 0, 8, 16, 24 deg (rad): a slope of 1.43 from -8 to 8 deg, where the
+#: flight's alpha (2-6 deg) is, and of 2.9 beyond: steeper than 1:1 wherever the flight goes
 STEEP = [-0.2, 0.0, 0.2, -0.2, 0.2]
-#: the same shape, mirrored: slopes of -1.43 on the segments the flight's alpha covers, where the
-#: iteration y -> F(y) overshoots but Newton converges in a few steps (every slope is constant)
+#: the same shape, mirrored: a slope of -1.43 where the flight's alpha is, where the iteration
+#: y -> F(y) overshoots but Newton converges in a few steps (the slope is constant there)
 MIRRORED = [0.2, 0.0, -0.2, 0.2, -0.2]
 
 
 @pytest.fixture(scope="module")
-def setup():
+def side_probe():
     _, specs = load_model_set("tejas")
     problem = Flight(truth_values(np.random.default_rng(5)), specs).problem()
     values = np.array(problem.parameters.values, dtype=float)
@@ -51,20 +51,20 @@ def expression_calls(monkeypatch):
     return calls
 
 
-def test_a_cycling_implicit_model_is_given_up_at_once(setup, expression_calls):
-    model, values, f3 = setup
+def test_a_cycling_implicit_model_is_given_up_at_once(side_probe, expression_calls):
+    model, values, f3 = side_probe
     steep = values.copy()
     steep[f3] = STEEP
     with pytest.raises(ModelEvaluationError, match=r"alpha_zsp.*does not converge"):
         model.evaluate_all(steep, jacobian=False)
     budget = IMPLICIT_ITERATIONS + IMPLICIT_FIXED_POINT_ITERATIONS
-    # the cycle is recognised after 8 Newton and 30 fixed-point iterations (model.py's
+    # the cycle is recognised after 9 Newton and 31 fixed-point iterations (model.py's
     # IMPLICIT_STALLED_STEP): the other channels' few evaluations besides, far below the budget
     assert expression_calls[0] < budget / 4, (expression_calls[0], budget)
 
 
-def test_implicit_models_that_settle_still_do(setup, expression_calls):
-    model, values, f3 = setup
+def test_implicit_models_that_settle_still_do(side_probe, expression_calls):
+    model, values, f3 = side_probe
     ev = model.evaluate_all(values, jacobian=False)  # the truth: a gentle f3
     assert all(np.isfinite(ce.y).all() for ce in ev.channels)
     mirrored = values.copy()
