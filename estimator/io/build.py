@@ -60,14 +60,12 @@ class StateSetup:
     sensors : sensor positions, body axes, m (the model set's midpoint sensors are added:
         :func:`~estimator.io.modelset.sensor_positions`).
     imu_position_body_m : accelerometer position, body axes, m.
-    g_mps2 : gravity of the flat-earth equations.
-    lever_arm : the state equations' lever-arm formulation (:class:`Problem`).
+    equations : gravity and the lever-arm formulation (:class:`StateEquations`).
     """
 
     sensors: Mapping[str, np.ndarray]
     imu_position_body_m: np.ndarray
-    g_mps2: float
-    lever_arm: str = LEVER_ARMS[0]
+    equations: StateEquations = StateEquations()
 
 
 def build_problem(
@@ -92,8 +90,8 @@ def build_problem(
         (:class:`StateSetup`).
     source : problem file or dataset, for messages.
     """
-    sensors, imu_position_body_m, g_mps2, lever_arm = (
-        setup.sensors, setup.imu_position_body_m, setup.g_mps2, setup.lever_arm)
+    sensors, imu_position_body_m = setup.sensors, setup.imu_position_body_m
+    g_mps2, lever_arm = setup.equations.g_mps2, setup.equations.lever_arm
     if lever_arm not in LEVER_ARMS:
         raise DataError(f"{source}: lever_arm = {lever_arm!r}; one of {', '.join(map(repr, LEVER_ARMS))}")
     if not 9.7 <= g_mps2 <= 9.9:

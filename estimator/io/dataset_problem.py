@@ -116,7 +116,6 @@ def problem_from_dataset(
     if "imu" not in pos:
         raise DataError(f"{path}: the manifest's airframe has no imu position; "
                         "pass sensors={'imu': [x, y, z]}")
-    setup = StateSetup(sensors=pos, imu_position_body_m=pos["imu"], g_mps2=equations.g_mps2,
-                       lever_arm=equations.lever_arm)
+    setup = StateSetup(sensors=pos, imu_position_body_m=pos["imu"], equations=equations)
     return build_problem(pairs, chans, specs, user_declared=declared, explicit_channels=channels,
                          setup=setup, source=str(path))

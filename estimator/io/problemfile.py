@@ -13,7 +13,7 @@ import numpy as np
 
 from aircraft_models.schema import SUFFIXES, Key, check, did_you_mean
 from estimator.io.assemble import DIMENSIONS, REQUIRED, ManeuverRequest, SourceTable
-from estimator.io.build import StateSetup, build_problem
+from estimator.io.build import StateEquations, StateSetup, build_problem
 from estimator.io.dataset_problem import load_dataset_maneuvers
 from estimator.io.errors import DataError
 from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
@@ -21,7 +21,7 @@ from estimator.io.positions import check_positions, positions_of
 from estimator.io.tables import check_data_path, infer_format, numeric, pick_column, read_table
 from estimator.options import CalibrationOptions, option_tables
 from estimator.parameters import ParameterSpec
-from estimator.problem import LEVER_ARMS, STATE_SIGNALS, ChannelSpec, Problem
+from estimator.problem import STATE_SIGNALS, ChannelSpec, Problem
 
 TOP_KEYS = ("title", "g_mps2", "lever_arm", "model", "channels", "resample_hz", "sensors", "aircraft",
             "columns", "files", "data", "parameter", "channel", "workflow", "solver", "report",
@@ -317,11 +317,12 @@ def load_problem(path: str | Path) -> Problem:
     if "imu" not in sensors:
         raise DataError(f"{where}: [sensors] needs imu = [x, y, z], the accelerometer position (body axes, "
                         "m from the reference point): the lever-arm correction depends on it")
-    g = raw.get("g_mps2", 9.80665)
+    default = StateEquations()
+    g = raw.get("g_mps2", default.g_mps2)
     if isinstance(g, bool) or not isinstance(g, (int, float)):
         raise DataError(f"{where}: g_mps2 must be a number (m/s^2), got {g!r}")
-    setup = StateSetup(sensors=sensors, imu_position_body_m=sensors["imu"], g_mps2=float(g),
-                       lever_arm=raw.get("lever_arm", LEVER_ARMS[0]))
+    setup = StateSetup(sensors=sensors, imu_position_body_m=sensors["imu"],
+                       equations=StateEquations(float(g), raw.get("lever_arm", default.lever_arm)))
     problem = build_problem(pairs, chans, specs, user_declared=declared,
                             explicit_channels=raw.get("channels"), setup=setup, source=where)
     return dataclasses.replace(problem, options=options) if options else problem
