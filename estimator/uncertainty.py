@@ -136,12 +136,13 @@ class _ChunkMiddles:
     :meth:`spectra` on the evaluation's worker threads, then reduced per maneuver (:meth:`reduce`).
 
     ``held``: "ar", each channel's spectra by maneuver; ``Y``: the periodogram's cross-channel
-    factor; ``V``, ``dEq``: the IMU noise's factor and input increments (scaled by Q^1/2)."""
+    factor; ``B``, ``dEq``: the IMU noise's ``J^T W J_IC`` summed over the channels on the grid
+    (parameter, sample, 7) and the input increments (scaled by Q^1/2)."""
 
     shared: _Shared
     held: dict[int, list]
     Y: dict[int, np.ndarray]
-    V: dict[int, np.ndarray]
+    B: dict[int, np.ndarray]
     dEq: dict[int, np.ndarray]
 
     def spectra(self, ce) -> None:
@@ -164,16 +165,17 @@ class _ChunkMiddles:
                 ok = st.free[pidx]
                 Jb = JT[keep[ok], r0:r1]
                 pos = np.searchsorted(lay.union[k], pidx[ok])
-                if k in self.V and (opt.imu_channels is None or opt.imu_channels[k, ce.channel]):
-                    # the IMU noise: J^T W J_IC on the grid, its suffix sums times dE Q^1/2
-                    bb = np.zeros((int(lay.n_of[k]), Jb.shape[0], 7))
-                    # the outer product per sample: each element one product, then times w
-                    outer = Jb.T[:, :, None] * JT[:7, r0:r1].T[:, None, :]
+                if k in self.B and (opt.imu_channels is None or opt.imu_channels[k, ce.channel]):
+                    # the IMU noise: J^T W J_IC on the grid, summed over the channels (the suffix
+                    # sums and the product with dE Q^1/2 are linear: taken once, in reduce)
+                    outer = Jb[:, :, None] * JT[:7, r0:r1].T[None, :, :]
                     outer *= w
-                    bb[rows] = outer
-                    Vc = suffix_middle_factor(bb, self.dEq[k])
+                    if rows.size < lay.n_of[k]:  # on the grid, zero where the channel has no sample
+                        grid = np.zeros((Jb.shape[0], int(lay.n_of[k]), 7))
+                        grid[:, rows] = outer
+                        outer = grid
                     with lock:
-                        _scatter_add(self.V[k], pos, Vc, axis=1)
+                        _scatter_add(self.B[k], pos, outer)
                 if opt.imu_only:
                     continue
                 Lk = int(lay.L_of[k])
@@ -224,8 +226,9 @@ class _ChunkMiddles:
                 Yr = np.ascontiguousarray(Yk).view(np.float64).reshape(u.size, -1)
                 C.add_blocks((Yr @ Yr.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
                              np.array([k]), 1.0)
-            if k in self.V:
-                Yv = np.ascontiguousarray(self.V.pop(k).transpose(1, 0, 2)).reshape(u.size, -1)
+            if k in self.B:
+                V = suffix_middle_factor(self.B.pop(k).transpose(1, 0, 2), self.dEq.pop(k))
+                Yv = np.ascontiguousarray(V.transpose(1, 0, 2)).reshape(u.size, -1)
                 Cp.add_blocks((Yv @ Yv.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
                               np.array([k]), 1.0)
 
@@ -234,7 +237,7 @@ def _chunk_middles(model: Model, theta: np.ndarray, chunk: tuple[int, ...], imu_
                    shared: _Shared) -> _ChunkMiddles:
     """A chunk's empty accumulators, with its IMU noise's input increments computed."""
     lay, opt = shared.lay, shared.opt
-    V: dict[int, np.ndarray] = {}
+    B: dict[int, np.ndarray] = {}
     dEq: dict[int, np.ndarray] = {}
     imu_chunk = tuple(k for k in chunk if opt.imu_maneuvers is None or opt.imu_maneuvers[k])
     if imu_psd is not None and imu_chunk:
@@ -243,11 +246,11 @@ def _chunk_middles(model: Model, theta: np.ndarray, chunk: tuple[int, ...], imu_
             m = p.maneuvers[k]
             q = np.sqrt(np.nan_to_num(imu_psd[m.aircraft]) / m.dt_s)  # unknown: left out
             dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
-            V[k] = np.zeros((m.n, lay.union[k].size, 6))
+            B[k] = np.zeros((lay.union[k].size, m.n, 7))
     Y = ({k: np.zeros((lay.union[k].size, int(lay.L_of[k]) // 2 + 1), dtype=complex) for k in chunk}
          if opt.cross_channel and opt.spectrum != "ar" else {})
     # "ar": each channel's spectra, for later
-    return _ChunkMiddles(shared, {k: [] for k in chunk}, Y, V, dEq)
+    return _ChunkMiddles(shared, {k: [] for k in chunk}, Y, B, dEq)
 
 
 def _floored(std_crb: np.ndarray, sandwiches: tuple, glob: np.ndarray, imu_only: bool
@@ -485,24 +488,36 @@ def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: fl
             ok = rows[rows >= m.order]
             U[ok, t] = u[ok - m.order]
         gam = innovation_cross_spectrum(U, np.array([models[i].innovation_var for i in together]), L, dt_s)
-        lam, vec = np.linalg.eigh(gam)  # per frequency
-        Lam = vec * np.sqrt(np.maximum(lam, 0.0))[:, None, :]  # (nf, Ct, Ct)
+        Lam = _psd_factor(gam)  # (nf, Ct, Ct)
         for t, i in enumerate(together):
             factors[i, :, j:] = models[i].inverse_filter(L)[:, None] * Lam[:, t, :]
-    Y = np.zeros((nu, nf, cols), dtype=complex)
+    # Y_f = sum_i w_i F_i,f factors_i,f: each channel's spectra placed once, then one product per
+    # frequency (placing each channel's product with its factor costs the columns over again)
+    H = np.zeros((nu, len(items), nf), dtype=complex)
     for i, (_, pos, F, _, _, _, w) in enumerate(items):
-        _scatter_add(Y, pos, (w * F)[:, :, None] * factors[i][None, :, :])
-    return Y
+        _scatter_add(H[:, i, :], pos, w * F)
+    Y = np.matmul(H.transpose(2, 0, 1), factors.transpose(1, 0, 2))  # (nf, U, r)
+    return Y.transpose(1, 0, 2)
 
 
-def _scatter_add(target: np.ndarray, pos: np.ndarray, values: np.ndarray, axis: int = 0) -> None:
-    """``target[pos] += values`` along ``axis``, where slots of one parameter (repeated ``pos``) add
-    up; the common case of distinct positions without ``np.add.at`` (which is slow)."""
-    index = (slice(None),) * axis + (pos,)
+def _psd_factor(gam: np.ndarray) -> np.ndarray:
+    """``Lam`` with ``Lam Lam^H = gam`` per frequency (``gam`` (nf, C, C) positive semi-definite):
+    the Cholesky factor, or where a frequency's matrix is singular (fewer smoothed bins than
+    channels), the eigenvectors scaled by the square roots of the eigenvalues clipped at zero."""
+    try:
+        return np.linalg.cholesky(gam)
+    except np.linalg.LinAlgError:
+        lam, vec = np.linalg.eigh(gam)
+        return vec * np.sqrt(np.maximum(lam, 0.0))[:, None, :]
+
+
+def _scatter_add(target: np.ndarray, pos: np.ndarray, values: np.ndarray) -> None:
+    """``target[pos] += values``, where slots of one parameter (repeated ``pos``) add up; the common
+    case of distinct positions without ``np.add.at`` (which is slow)."""
     if np.unique(pos).size == pos.size:
-        target[index] += values
+        target[pos] += values
     else:
-        np.add.at(target, index, values)
+        np.add.at(target, pos, values)
 
 
 #: Maneuvers are taken in chunks whose spectral factors take about this much memory.
