@@ -722,7 +722,7 @@ class Model:
         # (next to) zero it takes the plain step
         for _ in range(IMPLICIT_ITERATIONS):
             sig["zhat"] = y
-            d = expr.evaluate(sig, params, tables, zhat)
+            d = expr.evaluate(sig, params, tables, zhat, by_parameters=False)  # d/dzhat alone
             r = y - np.broadcast_to(d.value, y.shape)
             denom = 1.0 - np.broadcast_to(d.dsignal.get("zhat", 0.0), y.shape)
             if settle(np.where(np.abs(denom) > 1e-3, r / np.where(denom == 0.0, 1.0, denom), r)):

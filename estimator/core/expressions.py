@@ -158,6 +158,7 @@ class Expression:
         params: Mapping[str, float],
         tables: Mapping[str, tuple[Table, np.ndarray]],
         state_signals: frozenset[str] | set[str] = frozenset(),
+        by_parameters: bool = True,
     ) -> Dual:
         """Evaluate with derivatives.
 
@@ -167,12 +168,15 @@ class Expression:
         params : name -> scalar value (SI), or (N,) values per sample.
         tables : name -> (Table, values (K,) or per sample (N, K)).
         state_signals : the signals to differentiate with respect to (they depend on the state).
+        by_parameters : also by the parameters and table values (False: by ``state_signals``
+            alone, for an iteration that needs no more; the value and those derivatives are the
+            same operation for operation: a derivative's arithmetic never involves another's).
 
         Returns
         -------
         Dual with the value (N,) and the derivatives.
         """
-        return _Evaluator(self, signals, params, tables, state_signals).visit(self.tree)
+        return _Evaluator(self, signals, params, tables, state_signals, by_parameters).visit(self.tree)
 
     def value(
         self,
@@ -220,9 +224,10 @@ def parse(text: str, where: str = "model") -> Expression:
 
 
 class _Evaluator:
-    def __init__(self, expr, signals, params, tables, state_signals):
+    def __init__(self, expr, signals, params, tables, state_signals, by_parameters=True):
         self.expr, self.signals, self.params = expr, signals, params
         self.tables, self.state_signals = tables, state_signals
+        self.by_parameters = by_parameters
 
     def fail(self, msg: str):
         raise ExpressionError(f"model {self.expr.text!r}: {msg}")
@@ -240,6 +245,8 @@ class _Evaluator:
                     return Dual(v, dsignal={n: np.ones_like(v)})
                 return Dual(v)
             if n in self.params:
+                if not self.by_parameters:
+                    return Dual(np.asarray(self.params[n], dtype=float))
                 return Dual(np.asarray(self.params[n], dtype=float), dparam={n: np.asarray(1.0)})
             self.fail(f"unknown name {n!r}: neither a signal nor a parameter of this channel")
         if isinstance(node, ast.UnaryOp):
@@ -277,7 +284,8 @@ class _Evaluator:
             slope = np.where(inside, (hi - lo) / np.diff(table.breakpoints)[i], 0.0)
             out = arg.scaled(slope) if _has_d(arg) else Dual(val)
             out.value = val
-            out.dtable.setdefault(name, []).extend([(i, 1.0 - w), (i + 1, w)])
+            if self.by_parameters:
+                out.dtable.setdefault(name, []).extend([(i, 1.0 - w), (i + 1, w)])
             return out
         self.fail(f"unsupported element {ast.dump(node)}")
 

@@ -39,6 +39,23 @@ MODELS = [
 
 
 @pytest.mark.parametrize("text", MODELS)
+def test_by_the_state_signals_alone_is_the_same_arithmetic(text):
+    # the implicit models' Newton iterations need d/dzhat alone: the value and the signals'
+    # derivatives must be those of the full evaluation to the last bit
+    signals, params, tables = _setup(seed=3)
+    expr = parse(text)
+    state = {"alpha_s", "beta_s", "alpha_t", "z"} & expr.names
+    full = expr.evaluate(signals, params, tables, state)
+    alone = expr.evaluate(signals, params, tables, state, by_parameters=False)
+    assert np.array_equal(alone.value, full.value)
+    assert not alone.dparam and not alone.dtable
+    assert alone.dsignal.keys() == full.dsignal.keys() == state
+    for name in state:
+        assert np.array_equal(np.broadcast_to(alone.dsignal[name], full.value.shape),
+                              np.broadcast_to(full.dsignal[name], full.value.shape)), name
+
+
+@pytest.mark.parametrize("text", MODELS)
 def test_derivatives_match_finite_differences(text):
     signals, params, tables = _setup()
     expr = parse(text)
