@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from _campaigns import TINY_CAMPAIGN
+from _campaigns import TINY_CAMPAIGN, linear_campaign
 
 from campaigns.benchmarks.user_files import problem_text
 from campaigns.cli import main
@@ -223,13 +223,22 @@ def test_single_earlier_results_refused_without_overwrite_and_replaced_with_it(d
 # fpr demo: its report folder
 
 
+#: The light-turbulence block of the tiny demo: one aircraft, the three maneuvers a Mach bin needs
+#: (its report folder is written and listed as the calm block's; what it finds is not the subject)
+TINY_TURBULENT = linear_campaign("tiny-turbulence", 12, [
+    {"configurations": ["PV1-NP"], "mach": [0.6], "maneuvers": ["pitch_doublet", "3211", "pullup_pushover"],
+     "maneuver": {"duration_s": 10.0}, "altitude_m": 6000.0}], turbulence="light")
+
+
 @pytest.fixture
 def tiny_demo(monkeypatch):
-    """``fpr demo`` flying the small fleet instead of the demo campaign (minutes)."""
+    """``fpr demo`` flying the small fleet (and a smaller turbulent block) instead of the demo
+    campaigns (minutes)."""
     import synth.campaign
 
-    campaign = parse_campaign(TINY_CAMPAIGN, source="tiny demo")
-    monkeypatch.setattr(synth.campaign, "load_campaign", lambda name: campaign)
+    campaigns = {"demo": parse_campaign(TINY_CAMPAIGN, source="tiny demo"),
+                 "demo_turbulence": parse_campaign(TINY_TURBULENT, source="tiny demo, turbulent block")}
+    monkeypatch.setattr(synth.campaign, "load_campaign", lambda name: campaigns[name])
 
 
 @pytest.mark.slow
