@@ -13,7 +13,7 @@
   stops them (their scratch data removed), says how many replications are written and how to
   resume, exits 130 without a traceback; the same command completes it to the same bytes.
 
-The tiny scenario of tests/test_montecarlo.py (a replication takes about a second).
+The tiny scenario of tests/campaigns_tests/test_montecarlo.py (a replication takes about half a second).
 """
 
 from __future__ import annotations
@@ -38,7 +38,14 @@ from _processes import HAVE_PROC, descendants, ignores, left_after, reap, sigint
 from test_montecarlo import SCENARIO_TOML, _scenario
 
 from campaigns import montecarlo_cli
-from campaigns.montecarlo import ReplicationResult, replication, run_montecarlo, runner, summarize
+from campaigns.montecarlo import (
+    ReplicationResult,
+    load_scenario,
+    replication,
+    run_montecarlo,
+    runner,
+    summarize,
+)
 from campaigns.montecarlo import summary as summary_module
 from campaigns.montecarlo.flight_cache import flight_bytes, flight_file, read_flight
 from campaigns.montecarlo.summary import load_results
@@ -186,10 +193,9 @@ def test_the_flight_cache_round_trip_is_lossless_and_deterministic(tmp_path):
 
 
 @pytest.mark.slow
-def test_an_interrupted_run_resumed_ends_byte_identical_to_an_uninterrupted_one(tmp_path, monkeypatch):
-    scenario = _scenario()
-    whole = tmp_path / "whole"
-    run_montecarlo(scenario, whole, replications=2, workers=1)
+def test_an_interrupted_run_resumed_ends_byte_identical_to_an_uninterrupted_one(run3, tmp_path, monkeypatch):
+    toml, whole = run3  # the uninterrupted run: replications 0..2 in one go (only read here)
+    scenario = load_scenario(str(toml))  # as `fpr montecarlo` reads it
     cut = tmp_path / "cut"
     real = runner.replication_task
 
@@ -200,23 +206,90 @@ def test_an_interrupted_run_resumed_ends_byte_identical_to_an_uninterrupted_one(
 
     monkeypatch.setattr(runner, "replication_task", interrupted_at_1)
     with pytest.raises(KeyboardInterrupt):
-        run_montecarlo(scenario, cut, replications=2, workers=1)
+        run_montecarlo(scenario, cut, replications=3, workers=1)
     assert sorted(runner.finished_replications(cut)) == [0]
     monkeypatch.setattr(runner, "replication_task", real)
-    report = run_montecarlo(scenario, cut, replications=2, workers=2)  # resumed, in worker processes
-    assert report.ran == (1,) and report.flights_flown == 0 and not report.failed
+    report = run_montecarlo(scenario, cut, replications=3, workers=2)  # resumed, in worker processes
+    assert report.ran == (1, 2) and report.flights_flown == 0 and not report.failed
     a, b = _files(whole), _files(cut)
     assert set(a) == set(b)
     assert sorted(k for k in a if k.startswith("replications/")) == [
-        f"replications/r{k:05d}.parquet" for k in range(2)]
+        f"replications/r{k:05d}.parquet" for k in range(3)]
     differ = sorted(k for k in a if a[k] != b[k])
     assert differ == ["timings.csv"]  # replications, flights, montecarlo.json: the same bytes
     # the timings are kept apart, and still read by the summary
     for out in (whole, cut):
         times = [r.elapsed_s for r in load_results(out)]
-        assert len(times) == 2 and all(t > 0 for t in times)
-        line = "time per replication in its worker (timings.csv, 2 replications): median"
+        assert len(times) == 3 and all(t > 0 for t in times)
+        line = "time per replication in its worker (timings.csv, 3 replications): median"
         assert line in summarize(out).text()
+
+
+#: installed in every Python process of a run the test interrupts or kills (the run, a fork server,
+#: the workers, however they start) as its sitecustomize: a replication other than those whose
+#: scratch folder's name holds one of FREE writes its scratch dataset, says so (a file ``held``
+#: there) and then waits inside its scratch folder until the run is stopped, so that the signal
+#: comes while the workers are in replications, whatever the machine's speed. The module is patched
+#: when a process imports it (a resource tracker, which never does, starts as fast as it would)
+_HOLD_REPLICATIONS = """
+import sys
+import time
+from importlib.abc import MetaPathFinder
+from importlib.machinery import PathFinder
+from pathlib import Path
+
+FREE = {free!r}
+NAME = "campaigns.montecarlo.replication"
+
+
+def hold(module):
+    real = module.write_scratch_dataset
+
+    def held(scenario, draws, truths, models, directory):
+        real(scenario, draws, truths, models, directory)
+        if not any(free in Path(directory).name for free in FREE):
+            (Path(directory) / "held").touch()
+            while True:
+                time.sleep(0.05)
+
+    module.write_scratch_dataset = held
+
+
+class Hook(MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name != NAME:
+            return None
+        spec = PathFinder.find_spec(name, path)
+        run = spec.loader.exec_module
+
+        def exec_module(module):
+            run(module)
+            hold(module)
+
+        spec.loader.exec_module = exec_module
+        return spec
+
+
+sys.meta_path.insert(0, Hook())
+"""
+
+
+def _holding_env(tmp_path: Path, free: tuple[str, ...], **env: str) -> dict[str, str]:
+    """The environment of a child run whose replications are held (:data:`_HOLD_REPLICATIONS`)."""
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(_HOLD_REPLICATIONS.format(free=free))
+    path = os.pathsep.join(p for p in (str(hook), os.environ.get("PYTHONPATH")) if p)
+    return dict(os.environ, PYTHONPATH=path, **env)
+
+
+def _wait_for(condition, child: subprocess.Popen, what: str, seconds: float = 120.0) -> None:
+    """Poll ``condition()`` until it holds; fail if the child ends first or after ``seconds``."""
+    deadline = time.monotonic() + seconds
+    while not condition():
+        assert child.poll() is None, ("the run ended before it could be stopped", child.communicate())
+        assert time.monotonic() < deadline, f"{what} within {seconds:.0f} s"
+        time.sleep(0.05)
 
 
 _RUN_IN_CHILD = """
@@ -234,16 +307,14 @@ def test_worker_processes_end_when_the_run_is_killed(tmp_path, short_tmp):
     out = tmp_path / "killed"
     tmp = short_tmp  # the system's temporary folder, for the run: nothing may leak there
     script = _RUN_IN_CHILD.format(here=str(HERE), tests=str(ROOT / "tests"), out=str(out))
+    # every replication is held in its scratch folder: both workers are inside one when it is killed
     child = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT,
-                             env=dict(os.environ, TMPDIR=str(tmp)))
+                             env=_holding_env(tmp_path, free=(), TMPDIR=str(tmp)))
+    workers: list[tuple[int, str]] = []
     try:
-        deadline = time.monotonic() + 120
-        workers: list[tuple[int, str]] = []
-        # the workers are busy with replications once the first one is written
-        while not (out / "replications").is_dir() or not any((out / "replications").glob("r*.parquet")):
-            assert child.poll() is None, "the run ended before it could be killed"
-            assert time.monotonic() < deadline, "no replication within 120 s"
-            time.sleep(0.2)
+        _wait_for(lambda: len(list((out / ".scratch").glob("r*/held"))) == 2, child,
+                  "the two workers were not in replications")
+        held = sorted(p.parent.name for p in (out / ".scratch").glob("r*/held"))
         # the workers (and under forkserver the server, their parent, and a resource tracker)
         workers = descendants(child.pid)
         assert len(workers) >= 2, workers
@@ -257,9 +328,10 @@ def test_worker_processes_end_when_the_run_is_killed(tmp_path, short_tmp):
     # (where only multiprocessing's own pymp-* folder of the fork server's socket may be left)
     assert list(tmp.glob("fpr-mc-*")) == []
     scratch = out / ".scratch"
-    assert all(replication.SCRATCH_NAME.fullmatch(p.name) for p in scratch.iterdir())
+    assert sorted(p.name for p in scratch.iterdir()) == held
+    assert all(replication.SCRATCH_NAME.fullmatch(name) for name in held)
     # the next run removes them (and nothing else there)
-    (scratch / "r00003-abcd_123" / "maneuvers").mkdir(parents=True)  # one more, for certain
+    (scratch / "r00003-abcd_123" / "maneuvers").mkdir(parents=True)  # one more, of a name it made
     (scratch / "r00007-mine").mkdir()
     run_montecarlo(_scenario(), out, replications=40, indices=[], workers=1)
     assert [p.name for p in scratch.iterdir()] == ["r00007-mine"]
@@ -428,27 +500,6 @@ def test_a_file_with_a_result_name_the_run_did_not_write_is_refused(run3, tmp_pa
     assert f"{rep / 'r00003.parquet'}: replication 0 of scenario hash" in err and "not replication 3" in err
 
 
-#: installed in every Python process of the interrupted run (the run, a fork server, the workers,
-#: however they start) as its sitecustomize: replications other than 0 wait inside their scratch
-#: directory until the run is interrupted, so that the Ctrl-C comes while they run, whatever the
-#: machine's speed
-_HOLD_REPLICATIONS = """
-import time
-from pathlib import Path
-from campaigns.montecarlo import replication
-real = replication.write_scratch_dataset
-
-def held(scenario, draws, truths, models, directory):
-    real(scenario, draws, truths, models, directory)
-    if "r00000-" not in Path(directory).name:
-        (Path(directory) / "held").touch()
-        while True:
-            time.sleep(0.05)
-
-replication.write_scratch_dataset = held
-"""
-
-
 @pytest.mark.slow
 @pytest.mark.skipif(not HAVE_PROC, reason="reads /proc")
 def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp_path, short_tmp, capsys):
@@ -457,24 +508,18 @@ def test_ctrl_c_stops_the_workers_cleanly_and_the_same_command_resumes(run3, tmp
     scratch = short_tmp
     args = ["montecarlo", str(toml), "--out", str(out), "--workers", "2", "--replications", "3",
             "--no-summary"]
-    hook = tmp_path / "hook"
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(_HOLD_REPLICATIONS)
-    path = os.pathsep.join(p for p in (str(hook), os.environ.get("PYTHONPATH")) if p)
+    # replication 0 runs to its end; 1 and 2 are held in their scratch folders until the Ctrl-C
+    env = _holding_env(tmp_path, free=("r00000-",), TMPDIR=str(scratch))
     # its own process group, as a terminal's foreground job: Ctrl-C goes to the run and its workers
-    child = subprocess.Popen([sys.executable, "-m", "campaigns.cli", *args], cwd=ROOT,
-                             env=dict(os.environ, TMPDIR=str(scratch), PYTHONPATH=path), process_group=0,
-                             preexec_fn=sigint_default, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                             text=True)
+    child = subprocess.Popen([sys.executable, "-m", "campaigns.cli", *args], cwd=ROOT, env=env,
+                             process_group=0, preexec_fn=sigint_default, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
     workers: list[tuple[int, str]] = []
     try:
-        deadline = time.monotonic() + 120
         # replication 0 written, both workers held inside a replication (1 and 2)
-        while not ((out / "replications" / "r00000.parquet").exists()
-                   and len(list((out / ".scratch").glob("r*/held"))) == 2):
-            assert child.poll() is None, child.communicate()
-            assert time.monotonic() < deadline, "the workers were not busy within 120 s"
-            time.sleep(0.1)
+        _wait_for(lambda: (out / "replications" / "r00000.parquet").exists()
+                  and len(list((out / ".scratch").glob("r*/held"))) == 2, child,
+                  "the workers were not busy")
         # the workers (and under forkserver the server, their parent, and a resource tracker)
         workers = descendants(child.pid)
         assert len(workers) >= 2, workers
