@@ -205,14 +205,16 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
                 k = ps.key_of(n, m, ch)
                 if k in index:
                     A[:, index[k]] += np.broadcast_to(d, y.shape)
+            samples = np.arange(y.size)
             for n, terms in dual.dtable.items():
+                # each breakpoint's column, -1 where it is not a free calibration parameter
+                col = np.array([index.get(ps.key_of(n, m, ch, e), -1)
+                                for e in range(tables[n].breakpoints.size)])
                 for idx, coef in terms:
-                    idx = np.broadcast_to(idx, y.shape)
-                    coef = np.broadcast_to(coef, y.shape)
-                    for e in np.unique(idx):
-                        k = ps.key_of(n, m, ch, int(e))
-                        if k in index:
-                            A[:, index[k]] += np.where(idx == e, coef, 0.0)
+                    # one breakpoint per sample and term: a sample's column gets its coefficient
+                    c = col[np.broadcast_to(idx, y.shape)]
+                    hit = c >= 0
+                    A[samples[hit], c[hit]] += np.broadcast_to(coef, y.shape)[hit]
             rows.append(A)
             rhs.append(r)
         A = np.vstack(rows)
