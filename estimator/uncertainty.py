@@ -211,20 +211,18 @@ class _ChunkMiddles:
             if not u.size:
                 continue
             Lk = int(lay.L_of[k])
+            middle = None
             if ar and self.held[k]:
                 items = sorted(self.held.pop(k), key=lambda it: it[0])
                 cov_u = _union_covariance(st, Sinv, Ainv, N, k, u)
-                Yk = _ar_factor(items, cov_u, u.size, int(lay.n_of[k]), Lk, problem.maneuvers[k].dt_s,
-                                opt.cross_channel)
-                norm = 1.0 / Lk
+                middle = _ar_middle(items, cov_u, u.size, int(lay.n_of[k]), Lk, problem.maneuvers[k].dt_s,
+                                    opt.cross_channel)
             elif k in self.Y:
-                Yk, norm = self.Y.pop(k)[:, :, None], 1.0 / (lay.n_of[k] * Lk)
-            else:
-                Yk = None
-            if Yk is not None:
-                Yk = Yk * np.sqrt(_one_sided_weights(Lk) * norm)[None, :, None]
+                Yk = self.Y.pop(k) * np.sqrt(_one_sided_weights(Lk) / (lay.n_of[k] * Lk))[None, :]
                 Yr = np.ascontiguousarray(Yk).view(np.float64).reshape(u.size, -1)
-                C.add_blocks((Yr @ Yr.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
+                middle = Yr @ Yr.T
+            if middle is not None:
+                C.add_blocks(middle[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
                              np.array([k]), 1.0)
             if k in self.B:
                 V = suffix_middle_factor(self.B.pop(k).transpose(1, 0, 2), self.dEq.pop(k))
@@ -399,10 +397,7 @@ def innovation_honest_std(N: NormalEquations, st: Structure, series: Callable[[i
             ep[rows] = e
             items.append((c, pos, sfft.rfft(Jp, axis=-1), sfft.rfft(ep), rows, e, 1.0))
         cov_u = _union_covariance(st, Sinv, Ainv, N, k, cols)
-        Yk = _ar_factor(items, cov_u, cols.size, n, Lk, float(dt_of[k]), cross_channel)
-        Yk = Yk * np.sqrt(_one_sided_weights(Lk) / Lk)[None, :, None]
-        Yr = np.ascontiguousarray(Yk).view(np.float64).reshape(cols.size, -1)
-        return k, cols, Yr @ Yr.T
+        return k, cols, _ar_middle(items, cov_u, cols.size, n, Lk, float(dt_of[k]), cross_channel)
 
     C = NormalEquations(st)
     for k, cols, Ck in map_fn(middle, range(len(n_of))):
@@ -438,9 +433,19 @@ def _union_covariance(st: Structure, Sinv: np.ndarray, Ainv: list[np.ndarray], N
     return out
 
 
+def _ar_middle(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: float, cross: bool
+               ) -> np.ndarray:
+    """One maneuver's coloured middle ``1/L sum_f w_f Re(Y_f Y_f^H)`` (U, U) from its channels'
+    spectra (:func:`_ar_factor`'s arguments; ``w_f`` the one-sided spectrum's weights)."""
+    Yf = _ar_factor(items, cov_u, nu, n, L, dt_s, cross)  # (nf, U, r), frequency-major
+    Yf *= np.sqrt(_one_sided_weights(L) / L)[:, None, None]
+    Yr = np.ascontiguousarray(Yf.transpose(1, 0, 2)).view(np.float64).reshape(nu, -1)
+    return Yr @ Yr.T
+
+
 def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: float, cross: bool
                ) -> np.ndarray:
-    """``Y_f`` (U, nf, r) of one maneuver from its channels' Jacobian spectra and autoregressive
+    """``Y_f`` (nf, U, r) of one maneuver from its channels' Jacobian spectra and autoregressive
     residual models (:func:`honest_std`, ``colored_spectrum = "ar"``).
 
     Each channel's residual periodogram is corrected for the fit's leverage ``h_c(f)`` (capped at
@@ -491,13 +496,16 @@ def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: fl
         Lam = _psd_factor(gam)  # (nf, Ct, Ct)
         for t, i in enumerate(together):
             factors[i, :, j:] = models[i].inverse_filter(L)[:, None] * Lam[:, t, :]
-    # Y_f = sum_i w_i F_i,f factors_i,f: each channel's spectra placed once, then one product per
-    # frequency (placing each channel's product with its factor costs the columns over again)
+    # Y_f = sum_i w_i F_i,f factors_i,f: each channel's spectra placed once (its own column of H),
+    # then one product per frequency (placing each channel's product with its factor costs the
+    # columns over again)
     H = np.zeros((nu, len(items), nf), dtype=complex)
     for i, (_, pos, F, _, _, _, w) in enumerate(items):
-        _scatter_add(H[:, i, :], pos, w * F)
-    Y = np.matmul(H.transpose(2, 0, 1), factors.transpose(1, 0, 2))  # (nf, U, r)
-    return Y.transpose(1, 0, 2)
+        if np.unique(pos).size == pos.size:
+            H[pos, i] = w * F
+        else:
+            np.add.at(H[:, i, :], pos, w * F)
+    return np.matmul(H.transpose(2, 0, 1), factors.transpose(1, 0, 2))
 
 
 def _psd_factor(gam: np.ndarray) -> np.ndarray:
