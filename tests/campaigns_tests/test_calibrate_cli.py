@@ -8,7 +8,10 @@ recover the injected IMU biases within three Cramér-Rao deviations.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -27,6 +30,18 @@ CAMPAIGN = linear_campaign("cli", 5, [
 @pytest.fixture(scope="module")
 def dataset(fly_once):
     return fly_once(CAMPAIGN, "cli")
+
+
+@pytest.fixture(scope="module")
+def dataset_run(dataset, tmp_path_factory):
+    """``fpr calibrate DATASET --single --free h0`` with its figures, once for the module:
+    ``(exit status, standard output, results folder)``. Shared: copy the folder before writing
+    into it. The figures take most of a run's time; the estimation itself is under a second."""
+    out = tmp_path_factory.mktemp("cli-dataset-run") / "res"
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        code = main(["calibrate", str(dataset), "--single", "--free", "h0", "--out", str(out)])
+    return code, buf.getvalue(), out
 
 
 def _write_user_files(ds_dir, tmp_path):
@@ -71,10 +86,8 @@ def test_calibrate_a_problem_file_of_user_data(dataset, tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_calibrate_a_dataset_writes_the_recovery_table(dataset, tmp_path, capsys):
-    out = tmp_path / "res"
-    code = main(["calibrate", str(dataset), "--single", "--free", "h0", "--out", str(out)])
-    text = capsys.readouterr().out
+def test_calibrate_a_dataset_writes_the_recovery_table(dataset_run):
+    code, text, out = dataset_run
     # a pitch doublet and a pull-up with rudder doublets: nothing separates the sideslip sensors'
     # biases from each maneuver's initial sideslip but kinematic couplings; the verdict says so
     assert code == EXIT_STATUS["SUCCESS_WITH_WARNINGS"], text
@@ -94,16 +107,25 @@ def test_calibrate_says_what_is_wrong_with_a_missing_file(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_calibrate_never_mixes_results_of_two_runs(dataset, tmp_path, capsys):
+def test_calibrate_never_mixes_results_of_two_runs(dataset, dataset_run, tmp_path, capsys):
+    # the first run: the module's run with its figures, copied (its listing, .fpr-written.json,
+    # with it: the folder is exactly what that run left)
+    first_code, _, first = dataset_run
+    assert first_code in (0, 3)
     out = tmp_path / "res"
-    assert main(["calibrate", str(dataset), "--single", "--out", str(out), "--no-colored"]) in (0, 3)
-    assert (out / "recovery.csv").exists()
+    shutil.copytree(first, out)
+    assert (out / "recovery.csv").exists() and (out / "time_history_match.png").exists()
     # a second run into the same directory must be asked for, and then replaces everything
     assert main(["calibrate", str(dataset), "--single", "--out", str(out), "--no-plots"]) == 2
     assert "--overwrite" in capsys.readouterr().err
-    again = ["calibrate", str(dataset), "--single", "--out", str(out), "--no-plots", "--overwrite"]
+    again = ["calibrate", str(dataset), "--single", "--out", str(out), "--no-plots", "--overwrite",
+             "--no-colored"]
     assert main(again) in (0, 3)  # a success: with or without warnings
     assert not (out / "time_history_match.png").exists(), "a stale figure survived"
+    # the tables are the second run's: h0 was free in the first run only
+    params = pd.read_csv(out / "parameters.csv", index_col="key")
+    assert not params.loc[params["name"] == "h0", "free"].any(), "a stale parameters.csv survived"
+    assert (out / "recovery.csv").exists()
     # a directory holding anything else is never touched
     other = tmp_path / "mine"
     other.mkdir()

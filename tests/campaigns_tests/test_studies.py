@@ -4,6 +4,7 @@ table and plot. The full studies are benchmarks (campaigns/studies/results/), no
 
 from __future__ import annotations
 
+import dataclasses
 import re
 
 import pytest
@@ -28,18 +29,37 @@ def _check_outputs(directory, stem: str, command: str) -> str:
     return text
 
 
-def test_shss_segments_tiny(tmp_path):
+def _keep_metrics(monkeypatch, study) -> list:
+    """The metrics the study's own analysis computes (its module's ``collect``), kept for the test:
+    what the report and plot were made from, without reading every run a second time."""
+    kept = []
+    collect = study.collect
+
+    def keep(*args, **kwargs):
+        kept.append(collect(*args, **kwargs))
+        return kept[-1]
+
+    monkeypatch.setattr(study, "collect", keep)
+    return kept
+
+
+def test_shss_segments_tiny(tmp_path, monkeypatch):
+    from campaigns.studies import scaffold
     from campaigns.studies import shss_segments as study
 
+    kept = _keep_metrics(monkeypatch, study)
     out, results = tmp_path / "work", tmp_path / "results"
-    assert study.main(["--out", str(out), "--results", str(results), "--size", "tiny", "--workers", "1"]) == 0
+    argv = ["--out", str(out), "--results", str(results), "--size", "tiny", "--workers", "1"]
+    assert study.main(argv) == 0
     text = _check_outputs(results, "shss_segments", "--size tiny")
     config = study.SIZES["tiny"]
     for v in config.variants:  # every variant ran, fitted, and is in the table
         assert (out / "runs" / v.name / "replications" / "r00000.parquet").exists()
         assert re.search(rf"{re.escape(v.label)}\s+1/1\s+0\s", text), v.label
     # the reference split is 1x relative to itself; the bounds of both splits are finite
-    metrics = study.collect(config, out, 1)
+    assert kept
+    metrics = kept[-1]
+    assert set(metrics) == set(config.variants)
     names = study.parameter_names(metrics)[1]
     ref = config.variants[-1]
     assert ref.pieces == config.reference_pieces and names
@@ -48,19 +68,28 @@ def test_shss_segments_tiny(tmp_path):
     assert 0.2 < long < 5.0
     for m in metrics.values():
         assert 0.0 < m.accuracy("beta_zsp") < 1.0  # calm air: the side-probe AOSS within its 1 deg
-    # the same command again resumes: nothing is recomputed, the table is rebuilt
+    # the same command again resumes: nothing is recomputed, the table is rebuilt. The figure is
+    # the first run's subject (checked above), not the resumption's: this invocation draws none
     mtime = (out / "runs" / ref.name / "replications" / "r00000.parquet").stat().st_mtime_ns
-    assert study.main(["--out", str(out), "--results", str(results), "--size", "tiny", "--workers", "1"]) == 0
+    no_figure = dataclasses.replace(study.STUDY_SPEC, plot=lambda analysis, config, path, n: path)
+    assert scaffold.main(no_figure, argv) == 0
     assert (out / "runs" / ref.name / "replications" / "r00000.parquet").stat().st_mtime_ns == mtime
+    again = (results / "shss_segments.txt").read_text()
+    assert re.search(r"^this invocation: .*, 0 replications computed;", again, re.M), again[:2000]
+    assert "over 2 invocations (resumed)" in again
+    assert f"{len(config.variants)} replications in all" in again
+    assert all(re.search(rf"{re.escape(v.label)}\s+1/1\s+0\s", again) for v in config.variants)
 
 
-def test_maneuvers_per_bin_tiny(tmp_path):
+def test_maneuvers_per_bin_tiny(tmp_path, monkeypatch):
     from campaigns.studies import maneuvers_per_bin as study
 
+    kept = _keep_metrics(monkeypatch, study)
     assert study.main(["--out", str(tmp_path), "--size", "tiny", "--workers", "1"]) == 0
     text = _check_outputs(tmp_path, "maneuvers_per_bin", "--size tiny")
     config = study.SIZES["tiny"]
-    metrics = study.collect(config, tmp_path, 1)
+    assert kept
+    metrics = kept[-1]
     sets = config.sets
     assert [s.n for s in sets] == list(config.counts)
     for s in sets:

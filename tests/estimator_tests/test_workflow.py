@@ -164,16 +164,26 @@ def test_tejas_declarations_reach_the_workflow_through_the_channels():
 
 @pytest.fixture(scope="module")
 def small_workflow(tiny_dataset):
-    """The workflow on the shared tiny campaign (one Mach bin of four maneuvers, two aircraft)."""
+    """The workflow on the shared tiny campaign (one Mach bin of four maneuvers, two aircraft).
+
+    The tests here are about the result's structure (immutability, the JSON round trip, the report's
+    captions), not the estimates' accuracy: the Gauss-Newton iterations stop once a step predicts
+    less than 0.1 log-likelihood units instead of the default 0.001 (a chi-square change of 0.2: the
+    step left is at most sqrt(0.2) = 0.45 Cramér-Rao deviations in any direction). On this small
+    problem the default creeps ~80 iterations along the weakly determined initial conditions; 0.1
+    takes ~20, with the same verdicts and every table filled (asserted below)."""
     import warnings
 
     from estimator.io import problem_from_dataset
+    from estimator.options import SolverOptions, WorkflowOptions
     from estimator.workflow import run_workflow
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the boom channels have no data in the tiny campaign
         problem = problem_from_dataset(tiny_dataset)
-    wf = run_workflow(problem)
+    wf = run_workflow(problem, WorkflowOptions(solver=SolverOptions(decrease_tol=0.1)))
+    # every stage a success: Table 2, the installation biases and the figures rest on them
+    assert wf.stages and all(st.result.success for st in wf.stages), [st.result.verdict for st in wf.stages]
     assert wf.final and len(wf.installation) and len(wf.accuracy) and wf.notes  # every part filled
     return problem, wf
 
@@ -326,6 +336,11 @@ def test_fig7_says_why_there_is_no_usable_alpha_range(small_workflow, tmp_path):
 
     problem, wf = small_workflow
     g = wf.alpha_limit_growth
+    # the caption is the subject, not the other figures: the model set's [report] cross-plots
+    # (Fig. 5) and time history (Fig. 3) are declared empty, so each report draws Figs. 4 and 7 only
+    # (Fig. 7 rests on the alpha-limit channel and the growth table, neither of them changed)
+    wf = replace(wf, declarations=replace(wf.declarations, crossplots=(), time_history=()))
+    assert wf.declarations.alpha_limit_channel in wf.final[0].residuals
     captions = {}
     for case, growth, limit in (
             ("limit", g.assign(passed=True), 12.0),
