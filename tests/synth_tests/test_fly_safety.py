@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from _processes import HAVE_PROC, alive, descendants, sigint_default
+from _processes import HAVE_PROC, descendants, left_after, reap, sigint_default
 
 from campaigns.cli import main
 from estimator.io.errors import DataError
@@ -22,15 +22,16 @@ from synth.dataset import MANIFEST, IncompleteDatasetError, load_dataset, prepar
 
 REPO = Path(__file__).resolve().parents[2]
 
-#: one short maneuver per job; 7 configurations x 3 Mach numbers: enough jobs that a run killed
-#: at its first file is far from done, few enough to fly in seconds
+#: one short maneuver per job, three jobs: in the killed run the first is written by a worker held
+#: before its result reaches the run, the second held halfway through its write, the third not
+#: started (:data:`_HOLD_WRITES`); the resume flies the last two
 KILL_CAMPAIGN = """\
 name = "kill-test"
 seed = 17
 [errors]
 preset = "typical"
 [[flights]]
-configurations = "all"
+configurations = ["PV1-NP"]
 mach = [0.45, 0.55, 0.65]
 maneuvers = ["pitch_doublet"]
 [flights.maneuver]
@@ -157,21 +158,27 @@ def test_fly_and_show_help_point_only_at_things_that_exist(capsys):
 
 
 @pytest.mark.slow
-def test_show_into_a_closed_pipe_ends_quietly(tmp_path):
-    out = tmp_path / "ds"
-    _fly_tiny(out)
-    for dataset in (out, tmp_path / "missing"):  # output, or an error message (to stderr)
-        read, write = os.pipe()
-        os.close(read)  # `fpr show DIR | head` after head has gone: every write fails
-        try:
-            proc = subprocess.run([sys.executable, "-m", "campaigns.cli", "show", str(dataset)], cwd=REPO,
-                                  stdout=write, stderr=subprocess.PIPE, text=True, timeout=120)
-        finally:
+def test_show_into_a_closed_pipe_ends_quietly(kill_campaign, tmp_path):
+    _, out, _ = kill_campaign  # a complete dataset, only read
+    procs, writes = [], []
+    try:
+        for dataset in (out, tmp_path / "missing"):  # output, or an error message (to stderr)
+            read, write = os.pipe()
+            os.close(read)  # `fpr show DIR | head` after head has gone: every write fails
+            writes.append(write)
+            # the two runs at once: each is mostly Python's start and the imports
+            procs.append(subprocess.Popen([sys.executable, "-m", "campaigns.cli", "show", str(dataset)],
+                                          cwd=REPO, stdout=write, stderr=subprocess.PIPE, text=True))
+        (shown, shown_err), (missing, missing_err) = ((p, p.communicate(timeout=120)[1]) for p in procs)
+    finally:
+        for write in writes:
             os.close(write)
-        if dataset == out:
-            assert proc.returncode == 141 and proc.stderr == "", proc.stderr
-        else:
-            assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    assert shown.returncode == 141 and shown_err == "", shown_err
+    assert missing.returncode == 2 and "Traceback" not in missing_err, missing_err
 
 
 # ------------------------------------------------------------------------ incomplete datasets
@@ -280,14 +287,75 @@ def test_resume_refuses_a_maneuvers_folder_that_is_a_link_or_a_file(tmp_path, ca
 
 
 # ---------------------------------------------------------- killed runs: resume, no orphans
+#: installed as sitecustomize in every Python process of the run the test kills (the run, the fork
+#: server, the workers, however they start): writing m0000.parquet, a worker writes it whole and
+#: then waits before its result reaches the run; writing m0001.parquet, it writes half of it to a
+#: temporary file as ``atomic_write_bytes`` names it (``.NAME.RANDOM.tmp``) and waits. Each says
+#: so (a file of that name in HELD). So the signal comes while both workers are inside jobs, each
+#: after one flight, with a whole file the run has not heard of and a half-written one, whatever
+#: the machine's speed. The module is patched when a process imports it (a resource tracker, which
+#: never does, starts as fast as it would).
+_HOLD_WRITES = """
+import os
+import sys
+import tempfile
+import time
+from importlib.abc import MetaPathFinder
+from importlib.machinery import PathFinder
+from pathlib import Path
+
+HELD = Path({held!r})
+NAME = "synth.dataset"
+
+
+def hold(module):
+    real = module.atomic_write_bytes
+
+    def held(path, payload):
+        path = Path(path)
+        if path.name == "m0000.parquet":
+            real(path, payload)
+        elif path.name == "m0001.parquet":
+            fd, _ = tempfile.mkstemp(dir=path.parent, prefix=f".{{path.name}}.", suffix=".tmp")
+            os.write(fd, payload[: len(payload) // 2])
+        else:
+            return real(path, payload)
+        (HELD / path.name).touch()
+        while True:
+            time.sleep(0.05)
+
+    module.atomic_write_bytes = held
+
+
+class Hook(MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name != NAME:
+            return None
+        spec = PathFinder.find_spec(name, path)
+        run = spec.loader.exec_module
+
+        def exec_module(module):
+            run(module)
+            hold(module)
+
+        spec.loader.exec_module = exec_module
+        return spec
+
+
+sys.meta_path.insert(0, Hook())
+"""
+
+
 @pytest.fixture(scope="module")
 def kill_campaign(tmp_path_factory):
+    """The kill test's campaign file, and its dataset flown uninterrupted by a pool, as the killed
+    run flies (its folder, its files); shared: copy the folder before editing it."""
     base = tmp_path_factory.mktemp("kill")
     toml = base / "kill.toml"
     toml.write_text(KILL_CAMPAIGN)
     ref = base / "reference"
     assert main(["fly", str(toml), "--out", str(ref), "--workers", "2"]) == 0
-    return toml, _files(ref)
+    return toml, ref, _files(ref)
 
 
 @pytest.mark.slow
@@ -295,22 +363,29 @@ def kill_campaign(tmp_path_factory):
 @pytest.mark.parametrize("how", ["SIGINT", "SIGKILL"])
 def test_a_killed_fly_leaves_no_worker_and_resumes_to_the_same_bytes(kill_campaign, tmp_path, short_tmp, how,
                                                                      capsys):
-    toml, reference = kill_campaign
+    toml, _, reference = kill_campaign
     out = tmp_path / "ds"
     log_out, log_err = tmp_path / "stdout.txt", tmp_path / "stderr.txt"
+    hook, held = tmp_path / "hook", tmp_path / "held"
+    hook.mkdir()
+    held.mkdir()
+    (hook / "sitecustomize.py").write_text(_HOLD_WRITES.format(held=str(held)))
+    pythonpath = os.pathsep.join(p for p in (str(hook), os.environ.get("PYTHONPATH")) if p)
     with open(log_out, "w") as fo, open(log_err, "w") as fe:
         proc = subprocess.Popen(
             [sys.executable, "-m", "campaigns.cli", "fly", str(toml), "--out", str(out), "--workers", "2"],
             stdout=fo, stderr=fe, cwd=REPO, start_new_session=True, preexec_fn=sigint_default,
             # multiprocessing's own folder (the fork server's socket), which a killed parent leaves
-            env=dict(os.environ, TMPDIR=str(short_tmp)))
+            env=dict(os.environ, TMPDIR=str(short_tmp), PYTHONPATH=pythonpath))
+    workers = []
     try:
-        # wait for the first maneuver file (bounded: a stuck start fails instead of hanging)
+        # wait until both workers are held inside their jobs (bounded: a stuck start fails
+        # instead of hanging)
         deadline = time.monotonic() + 120.0
-        while not (out / "maneuvers").is_dir() or not any((out / "maneuvers").glob("m*.parquet")):
+        while not ((held / "m0000.parquet").exists() and (held / "m0001.parquet").exists()):
             assert proc.poll() is None, f"fpr fly ended early: {log_err.read_text()}"
-            assert time.monotonic() < deadline, "no maneuver file within 120 s"
-            time.sleep(0.01)
+            assert time.monotonic() < deadline, "the workers not held within 120 s"
+            time.sleep(0.05)
         # the workers, and under forkserver the server (their parent) and a resource tracker
         workers = descendants(proc.pid)
         assert len(workers) >= 2, workers
@@ -320,28 +395,34 @@ def test_a_killed_fly_leaves_no_worker_and_resumes_to_the_same_bytes(kill_campai
             os.kill(proc.pid, signal.SIGKILL)  # the parent alone
         code = proc.wait(timeout=60)
     finally:
-        if proc.poll() is None:
-            proc.kill()
+        if proc.poll() is None:  # failed before the run ended: end it and its held workers
+            reap(proc, workers)
     # no worker outlives its parent by more than 5 s (the issue's bound)
-    deadline = time.monotonic() + 5.0
-    while any(alive(w) for w in workers) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert not [w for w in workers if alive(w)], "orphaned worker processes"
+    orphans = left_after(workers, 5.0)
+    reap(proc, orphans)  # a held worker left would wait forever
+    assert not orphans, "orphaned worker processes"
     err = log_err.read_text()
+    temporary = sorted(p.name for p in (out / "maneuvers").glob(".m0001.parquet.*.tmp"))
     if how == "SIGINT":
         assert code == 130, err
         assert "interrupted:" in err and f"fpr fly --resume --out {out}" in err
         assert "Traceback" not in err
+        assert temporary == [], "the interrupted run left its half-written file"
     else:
         assert code == -signal.SIGKILL
-    # the dataset says it is incomplete, and how to complete it
+        assert len(temporary) == 1, temporary  # what the resume must clear
+    # the dataset says it is incomplete, and how to complete it; the whole file counts, though the
+    # run never heard of it
     assert json.loads((out / MANIFEST).read_text())["complete"] is False
     assert main(["show", str(out)]) == 1
     shown = capsys.readouterr().out
     assert "INCOMPLETE" in shown and f"fpr fly --resume --out {out}" in shown
-    assert f"of {len(reference) - 1} maneuvers written" in shown
-    # resumed, it is byte for byte the uninterrupted run (no stray temporary file either)
-    assert main(["fly", "--resume", "--out", str(out), "--workers", "2"]) == 0
+    assert f"1 of {len(reference) - 1} maneuvers written" in shown
+    # resumed, it is byte for byte the uninterrupted run (no stray temporary file either): the
+    # killed run's file kept, the others flown again. In this process: workers change only how fast
+    # it flies (the reference and the kept file come from pools), and a new pool's workers would
+    # import everything anew
+    assert main(["fly", "--resume", "--out", str(out), "--workers", "1"]) == 0
     got = _files(out)
     assert sorted(got) == sorted(reference)
     assert [k for k in reference if got[k] != reference[k]] == []

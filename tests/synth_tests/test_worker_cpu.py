@@ -17,8 +17,11 @@ import pytest
 from synth import workers
 from synth.workers import peak_rss_mib, worker_pool, workers_cpu_s, workers_peak_rss_mib
 
-#: CPU seconds each task burns
-BUSY_S = 0.5
+#: CPU seconds each task burns: a count that misses the workers falls short by at least twice this
+BUSY_S = 0.1
+#: ... in the test that a count takes each worker once: twice would overshoot by the workers' CPU,
+#: at least 2 x ONCE_BUSY_S, which must stand well clear of that test's tolerance (0.25 s and 10 %)
+ONCE_BUSY_S = 0.25
 METHODS = [m for m in ("forkserver", "fork", "spawn") if m in multiprocessing.get_all_start_methods()]
 #: MiB a task allocates and touches
 ALLOC_MIB = 200
@@ -139,7 +142,7 @@ def test_children_and_workers_together_count_each_worker_once(method, monkeypatc
 
     before, all_before = total(), workers_cpu_s()
     with worker_pool(2) as pool:
-        measured = sum(pool.map(_busy, [BUSY_S, BUSY_S]))
+        measured = sum(pool.map(_busy, [ONCE_BUSY_S, ONCE_BUSY_S]))
     counted = total() - before
     workers_s = workers_cpu_s() - all_before  # every worker's own report, start-up included
     assert measured <= counted + 0.05, f"{method}: counted {counted:.2f} s < the tasks' {measured:.2f} s"
