@@ -510,8 +510,9 @@ def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: fl
 
 def _psd_factor(gam: np.ndarray) -> np.ndarray:
     """``Lam`` with ``Lam Lam^H = gam`` per frequency (``gam`` (nf, C, C) positive semi-definite):
-    the Cholesky factor, or where a frequency's matrix is singular (fewer smoothed bins than
-    channels), the eigenvectors scaled by the square roots of the eigenvalues clipped at zero."""
+    the Cholesky factors, or, should one frequency's matrix be singular (fewer smoothed bins than
+    channels), at every frequency the eigenvectors scaled by the square roots of the eigenvalues
+    clipped at zero (the same product; which factor does not change the middle)."""
     try:
         return np.linalg.cholesky(gam)
     except np.linalg.LinAlgError:
