@@ -82,3 +82,45 @@ def sigint_default() -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+#: A sitecustomize that calls ``hold(module)`` (defined in the source it is given) on the module
+#: ``NAME`` right after any process of the run imports it: the run, a fork server, the workers,
+#: however they start; a process that never imports it (a resource tracker) starts as fast as it
+#: would.
+_PATCH_ON_IMPORT = """
+import sys
+from importlib.abc import MetaPathFinder
+from importlib.machinery import PathFinder
+
+NAME = {name!r}
+
+{hold}
+
+class Hook(MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name != NAME:
+            return None
+        spec = PathFinder.find_spec(name, path)
+        run = spec.loader.exec_module
+
+        def exec_module(module):
+            run(module)
+            hold(module)
+
+        spec.loader.exec_module = exec_module
+        return spec
+
+
+sys.meta_path.insert(0, Hook())
+"""
+
+
+def patched_on_import_env(folder: Path, module: str, hold_source: str, **env: str) -> dict[str, str]:
+    """The environment of a child process whose every Python process patches ``module`` on import
+    with the function ``hold(module)`` that ``hold_source`` defines (its imports included): a
+    sitecustomize written into ``folder`` (created) and put first on PYTHONPATH; ``env`` added."""
+    folder.mkdir()
+    (folder / "sitecustomize.py").write_text(_PATCH_ON_IMPORT.format(name=module, hold=hold_source))
+    path = os.pathsep.join(p for p in (str(folder), os.environ.get("PYTHONPATH")) if p)
+    return dict(os.environ, **env, PYTHONPATH=path)

@@ -34,7 +34,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _processes import HAVE_PROC, descendants, ignores, left_after, reap, sigint_default
+from _processes import (
+    HAVE_PROC,
+    descendants,
+    ignores,
+    left_after,
+    patched_on_import_env,
+    reap,
+    sigint_default,
+)
 from test_montecarlo import SCENARIO_TOML, _scenario
 
 from campaigns import montecarlo_cli
@@ -225,21 +233,16 @@ def test_an_interrupted_run_resumed_ends_byte_identical_to_an_uninterrupted_one(
         assert line in summarize(out).text()
 
 
-#: installed in every Python process of a run the test interrupts or kills (the run, a fork server,
-#: the workers, however they start) as its sitecustomize: a replication other than those whose
-#: scratch folder's name holds one of FREE writes its scratch dataset, says so (a file ``held``
-#: there) and then waits inside its scratch folder until the run is stopped, so that the signal
-#: comes while the workers are in replications, whatever the machine's speed. The module is patched
-#: when a process imports it (a resource tracker, which never does, starts as fast as it would)
+#: ``hold`` of the sitecustomize (:func:`_processes.patched_on_import_env`) of a run the test
+#: interrupts or kills: a replication other than those whose scratch folder's name holds one of
+#: FREE writes its scratch dataset, says so (a file ``held`` there) and then waits inside its
+#: scratch folder until the run is stopped, so that the signal comes while the workers are in
+#: replications, whatever the machine's speed
 _HOLD_REPLICATIONS = """
-import sys
 import time
-from importlib.abc import MetaPathFinder
-from importlib.machinery import PathFinder
 from pathlib import Path
 
 FREE = {free!r}
-NAME = "campaigns.montecarlo.replication"
 
 
 def hold(module):
@@ -253,34 +256,13 @@ def hold(module):
                 time.sleep(0.05)
 
     module.write_scratch_dataset = held
-
-
-class Hook(MetaPathFinder):
-    def find_spec(self, name, path, target=None):
-        if name != NAME:
-            return None
-        spec = PathFinder.find_spec(name, path)
-        run = spec.loader.exec_module
-
-        def exec_module(module):
-            run(module)
-            hold(module)
-
-        spec.loader.exec_module = exec_module
-        return spec
-
-
-sys.meta_path.insert(0, Hook())
 """
 
 
 def _holding_env(tmp_path: Path, free: tuple[str, ...], **env: str) -> dict[str, str]:
     """The environment of a child run whose replications are held (:data:`_HOLD_REPLICATIONS`)."""
-    hook = tmp_path / "hook"
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(_HOLD_REPLICATIONS.format(free=free))
-    path = os.pathsep.join(p for p in (str(hook), os.environ.get("PYTHONPATH")) if p)
-    return dict(os.environ, PYTHONPATH=path, **env)
+    return patched_on_import_env(tmp_path / "hook", "campaigns.montecarlo.replication",
+                                 _HOLD_REPLICATIONS.format(free=free), **env)
 
 
 def _wait_for(condition, child: subprocess.Popen, what: str, seconds: float = 120.0) -> None:

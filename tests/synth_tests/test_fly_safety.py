@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from _processes import HAVE_PROC, descendants, left_after, reap, sigint_default
+from _processes import HAVE_PROC, descendants, left_after, patched_on_import_env, reap, sigint_default
 
 from campaigns.cli import main
 from estimator.io.errors import DataError
@@ -287,25 +287,19 @@ def test_resume_refuses_a_maneuvers_folder_that_is_a_link_or_a_file(tmp_path, ca
 
 
 # ---------------------------------------------------------- killed runs: resume, no orphans
-#: installed as sitecustomize in every Python process of the run the test kills (the run, the fork
-#: server, the workers, however they start): writing m0000.parquet, a worker writes it whole and
-#: then waits before its result reaches the run; writing m0001.parquet, it writes half of it to a
-#: temporary file as ``atomic_write_bytes`` names it (``.NAME.RANDOM.tmp``) and waits. Each says
-#: so (a file of that name in HELD). So the signal comes while both workers are inside jobs, each
-#: after one flight, with a whole file the run has not heard of and a half-written one, whatever
-#: the machine's speed. The module is patched when a process imports it (a resource tracker, which
-#: never does, starts as fast as it would).
+#: ``hold`` of the sitecustomize (:func:`_processes.patched_on_import_env`) of the run the test
+#: kills: writing m0000.parquet, a worker writes it whole and then waits before its result reaches
+#: the run; writing m0001.parquet, it writes half of it to a temporary file as
+#: ``atomic_write_bytes`` names it (``.NAME.RANDOM.tmp``) and waits. Each says so (a file of that
+#: name in HELD). So the signal comes while both workers are inside jobs, each after one flight,
+#: with a whole file the run has not heard of and a half-written one, whatever the machine's speed.
 _HOLD_WRITES = """
 import os
-import sys
 import tempfile
 import time
-from importlib.abc import MetaPathFinder
-from importlib.machinery import PathFinder
 from pathlib import Path
 
 HELD = Path({held!r})
-NAME = "synth.dataset"
 
 
 def hold(module):
@@ -325,24 +319,6 @@ def hold(module):
             time.sleep(0.05)
 
     module.atomic_write_bytes = held
-
-
-class Hook(MetaPathFinder):
-    def find_spec(self, name, path, target=None):
-        if name != NAME:
-            return None
-        spec = PathFinder.find_spec(name, path)
-        run = spec.loader.exec_module
-
-        def exec_module(module):
-            run(module)
-            hold(module)
-
-        spec.loader.exec_module = exec_module
-        return spec
-
-
-sys.meta_path.insert(0, Hook())
 """
 
 
@@ -366,17 +342,16 @@ def test_a_killed_fly_leaves_no_worker_and_resumes_to_the_same_bytes(kill_campai
     toml, _, reference = kill_campaign
     out = tmp_path / "ds"
     log_out, log_err = tmp_path / "stdout.txt", tmp_path / "stderr.txt"
-    hook, held = tmp_path / "hook", tmp_path / "held"
-    hook.mkdir()
+    held = tmp_path / "held"
     held.mkdir()
-    (hook / "sitecustomize.py").write_text(_HOLD_WRITES.format(held=str(held)))
-    pythonpath = os.pathsep.join(p for p in (str(hook), os.environ.get("PYTHONPATH")) if p)
+    # multiprocessing's own folder (the fork server's socket), which a killed parent leaves
+    env = patched_on_import_env(tmp_path / "hook", "synth.dataset", _HOLD_WRITES.format(held=str(held)),
+                                TMPDIR=str(short_tmp))
     with open(log_out, "w") as fo, open(log_err, "w") as fe:
         proc = subprocess.Popen(
             [sys.executable, "-m", "campaigns.cli", "fly", str(toml), "--out", str(out), "--workers", "2"],
             stdout=fo, stderr=fe, cwd=REPO, start_new_session=True, preexec_fn=sigint_default,
-            # multiprocessing's own folder (the fork server's socket), which a killed parent leaves
-            env=dict(os.environ, TMPDIR=str(short_tmp), PYTHONPATH=pythonpath))
+            env=env)
     workers = []
     try:
         # wait until both workers are held inside their jobs (bounded: a stuck start fails
