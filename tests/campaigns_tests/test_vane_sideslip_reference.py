@@ -5,10 +5,10 @@ different biases leave an error antisymmetric between them and linear in alpha, 
 vane model (one f1, constant biases) can only put into ``f2(alpha) * beta_s`` by moving the
 sideslip of every sensor. With the wind as states (filter error) the kinematic sideslip reference
 is weak and the sideslip offsets then come out far off: with small deviations (a wrong result
-that looks right), or, as the filter-error iterations run now, without converging. With ``c_vb`` free the vanes no longer fix the common sideslip offset;
-the kinematics do, and the deviations say how well. Here JSBSim flies PT1 in calm air with the
-vanes' installation biases as the only deterministic error; the filter error method runs with wind
-states forced (1 m/s).
+that looks right), or, as the filter-error iterations run now, without converging. With ``c_vb``
+free the vanes no longer fix the common sideslip offset; the kinematics do, and the deviations say
+how well. Here JSBSim flies PT1 in calm air with the vanes' installation biases as the only
+deterministic error; the filter error method runs with wind states forced (1 m/s).
 """
 
 from __future__ import annotations
@@ -70,11 +70,10 @@ def test_the_vanes_sideslip_reference_keeps_the_sideslip_offsets_honest(dataset)
 
 def test_without_it_the_offsets_are_wrong_and_do_not_look_right(dataset):
     # the paper's vane model (c_vb held at 0): the reason c_vb exists. Measured: every offset
-    # 0.18-0.19 deg off (2.9-3.0 honest deviations of 0.062 deg), where c_vb free gives 0.1
-    # (0.01 deg off, deviations 0.11 deg: what the kinematics hold); the iterations linearised at
-    # each iterate do not settle (the iteration limit: a FAILURE), the estimate 9 deviations from
-    # the held linearisation's optimum. Each offset must be wrong, and say so: beyond 3 honest
-    # deviations, or in a result that is not a success.
+    # 0.18-0.19 deg off, where c_vb free gives 0.1 honest deviations (0.01 deg off, deviations
+    # 0.11 deg: what the kinematics hold); the iterations, linearised at each iterate once the
+    # noise statistics are held, do not settle (the iteration limit: a FAILURE). Each offset must
+    # be wrong, and say so: beyond 3 honest deviations, or in a result that is a FAILURE.
     rt, res = _recovery(dataset, overrides={"c_vb": {"free": False}})
     err = rt.loc[list(OFFSETS), "error_display"].abs()
     assert (err > 0.05).all(), err
