@@ -4,7 +4,7 @@
 - :func:`near_bounds` — estimates within :data:`NEAR_BOUND_DEVIATIONS` deviations of a bound;
 - :func:`not_invertible` — a flow channel whose estimated calibration cannot be applied
   (:data:`MIN_CALIBRATION_SLOPE`);
-- :func:`unsettled` — an estimate that depends on where the likelihood is linearised (the
+- :func:`unsettled` — an estimate a fresh linearisation of the likelihood still moves (the
   filter-error method's wind sensitivities);
 - :func:`widened_said` — a delay near its bound whose deviation the feedback check widened is said
   by that note;
@@ -158,11 +158,9 @@ def not_invertible(problem: Problem, evals: Evaluation, st: Structure) -> list[F
 
 def unsettled(move: np.ndarray | None, std: np.ndarray, problem: Problem,
                std_honest: np.ndarray | None = None) -> list[Finding]:
-    """The filter-error method's estimate, linearised at itself, lies more than a deviation from
-    the optimum of the held linearisation of the wind sensitivities (``move``, SI;
-    :meth:`estimator.filter_error.FilterErrorLikelihood.after_iterations`; nothing otherwise):
-    the estimate depends on where the filter is linearised. A warning where a calibration parameter
-    moved, a note
+    """The filter-error method's last fresh linearisation of the wind sensitivities
+    (:meth:`estimator.filter_error.FilterErrorLikelihood.refresh`) still moved the estimate by more
+    than a deviation (nothing otherwise): a warning where it moved a calibration parameter, a note
     where only the maneuvers' own parameters moved (their initial conditions, steady winds and IMU
     biases: what describes the flight, not the calibration; the demo's turbulent block, 9.3
     deviations on one maneuver's initial velocities and steady wind)."""
@@ -187,10 +185,10 @@ def unsettled(move: np.ndarray | None, std: np.ndarray, problem: Problem,
             "maneuvers' own (initial conditions, steady winds, IMU biases)")
     return [Finding(
         "unsettled", Severity.WARNING if calibration else Severity.NOTE,
-        f"filter-error method: the estimate depends on where the wind sensitivities are linearised: "
-        f"linearised at itself it lies up to {z.max():.1f} Cramér-Rao deviations from the optimum "
-        f"of the linearisation held with the noise statistics ({', '.join(worst)}), and is "
-        f"uncertain by about that much beyond its deviations{what}",
+        f"filter-error method: with the noise statistics held, each fresh linearisation of the wind "
+        f"sensitivities still moves the estimate, the last by up to {z.max():.1f} Cramér-Rao "
+        f"deviations ({', '.join(worst)}): the estimate is the optimum of the last linearisation, "
+        f"and uncertain by about that much beyond its deviations{what}",
         "look for a model-structure error the wind states partly take up (a scale factor or table "
         "the model set lacks: fit the calm maneuvers by output error and read its diagnostics)"
         if calibration else "",

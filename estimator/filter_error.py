@@ -71,9 +71,8 @@ scaled to the measurement noise, ``nu sqrt(R / s)`` (:meth:`FilterErrorLikelihoo
 outliers, stuck channels, unit errors and gross misfits are found as in the output-error
 residuals, and air motion the wind states do not follow still reads as turbulence; a moderate
 scale error the wind states partly take up (a vane scaled 1.1: innovations at the noise, where the
-output-error residuals are 1.5-1.9x it), and it shows instead as an estimate that depends on where
-the wind sensitivities are linearised: the optimum of the held linearisation and the estimate
-linearised at itself lie several deviations apart (the "unsettled" warning of the solver).
+output-error residuals are 1.5-1.9x it), and it shows instead as an estimate that each fresh
+linearisation of the wind sensitivities moves (the "unsettled" warning of the solver).
 
 **Table 2** (measurement minus model, :func:`estimator.workflow.stage_residuals`): the sensor saw
 the model's flow plus the turbulent wind, so each channel is compared with the model output plus
@@ -181,12 +180,8 @@ HOLD_AFTER = 6
 PREFIT_ITERATIONS = 10
 #: Filter-error iterations at most before the maneuvers without wind states are diagnosed again
 PROBE_ITERATIONS = 5
-#: Convergence on the held linearisation, iterated only to measure how far the estimate lies from
-#: its optimum (after_iterations): to a tenth of a deviation, against the unsettled check's bound of
-#: one deviation (the demo's light-turbulence block: 5.5 deviations, 5.7 converged as tightly as
-#: the estimate; 13 and 23 iterations)
-HELD_STEP_TOL_SIGMA = 0.1
-HELD_DECREASE_TOL = 0.01
+#: Fresh linearisations at most once the noise statistics are held (after_iterations)
+REFRESH_ROUNDS = 3
 #: The aircraft's answer to the gusts (FilterErrorLikelihood.answer_findings): a flow channel's
 #: innovations against the IMU's specific force along the body axis the channel sees the air on,
 #: high-passed over ANSWER_HIGH_PASS_S (a maneuver's own motion is slower; a gust's answer is
@@ -372,8 +367,6 @@ class FilterErrorLikelihood:
         self._relaxed = 0
         self._last_e: list[np.ndarray] = []
         self._fresh = np.zeros(len(ids), dtype=bool)
-        self._held: FilterNoise | None = None  # the noise statistics as the hold found them
-        self._pinned = False  # relax returns them (after_iterations)
         # the compiled filter is loaded (and compiled) only when the method is used
         from estimator.core import wind_filter
 
@@ -412,16 +405,8 @@ class FilterErrorLikelihood:
         converge on a fixed cost, as in the alternating scheme of Jategaonkar (2006, §5.5)
         (relaxing at every step, 3 of 8 light-turbulence fits of planning study (c) ran into the
         iteration limit, the cost two-cycling by 1e-5 with each new ``R``); :meth:`noise_drift`
-        measures what the hold left. Held, ``R`` and the intensities are linearised at ``ev``
-        (:meth:`refresh`): the iterations converge to the estimate that is the optimum of its own
-        linearisation (Maine & Iliff 1981: the filter at the current parameters), not of the one
-        the hold found.
+        measures what the hold left.
         """
-        if self._last is not None and self.held:
-            if self._pinned:
-                return self._held
-            self.refresh(ev)
-            return self._last
         if self._last is not None and (self._relaxed >= HOLD_AFTER or self._moved_little(
                 ev, self._last, HOLD_NOISE_BELOW if self._relaxed < SETTLE_AFTER else SETTLED_BELOW)):
             return self._last
@@ -432,8 +417,8 @@ class FilterErrorLikelihood:
         sensitivities ``h`` (which move with the table slopes and scale factors) and the flight
         speed taken anew, the observation placement kept. After the iterations on the held
         linearisation the estimate is the optimum of that linearisation's cost, not of the
-        current one's (a vane scaled 1.1: 11.6 deviations apart); :meth:`relax` therefore
-        linearises the held statistics at every iterate."""
+        current one's (a vane scaled 1.1: 11.6 deviations apart; review of 7897c6e); the solver
+        iterates again from there until a fresh linearisation no longer moves it."""
         if self._last is None:
             return
         self._last = FilterNoise(self._last.R, self._last.sigma_mps, self._linearise(ev), self.dt_s)
@@ -446,12 +431,11 @@ class FilterErrorLikelihood:
         statistics; this says how far from their own optimum the estimate left them."""
         if self._last is None:
             return 0.0, 0.0
-        saved = (self._R, self._sigma, self._last, self._last_e, self._relaxed, self._fresh, self._held)
+        saved = (self._R, self._sigma, self._last, self._last_e, self._relaxed, self._fresh)
         try:
             new = self._relax_now(ev)
         finally:
-            (self._R, self._sigma, self._last, self._last_e, self._relaxed, self._fresh,
-             self._held) = saved
+            self._R, self._sigma, self._last, self._last_e, self._relaxed, self._fresh = saved
         old = saved[2]
         windy = (old.sigma_mps > 0) | (new.sigma_mps > 0)
         ds = 0.0
@@ -520,8 +504,6 @@ class FilterErrorLikelihood:
                 search = True  # R has settled: the intensities once more
         self._R, self._sigma = R, sigma
         self._last = FilterNoise(R, sigma, mans, self.dt_s)
-        if self._relaxed == HOLD_AFTER:
-            self._held = self._last
         self._last_e = [ce.e.copy() for ce in ev.channels]
         return self._last
 
@@ -674,28 +656,23 @@ class FilterErrorLikelihood:
         return partial(self.normal_of, blocks=self.normal_blocks(st, ev, self.noise))
 
     def after_iterations(self, it: Iterated, st: Structure, opt: SolverOptions) -> Postlude:
-        """Where the noise statistics were held, the iterations converged to the estimate that is
-        the optimum of its own linearisation (:meth:`relax`); ``moved`` is how far it lies from the
-        optimum of the linearisation the hold found (iterated to :data:`HELD_STEP_TOL_SIGMA`, from
-        the estimate): the solver's ``unsettled`` check, a model-structure error the wind states
-        partly take up moving it by several deviations. Then a safety net: the check after the
-        first filter-error iterations can miss a maneuver (:meth:`widened_where_turbulent`), which
-        gets wind states and more iterations.
-
-        Linearised at every iterate once held, not held and then relinearised in rounds each
-        iterated to convergence: the demo's light-turbulence block, 40 and 46 iterations per stage
-        against 98 and 121, where three rounds still moved the estimate by 6.4 and 9.3 deviations."""
+        """With the noise held for good, its linearisation (the wind sensitivities) is the one of
+        the 6th relaxation: iterate again on fresh ones (:meth:`refresh`) until they no longer move
+        the estimate. Then a safety net: the check after the first filter-error iterations can miss
+        a maneuver (:meth:`widened_where_turbulent`), which gets wind states and more iterations."""
         lik, iterations, history, notes, moved = self, 0, [], [], None
         theta, evals = it.theta, it.evals
-        if self.held and it.status.converged and self._held is not None:
-            self._pinned = True
-            try:
-                held = iterate(self.model, theta, st, replace(opt, step_tol_sigma=HELD_STEP_TOL_SIGMA,
-                                                               decrease_tol=HELD_DECREASE_TOL), evals, self)
-            finally:
-                self._pinned = False
-            iterations += held.iterations
-            moved = theta - held.theta
+        if self.held and it.status.converged:
+            for _ in range(REFRESH_ROUNDS):
+                self.refresh(evals)
+                before = theta
+                it = iterate(self.model, theta, st, opt, None, self)
+                theta, evals = it.theta, it.evals
+                iterations += it.iterations
+                history += it.history
+                moved = theta - before
+                if it.iterations <= 1 or not it.status.converged:
+                    break
         missed: frozenset[str] = frozenset()
         if it.status.converged or it.status == Status.ITERATION_LIMIT:
             lik, evals, missed = self.widened_where_turbulent(st, theta, evals)

@@ -88,8 +88,8 @@ class Prelude(NamedTuple):
 
 class Postlude(NamedTuple):
     """What a likelihood's ``after_iterations`` leaves: the likelihood at the estimate, the last
-    iterations' outcome, the iterations, costs and notes it added, and how far iterating on,
-    linearised at each iterate, moved the estimate (SI; None: it did not)."""
+    iterations' outcome, the iterations, costs and notes it added, and how far its last
+    relinearisation moved the estimate (SI; None: none was made)."""
 
     likelihood: Likelihood
     it: Iterated

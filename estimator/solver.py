@@ -349,7 +349,7 @@ def _failed(problem: Problem, theta: np.ndarray, t0: float, why: str, advice: st
 def _finish(run: _Run, lik: Likelihood, it: Iterated, st: Structure, holds: list,
             moved: np.ndarray | None) -> EstimationResult:
     """Covariances, diagnostics, findings and verdict at the estimate ``it`` (``moved``: how far
-    it lies from the optimum of the likelihood's held linearisation, SI; None: not measured)."""
+    the likelihood's last fresh linearisation moved it, SI)."""
     problem, opt = run.problem, run.opt
     theta, evals = it.theta, it.evals
     keys = problem.parameters.keys

@@ -267,10 +267,9 @@ def test_a_scale_error_beside_turbulence_says_so():
 
 @pytest.mark.slow
 def test_noise_statistics_are_held_after_a_few_relaxations(turbulent):
-    """After HOLD_AFTER relaxations the noise statistics (R, the intensities) stay as they are
-    whatever the residuals do, linearised at each evaluation (the wind sensitivities move with the
-    parameters), and noise_drift says how far a new relaxation would move them, leaving the
-    likelihood's state untouched."""
+    """After HOLD_AFTER relaxations the noise statistics stay as they are whatever the residuals do
+    (the Gauss-Newton iterations then converge on a fixed cost), and noise_drift says how far a
+    new relaxation would move them, leaving the likelihood's state untouched."""
     from estimator.filter_error import HOLD_AFTER, FilterErrorLikelihood
 
     _, prob = turbulent
@@ -283,19 +282,11 @@ def test_noise_statistics_are_held_after_a_few_relaxations(turbulent):
         theta[tau] += 0.004  # residuals moving by far more than the hold thresholds
         ev = lik.evaluate(theta, True)
         new = lik.relax(ev, lik.stats(ev))
-        held = step >= HOLD_AFTER
-        if noise is not None:
-            same = new.R is noise.R and new.sigma_mps is noise.sigma_mps
-            assert same == held, f"relaxation {step + 1}"
+        assert (new is not noise) == (step < HOLD_AFTER), f"relaxation {step + 1}"
         assert lik.held == (step >= HOLD_AFTER - 1)
-        if held:  # linearised at this evaluation: the wind sensitivities of a fresh linearisation
-            fresh = lik._linearise(ev)
-            for a, b, c in zip(new.maneuvers, fresh, noise.maneuvers, strict=True):
-                assert np.array_equal(a.h, b.h) and not np.array_equal(a.h, c.h)
         noise = new
     drift = lik.noise_drift(ev)
-    again = lik.relax(ev, lik.stats(ev))
-    assert again.R is noise.R and again.sigma_mps is noise.sigma_mps, "noise_drift changed what is held"
+    assert lik.relax(ev, lik.stats(ev)) is noise, "noise_drift must not change what is held"
     assert all(np.isfinite(drift)) and drift[1] > 0.0
     (air,) = [f for f in lik.turbulence_findings(noise, drift=drift) if f.code == "turbulence"]
     assert f"held after {HOLD_AFTER} relaxations" in air.message
@@ -396,12 +387,15 @@ def test_imu_noise_is_in_the_honest_deviations_of_turbulent_maneuvers(turbulent)
 @pytest.mark.slow
 def test_a_scale_error_the_wind_takes_up_leaves_the_estimate_unsettled(short_turbulent, turbulent_fit):
     """A vane scaled by 1.1 in turbulence: the wind states take up part of it (its innovations stay
-    near the noise), the noise statistics end held, and the estimate linearised at itself lies
-    several deviations from the optimum of the held linearisation: the result says so (a WARNING
-    naming the parameters), not a clean success. Without the scale error no such warning.
+    near the noise), the noise statistics end held, and each fresh linearisation of the wind
+    sensitivities moves the estimate by several deviations: the result says so (a WARNING naming
+    the parameters), not a clean success. Without the scale error no such warning.
 
-    On the 30-s flight (67 iterations, each about half as dear as on the 60-s one): 12.7
-    Cramér-Rao deviations apart, four times the bound of 3."""
+    On the 30-s flight: the fit crawls through about a hundred iterations on either length (three
+    fresh linearisations, each iterated to convergence), each about half as dear here. The last
+    moves the estimate by 6.4 Cramér-Rao deviations (7.1 and 7.6 with the noise seeds 4 and 6),
+    9.5 on the 60-s flight: the same move counted in deviations sqrt(2) wider (half the samples),
+    still twice the bound of 3."""
     import dataclasses
 
     _, base = short_turbulent
@@ -416,7 +410,7 @@ def test_a_scale_error_the_wind_takes_up_leaves_the_estimate_unsettled(short_tur
     (w,) = [f for f in res.findings if f.code == "unsettled"]
     assert w.severity.name == "WARNING" and w.value > 3.0 and w.parameters, w.message
     # the same flight without the scale error: the noise statistics settle, nothing is held and
-    # followed (as on the 60-s flight)
+    # refreshed (as on the 60-s flight)
     clean = estimate(base, opt)
     assert clean.status.converged, clean.message
     for fit in (clean, turbulent_fit):
