@@ -192,15 +192,18 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
     index = {k: i for i, k in enumerate(free_calib)}
     if not free_calib or not cases:
         return {}
-    residuals: dict[str, np.ndarray] = {}
+    # the design matrix of every case's samples, filled in place each iteration (one block of rows
+    # per case), and the right-hand side
+    starts = np.cumsum([0] + [y.size for *_, y in cases])
+    A_all = np.empty((int(starts[-1]), len(free_calib)))
+    b = np.empty(int(starts[-1]))
     for _ in range(8):
-        rows, rhs = [], []
-        for ch, m, sig, y in cases:
+        A_all[:] = 0.0
+        for (ch, m, sig, y), r0, r1 in zip(cases, starts[:-1], starts[1:], strict=True):
             params, tabs = channel_values(problem, theta, m, ch, tables)
             dual = ch.expression.evaluate(sig, params, tabs)
-            r = y - np.broadcast_to(dual.value, y.shape)
-            residuals[ch.name] = np.concatenate([residuals.get(ch.name, np.zeros(0)), r])
-            A = np.zeros((y.size, len(free_calib)))
+            b[r0:r1] = y - np.broadcast_to(dual.value, y.shape)
+            A = A_all[r0:r1]
             for n, d in dual.dparam.items():
                 k = ps.key_of(n, m, ch)
                 if k in index:
@@ -215,19 +218,20 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
                     c = col[np.broadcast_to(idx, y.shape)]
                     hit = c >= 0
                     A[samples[hit], c[hit]] += np.broadcast_to(coef, y.shape)[hit]
-            rows.append(A)
-            rhs.append(r)
-        A = np.vstack(rows)
-        b = np.concatenate(rhs)
-        live = np.abs(A).sum(axis=0) > 0
-        step, *_ = np.linalg.lstsq(A[:, live], b, rcond=None)
+        live = np.abs(A_all).sum(axis=0) > 0
+        step, *_ = np.linalg.lstsq(A_all[:, live], b, rcond=None)
+        moved = 0.0
         for j, k in enumerate(np.array(free_calib)[live]):
             # within the parameter's bounds, as the estimator: a breakpoint the samples hardly
             # reach would otherwise take any value (f2 at -4 deg alpha: -60 on a few samples)
             lo, hi = ps[k].bounds
-            theta[ps.index(k)] = min(max(theta[ps.index(k)] + step[j], lo), hi)
-        residuals = {}
-        if np.abs(step).max() < 1e-12:
+            i = ps.index(k)
+            new = min(max(theta[i] + step[j], lo), hi)
+            moved = max(moved, abs(new - theta[i]))
+            theta[i] = new
+        # converged when the parameters stop moving: the step of one held on its bound does not
+        # vanish (it asks for the same move at every iteration)
+        if moved < 1e-12:
             break
     for k, ok in zip(free_calib, live, strict=True):
         if ok:
