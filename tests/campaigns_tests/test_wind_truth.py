@@ -107,7 +107,9 @@ def test_the_airspeed_delay_is_honest_where_its_instrument_is_weak(problem, filt
 
 
 def test_report_has_the_wind_section(problem):
-    wf = run_workflow(problem, WorkflowOptions(solver=SolverOptions(method="filter_error")))
+    # the section is what is tested, not the deviations: the honest ones are left out (a quarter
+    # of the workflow's time here: 13.4 -> 10.1 s)
+    wf = run_workflow(problem, WorkflowOptions(solver=SolverOptions(method="filter_error", colored=False)))
     sections = truth_sections(wf)
     (wind,) = [s for s in sections.final if s.title.startswith("Wind:")]
     assert wind.figures and wind.csv[0][0] == "wind_recovery.csv"
