@@ -296,15 +296,27 @@ class _ChannelLayout:
         # relative work of an evaluation with the Jacobian (rows times slots), to balance threads
         self.cost = float(self.rows.size * (self.m + 13))
         self.colmap = np.hstack(cols).astype(np.intp) if len(self.mans) else np.zeros((0, nslot), np.intp)
+        # whether every maneuver uses the same instance, per index array of this layout (fixed:
+        # asked at every evaluation); keyed by identity, the arrays living as long as the layout
+        owned = [*self.pidx.values(), *self.tidx.values(), *([self.didx] if ch.delay else [])]
+        self._common = {id(idx): _same_instance(idx) for idx in owned}
 
     def index_per_sample(self, idx: np.ndarray, values: np.ndarray):
         """Values of per-maneuver parameter indices (B,) or (B, K): one value (a scalar, or a (K,)
         table) if every maneuver uses the same instance, as for one maneuver; else one per
         evaluation sample."""
-        if idx.shape[0] and np.all(idx == idx[:1]):
+        common = self._common.get(id(idx))
+        if common is None:
+            common = _same_instance(idx)
+        if common:
             first = values[idx[0]]
             return float(first) if idx.ndim == 1 else first
         return np.repeat(values[idx], self.lens, axis=0)
+
+
+def _same_instance(idx: np.ndarray) -> bool:
+    """Do all maneuvers' rows of the index array ``idx`` (B,) or (B, K) name the same parameters?"""
+    return bool(idx.shape[0]) and bool(np.all(idx == idx[:1]))
 
 
 class _Layout:
