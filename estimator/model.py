@@ -475,6 +475,21 @@ class Model:
             lay = self._layouts[ks] = _Layout(self, ks)
         return lay
 
+    def forget(self, maneuvers: tuple[int, ...]) -> None:
+        """Drop the cached layout of the maneuver subset ``maneuvers`` (maneuver indices) and its
+        scratch buffers: a subset evaluated once (a chunk of the honest deviations) would hold
+        them for the model's life. The whole problem's layout is kept."""
+        ks = tuple(int(k) for k in maneuvers)
+        if ks != tuple(range(len(self.problem.maneuvers))):
+            self._layouts.pop(ks, None)
+
+    def release_scratch(self) -> None:
+        """Free every cached layout's scratch buffers (the sensitivities and the state signals'
+        derivative stacks; the next evaluation with the Jacobian allocates them again): before
+        evaluating chunks of the maneuvers, which have their own."""
+        for lay in self._layouts.values():
+            lay.S = lay.SA = lay.SB = lay.SV = None
+
     def channel_layout(self) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
         """The static structure of every channel over all maneuvers, as :meth:`evaluate_all` gives it.
 

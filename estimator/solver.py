@@ -228,8 +228,12 @@ def _begin(run: _Run) -> tuple[np.ndarray, Structure, list] | EstimationResult:
     problem, model, opt, t0, start = run.problem, run.model, run.opt, run.t0, run.start
     nch = len(problem.channels)
     theta = start.copy()
+    staged = opt.start == "staged"
     try:
-        evals = evaluate(model, theta, True)
+        # before a staged start this evaluation only checks that the model can be evaluated and
+        # counts the data: a Jacobian would go unused, its scratch held beside every stage's (131
+        # MB each at the paper's size, 70 maneuvers)
+        evals = evaluate(model, theta, not staged)
     except ModelEvaluationError as exc:
         return _failed(problem, start, t0, f"the model cannot be evaluated at the start values: {exc}",
                        "check the units and signs of the channel named (a measurement far outside its "
@@ -237,17 +241,18 @@ def _begin(run: _Run) -> tuple[np.ndarray, Structure, list] | EstimationResult:
     sse, cnt = residual_sums(evals, nch)
     if not cnt.any():
         raise ValueError(f"{problem.source}: no channel has data in any maneuver")
-    if opt.start == "staged":
-        staged, stage_notes = staged_start(problem, theta, run.requested, opt)
+    if staged:
+        ended, stage_notes = staged_start(problem, theta, run.requested, opt)
         run.notes += stage_notes
         try:
             # the stages fit subsets of the channels: an implicit channel left out may be outside
             # its domain where they ended; then the full estimation starts from the given values
-            evals = evaluate(model, staged, True)
-            theta = staged
+            evals = evaluate(model, ended, True)
+            theta = ended
         except ModelEvaluationError as exc:
             run.notes.append(f"the staged start is left: the full model cannot be evaluated where it "
                              f"ended ({exc}); the estimation starts from the given values")
+            evals = evaluate(model, theta, True)
         sse, cnt = residual_sums(evals, nch)
     # the screen before the iterations also holds what looks undetermined there, which keeps a
     # parameter the data hardly see from wandering to a bound on the way; the screen at the

@@ -245,6 +245,8 @@ def _chunk_middles(model: Model, theta: np.ndarray, chunk: tuple[int, ...], imu_
             q = np.sqrt(np.nan_to_num(imu_psd[m.aircraft]) / m.dt_s)  # unknown: left out
             dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
             B[k] = np.zeros((lay.union[k].size, m.n, 7))
+        if imu_chunk != chunk:  # the chunk's own layout is evaluated next (honest_std forgets it)
+            model.forget(imu_chunk)
     Y = ({k: np.zeros((lay.union[k].size, int(lay.L_of[k]) // 2 + 1), dtype=complex) for k in chunk}
          if opt.cross_channel and opt.spectrum != "ar" else {})
     # "ar": each channel's spectra, for later
@@ -324,11 +326,15 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
     C = NormalEquations(st)
     Cp = NormalEquations(st) if imu_psd is not None else None
     shared = _Shared(st, R, lay, options, C, threading.Lock())
-    for chunk in lay.chunks():
+    chunks = lay.chunks()
+    if len(chunks) > 1:  # the chunks have their own scratch: the whole problem's is not held beside
+        model.release_scratch()
+    for chunk in chunks:
         mid = _chunk_middles(model, theta, chunk, imu_psd, shared)
         # the chunk once more, now with its Jacobian, each channel's spectra computed (on the
         # evaluation's worker threads) as soon as the channel is done
         model.evaluate_all(theta, jacobian=True, keep_jacobian=True, maneuvers=chunk, on_channel=mid.spectra)
+        model.forget(chunk)  # its layout's scratch, not to be held beside the next chunk's
         mid.reduce(chunk, model.problem, N, Sinv, Ainv, Cp)
     std_mk, cov_mk = sandwich_std(N, st, C, Sinv, Ainv, nparam)
     if Cp is not None:
