@@ -219,7 +219,10 @@ def _filled(t_s: np.ndarray, v: np.ndarray) -> np.ndarray:
 class _ChannelLayout:
     """What a channel needs that does not depend on the parameter values, for a maneuver set."""
 
-    def __init__(self, model: Model, c: int, ks: tuple[int, ...], sub_seg: np.ndarray):
+    def __init__(self, model: Model, c: int, ks: tuple[int, ...], sub_seg: np.ndarray,
+                 grids: dict[tuple[int, ...], tuple[np.ndarray, ...]]):
+        """``grids``: the per-sample time grids already built for a set of maneuver positions,
+        shared by the channels present in the same maneuvers (read only)."""
         p = model.problem
         ps = p.parameters
         ch = p.channels[c]
@@ -234,11 +237,15 @@ class _ChannelLayout:
         self.cseg = np.concatenate([[0], np.cumsum(lens)]).astype(np.intp)
         # evaluation samples: every sample of the channel's maneuvers (the implicit models'
         # fixed point is iterated over all of them, as for one maneuver); rows: the cost's
-        self.off = np.repeat(sub_seg[self.pos], lens).astype(np.int64)  # maneuver's first sample
-        self.t = np.concatenate([m.t_s for m in mans]) if mans else np.zeros(0)
-        self.t0 = np.repeat([m.t_s[0] for m in mans], lens)
-        self.dt = np.repeat([m.dt_s for m in mans], lens)
-        self.last = np.repeat(lens - 2, lens).astype(np.int64)
+        grid = grids.get(tuple(pos))
+        if grid is None:
+            grid = grids[tuple(pos)] = (
+                np.repeat(sub_seg[self.pos], lens).astype(np.int64),  # maneuver's first sample
+                np.concatenate([m.t_s for m in mans]) if mans else np.zeros(0),
+                np.repeat([m.t_s[0] for m in mans], lens),
+                np.repeat([m.dt_s for m in mans], lens),
+                np.repeat(lens - 2, lens).astype(np.int64))
+        self.off, self.t, self.t0, self.dt, self.last = grid
         rows, local, rseg = [], [], [0]
         for b, k in enumerate(self.mans):
             g = model.guard_samples(int(k), c)
@@ -348,7 +355,8 @@ class _Layout:
         self.state_idx = model._state_idx[list(ks)]
         self.S: np.ndarray | None = None  # sensitivity buffer, reused by every evaluation
         present = sorted({c for k in ks for c in model._present[k]})
-        self.channels = [_ChannelLayout(model, c, ks, self.seg[:-1]) for c in present]
+        grids: dict[tuple[int, ...], tuple[np.ndarray, ...]] = {}
+        self.channels = [_ChannelLayout(model, c, ks, self.seg[:-1], grids) for c in present]
         # every state signal the channels use, numbered for the derivative stacks SA, SB, SV
         keys = {_signal_key(n, cl.ch.sensor) for cl in self.channels for n in cl.state_names}
         self.sig_id = {k: i for i, k in enumerate(sorted(keys, key=str))}
