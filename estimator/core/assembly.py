@@ -178,8 +178,9 @@ def channel_normals(S, shift, signals, stacks, sparse, dslot, e, rseg, m, out):
         _column_extents(buf, nb, first, last, cnt[b])
         _gram(buf, first, last, e[r0:r0 + nb], H[b], g[b])
         if keep:
-            for s in range(m):
-                JT[s, r0:r0 + nb] = buf[s, :nb]
+            for s in range(m):  # loops, not slice assignments: no shape-check message to compile
+                for i in range(nb):
+                    JT[s, r0 + i] = buf[s, i]
 
 
 @njit(cache=True, nogil=True)

@@ -283,7 +283,8 @@ def _maneuver_start(m, seg, params, om_m, r_acc, r_h, X):
     da = params[m, 7:10]
     dw = params[m, 10:13]
     b = seg[m]
-    X[b] = params[m, :7]
+    for i in range(7):  # a loop, not a slice assignment: no shape-check message to compile
+        X[b, i] = params[m, i]
     _initial_velocity(X[b], om_m[b], dw, r_h[m])
     return r_acc[m], r_h[m], da, dw, b
 

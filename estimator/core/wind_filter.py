@@ -298,7 +298,8 @@ def _time_update(Phi, Qd, x, P, xt, T):
         for c in range(ns):
             acc += Phi[a, c] * x[c]
         xt[a] = acc
-    x[:] = xt
+    for a in range(ns):  # loops, not slice assignments: no shape-check message to compile
+        x[a] = xt[a]
     for a in range(ns):  # T = Phi P
         for b in range(ns):
             acc = 0.0
@@ -326,7 +327,9 @@ def _jacobian_time_update(Phi, dx, dxt):
             if f != 0.0:
                 for j in range(m):
                     dxt[a, j] += f * dx[c, j]
-    dx[:, :] = dxt
+    for a in range(ns):
+        for j in range(m):
+            dx[a, j] = dxt[a, j]
 
 
 @njit(cache=True, nogil=True)
