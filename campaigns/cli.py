@@ -562,17 +562,36 @@ def build_parser() -> argparse.ArgumentParser:
                  "the command that completes it (exit status 1)")
     s = sub.add_parser("show", help=show_help, description=show_help[0].upper() + show_help[1:] + ".")
     s.add_argument("dataset", type=Path, help="the dataset directory (fpr fly --out)")
+    streams_help = ("list the streams of a flight log (a PX4 ULog's topics, a MATLAB file's structs): "
+                    "fields, samples, time span, rate and dropouts, to write a problem file's [columns] "
+                    "paths (STREAM.FIELD) from")
+    st = sub.add_parser("streams", help=streams_help,
+                        description=streams_help[0].upper() + streams_help[1:] + ".")
+    st.add_argument("log", type=Path, help="the log file (.ulg, .mat)")
+    st.add_argument("--format", choices=("ulog", "mat"), default=None,
+                    help="the log's format (default: from the extension)")
     from campaigns import montecarlo_cli
 
     montecarlo_cli.add_parser(sub)
     return parser
 
 
+def _streams(args: argparse.Namespace) -> int:
+    import pandas as pd
+
+    from estimator.io.logs import stream_table
+
+    table = stream_table(args.log, args.format)
+    with pd.option_context("display.width", 200, "display.max_rows", None, "display.max_columns", None):
+        print(table.to_string(index=False, float_format=lambda v: f"{v:.3f}"))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from campaigns import montecarlo_cli
 
-    handlers = {"fly": _fly, "demo": _demo, "show": _show, "calibrate": _calibrate,
+    handlers = {"fly": _fly, "demo": _demo, "show": _show, "calibrate": _calibrate, "streams": _streams,
                 **dict.fromkeys(montecarlo_cli.COMMANDS, montecarlo_cli.run)}
     try:
         code = handlers[args.command](args)

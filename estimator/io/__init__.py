@@ -3,7 +3,8 @@ r"""Import flight data into an estimation :class:`~estimator.problem.Problem`.
 Two ways in, one set of checks:
 
 - :func:`load_problem` reads a **problem file** (TOML, below) that points at your flight data
-  (CSV, whitespace-separated text, Parquet) or at a dataset written by ``fpr fly``;
+  (CSV, whitespace-separated text, Parquet; PX4 ULog and MATLAB logs, :mod:`estimator.io.logs`)
+  or at a dataset written by ``fpr fly``;
 - :func:`problem_from_dataset` does the same for an ``fpr fly`` dataset from Python.
 
 The problem file
@@ -65,8 +66,8 @@ z down) from the aircraft's reference point::
 
     [[files]]                 # one entry per file
     path = "flight421.csv"
-    format = "csv"            # csv | whitespace | parquet; default from the extension
-                              # (.csv; .txt .dat .asc; .parquet .pq)
+    format = "csv"            # csv | whitespace | parquet | ulog | mat; default from the
+                              # extension (.csv; .txt .dat .asc; .parquet .pq; .ulg .ulog; .mat)
     header = true             # text files: first line names the columns; false: by index only
                               # (a first line of numbers is data, not a header: see below)
     delimiter = ","           # csv only (default ","; ";" for many European exports)

@@ -16,9 +16,11 @@ from estimator.io.assemble import DIMENSIONS, REQUIRED, ManeuverRequest, SourceT
 from estimator.io.build import StateEquations, StateSetup, build_problem
 from estimator.io.dataset_problem import load_dataset_maneuvers
 from estimator.io.errors import DataError
+from estimator.io.logs import LOG_FORMATS, log_frame
 from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
 from estimator.io.positions import check_positions, positions_of
 from estimator.io.tables import check_data_path, infer_format, numeric, pick_column, read_table
+from estimator.io.units import get_unit
 from estimator.options import CalibrationOptions, option_tables
 from estimator.parameters import ParameterSpec
 from estimator.problem import STATE_SIGNALS, ChannelSpec, Problem
@@ -29,7 +31,8 @@ TOP_KEYS = ("title", "g_mps2", "lever_arm", "model", "channels", "resample_hz", 
 #: the CG, in m (or r_cg_body_in, r_cg_body_ft)
 _CG_KEYS = {"r_cg_body_m": Key(unit="m")}
 FILE_KEYS = {**dict.fromkeys(("path", "format", "header", "delimiter", "decimal", "skip_rows", "encoding",
-                              "aircraft", "configuration", "maneuvers", "resample_hz", "columns"), Key()),
+                              "aircraft", "configuration", "maneuvers", "resample_hz", "columns",
+                              "offsets_s"), Key()),
              **_CG_KEYS}
 MANEUVER_KEYS = {**dict.fromkeys(("id", "t_start_s", "t_end_s", "configuration"), Key()), **_CG_KEYS}
 COLUMN_KEYS = ("column", "unit", "optional", "own_rate")
@@ -156,11 +159,14 @@ def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: s
         if key in entry and (not isinstance(entry[key], str) or len(entry[key]) != 1):
             raise DataError(f"{where}: {key} = {entry[key]!r} must be one character in quotes, e.g. "
                             f"{key} = \"{';' if key == 'delimiter' else ','}\"")
-    named = [spec["column"] for spec in columns.values() if isinstance(spec["column"], str)]
-    df = read_table(path, fmt, header=header, delimiter=entry.get("delimiter"), skip_rows=skip,
-                    named_columns=named, encoding=None if encoding is None else str(encoding),
-                    decimal=entry.get("decimal"))
-    header = header is not False and not all(isinstance(c, (int, np.integer)) for c in df.columns)
+    if fmt in LOG_FORMATS:
+        df, header = _read_log(path, fmt, entry, columns, where), True
+    else:
+        named = [spec["column"] for spec in columns.values() if isinstance(spec["column"], str)]
+        df = read_table(path, fmt, header=header, delimiter=entry.get("delimiter"), skip_rows=skip,
+                        named_columns=named, encoding=None if encoding is None else str(encoding),
+                        decimal=entry.get("decimal"))
+        header = header is not False and not all(isinstance(c, (int, np.integer)) for c in df.columns)
     values, bad, text, units, labels = {}, {}, {}, {}, {}
     for name, spec in columns.items():
         src = spec["column"]
@@ -179,6 +185,21 @@ def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: s
     own = frozenset(n for n, spec in columns.items() if spec.get("own_rate", False) and n in values)
     return SourceTable(path=path, values=values, not_numeric=bad, raw_text=text, units=units, labels=labels,
                        own_rate=own)
+
+
+def _read_log(path: Path, fmt: str, entry: Mapping, columns: Mapping[str, dict], where: str):
+    """A log's columns on the time base of its ``t`` column's stream (:func:`log_frame`), with
+    the entry's declared clock offsets (``offsets_s = { STREAM = seconds }``)."""
+    offsets = entry.get("offsets_s", {})
+    if not isinstance(offsets, Mapping) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+            for v in offsets.values()):
+        raise DataError(f"{where}: offsets_s = {offsets!r} must be a table of stream = seconds, e.g. "
+                        "offsets_s = { vehicle_gps_position = -0.2 } (added to that stream's stamps)")
+    t_unit = columns.get("t", {}).get("unit", "s")
+    factor = get_unit(t_unit, f"{where}: t").factor
+    return log_frame(path, fmt, columns, where, offsets_s={str(k): float(v) for k, v in offsets.items()},
+                     time_factor_s=factor)
 
 
 def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[str]]

@@ -16,10 +16,12 @@ import pyarrow.parquet as pq
 
 from aircraft_models.schema import did_you_mean
 from estimator.io.errors import DataError, close_match, warn
+from estimator.io.logs import LOG_EXTENSIONS, LOG_FORMATS
 
-FORMATS = ("csv", "whitespace", "parquet")
+#: Tables (one time base, columns by name or index) and logs (streams: :mod:`estimator.io.logs`).
+FORMATS = ("csv", "whitespace", "parquet", *LOG_FORMATS)
 _EXTENSIONS = {".csv": "csv", ".txt": "whitespace", ".dat": "whitespace", ".asc": "whitespace",
-               ".parquet": "parquet", ".pq": "parquet"}
+               ".parquet": "parquet", ".pq": "parquet", **LOG_EXTENSIONS}
 
 
 def infer_format(path: Path, fmt: str | None, where: str) -> str:
@@ -32,7 +34,8 @@ def infer_format(path: Path, fmt: str | None, where: str) -> str:
     if ext not in _EXTENSIONS:
         raise DataError(
             f"{where}: cannot tell the format of {path.name} from its extension {ext!r} "
-            f"(known: {sorted(_EXTENSIONS)}); add format = \"csv\" | \"whitespace\" | \"parquet\""
+            f"(known: {sorted(_EXTENSIONS)}); add format = \"csv\" | \"whitespace\" | \"parquet\" | "
+            "\"ulog\" | \"mat\""
         )
     return _EXTENSIONS[ext]
 

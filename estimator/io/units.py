@@ -27,7 +27,7 @@ class Unit:
 _DEG = math.pi / 180.0
 _FT = 0.3048
 _TABLE = (
-    Unit("s", "time", 1.0), Unit("ms", "time", 1e-3),
+    Unit("s", "time", 1.0), Unit("ms", "time", 1e-3), Unit("us", "time", 1e-6),
     Unit("rad", "angle", 1.0), Unit("deg", "angle", _DEG), Unit("mrad", "angle", 1e-3),
     Unit("rad/s", "angular rate", 1.0), Unit("deg/s", "angular rate", _DEG),
     Unit("m/s^2", "acceleration", 1.0), Unit("g", "acceleration", 9.80665),
@@ -67,6 +67,7 @@ def get_unit(name: str, where: str) -> Unit:
 #: Common spellings of the units, lower case and without blanks -> the unit's name here.
 _SPELLINGS = {
     "sec": "s", "second": "s", "seconds": "s", "msec": "ms", "millisecond": "ms", "milliseconds": "ms",
+    "µs": "us", "μs": "us", "usec": "us", "microsecond": "us", "microseconds": "us",
     "radian": "rad", "radians": "rad", "degree": "deg", "degrees": "deg", "°": "deg",
     "milliradian": "mrad", "milliradians": "mrad",
     "rad/sec": "rad/s", "rps": "rad/s", "deg/sec": "deg/s", "dps": "deg/s", "°/s": "deg/s",

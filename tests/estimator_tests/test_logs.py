@@ -1,0 +1,299 @@
+"""Flight logs behind a problem file's ``[[files]]``: MATLAB (v5, v7.3) and PX4 ULog files read
+into streams, each on its own clock, and brought onto one time base (estimator/io/logs.py).
+
+- The same flight written as Parquet, as a MATLAB v5 struct and as a MATLAB v7.3 (HDF5) struct
+  reads into the same problem, bit for bit, and estimates to the same numbers.
+- Streams on their own clocks: a slower stream is interpolated onto the base stamps (linear
+  signals exactly), a declared clock offset moves it, an own-rate column keeps only its own
+  samples, a dropout is left empty (never bridged), a quaternion gives its Euler angles.
+- Real logs (``../shared/data``; skipped when absent): both PX4 sample logs list every stream with
+  its rate and span, the small one's logger dropout included; the Thor UAV's MATLAB file is one
+  50-Hz stream, and a problem file over it reads an airborne piece into a problem.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+import scipy.io
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from campaigns.benchmarks.user_files import USER_COLUMNS, write_user_files
+from campaigns.cli import main
+from estimator.io import load_problem
+from estimator.io.errors import DataError
+from estimator.io.logs import euler_from_quaternion, log_frame, stream_table
+from estimator.solver import SolverOptions, estimate
+
+SHARED = Path(__file__).resolve().parents[3] / "shared" / "data"
+THOR = SHARED / "umn-thor75" / "thor_flight75.mat"
+PX4 = SHARED / "px4"
+CHANNELS = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr"]
+
+
+# --------------------------------------------------------------------------------------------------
+# one flight, three file formats
+
+
+def _write_mat73(path: Path, struct: str, columns: dict[str, np.ndarray]) -> None:
+    """An HDF5 file laid out as MATLAB v7.3 writes a struct of column vectors: a group of (1, N)
+    datasets (MATLAB is column-major) after a 512-byte user block holding MATLAB's header."""
+    with h5py.File(path, "w", userblock_size=512) as f:
+        g = f.create_group(struct)
+        for name, v in columns.items():
+            g.create_dataset(name, data=np.asarray(v, dtype=float)[None, :])
+    with open(path, "r+b") as fh:
+        fh.write(b"MATLAB 7.3 MAT-file, written by the project's tests".ljust(116))
+
+
+@pytest.fixture(scope="module")
+def formats(tiny_dataset, tmp_path_factory) -> dict[str, Path]:
+    """The tiny campaign as a user's files: one Parquet table, one MATLAB v5 struct ``flight``,
+    one MATLAB v7.3 struct ``flight``; a problem file each, alike but for the path and the columns'
+    paths (``flight.AX`` for a MATLAB struct field)."""
+    root = tmp_path_factory.mktemp("logs")
+    cols = {k: USER_COLUMNS[k] for k in ("ax", "ay", "az", "p", "q", "r", *CHANNELS)}
+    problem = write_user_files(tiny_dataset, root / "csv", cols, CHANNELS, "tiny as a user's files")
+    frame = pd.read_csv(root / "csv" / "flight.csv")
+    text = problem.read_text()
+    out = {}
+    for fmt, name in (("parquet", "flight.parquet"), ("mat5", "flight_v5.mat"), ("mat73", "flight_v73.mat")):
+        d = root / fmt
+        d.mkdir()
+        if fmt == "parquet":
+            frame.to_parquet(d / name)
+            body = text
+        else:
+            columns = {c: frame[c].to_numpy() for c in frame.columns}
+            if fmt == "mat5":
+                scipy.io.savemat(d / name, {"flight": columns})
+            else:
+                _write_mat73(d / name, "flight", columns)
+            body = re.sub(r'column = "([^"]+)"', r'column = "flight.\1"', text)
+        (d / "problem.toml").write_text(body.replace('path = "flight.csv"', f'path = "{name}"'))
+        out[fmt] = d / "problem.toml"
+    return out
+
+
+def _load(path: Path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return load_problem(path)
+
+
+def test_matlab_v5_and_v73_read_into_the_parquet_problem_bit_for_bit(formats):
+    ref = _load(formats["parquet"])
+    for fmt in ("mat5", "mat73"):
+        p = _load(formats[fmt])
+        assert [m.id for m in p.maneuvers] == [m.id for m in ref.maneuvers]
+        for a, b in zip(p.maneuvers, ref.maneuvers, strict=True):
+            assert np.array_equal(a.t_s, b.t_s), fmt
+            assert np.array_equal(a.accel_imu_mps2, b.accel_imu_mps2), fmt
+            assert np.array_equal(a.omega_rps, b.omega_rps), fmt
+            assert a.measurements.keys() == b.measurements.keys(), fmt
+            for k in b.measurements:
+                assert np.array_equal(a.measurements[k], b.measurements[k], equal_nan=True), (fmt, k)
+
+
+@pytest.mark.slow
+def test_a_matlab_file_estimates_to_the_parquet_numbers(formats):
+    opt = SolverOptions(max_iterations=4, colored=False, diagnose=False)
+    ref = estimate(_load(formats["parquet"]), opt)
+    res = estimate(_load(formats["mat73"]), opt)
+    scale = np.maximum(np.abs(ref.parameters.values), 1e-12)
+    assert np.max(np.abs(res.parameters.values - ref.parameters.values) / scale) <= 1e-9
+    assert np.allclose(res.std_crb, ref.std_crb, rtol=1e-9, equal_nan=True)
+
+
+# --------------------------------------------------------------------------------------------------
+# streams on their own clocks
+
+
+def _two_clocks(path: Path, gps_offset_s: float = 0.0, gap: tuple[float, float] | None = None) -> None:
+    """A MATLAB file with an IMU struct at 50 Hz and a GPS struct at 5 Hz on its own clock
+    (``gps_offset_s`` behind the IMU's), both carrying a linear ramp of time."""
+    t_imu = np.arange(0.0, 20.0, 0.02)
+    t_gps = np.arange(0.1, 20.0, 0.2)
+    if gap is not None:
+        t_gps = t_gps[(t_gps < gap[0]) | (t_gps > gap[1])]
+    scipy.io.savemat(path, {
+        "imu": {"time": t_imu, "ax": 3.0 * t_imu, "quat": np.tile([1.0, 0.0, 0.0, 0.0], (t_imu.size, 1))},
+        "gps": {"time": t_gps - gps_offset_s, "vn": 2.0 * t_gps + 1.0}})
+
+
+def _cols(**more) -> dict:
+    return {"t": {"column": "imu.time", "unit": "s"}, **more}
+
+
+def test_a_slower_stream_is_interpolated_onto_the_base_stamps(tmp_path):
+    _two_clocks(tmp_path / "f.mat")
+    df = log_frame(tmp_path / "f.mat", "mat", _cols(vn={"column": "gps.vn"}), "test")
+    t = df["imu.time"].to_numpy()
+    t_gps = np.arange(0.1, 20.0, 0.2)
+    inside = (t >= t_gps[0]) & (t <= t_gps[-1])
+    assert np.allclose(df["gps.vn"][inside], 2.0 * t[inside] + 1.0, rtol=0, atol=1e-12)
+    assert df["gps.vn"][~inside].isna().all(), "outside the GPS's span there is no value to give"
+
+
+def test_a_declared_clock_offset_brings_the_stream_onto_the_base_clock(tmp_path):
+    _two_clocks(tmp_path / "f.mat", gps_offset_s=0.5)
+    cols = _cols(vn={"column": "gps.vn"})
+    off = log_frame(tmp_path / "f.mat", "mat", cols, "test")
+    on = log_frame(tmp_path / "f.mat", "mat", cols, "test", offsets_s={"gps": 0.5})
+    t = on["imu.time"].to_numpy()
+    ok = on["gps.vn"].notna().to_numpy()
+    assert np.allclose(on["gps.vn"][ok], 2.0 * t[ok] + 1.0, atol=1e-12)
+    shifted = off["gps.vn"].notna().to_numpy()
+    # its clock reads 0.5 s behind the IMU's: without the offset each value is taken for 0.5 s
+    # earlier than it was measured, the ramp 1.0 too high
+    assert np.allclose(off["gps.vn"][shifted] - (2.0 * t[shifted] + 1.0), 1.0, atol=1e-12)
+
+
+def test_an_own_rate_column_keeps_only_its_own_samples(tmp_path):
+    _two_clocks(tmp_path / "f.mat")
+    df = log_frame(tmp_path / "f.mat", "mat", _cols(vn={"column": "gps.vn", "own_rate": True}), "test")
+    got = df["gps.vn"].notna().to_numpy()
+    assert got.sum() == 100, "each of the 100 GPS samples at one base sample"
+    t = df["imu.time"].to_numpy()[got]
+    assert np.allclose(df["gps.vn"][got], 2.0 * t + 1.0, atol=1e-9)
+
+
+def test_a_dropout_is_left_empty_not_bridged(tmp_path):
+    _two_clocks(tmp_path / "f.mat", gap=(8.0, 11.0))
+    df = log_frame(tmp_path / "f.mat", "mat", _cols(vn={"column": "gps.vn"}), "test")
+    t = df["imu.time"].to_numpy()
+    empty = df["gps.vn"].isna().to_numpy()
+    assert empty[(t > 7.95) & (t < 11.05)].all()
+    assert not empty[(t > 1.0) & (t < 7.85)].any() and not empty[(t > 11.15) & (t < 19.8)].any()
+
+
+def test_a_quaternion_gives_its_euler_angles(tmp_path):
+    _two_clocks(tmp_path / "f.mat")
+    df = log_frame(tmp_path / "f.mat", "mat", _cols(phi={"column": "imu.quat.roll"},
+                                                     psi={"column": "imu.quat.yaw"}), "test")
+    assert np.all(df["imu.quat.roll"] == 0.0) and np.all(df["imu.quat.yaw"] == 0.0)
+    with pytest.raises(DataError, match=r"4 components.*quat\.roll, quat\.pitch or quat\.yaw"):
+        log_frame(tmp_path / "f.mat", "mat", _cols(phi={"column": "imu.quat"}), "test")
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(-3.1, 3.1), st.floats(-1.5, 1.5), st.floats(-3.1, 3.1))
+def test_euler_angles_of_a_quaternion_are_the_ones_it_was_built_from(roll, pitch, yaw):
+    cr, sr = np.cos(roll / 2), np.sin(roll / 2)
+    cp, sp = np.cos(pitch / 2), np.sin(pitch / 2)
+    cy, sy = np.cos(yaw / 2), np.sin(yaw / 2)
+    q = np.array([[cr * cp * cy + sr * sp * sy], [sr * cp * cy - cr * sp * sy],
+                  [cr * sp * cy + sr * cp * sy], [cr * cp * sy - sr * sp * cy]])  # ZYX, scalar first
+    got = [float(a[0]) for a in euler_from_quaternion(q)]
+    assert np.allclose(got, [roll, pitch, yaw], atol=1e-7)
+
+
+def test_a_wrong_path_is_named_with_what_the_file_has(tmp_path):
+    _two_clocks(tmp_path / "f.mat")
+    with pytest.raises(DataError, match=r"no stream 'gsp'; did you mean 'gps'\?.*fpr streams"):
+        log_frame(tmp_path / "f.mat", "mat", _cols(vn={"column": "gsp.vn"}), "test")
+    with pytest.raises(DataError, match=r"stream 'gps' has no field 'vnn'; did you mean 'vn'\?"):
+        log_frame(tmp_path / "f.mat", "mat", _cols(vn={"column": "gps.vnn"}), "test")
+    df = log_frame(tmp_path / "f.mat", "mat", _cols(vn={"column": "gps.vnn", "optional": True}), "test")
+    assert list(df.columns) == ["imu.time"], "an optional column a log lacks is simply absent"
+
+
+# --------------------------------------------------------------------------------------------------
+# real logs
+
+
+needs_px4 = pytest.mark.skipif(not (PX4 / "sample.ulg").is_file(), reason="../shared/data/px4 absent")
+needs_thor = pytest.mark.skipif(not THOR.is_file(), reason="../shared/data/umn-thor75 absent")
+
+
+@needs_px4
+@pytest.mark.parametrize("name", ["sample.ulg", "sample_log_small.ulg"])
+def test_both_px4_sample_logs_list_every_stream_with_its_rate_and_span(name):
+    table = stream_table(PX4 / name)
+    assert table["stream"].is_unique and len(table) >= 15
+    sc = table.set_index("stream").loc["sensor_combined"]
+    assert sc["span_s"] > 6.0 and 150.0 < sc["rate_hz"] < 260.0, sc
+    timed = table[table["samples"] > 1]
+    # a rate for every stream whose stamps increase; the others are counted as bad stamps (some
+    # topics of sample.ulg carry one stamp for all their samples)
+    assert (timed["rate_hz"].notna() | (timed["bad_stamps"] == timed["samples"] - 1)).all()
+    if name == "sample_log_small.ulg":
+        # its logger lost 0.16 s of the fast topics at once: a dropout in each of them
+        assert sc["dropouts"] == 1 and 0.15 < sc["longest_dropout_s"] < 0.17
+        assert {"sensor_accel:1", "sensor_accel:2"} <= set(table["stream"]), "multi-instance topics"
+
+
+@needs_px4
+def test_a_ulog_reads_onto_the_imu_time_base_with_attitude_from_its_quaternion():
+    cols = {"t": {"column": "sensor_combined.timestamp", "unit": "us"},
+            "ax": {"column": "sensor_combined.accelerometer_m_s2[0]"},
+            "phi": {"column": "vehicle_attitude.q.roll"}, "theta": {"column": "vehicle_attitude.q.pitch"},
+            "tas": {"column": "airspeed.true_airspeed_m_s", "optional": True}}
+    df = log_frame(PX4 / "sample_log_small.ulg", "ulog", cols, "test", time_factor_s=1e-6)
+    assert len(df) == 1298  # sensor_combined's samples
+    assert np.nanmax(np.abs(df["vehicle_attitude.q.roll"])) < np.pi
+    # the attitude topic shares sensor_combined's stamps here: its values, not interpolated ones
+    assert df["vehicle_attitude.q.pitch"].notna().mean() > 0.95
+
+
+@needs_thor
+def test_the_thor_flight_is_one_50_hz_stream():
+    (row,) = stream_table(THOR).itertuples()
+    assert row.stream == "flight_data" and row.time_field == "time" and row.samples == 34812
+    assert abs(row.rate_hz - 50.0) < 0.01 and row.dropouts == 0
+
+
+@needs_thor
+def test_a_problem_file_reads_an_airborne_piece_of_the_thor_flight(tmp_path):
+    (tmp_path / "thor.toml").write_text(f"""
+model = "uav_example"
+channels = ["phi", "theta", "psi", "tas", "h", "alpha_v", "beta_v"]
+positions_checked = true
+[sensors]
+imu = [0.0, 0.0, 0.0]
+aoa_vane = [0.5, 0.0, 0.0]
+sideslip_vane = [0.5, 0.0, 0.0]
+[aircraft.thor]
+r_cg_body_m = [0.0, 0.0, 0.0]
+[columns]
+t = {{ column = "flight_data.time", unit = "s" }}
+ax = {{ column = "flight_data.ax", unit = "m/s^2" }}
+ay = {{ column = "flight_data.ay", unit = "m/s^2" }}
+az = {{ column = "flight_data.az", unit = "m/s^2" }}
+p = {{ column = "flight_data.p", unit = "rad/s" }}
+q = {{ column = "flight_data.q", unit = "rad/s" }}
+r = {{ column = "flight_data.r", unit = "rad/s" }}
+phi = {{ column = "flight_data.phi", unit = "rad" }}
+theta = {{ column = "flight_data.theta", unit = "rad" }}
+psi = {{ column = "flight_data.psi", unit = "rad" }}
+tas = {{ column = "flight_data.ias", unit = "m/s" }}
+h = {{ column = "flight_data.h", unit = "m" }}
+alpha_v = {{ column = "flight_data.aoa", unit = "rad" }}
+beta_v = {{ column = "flight_data.aos", unit = "rad" }}
+[[files]]
+path = "{THOR}"
+maneuvers = [{{ id = "leg1", t_start_s = 300.0, t_end_s = 330.0 }}]
+""")
+    try:
+        p = _load(tmp_path / "thor.toml")
+    except DataError as exc:  # the model set's ranges are a jet drone's: say so, then stop here
+        pytest.fail(f"the Thor flight's problem file does not read: {exc}")
+    (m,) = p.maneuvers
+    assert m.t_s.size == 1500 and abs(m.t_s[-1] - m.t_s[0] - 29.98) < 0.001  # 50 Hz, stamps in float32
+    assert set(m.measurements) >= {"phi", "theta", "tas", "alpha_v", "beta_v"}
+    assert 10.0 < np.nanmedian(m.measurements["tas"]) < 25.0, "a small UAV's airspeed"
+
+
+def test_fpr_streams_prints_the_table(tmp_path, capsys):
+    _two_clocks(tmp_path / "f.mat")
+    assert main(["streams", str(tmp_path / "f.mat")]) == 0
+    out = capsys.readouterr().out
+    assert "gps" in out and "imu" in out and "rate_hz" in out
+    assert re.search(r"gps\s+2\s+100\s+time", out), out
