@@ -1,8 +1,9 @@
 """Flight logs behind a problem file's ``[[files]]``: MATLAB (v5, v7.3) and PX4 ULog files read
 into streams, each on its own clock, and brought onto one time base (estimator/io/logs.py).
 
-- The same flight written as Parquet, as a MATLAB v5 struct and as a MATLAB v7.3 (HDF5) struct
-  reads into the same problem, bit for bit, and estimates to the same numbers.
+- The same flight written as Parquet, as a MATLAB v5 struct, as a MATLAB v7.3 (HDF5) struct and
+  as a PX4 ULog topic (synth/export.py) reads into the same problem, bit for bit, and estimates to
+  the same numbers.
 - Streams on their own clocks: a slower stream is interpolated onto the base stamps (linear
   signals exactly), a declared clock offset moves it, an own-rate column keeps only its own
   samples, a dropout is left empty (never bridged), a quaternion gives its Euler angles.
@@ -17,7 +18,6 @@ import re
 import warnings
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pandas as pd
 import pytest
@@ -31,6 +31,7 @@ from estimator.io import load_problem
 from estimator.io.errors import DataError
 from estimator.io.logs import euler_from_quaternion, log_frame, stream_table
 from estimator.solver import SolverOptions, estimate
+from synth.export import write_mat, write_ulog
 
 SHARED = Path(__file__).resolve().parents[3] / "shared" / "data"
 THOR = SHARED / "umn-thor75" / "thor_flight75.mat"
@@ -39,44 +40,41 @@ CHANNELS = ["phi", "theta", "psi", "tas", "h", "alpha_zl", "alpha_zr"]
 
 
 # --------------------------------------------------------------------------------------------------
-# one flight, three file formats
-
-
-def _write_mat73(path: Path, struct: str, columns: dict[str, np.ndarray]) -> None:
-    """An HDF5 file laid out as MATLAB v7.3 writes a struct of column vectors: a group of (1, N)
-    datasets (MATLAB is column-major) after a 512-byte user block holding MATLAB's header."""
-    with h5py.File(path, "w", userblock_size=512) as f:
-        g = f.create_group(struct)
-        for name, v in columns.items():
-            g.create_dataset(name, data=np.asarray(v, dtype=float)[None, :])
-    with open(path, "r+b") as fh:
-        fh.write(b"MATLAB 7.3 MAT-file, written by the project's tests".ljust(116))
+# one flight, four file formats
 
 
 @pytest.fixture(scope="module")
 def formats(tiny_dataset, tmp_path_factory) -> dict[str, Path]:
-    """The tiny campaign as a user's files: one Parquet table, one MATLAB v5 struct ``flight``,
-    one MATLAB v7.3 struct ``flight``; a problem file each, alike but for the path and the columns'
-    paths (``flight.AX`` for a MATLAB struct field)."""
+    """The tiny campaign as a user's files: one Parquet table; one MATLAB v5 and one v7.3 struct
+    ``flight`` and one ULog topic ``flight`` (synth/export.py); a problem file each, alike but for
+    the path and the columns' paths (``flight.AX``). The ULog's stamps are whole microseconds, so
+    ``parquet_us`` is the Parquet table with its time quantised alike (the ULog's reference)."""
     root = tmp_path_factory.mktemp("logs")
     cols = {k: USER_COLUMNS[k] for k in ("ax", "ay", "az", "p", "q", "r", *CHANNELS)}
     problem = write_user_files(tiny_dataset, root / "csv", cols, CHANNELS, "tiny as a user's files")
     frame = pd.read_csv(root / "csv" / "flight.csv")
+    t_us = np.round(frame["Time"].to_numpy() * 1e6).astype(np.int64)
     text = problem.read_text()
+    in_log = re.sub(r'column = "([^"]+)"', r'column = "flight.\1"', text)
     out = {}
-    for fmt, name in (("parquet", "flight.parquet"), ("mat5", "flight_v5.mat"), ("mat73", "flight_v73.mat")):
+    for fmt, name in (("parquet", "flight.parquet"), ("parquet_us", "flight.parquet"),
+                      ("mat5", "flight_v5.mat"), ("mat73", "flight_v73.mat"), ("ulog", "flight.ulg")):
         d = root / fmt
         d.mkdir()
-        if fmt == "parquet":
-            frame.to_parquet(d / name)
+        columns = {c: frame[c].to_numpy() for c in frame.columns}
+        body = in_log
+        if fmt.startswith("parquet"):
+            if fmt == "parquet_us":
+                columns["Time"] = t_us.astype(float) * 1e-6 + 0.0  # as the reader converts us
+            pd.DataFrame(columns).to_parquet(d / name)
             body = text
+        elif fmt == "ulog":
+            del columns["Time"]
+            write_ulog(d / name, {"flight": {"timestamp": t_us, **columns}})
+            body = in_log.replace('t = { column = "flight.Time", unit = "s" }',
+                                  't = { column = "flight.timestamp", unit = "us" }')
         else:
-            columns = {c: frame[c].to_numpy() for c in frame.columns}
-            if fmt == "mat5":
-                scipy.io.savemat(d / name, {"flight": columns})
-            else:
-                _write_mat73(d / name, "flight", columns)
-            body = re.sub(r'column = "([^"]+)"', r'column = "flight.\1"', text)
+            write_mat(d / name, {"flight": columns}, version="5" if fmt == "mat5" else "7.3")
         (d / "problem.toml").write_text(body.replace('path = "flight.csv"', f'path = "{name}"'))
         out[fmt] = d / "problem.toml"
     return out
@@ -88,9 +86,9 @@ def _load(path: Path):
         return load_problem(path)
 
 
-def test_matlab_v5_and_v73_read_into_the_parquet_problem_bit_for_bit(formats):
-    ref = _load(formats["parquet"])
-    for fmt in ("mat5", "mat73"):
+def test_matlab_v5_v73_and_ulog_read_into_the_parquet_problem_bit_for_bit(formats):
+    for fmt, reference in (("mat5", "parquet"), ("mat73", "parquet"), ("ulog", "parquet_us")):
+        ref = _load(formats[reference])
         p = _load(formats[fmt])
         assert [m.id for m in p.maneuvers] == [m.id for m in ref.maneuvers]
         for a, b in zip(p.maneuvers, ref.maneuvers, strict=True):

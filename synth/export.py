@@ -1,0 +1,106 @@
+"""Flight data written as the field's recorders write it: a PX4 ULog, a MATLAB v5 or v7.3 file.
+
+The readers of :mod:`estimator.io.logs` are tested end to end against these: the same flight
+written here and as Parquet must read into the same problem.
+
+ULog (PX4's format, https://docs.px4.io/main/en/dev_log/ulog_file_format.html): a 16-byte header
+(magic, version 1, start time in us), a flag-bits message, one format message per topic
+(``name:uint64_t timestamp;double field;double[3] vec``), then the data section: one
+add-logged-message per topic instance and one data message per sample, in time order. Every
+field is written as ``double`` (``double[k]`` for a vector), so that values come back exactly.
+
+MATLAB: v5 through :func:`scipy.io.savemat`; v7.3 is HDF5 as MATLAB writes it: a 512-byte
+user block holding MATLAB's text header, a struct as a group (``MATLAB_class = "struct"``), each
+field a ``double`` dataset stored column-major (an N-vector as a (1, N) dataset, an N x k matrix
+as (k, N)).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+#: ULog's magic bytes and the file-format version written.
+ULOG_MAGIC, ULOG_VERSION = b"ULog\x01\x12\x35", 1
+
+
+def _message(kind: bytes, payload: bytes) -> bytes:
+    return struct.pack("<HB", len(payload), kind[0]) + payload
+
+
+def write_ulog(path: str | Path, topics: Mapping[str, Mapping[str, np.ndarray]], start_us: int = 0) -> Path:
+    """Write topics to a ULog file.
+
+    Parameters
+    ----------
+    path : the file written.
+    topics : topic name -> fields; each has ``timestamp`` ((N,) integers, us, increasing) and
+        fields of (N,) or (N, k) values, written as ``double`` / ``double[k]``. A second instance
+        of a topic is named ``"topic:1"``.
+    start_us : the header's start time, us.
+
+    Returns
+    -------
+    The path.
+    """
+    formats, adds, samples = [], [], []
+    names: dict[str, list[str]] = {}
+    for msg_id, (key, fields) in enumerate(topics.items()):
+        name, _, instance = key.partition(":")
+        t = np.asarray(fields["timestamp"], dtype=np.uint64)
+        cols = [(f, np.asarray(v, dtype="<f8").reshape(len(t), -1)) for f, v in fields.items()
+                if f != "timestamp"]
+        spec = ";".join(["uint64_t timestamp"] + [f"double{f'[{c.shape[1]}]' if c.shape[1] > 1 else ''} {f}"
+                                                  for f, c in cols]) + ";"
+        if name in names and names[name] != spec:
+            raise ValueError(f"{path}: topic {name!r}: its instances must have the same fields")
+        if name not in names:
+            names[name] = spec
+            formats.append(_message(b"F", f"{name}:{spec}".encode("ascii")))
+        adds.append(_message(b"A", struct.pack("<BH", int(instance or 0), msg_id) + name.encode("ascii")))
+        body = np.hstack([c for _, c in cols]) if cols else np.empty((len(t), 0))
+        head = struct.pack("<H", msg_id)
+        samples += [(int(ti), msg_id, _message(b"D", head + struct.pack("<Q", int(ti)) + row.tobytes()))
+                    for ti, row in zip(t, body, strict=True)]
+    samples.sort(key=lambda s: (s[0], s[1]))  # time order, as a logger writes them
+    header = ULOG_MAGIC + struct.pack("<BQ", ULOG_VERSION, start_us)
+    flags = _message(b"B", bytes(8) + bytes(8) + struct.pack("<3Q", 0, 0, 0))
+    out = Path(path)
+    out.write_bytes(b"".join([header, flags, *formats, *adds, *(s[2] for s in samples)]))
+    return out
+
+
+def write_mat(path: str | Path, structs: Mapping[str, Mapping[str, np.ndarray]], version: str = "5") -> Path:
+    """Write structs of vectors (and N x k matrices) to a MATLAB file.
+
+    Parameters
+    ----------
+    path : the file written.
+    structs : struct name -> field name -> (N,) or (N, k) values (written as double).
+    version : ``"5"`` (scipy) or ``"7.3"`` (HDF5, as MATLAB lays it out).
+    """
+    out = Path(path)
+    data = {s: {f: np.asarray(v, dtype=float) for f, v in fields.items()} for s, fields in structs.items()}
+    if version == "5":
+        import scipy.io
+
+        scipy.io.savemat(out, data)
+        return out
+    if version != "7.3":
+        raise ValueError(f"{path}: MATLAB file version {version!r}: write \"5\" or \"7.3\"")
+    import h5py
+
+    with h5py.File(out, "w", userblock_size=512) as f:
+        for s, fields in data.items():
+            g = f.create_group(s)
+            g.attrs["MATLAB_class"] = np.bytes_("struct")
+            for name, v in fields.items():
+                d = g.create_dataset(name, data=np.atleast_2d(v.T) if v.ndim == 2 else v[None, :])
+                d.attrs["MATLAB_class"] = np.bytes_("double")
+    with open(out, "r+b") as fh:  # MATLAB's text header in the user block
+        fh.write(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, written by synth.export".ljust(116)
+                 + bytes(8) + struct.pack("<H", 0x0200) + b"IM")
+    return out
