@@ -27,6 +27,7 @@ Formats: ``ulog`` (``.ulg``; read with pyulog), ``mat`` (``.mat``: MATLAB v5 thr
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Mapping, Sequence
@@ -67,6 +68,8 @@ class Stream:
     name: str
     fields: Mapping[str, np.ndarray]
     time_field: str | None = None
+    #: fields of another length than the stream's (a MATLAB struct's odd ones out): name -> length
+    left_out: Mapping[str, int] = dataclasses.field(default_factory=dict)
 
     @property
     def samples(self) -> int:
@@ -104,8 +107,20 @@ def read_streams(path: Path, fmt: str, streams: Sequence[str] | None = None) -> 
 def _read_ulog(path: Path, streams: Sequence[str] | None) -> dict[str, Stream]:
     from pyulog import ULog
 
+    from estimator.io.errors import warn
+
     topics = None if streams is None else sorted({s.split(":", 1)[0] for s in streams})
-    log = ULog(str(path), message_name_filter_list=topics)
+    try:
+        log = ULog(str(path), message_name_filter_list=topics)
+    except Exception as exc:  # pyulog's ULogException derives from Exception only
+        if isinstance(exc, (OSError, MemoryError)):
+            raise
+        raise DataError(f"{path}: not a readable PX4 ULog ({str(exc).strip() or type(exc).__name__}); "
+                        "check that the file is a complete .ulg log, and its format under its "
+                        "[[files]] entry") from None
+    if getattr(log, "file_corruption", False):
+        warn(f"{path}: the log is corrupted in places (pyulog skipped damaged messages): check the "
+             "streams' dropouts (fpr streams) before trusting it")
     out: dict[str, Stream] = {}
     for d in log.data_list:
         name = d.name if d.multi_id == 0 else f"{d.name}:{d.multi_id}"
@@ -161,11 +176,13 @@ def _collect_mat(items: Mapping, prefix: str, out: dict[str, Stream], is_struct,
             arrays[key] = np.atleast_1d(np.squeeze(a)) if a.ndim == 2 and 1 in a.shape else a
     if not arrays:
         return
-    n = max((len(a) for a in arrays.values()), key=[len(a) for a in arrays.values()].count)
+    # the stream's length: its time vector's, else the commonest (ties: the longest)
+    timed = next((t for t in TIME_FIELD_NAMES if t in arrays and arrays[t].ndim == 1), None)
+    lengths = [len(a) for a in arrays.values()]
+    n = len(arrays[timed]) if timed else max(lengths, key=lambda k: (lengths.count(k), k))
     name = prefix[:-1]
     fields = {k: a for k, a in arrays.items() if len(a) == n}
-    time_field = next((t for t in TIME_FIELD_NAMES if t in fields and fields[t].ndim == 1), None)
-    out[name] = Stream(name, fields, time_field)
+    out[name] = Stream(name, fields, timed, {k: len(a) for k, a in arrays.items() if len(a) != n})
 
 
 # --------------------------------------------------------------------------------------------------
@@ -217,6 +234,11 @@ def field_values(stream: Stream, field: str, where: str) -> np.ndarray:
             1 for f in stream.fields if _INDEX.match(f) and _INDEX.match(f)["name"] == field)
         extra = (f"; a quaternion: take {field}.roll, {field}.pitch or {field}.yaw" if k == 4 else "")
         raise DataError(f"{where}: {field!r} has {k} components: take one, e.g. {field}[0]{extra}")
+    base_name = (m["name"] if m else field)
+    if base_name in stream.left_out:
+        raise DataError(f"{where}: {base_name!r} has {stream.left_out[base_name]} samples, the other fields "
+                        f"of stream {stream.name!r} {stream.samples}: it is not on their time base; "
+                        "write it into a struct of its own with its own time vector")
     near = close_match(field, list(stream.fields))
     raise DataError(f"{where}: stream {stream.name or '(top level)'!r} has no field {field!r}"
                     + (f"; did you mean {near!r}?" if near else "")
@@ -286,54 +308,96 @@ def log_frame(path: Path, fmt: str, columns: Mapping[str, Mapping], where: str,
                         "[columns]: the stream whose time stamps are the time base (e.g. "
                         "\"sensor_combined.timestamp\", unit \"us\"; \"flight_data.time\", unit \"s\")")
     paths = {name: spec["column"] for name, spec in columns.items()}
-    for name, src in paths.items():
-        if not isinstance(src, str):
-            raise DataError(f"{where}: {name} = {{ column = {src!r} }}: a log's columns are paths "
-                            "(\"STREAM.FIELD\"), not indices")
+    _check_paths(paths, columns, where)
     # a ULog topic's name holds no dot (its fields may: previous.lat); instances are topic:k
     topics = [p.split(".", 1)[0] for p in paths.values()]
     streams = read_streams(path, fmt, topics if fmt == "ulog" else None)
     base, t_field = _stream_of(streams, paths["t"])
     if base is None:
-        raise _no_stream(path, streams, paths["t"], "t")
-    t_base = field_values(base, t_field, f"{path}: t")
-    offsets = dict(offsets_s or {})
-    unknown = sorted(set(offsets) - set(streams))
-    if unknown:
-        raise DataError(f"{where}: offsets_s names stream(s) {unknown} the file does not hold (or "
-                        f"that no column uses); its streams: {_shown(streams)}")
+        raise _no_stream(path, fmt, streams, paths["t"], "t")
+    t_base = field_values(base, t_field, f"{path}: t")  # raw stamps, in the t column's unit
+    offsets = _checked_offsets(offsets_s, streams, paths, base, where)
     frame = {paths["t"]: t_base}
     for name, src in paths.items():
         if name == "t":
             continue
         stream, field = _stream_of(streams, src)
-        optional = columns[name].get("optional", False)
+        if columns[name].get("optional", False) and not _holds(stream, field):
+            continue  # a log that legitimately lacks it: no such channel, as for a table
         if stream is None:
-            if optional:
-                continue
-            raise _no_stream(path, streams, src, name)
-        try:
-            values = field_values(stream, field, f"{path}: {name} (column {src!r})")
-        except DataError:
-            if optional:  # a log that legitimately lacks it: no such channel, as for a table
-                continue
-            raise
+            raise _no_stream(path, fmt, streams, src, name)
+        label = f"{path}: {name} (column {src!r})"
+        values = field_values(stream, field, label)
         if stream is not base:
-            t_own = _stream_time(stream, t_field, base, f"{path}: {name} (column {src!r})")
-            if t_own is not None:
-                t_own = t_own + offsets.get(stream.name, 0.0) / time_factor_s
-                values = (_nearest(t_base, t_own, values) if columns[name].get("own_rate", False)
-                          else _interpolated(t_base, t_own, values))
-            elif len(values) != len(t_base):
-                raise DataError(f"{path}: {name} (column {src!r}): stream {stream.name!r} has "
-                                f"{len(values)} samples and no time field of its own, the time base "
-                                f"{len(t_base)}: give it a time field, or take it from the base stream")
+            values = _onto_base(t_base, stream, t_field, values, field, label,
+                                offsets.get(stream.name, 0.0) / time_factor_s,
+                                columns[name].get("own_rate", False))
         frame[src] = values
     return pd.DataFrame(frame)
 
 
-def _no_stream(path: Path, streams: Mapping[str, Stream], src: str, name: str) -> DataError:
-    stream = split_path(src)[0]
+def _check_paths(paths: Mapping[str, object], columns: Mapping[str, Mapping], where: str) -> None:
+    """Every column a path; a path used twice only the same way (interpolated or own-rate)."""
+    seen: dict[str, bool] = {}
+    for name, src in paths.items():
+        if not isinstance(src, str):
+            raise DataError(f"{where}: {name} = {{ column = {src!r} }}: a log's columns are paths "
+                            "(\"STREAM.FIELD\"), not indices")
+        own = bool(columns[name].get("own_rate", False))
+        if seen.setdefault(src, own) != own:
+            raise DataError(f"{where}: {src!r} is mapped twice, once with own_rate = true and once "
+                            "without: map it once")
+
+
+def _holds(stream: Stream | None, field: str) -> bool:
+    """Does the stream hold the field (or the array or quaternion it names)? Only a column whose
+    data are absent is skipped as optional: a wrong index or suffix is still an error."""
+    if stream is None:
+        return False
+    base = field.rpartition(".")[0] if field.endswith(tuple(f".{s}" for s in EULER_SUFFIXES)) else field
+    m = _INDEX.match(base)
+    name = m["name"] if m else base
+    return name in stream.fields or f"{name}[0]" in stream.fields
+
+
+def _checked_offsets(offsets_s: Mapping[str, float] | None, streams: Mapping[str, Stream],
+                     paths: Mapping[str, str], base: Stream, where: str) -> dict[str, float]:
+    """The declared clock offsets, s: each of a stream a column uses, and none of the base's."""
+    offsets = dict(offsets_s or {})
+    used = {s.name for s, _ in (_stream_of(streams, p) for p in paths.values()) if s is not None}
+    unknown = sorted(set(offsets) - used)
+    if unknown:
+        raise DataError(f"{where}: offsets_s names stream(s) {unknown} that no column takes data from; "
+                        f"the columns' streams: {sorted(used)}")
+    if offsets.get(base.name, 0.0) != 0.0:
+        raise DataError(f"{where}: offsets_s gives the time base's own stream {base.name!r} an offset: "
+                        "the base defines the clock; give the other streams the opposite offset")
+    return offsets
+
+
+def _onto_base(t_base: np.ndarray, stream: Stream, t_field: str, values: np.ndarray, field: str,
+               label: str, offset: float, own_rate: bool) -> np.ndarray:
+    """A column of another stream on the base stamps (``offset`` in the stamps' unit)."""
+    t_own = _stream_time(stream, t_field, label)
+    if t_own is None:
+        if len(values) != len(t_base):
+            raise DataError(f"{label}: stream {stream.name!r} has {len(values)} samples and no time "
+                            f"field {t_field!r} of its own, the time base {len(t_base)}: give it one, "
+                            "or take the column from the base stream")
+        return values
+    t_own = t_own + offset
+    if own_rate:
+        return _nearest(t_base, t_own, values, label)
+    if field.endswith((".roll", ".yaw")):
+        # an angle that wraps at +-180 deg: interpolated unwrapped, wrapped again
+        return np.mod(_interpolated(t_base, t_own, np.unwrap(values)) + np.pi, 2.0 * np.pi) - np.pi
+    return _interpolated(t_base, t_own, values)
+
+
+def _no_stream(path: Path, fmt: str, streams: Mapping[str, Stream], src: str, name: str) -> DataError:
+    if fmt == "ulog":  # the streams read were only the ones asked for: list them all
+        streams = read_streams(path, fmt)
+    stream = src.split(".", 1)[0] if fmt == "ulog" else split_path(src)[0]
     near = close_match(stream, [s for s in streams if s])
     return DataError(f"{path}: {name} (column {src!r}): the file has no stream {stream!r}"
                      + (f"; did you mean {near!r}?" if near else "")
@@ -341,34 +405,33 @@ def _no_stream(path: Path, streams: Mapping[str, Stream], src: str, name: str) -
                      "their rates)")
 
 
-def _stream_time(stream: Stream, t_field: str, base: Stream, where: str) -> np.ndarray | None:
-    """A stream's own stamps (its time field: ULog's ``timestamp``, or the field of the base's
-    name), None when it has none; checked to increase."""
-    name = stream.time_field if stream.time_field in stream.fields else (
-        t_field if t_field in stream.fields else None)
-    if name is None:
+def _stream_time(stream: Stream, t_field: str, where: str) -> np.ndarray | None:
+    """A stream's own stamps, in the base's unit: its field of the base's time field's name (ULog:
+    ``timestamp``; a MATLAB struct: e.g. ``time``), None when it has none; checked to increase."""
+    if t_field not in stream.fields:
         return None
-    t = np.asarray(stream.fields[name], dtype=float)
+    t = np.asarray(stream.fields[t_field], dtype=float)
     steps = np.diff(t)
     bad = np.flatnonzero(~(steps > 0))
     if bad.size:
-        raise DataError(f"{where}: stream {stream.name!r}'s time stamps ({name}) do not increase at sample "
-                        f"{int(bad[0]) + 1} ({t[bad[0]]!r} then {t[bad[0] + 1]!r}; {bad.size} such steps): "
-                        "the stream cannot be put on the time base; take the column from another "
+        raise DataError(f"{where}: stream {stream.name!r}'s time stamps ({t_field}) do not increase at "
+                        f"sample {int(bad[0]) + 1} ({t[bad[0]]!r} then {t[bad[0] + 1]!r}; {bad.size} such "
+                        "steps): the stream cannot be put on the time base; take the column from another "
                         "stream, or repair the log's stamps")
     return t
 
 
 def _dropout_mask(t_base: np.ndarray, t_own: np.ndarray) -> np.ndarray:
-    """Base samples outside the stream's span or inside one of its dropouts."""
+    """Base samples outside the stream's span or strictly inside one of its dropouts."""
     out = (t_base < t_own[0]) | (t_base > t_own[-1])
     if t_own.size > 2:
         steps = np.diff(t_own)
         gap = np.flatnonzero(steps > DROPOUT_FACTOR * np.median(steps))
         if gap.size:
-            k = np.searchsorted(t_own, t_base, side="right") - 1  # the stream sample before each base one
+            k = np.searchsorted(t_own, t_base, side="right") - 1  # the stream sample at or before
             inside = (k >= 0) & (k < t_own.size - 1)
-            out |= inside & np.isin(k, gap)
+            kk = np.clip(k, 0, t_own.size - 1)
+            out |= inside & np.isin(k, gap) & (t_base > t_own[kk])
     return out
 
 
@@ -378,13 +441,23 @@ def _interpolated(t_base: np.ndarray, t_own: np.ndarray, values: np.ndarray) -> 
     return v
 
 
-def _nearest(t_base: np.ndarray, t_own: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Each own sample at the base sample nearest it (NaN elsewhere): an own-rate column."""
+def _nearest(t_base: np.ndarray, t_own: np.ndarray, values: np.ndarray, label: str) -> np.ndarray:
+    """Each own sample at the base sample nearest it (NaN elsewhere): an own-rate column. A sample
+    more than half a base step from every base sample (in a gap of the base) is left out; two on
+    one base sample mean the stream is not slower than the base: an error."""
     v = np.full(t_base.size, np.nan)
     inside = (t_own >= t_base[0]) & (t_own <= t_base[-1])
-    k = np.clip(np.searchsorted(t_base, t_own[inside]), 1, t_base.size - 1)
-    k -= (t_own[inside] - t_base[k - 1]) < (t_base[k] - t_own[inside])
-    v[k] = values[inside]
+    t_in, v_in = t_own[inside], values[inside]
+    k = np.clip(np.searchsorted(t_base, t_in), 1, t_base.size - 1)
+    k -= (t_in - t_base[k - 1]) < (t_base[k] - t_in)
+    half_step = 0.5 * float(np.median(np.diff(t_base))) if t_base.size > 1 else np.inf
+    near = np.abs(t_in - t_base[k]) <= half_step
+    k, v_in = k[near], v_in[near]
+    if k.size and np.any(np.diff(k) == 0):
+        raise DataError(f"{label}: own_rate = true, but two of its samples fall on one sample of the "
+                        "time base: the stream is not slower than the base; leave own_rate out (it is "
+                        "then interpolated)")
+    v[k] = v_in
     return v
 
 
@@ -417,6 +490,9 @@ def stream_table(path: str | Path, fmt: str | None = None,
                         f"{sorted(LOG_EXTENSIONS)}); give it (ulog or mat)")
     factor = time_factor_s if time_factor_s is not None else (1e-6 if fmt == "ulog" else 1.0)
     rows = [_stream_row(s, factor) for s in read_streams(p, fmt).values()]
+    if not rows:
+        raise DataError(f"{p}: the log holds no stream with data (no topic with samples, no numeric "
+                        "vector); check that it is the right file and complete")
     return pd.DataFrame(rows).sort_values("stream", kind="stable").reset_index(drop=True)
 
 

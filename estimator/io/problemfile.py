@@ -159,6 +159,12 @@ def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: s
         if key in entry and (not isinstance(entry[key], str) or len(entry[key]) != 1):
             raise DataError(f"{where}: {key} = {entry[key]!r} must be one character in quotes, e.g. "
                             f"{key} = \"{';' if key == 'delimiter' else ','}\"")
+    table_keys = sorted(k for k in ("header", "delimiter", "decimal", "skip_rows", "encoding") if k in entry)
+    if fmt in LOG_FORMATS and table_keys:
+        raise DataError(f"{where}: {table_keys} are for text tables; a {fmt} log has none: remove them")
+    if fmt not in LOG_FORMATS and "offsets_s" in entry:
+        raise DataError(f"{where}: offsets_s is for a log's streams (ulog, mat); a {fmt} table has one "
+                        "time base: remove it")
     if fmt in LOG_FORMATS:
         df, header = _read_log(path, fmt, entry, columns, where), True
     else:

@@ -181,6 +181,30 @@ def test_a_quaternion_gives_its_euler_angles(tmp_path):
         log_frame(tmp_path / "f.mat", "mat", _cols(phi={"column": "imu.quat"}), "test")
 
 
+def test_heading_through_180_deg_is_interpolated_unwrapped(tmp_path):
+    t_fast, t_slow = np.arange(0.0, 10.0, 0.01), np.arange(0.0, 10.0, 0.02)
+    yaw = np.pi - 0.5 + 0.1 * t_slow  # crosses +180 deg at t = 5 s
+    q = np.column_stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)])
+    scipy.io.savemat(tmp_path / "f.mat", {"imu": {"time": t_fast, "ax": t_fast},
+                                          "ins": {"time": t_slow, "q": q}})
+    df = log_frame(tmp_path / "f.mat", "mat", _cols(psi={"column": "ins.q.yaw"}), "test")
+    t = df["imu.time"].to_numpy()
+    ok = t <= t_slow[-1]
+    want = np.mod(np.pi - 0.5 + 0.1 * t[ok] + np.pi, 2 * np.pi) - np.pi
+    assert np.allclose(df["ins.q.yaw"][ok], want, atol=1e-9)
+
+
+def test_clock_and_rate_mistakes_are_named(tmp_path):
+    _two_clocks(tmp_path / "f.mat")
+    with pytest.raises(DataError, match="not slower than the base"):  # a 50-Hz stream as own-rate at 5 Hz
+        log_frame(tmp_path / "f.mat", "mat", {"t": {"column": "gps.time"},
+                                              "ax": {"column": "imu.ax", "own_rate": True}}, "test")
+    with pytest.raises(DataError, match="time base's own stream 'imu'"):
+        log_frame(tmp_path / "f.mat", "mat", _cols(vn={"column": "gps.vn"}), "test", offsets_s={"imu": 0.1})
+    with pytest.raises(DataError, match="quat has 4 columns"):  # optional, but the index is wrong
+        log_frame(tmp_path / "f.mat", "mat", _cols(w={"column": "imu.quat[4]", "optional": True}), "test")
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.floats(-3.1, 3.1), st.floats(-1.5, 1.5), st.floats(-3.1, 3.1))
 def test_euler_angles_of_a_quaternion_are_the_ones_it_was_built_from(roll, pitch, yaw):
