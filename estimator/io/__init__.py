@@ -60,7 +60,9 @@ z down) from the aircraft's reference point::
     h_dgps = { column = "GPS_ALT", unit = "ft", own_rate = true }
                               # own_rate: recorded slower than the file's time base and empty
                               # between its samples (a 10 Hz GPS height in a 40 Hz file): fitted
-                              # at its own samples only (interpolating it would delay it)
+                              # at its own samples only (interpolating it would delay it); or held,
+                              # each sample repeated until the next (a 1-Hz GPS at 50 Hz): kept
+                              # where its value changes
     gear = { column = "GEAR", unit = "1" } # any other data signal a model uses (1 = gear down)
     mach = { column = "MACH", unit = "1" }
 

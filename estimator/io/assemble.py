@@ -250,8 +250,8 @@ def _warn_held(v: np.ndarray, t_s: np.ndarray, where: Where, label: str) -> None
     rate = 1.0 / float(np.median(np.diff(t_s)))
     warn(f"{where}: {label} holds each value for {k} rows ({rate / k:.3g} Hz in a {rate:.3g} Hz file): a "
          f"slower channel written by repeating its samples, which delays it by up to "
-         f"{1e3 * (k - 1) / rate:.0f} ms. Blank the repeated rows in the file and mark it own_rate = true "
-         "under [columns], so that it is fitted at its own samples only")
+         f"{1e3 * (k - 1) / rate:.0f} ms. Mark it own_rate = true under [columns]: it is then fitted at "
+         "its own samples only (the rows where its value changes)")
 
 
 def _own_rate_on_grid(t_s: np.ndarray, v: np.ndarray, t_new_s: np.ndarray, label: str,

@@ -189,8 +189,20 @@ def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: s
         units[name] = spec["unit"]
         labels[name] = f"{name} (column {src!r})"
     own = frozenset(n for n, spec in columns.items() if spec.get("own_rate", False) and n in values)
+    for name in own:
+        values[name] = held_samples(values[name])
     return SourceTable(path=path, values=values, not_numeric=bad, raw_text=text, units=units, labels=labels,
                        own_rate=own)
+
+
+def held_samples(v: np.ndarray) -> np.ndarray:
+    """An own-rate column written at the file's rate by holding each sample (a 1-Hz GPS velocity
+    repeated at 50 Hz, no empty cells): kept only where its value changes, the rows its samples
+    arrived at, so that it is fitted at its own samples. A column with empty cells is returned as
+    it is (its samples are already the filled ones)."""
+    if np.isnan(v).any() or v.size < 2:
+        return v
+    return np.where(np.r_[True, np.diff(v) != 0], v, np.nan)
 
 
 def _read_log(path: Path, fmt: str, entry: Mapping, columns: Mapping[str, dict], where: str):

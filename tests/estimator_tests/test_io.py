@@ -561,6 +561,14 @@ def test_documented_problem_file_example_works(tmp_path):
     with pytest.warns(DataWarning, match="b_5h"):
         pd1, _ = load_problem(tmp_path / "problem.toml").maneuvers
     assert "h_dgps" not in pd1.measurements and "h_dgps" not in pd1.signals
+    # the same GPS height held between its samples (each repeated for 4 rows, no empty cells), as
+    # a recorder writing everything at one rate does: the same samples, fitted at the same rows
+    (tmp_path / "problem.toml").write_text(text)
+    eng["GPS_ALT"] = eng["GPS_ALT"].ffill()
+    eng.to_csv(tmp_path / "flight421.csv", index=False)
+    with pytest.warns(DataWarning, match="b_5h"):
+        held, _ = load_problem(tmp_path / "problem.toml").maneuvers
+    assert np.array_equal(held.measurements["h_dgps"], gps, equal_nan=True)
 
 
 def test_estimator_io_imports_neither_synth_nor_jsbsim():
