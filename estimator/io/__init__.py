@@ -87,6 +87,11 @@ z down) from the aircraft's reference point::
       { id = "wut1", t_start_s = 300.0, t_end_s = 340.0, configuration = "PV1-NP" },
     ]
 
+    [plausible]               # optional: the aircraft's ranges where the import's unit checks
+    tas = { range = [60.0, 900.0], unit = "kt" }   # (built in: a fighter's or an airliner's)
+                              # are not its own: a median airspeed of 15-700 m/s, a height of
+                              # -500 to 25 000 m (a 12 m/s UAV: range = [5, 40], unit = "m/s");
+                              # also in the model set; the problem file's wins
     [parameter.b_l]           # change any parameter of the model set; the keys are the model-set
     free = true               # format's (estimator/io/modelset.py) and merge into its declaration:
     bounds_deg = [-3.0, 3.0]  # value_deg replaces value, bounds replaces bounds_deg, ...

@@ -84,6 +84,8 @@ class ManeuverRequest:
     aircraft, configuration : ids for aircraft- and configuration-scoped parameters.
     r_cg_body_m : (3,) CG position, body axes, m.
     resample_hz : resample onto a uniform grid at this rate (None: the data must be uniform).
+    plausible : declared plausible ranges, SI (``[plausible]``:
+        :func:`estimator.io.plausibility.parse_ranges`).
     meta : carried into :attr:`ManeuverData.meta`, where ``mach_mean``, ``mach_min``,
         ``mach_max`` and ``gear_down`` are added from the data if absent.
     """
@@ -96,6 +98,7 @@ class ManeuverRequest:
     r_cg_body_m: np.ndarray
     resample_hz: float | None = None
     meta: Mapping = field(default_factory=dict)
+    plausible: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def check_dimensions(table: SourceTable, expected: Mapping[str, str]) -> None:
@@ -162,8 +165,9 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
     for name, v in si.items():
         if name not in ("ax", "ay", "az"):
             k = present[name]
-            check_plausible(name, table.labels[name], v[k], table.units[name], t_s[k], rows[k], where)
-    _check_accel(table, si, t_s, rows, where)
+            check_plausible(name, table.labels[name], v[k], table.units[name], t_s[k], rows[k], where,
+                            req.plausible)
+    _check_accel(table, si, t_s, rows, where, req.plausible)
     if "tas" in si and "mach" in si and "tas" not in own:
         check_tas_against_mach(si["tas"], si["mach"], table.units["tas"], table.labels["tas"], where)
     check_euler_rates(si, t_s, table.units, table.labels, where)
@@ -274,15 +278,16 @@ def _own_rate_on_grid(t_s: np.ndarray, v: np.ndarray, t_new_s: np.ndarray, label
     return out
 
 
-def _check_accel(table: SourceTable, si: Mapping[str, np.ndarray], t_s, rows, where: Where) -> None:
+def _check_accel(table: SourceTable, si: Mapping[str, np.ndarray], t_s, rows, where: Where,
+                 ranges: Mapping[str, tuple[float, float]]) -> None:
     units = [table.units[c] for c in ("ax", "ay", "az")]
     acc = np.column_stack([si["ax"], si["ay"], si["az"]])
     label = "the IMU specific force (" + ", ".join(table.labels[c] for c in ("ax", "ay", "az")) + ")"
     if len(set(units)) == 1:
-        check_plausible("accel", label, acc, units[0], t_s, rows, where)
+        check_plausible("accel", label, acc, units[0], t_s, rows, where, ranges)
         return
     try:
-        check_plausible("accel", label, acc, "m/s^2", t_s, rows, where)
+        check_plausible("accel", label, acc, "m/s^2", t_s, rows, where, ranges)
     except SpikeError:
         raise
     except DataError:

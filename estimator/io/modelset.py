@@ -204,7 +204,7 @@ def declarations_of(problem_or_channels) -> Declarations:
 
 
 _SECTIONS = ("channel", "parameter", "requirements", "workflow", "initial_conditions", "report",
-             "sensor_midpoints")
+             "sensor_midpoints", "plausible")
 _REQUIREMENT_KEYS = ("sensor", "desired_3sigma_deg", "low_alpha_only")
 _WORKFLOW_KEYS = ("reference_mach", "apportion_biases", "correction_model", "identity_table",
                   "alpha_limit_channel")

@@ -27,6 +27,10 @@ gear flag (gear)       min, max                         0 to 1
 Mach (mach)            median                           0 to 5; every sample 0 to 5
 =====================  ===============================  =========================================
 
+These are a fighter's and an airliner's ranges. An aircraft outside them (a 12 m/s UAV) declares
+its own under ``[plausible]`` in its model set or problem file (:func:`parse_ranges`): the range of
+the statistic, replacing the built-in one (:func:`declared`).
+
 Samples out of range that jump away from the rest (:func:`spikes`: one sample or a burst whose
 signed value jumps from the in-range samples either side by far more than the signal's own
 steps) are spikes. A unit is judged only by the bulk of the data (:func:`_bulk`: without its
@@ -39,8 +43,9 @@ itself is implausible.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -101,6 +106,47 @@ _BY_DIMENSION: dict[str, Check] = {
     "angle": Check("an angle", "maxabs", 0.0, 2 * math.pi + 0.05, prefer=("deg", "mrad")),
     "angular rate": Check("an angular rate", "maxabs", 0.0, 6.0, prefer=("deg/s",)),
 }
+
+
+#: A declared range (``[plausible]``): canonical name -> (low, high), SI.
+Ranges = Mapping[str, tuple[float, float]]
+
+
+def parse_ranges(table: object, where: str) -> dict[str, tuple[float, float]]:
+    """A ``[plausible]`` table (model set or problem file): ``NAME = { range = [low, high],
+    unit = "..." }`` -> name -> (low, high) in SI. The range replaces the built-in plausible
+    interval of the channel's statistic (the median of an airspeed, height or Mach; the largest
+    |value| of an angle or rate) for an aircraft outside the fighter-to-airliner ranges of
+    :data:`_CHECKS` (a 12 m/s UAV)."""
+    if not isinstance(table, Mapping):
+        raise DataError(f"{where}: [plausible] must be a table of NAME = {{ range = [low, high], "
+                        "unit = ... }")
+    out = {}
+    for name, spec in table.items():
+        w = f"{where}: [plausible] {name}"
+        if not isinstance(spec, Mapping) or set(spec) != {"range", "unit"}:
+            raise DataError(f"{w}: must be {{ range = [low, high], unit = \"...\" }}, e.g. tas = {{ range = "
+                            "[8.0, 40.0], unit = \"m/s\" }}, got " + repr(spec))
+        r = spec["range"]
+        if (not isinstance(r, list) or len(r) != 2 or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) for x in r) or not r[0] < r[1]):
+            raise DataError(f"{w}: range = {r!r} must be [low, high] with low < high")
+        lo, hi = to_si(np.asarray(r, dtype=float), str(spec["unit"]), w)
+        out[str(name)] = (float(lo), float(hi))
+    return out
+
+
+def declared(check: Check | None, name: str, lo: float, hi: float) -> Check:
+    """``check`` with a declared plausible range of its statistic, SI; every sample's range
+    widened to hold it. A name without a built-in check gets one on its median."""
+    if check is None:
+        return Check(f"{name} (its declared range)", "median", lo, hi, sample_low=lo, sample_high=hi)
+    if check.statistic == "maxabs":
+        return dataclasses.replace(check, high=hi)
+    return dataclasses.replace(
+        check, low=lo, high=hi,
+        sample_low=None if check.sample_low is None else min(check.sample_low, lo),
+        sample_high=None if check.sample_high is None else max(check.sample_high, hi))
 
 
 def check_for(name: str, dimension: str) -> Check | None:
@@ -260,7 +306,7 @@ def _samples_text(values: np.ndarray, unit: str, t_s: np.ndarray, rows: np.ndarr
 
 
 def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s: np.ndarray,
-                    rows: np.ndarray, where: Where) -> None:
+                    rows: np.ndarray, where: Where, ranges: Ranges | None = None) -> None:
     """Raise :class:`DataError` if ``values_si`` cannot be right in the declared ``unit``.
 
     A few samples far outside the plausible range that jump away from their neighbours are
@@ -276,8 +322,11 @@ def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s
     t_s : (N,) sample times, s (for ``"t"``: the times themselves, SI).
     rows : (N,) data rows of the samples in the file.
     where : file, maneuver and time range.
+    ranges : declared plausible ranges (``[plausible]``, :func:`parse_ranges`), SI.
     """
     check = check_for(name, UNITS[unit].dimension)
+    if ranges and name in ranges:
+        check = declared(check, name, *ranges[name])
     if check is None or values_si.size == 0:
         return
     raw_all = from_si(values_si, unit, label)
@@ -325,6 +374,10 @@ def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s
     lo, hi = check.low, check.high
     hint = (f"the values look like {cands[0]}: set unit = \"{cands[0]}\" for it under [columns]"
             if cands else "check that the column is the right one and that its unit is declared correctly")
+    if check.statistic == "median" and name != "t":  # an aircraft outside the built-in ranges
+        hint += (f"; if your aircraft really flies there, declare the range under [plausible] "
+                 f"({name} = {{ range = [low, high], unit = \"{unit}\" }}, in the problem file or the "
+                 "model set)")
     n_spikes = int(spike.sum())
     also = (f" ({n_spikes} spike(s) beyond that left aside: "
             f"{_samples_text(_scalar(raw_all), unit, t_s, rows, np.flatnonzero(spike), 3)})"

@@ -18,6 +18,7 @@ from estimator.io.dataset_problem import load_dataset_maneuvers
 from estimator.io.errors import DataError
 from estimator.io.logs import LOG_FORMATS, log_frame
 from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
+from estimator.io.plausibility import parse_ranges
 from estimator.io.positions import check_positions, positions_of
 from estimator.io.tables import check_data_path, infer_format, numeric, pick_column, read_table
 from estimator.io.units import get_unit
@@ -27,7 +28,7 @@ from estimator.problem import STATE_SIGNALS, ChannelSpec, Problem
 
 TOP_KEYS = ("title", "g_mps2", "lever_arm", "model", "channels", "resample_hz", "sensors", "aircraft",
             "columns", "files", "data", "parameter", "channel", "workflow", "solver", "report",
-            "positions_checked")
+            "positions_checked", "plausible")
 #: the CG, in m (or r_cg_body_in, r_cg_body_ft)
 _CG_KEYS = {"r_cg_body_m": Key(unit="m")}
 FILE_KEYS = {**dict.fromkeys(("path", "format", "header", "delimiter", "decimal", "skip_rows", "encoding",
@@ -220,7 +221,8 @@ def _read_log(path: Path, fmt: str, entry: Mapping, columns: Mapping[str, dict],
                      time_factor_s=factor)
 
 
-def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[str]]
+def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[str]],
+                plausible: Mapping[str, tuple[float, float]] | None = None
                 ) -> list[tuple[SourceTable, ManeuverRequest]]:
     files = raw.get("files")
     if not files:
@@ -271,6 +273,7 @@ def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[s
                 configuration=str(man.get("configuration", entry.get("configuration", ac))),
                 r_cg_body_m=cg, resample_hz=None if rate is None else float(rate),
                 meta={"file": str(table.path), "t_start_s": t0, "t_end_s": t1},
+                plausible=dict(plausible or {}),
             )))
     return pairs
 
@@ -352,7 +355,10 @@ def load_problem(path: str | Path) -> Problem:
                                             chans)
         sensors = {**pos, **sensors}
     else:
-        pairs = _file_pairs(raw, base, where, column_names(chans, specs))
+        # the aircraft's plausible ranges: the model set's, then the problem file's
+        plausible = {**parse_ranges(raw_model.get("plausible", {}), f"{where} (model set {msource})"),
+                     **parse_ranges(raw.get("plausible", {}), where)}
+        pairs = _file_pairs(raw, base, where, column_names(chans, specs), plausible)
     if "imu" not in sensors:
         raise DataError(f"{where}: [sensors] needs imu = [x, y, z], the accelerometer position (body axes, "
                         "m from the reference point): the lever-arm correction depends on it")

@@ -1,0 +1,73 @@
+"""Plausible ranges declared for the aircraft (``[plausible]`` in the model set or the problem file).
+
+The import's unit checks (estimator/io/plausibility.py) know a fighter's and an airliner's ranges:
+a median true airspeed of 15 to 700 m/s. A 12 m/s UAV's airspeed is then refused as "cannot be a
+true airspeed" although it is one; the message says how to declare the aircraft's range, and a
+declared range replaces the built-in one (wider or narrower), from the model set or the problem
+file (the problem file's wins).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from campaigns.benchmarks.user_files import USER_COLUMNS, write_user_files
+from estimator.io import load_problem
+from estimator.io.errors import DataError, Where
+from estimator.io.modelset import MODELS_DIR
+from estimator.io.plausibility import check_plausible, parse_ranges
+
+WHERE = Where("uav.csv", "leg1")
+
+
+def _uav_airspeed(n: int = 500) -> tuple[np.ndarray, np.ndarray]:
+    t = np.arange(n) * 0.02
+    return t, 12.0 + 0.5 * np.sin(t)
+
+
+def test_a_slow_uav_airspeed_is_refused_by_default_with_the_fix_named():
+    t, v = _uav_airspeed()
+    with pytest.raises(DataError, match=r"cannot be a true airspeed.*declare the range under \[plausible\]"):
+        check_plausible("tas", "tas (column 'IAS')", v, "m/s", t, np.arange(t.size), WHERE)
+
+
+def test_a_declared_range_replaces_the_built_in_one():
+    t, v = _uav_airspeed()
+    ranges = parse_ranges({"tas": {"range": [10.0, 80.0], "unit": "kt"}}, "test")
+    assert ranges["tas"] == pytest.approx((10.0 * 1852 / 3600, 80.0 * 1852 / 3600))
+    check_plausible("tas", "tas", v, "m/s", t, np.arange(t.size), WHERE, ranges)  # 23 kt: plausible
+    with pytest.raises(DataError, match="cannot be a true airspeed"):  # narrower: 150 m/s is out
+        check_plausible("tas", "tas", np.full(t.size, 150.0), "m/s", t, np.arange(t.size), WHERE, ranges)
+
+
+@pytest.mark.parametrize("bad", [{"tas": [5, 40]}, {"tas": {"range": [40, 5], "unit": "m/s"}},
+                                 {"tas": {"range": [5, 40], "unit": "furlong"}}])
+def test_a_malformed_range_is_named(bad):
+    with pytest.raises(DataError, match=r"\[plausible\] tas|unknown unit"):
+        parse_ranges(bad, "problem.toml")
+
+
+def test_the_problem_file_and_the_model_set_declare_ranges(tiny_dataset, tmp_path):
+    cols = {k: USER_COLUMNS[k] for k in ("ax", "ay", "az", "p", "q", "r", "phi", "theta", "psi", "tas", "h")}
+    channels = ["phi", "theta", "psi", "tas", "h"]
+    problem = write_user_files(tiny_dataset, tmp_path / "u", cols, channels, "ranges")
+    text = problem.read_text()
+    narrow = '\n[plausible]\ntas = { range = [5.0, 60.0], unit = "kt" }\n'
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        load_problem(problem)  # the tiny campaign's ~300 kt: plausible by default
+        problem.write_text(text + narrow)
+        with pytest.raises(DataError, match=r"cannot be a true airspeed \(plausible: 2.572 to 30.87"):
+            load_problem(problem)
+        # the same range from a model set of one's own; the problem file's own range wins over it
+        model = tmp_path / "u" / "narrow.toml"
+        model.write_text((MODELS_DIR / "tejas.toml").read_text() + narrow)
+        problem.write_text(text.replace('model = "tejas"', 'model = "narrow.toml"'))
+        with pytest.raises(DataError, match="cannot be a true airspeed"):
+            load_problem(problem)
+        problem.write_text(text.replace('model = "tejas"', 'model = "narrow.toml"')
+                           + '\n[plausible]\ntas = { range = [50.0, 900.0], unit = "kt" }\n')
+        load_problem(problem)
