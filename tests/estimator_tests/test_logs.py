@@ -313,6 +313,18 @@ maneuvers = [{{ id = "leg1", t_start_s = 300.0, t_end_s = 330.0 }}]
     assert 10.0 < np.nanmedian(m.measurements["tas"]) < 25.0, "a small UAV's airspeed"
 
 
+@needs_thor
+def test_the_shipped_thor_example_reads_the_flight_from_its_matlab_file():
+    # docs/examples/thor75.toml: the uav model set, columns as paths, the held 1-Hz GPS fitted at its fixes
+    example = Path(__file__).resolve().parents[2] / "docs" / "examples" / "thor75.toml"
+    p = _load(example)
+    assert [m.id for m in p.maneuvers] == [f"s{k:02d}" for k in range(6)]
+    for m in p.maneuvers:
+        assert m.t_s.size == 2999 and set(m.measurements) >= {"vn", "ve", "vd", "tas", "alpha_v", "beta_v"}
+        fixes = np.count_nonzero(np.isfinite(m.measurements["vn"]))
+        assert 55 <= fixes <= 61, f"{m.id}: {fixes} GPS fixes in 60 s, at 1 Hz"
+
+
 def test_fpr_streams_prints_the_table(tmp_path, capsys):
     _two_clocks(tmp_path / "f.mat")
     assert main(["streams", str(tmp_path / "f.mat")]) == 0
