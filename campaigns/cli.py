@@ -286,7 +286,8 @@ def _show(args: argparse.Namespace) -> int:
 
 
 CALIBRATE_EPILOG = """\
-PROBLEM.toml is a problem file: your flight data (CSV, text or Parquet), column names and units,
+PROBLEM.toml is a problem file: your flight data (CSV, text, Parquet, PX4 ULog or MATLAB; `fpr streams
+LOG` lists a log's streams), column names (a log's: STREAM.FIELD paths) and units,
 sensor positions, CG, the channel models and which parameters are free; see docs/user-guide.md
 section "Problem files" and the problem-file schema in estimator/io/__init__.py. A dataset
 directory written by `fpr fly` works too (then --kind, --config, --aircraft, --mach-min,
