@@ -34,9 +34,9 @@ What it runs, and what each class must get:
   one at the true minimum must not be. And fits held away from their minimum: a gyro bias held 0.3
   deg/s off its estimate (pitch, roll, yaw), converged for the rest: each must be a FAILURE.
 - **real** — a small UAV's whole flight (``../shared/data/umn-thor75/``, skipped when absent): its
-  airborne part cut into 60-s pieces, a user's CSV and problem file with a model set for its
-  five-hole probe written here (``uav_ins`` below). Its calibration does not work yet; its verdict
-  must say what cannot be fitted and why, in a few lines.
+  airborne part cut into 60-s pieces, a user's CSV and problem file with the shipped ``uav`` model
+  set. Its calibration does not work yet; its verdict must say what cannot be fitted and why, in
+  a few lines.
 
 The thresholds the verdict uses (``estimator.diagnostics.DiagnosticOptions``) were set with the
 ``tune`` seeds; the committed table is the ``report`` seeds'. Its last section gives each
@@ -478,24 +478,17 @@ def wrong_minimum_cases(root: Path, workers: int | None) -> list[Callable[[], Ou
 # ------------------------------------------------------------------------------------------------
 # the real UAV flight
 
-#: A model set for the UMN Thor's instruments, written beside its problem file (what a user writes):
-#: the five-hole probe's onboard angles with a bias, a scale factor and a delay each (1-deg desired
-#: accuracy), the indicated airspeed with a scale factor, the baro height, the attitude of its
-#: INS/GNSS filter, the GPS velocity (1 Hz, fitted at its fixes) with the steady wind
 def uav_problem(dest: Path) -> Path:
     """The UMN Thor flight as a user's CSV (the airborne part in 60-s pieces) and problem file, with
-    the shipped UAV model set (estimator/models/uav.toml). The CSV keeps the GPS velocities' 1-Hz
-    fixes only (held at 50 Hz in the file: own_rate). docs/examples/thor75.toml reads the same
-    flight from its MATLAB file directly."""
+    the shipped UAV model set (estimator/models/uav.toml). The GPS velocities are written as the
+    file holds them (1-Hz fixes held at 50 Hz; own_rate: fitted at the fixes).
+    docs/examples/thor75.toml reads the same flight from its MATLAB file directly."""
     import scipy.io
 
     d = scipy.io.loadmat(UAV_DATA, squeeze_me=True, struct_as_record=False)["flight_data"]
     cols = {"t": np.asarray(d.time, float)}
-    for n in "p q r ax ay az phi theta psi ias h aoa aos".split():
+    for n in "p q r ax ay az phi theta psi ias h aoa aos vn ve vd".split():
         cols[n] = np.asarray(getattr(d, n), float)
-    for n in ("vn", "ve", "vd"):  # 1 Hz GPS held at 50 Hz: kept at its fixes (own_rate)
-        v = np.asarray(getattr(d, n), float)
-        cols[n] = np.where(np.r_[True, np.diff(v) != 0], v, np.nan)
     dest.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(cols).to_csv(dest / "thor75.csv", index=False, float_format="%.7g")
     pieces = ",\n".join(f'  {{ id = "s{k:02d}", t_start_s = {215 + 60 * k:.2f}, '

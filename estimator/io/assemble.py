@@ -15,7 +15,7 @@ import numpy as np
 
 from estimator.io.consistency import check_euler_rates
 from estimator.io.errors import DataError, Where, warn
-from estimator.io.plausibility import SpikeError, check_plausible, check_tas_against_mach
+from estimator.io.plausibility import Ranges, SpikeError, check_plausible, check_tas_against_mach
 from estimator.io.timebase import check_finite, check_sampling, check_time, resample, select_range
 from estimator.io.units import UNITS, get_unit, to_si
 from estimator.problem import ManeuverData
@@ -84,7 +84,7 @@ class ManeuverRequest:
     aircraft, configuration : ids for aircraft- and configuration-scoped parameters.
     r_cg_body_m : (3,) CG position, body axes, m.
     resample_hz : resample onto a uniform grid at this rate (None: the data must be uniform).
-    plausible : declared plausible ranges, SI (``[plausible]``:
+    plausible : declared plausible ranges, SI, with their dimension (``[plausible]``:
         :func:`estimator.io.plausibility.parse_ranges`).
     meta : carried into :attr:`ManeuverData.meta`, where ``mach_mean``, ``mach_min``,
         ``mach_max`` and ``gear_down`` are added from the data if absent.
@@ -98,7 +98,7 @@ class ManeuverRequest:
     r_cg_body_m: np.ndarray
     resample_hz: float | None = None
     meta: Mapping = field(default_factory=dict)
-    plausible: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    plausible: Ranges = field(default_factory=dict)
 
 
 def check_dimensions(table: SourceTable, expected: Mapping[str, str]) -> None:
@@ -244,10 +244,29 @@ def _check_slower(name: str, v: np.ndarray, t_s: np.ndarray, where: Where, label
                     "(hold or interpolate it in the file)")
 
 
+def hold_starts(v: np.ndarray) -> np.ndarray:
+    """Rows whose value differs from the row before (the first finite row counts; NaN rows never
+    do): where each sample of a held column arrived."""
+    return np.isfinite(v) & ~(v == np.r_[np.nan, v[:-1]])
+
+
+def held_samples(v: np.ndarray) -> np.ndarray:
+    """An own-rate column written at the file's rate by holding each sample (a 1-Hz GPS velocity
+    repeated at 50 Hz): kept only where its value changes, the rows its samples arrived at, so that
+    it is fitted at its own samples. Held means its changes come every k >= 2 of its filled rows
+    (:func:`regular_period`); any other column (empty between its samples, or a full-rate one
+    whose values merely repeat now and then, as a quantised height does) is returned as it is."""
+    finite = np.isfinite(v)
+    starts = hold_starts(v)
+    if regular_period(starts[finite]) is None:
+        return v
+    return np.where(starts, v, np.nan)
+
+
 def _warn_held(v: np.ndarray, t_s: np.ndarray, where: Where, label: str) -> None:
     """A slower channel written at the file's rate by repeating each sample: it is fitted as a
     staircase, late by up to a slow period; say so (it is not wrong enough to refuse)."""
-    starts = np.r_[True, np.diff(v) != 0]
+    starts = hold_starts(v)
     k = regular_period(starts)
     if k is None or np.count_nonzero(starts) < 10:
         return
@@ -279,7 +298,7 @@ def _own_rate_on_grid(t_s: np.ndarray, v: np.ndarray, t_new_s: np.ndarray, label
 
 
 def _check_accel(table: SourceTable, si: Mapping[str, np.ndarray], t_s, rows, where: Where,
-                 ranges: Mapping[str, tuple[float, float]]) -> None:
+                 ranges: Ranges) -> None:
     units = [table.units[c] for c in ("ax", "ay", "az")]
     acc = np.column_stack([si["ax"], si["ay"], si["az"]])
     label = "the IMU specific force (" + ", ".join(table.labels[c] for c in ("ax", "ay", "az")) + ")"

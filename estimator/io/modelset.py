@@ -69,6 +69,11 @@ optional, each name checked against the model set's channels and parameters)::
     truth_crossplots = ["alpha_zl"]    # calibrated - true (synthetic data)
     time_history = ["theta", "tas", "alpha_zl"]   # measured vs model (paper Fig. 3)
 
+    [plausible]                    # the aircraft's ranges for the import's unit checks, where the
+    tas = { range = [5.0, 60.0], unit = "m/s" }   # built-in ones (a fighter's) are not its own:
+                                   # the median's range (airspeed, height, Mach), the largest
+                                   # |value|'s (angles, rates: max(|low|, |high|)); accel: the
+                                   # specific force's magnitude. The problem file's [plausible] wins
     [sensor_midpoints]             # a sensor without a position of its own is the mean of these
     side_probe = ["side_probe_left", "side_probe_right"]   # (a pair of probes read as one sensor)
 

@@ -45,14 +45,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
-from estimator.io.errors import DataError, Where, at_row
-from estimator.io.units import UNITS, from_si, to_si, units_of
+from estimator.io.errors import DataError, Where, at_row, close_match
+from estimator.io.units import UNITS, from_si, get_unit, to_si, units_of
 
 
 class SpikeError(DataError):
@@ -108,41 +108,61 @@ _BY_DIMENSION: dict[str, Check] = {
 }
 
 
-#: A declared range (``[plausible]``): canonical name -> (low, high), SI.
-Ranges = Mapping[str, tuple[float, float]]
+#: Declared ranges (``[plausible]``): canonical name -> (low, high) in SI and the unit's dimension.
+Ranges = Mapping[str, tuple[float, float, str]]
+#: Names a range cannot be declared for: the time base is checked by its step, the specific force
+#: as a whole (declare ``accel``: the magnitude of (ax, ay, az)).
+_NOT_RANGED = {"t": "the time base is checked by its sampling step, not a range",
+               "ax": "declare accel (the specific force's magnitude) instead",
+               "ay": "declare accel (the specific force's magnitude) instead",
+               "az": "declare accel (the specific force's magnitude) instead"}
 
 
-def parse_ranges(table: object, where: str) -> dict[str, tuple[float, float]]:
+def parse_ranges(table: object, where: str, names: Sequence[str] | None = None
+                 ) -> dict[str, tuple[float, float, str]]:
     """A ``[plausible]`` table (model set or problem file): ``NAME = { range = [low, high],
-    unit = "..." }`` -> name -> (low, high) in SI. The range replaces the built-in plausible
-    interval of the channel's statistic (the median of an airspeed, height or Mach; the largest
-    |value| of an angle or rate) for an aircraft outside the fighter-to-airliner ranges of
-    :data:`_CHECKS` (a 12 m/s UAV)."""
+    unit = "..." }`` -> name -> (low, high) in SI and the unit's dimension. The range replaces the
+    built-in plausible interval of the column's statistic (the median of an airspeed, height or
+    Mach; the largest |value| of an angle or rate, which takes max(|low|, |high|)) for an aircraft
+    outside the fighter-to-airliner ranges of :data:`_CHECKS` (a 12 m/s UAV).
+
+    ``names``: the names a range may be declared for (the problem's columns and ``accel``);
+    None: not checked."""
     if not isinstance(table, Mapping):
         raise DataError(f"{where}: [plausible] must be a table of NAME = {{ range = [low, high], "
                         "unit = ... }")
     out = {}
     for name, spec in table.items():
         w = f"{where}: [plausible] {name}"
+        if name in _NOT_RANGED:
+            raise DataError(f"{w}: no range for {name}: {_NOT_RANGED[name]}")
+        if names is not None and name not in names:
+            near = close_match(str(name), list(names))
+            mean = f"; did you mean {near!r}?" if near else ""
+            raise DataError(f"{w}: {name!r} is no column of the problem{mean}; ranges can be declared "
+                            f"for: {sorted(names)}")
         if not isinstance(spec, Mapping) or set(spec) != {"range", "unit"}:
             raise DataError(f"{w}: must be {{ range = [low, high], unit = \"...\" }}, e.g. tas = {{ range = "
                             "[8.0, 40.0], unit = \"m/s\" }}, got " + repr(spec))
         r = spec["range"]
         if (not isinstance(r, list) or len(r) != 2 or not all(
-                isinstance(x, (int, float)) and not isinstance(x, bool) for x in r) or not r[0] < r[1]):
-            raise DataError(f"{w}: range = {r!r} must be [low, high] with low < high")
-        lo, hi = to_si(np.asarray(r, dtype=float), str(spec["unit"]), w)
-        out[str(name)] = (float(lo), float(hi))
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in r)
+                or not r[0] < r[1]):
+            raise DataError(f"{w}: range = {r!r} must be [low, high], finite, with low < high")
+        unit = get_unit(str(spec["unit"]), w)
+        lo, hi = to_si(np.asarray(r, dtype=float), unit.name, w)
+        out[str(name)] = (float(lo), float(hi), unit.dimension)
     return out
 
 
 def declared(check: Check | None, name: str, lo: float, hi: float) -> Check:
     """``check`` with a declared plausible range of its statistic, SI; every sample's range
-    widened to hold it. A name without a built-in check gets one on its median."""
+    widened to hold it. A largest-|value| check takes max(|lo|, |hi|); a name without a built-in
+    check gets one on its median."""
     if check is None:
         return Check(f"{name} (its declared range)", "median", lo, hi, sample_low=lo, sample_high=hi)
     if check.statistic == "maxabs":
-        return dataclasses.replace(check, high=hi)
+        return dataclasses.replace(check, high=max(abs(lo), abs(hi)))
     return dataclasses.replace(
         check, low=lo, high=hi,
         sample_low=None if check.sample_low is None else min(check.sample_low, lo),
@@ -325,8 +345,14 @@ def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s
     ranges : declared plausible ranges (``[plausible]``, :func:`parse_ranges`), SI.
     """
     check = check_for(name, UNITS[unit].dimension)
-    if ranges and name in ranges:
-        check = declared(check, name, *ranges[name])
+    declared_here = bool(ranges) and name in ranges
+    if declared_here:
+        lo, hi, dim = ranges[name]
+        if dim != UNITS[unit].dimension:
+            raise DataError(f"{where}: {label}: the range declared for it under [plausible] is in "
+                            f"{dim} units, the column in {unit!r} ({UNITS[unit].dimension}): give the "
+                            "range in a unit of the column's quantity")
+        check = declared(check, name, lo, hi)
     if check is None or values_si.size == 0:
         return
     raw_all = from_si(values_si, unit, label)
@@ -374,7 +400,11 @@ def check_plausible(name: str, label: str, values_si: np.ndarray, unit: str, t_s
     lo, hi = check.low, check.high
     hint = (f"the values look like {cands[0]}: set unit = \"{cands[0]}\" for it under [columns]"
             if cands else "check that the column is the right one and that its unit is declared correctly")
-    if check.statistic == "median" and name != "t":  # an aircraft outside the built-in ranges
+    if declared_here:
+        hint = ("it is outside the range declared for it under [plausible]: check the data and the "
+                "declared range (and the unit of each)")
+    elif check.statistic in ("median", "maxabs", "mean_norm") and name != "t":
+        # an aircraft outside the built-in ranges (a slow UAV, an agile one rolling at 400 deg/s)
         hint += (f"; if your aircraft really flies there, declare the range under [plausible] "
                  f"({name} = {{ range = [low, high], unit = \"{unit}\" }}, in the problem file or the "
                  "model set)")

@@ -12,13 +12,13 @@ from pathlib import Path
 import numpy as np
 
 from aircraft_models.schema import SUFFIXES, Key, check, did_you_mean
-from estimator.io.assemble import DIMENSIONS, REQUIRED, ManeuverRequest, SourceTable
+from estimator.io.assemble import DIMENSIONS, REQUIRED, ManeuverRequest, SourceTable, held_samples
 from estimator.io.build import StateEquations, StateSetup, build_problem
 from estimator.io.dataset_problem import load_dataset_maneuvers
 from estimator.io.errors import DataError
 from estimator.io.logs import LOG_FORMATS, log_frame
 from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
-from estimator.io.plausibility import parse_ranges
+from estimator.io.plausibility import Ranges, parse_ranges
 from estimator.io.positions import check_positions, positions_of
 from estimator.io.tables import check_data_path, infer_format, numeric, pick_column, read_table
 from estimator.io.units import get_unit
@@ -196,16 +196,6 @@ def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: s
                        own_rate=own)
 
 
-def held_samples(v: np.ndarray) -> np.ndarray:
-    """An own-rate column written at the file's rate by holding each sample (a 1-Hz GPS velocity
-    repeated at 50 Hz, no empty cells): kept only where its value changes, the rows its samples
-    arrived at, so that it is fitted at its own samples. A column with empty cells is returned as
-    it is (its samples are already the filled ones)."""
-    if np.isnan(v).any() or v.size < 2:
-        return v
-    return np.where(np.r_[True, np.diff(v) != 0], v, np.nan)
-
-
 def _read_log(path: Path, fmt: str, entry: Mapping, columns: Mapping[str, dict], where: str):
     """A log's columns on the time base of its ``t`` column's stream (:func:`log_frame`), with
     the entry's declared clock offsets (``offsets_s = { STREAM = seconds }``)."""
@@ -222,7 +212,7 @@ def _read_log(path: Path, fmt: str, entry: Mapping, columns: Mapping[str, dict],
 
 
 def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[str]],
-                plausible: Mapping[str, tuple[float, float]] | None = None
+                plausible: Ranges | None = None
                 ) -> list[tuple[SourceTable, ManeuverRequest]]:
     files = raw.get("files")
     if not files:
@@ -344,7 +334,8 @@ def load_problem(path: str | Path) -> Problem:
     data = raw.get("data")
     if data is not None:
         check(data, ("dataset", "select"), f"{where}: [data]", DataError)
-        clash = [k for k in ("files", "columns", "aircraft") if k in raw]
+        # a dataset of fpr fly is the testbed's aircraft: its plausible ranges are the built-in ones
+        clash = [k for k in ("files", "columns", "aircraft", "plausible") if k in raw]
         if clash:
             raise DataError(f"{where}: [data] dataset = ... reads everything from the dataset; "
                             f"remove {clash}")
@@ -356,9 +347,11 @@ def load_problem(path: str | Path) -> Problem:
         sensors = {**pos, **sensors}
     else:
         # the aircraft's plausible ranges: the model set's, then the problem file's
-        plausible = {**parse_ranges(raw_model.get("plausible", {}), f"{where} (model set {msource})"),
-                     **parse_ranges(raw.get("plausible", {}), where)}
-        pairs = _file_pairs(raw, base, where, column_names(chans, specs), plausible)
+        valid = column_names(chans, specs)
+        named = sorted({n for names in valid.values() for n in names} | {"accel"})
+        plausible = {**parse_ranges(raw_model.get("plausible", {}), f"{where} (model set {msource})", named),
+                     **parse_ranges(raw.get("plausible", {}), where, named)}
+        pairs = _file_pairs(raw, base, where, valid, plausible)
     if "imu" not in sensors:
         raise DataError(f"{where}: [sensors] needs imu = [x, y, z], the accelerometer position (body axes, "
                         "m from the reference point): the lever-arm correction depends on it")

@@ -571,6 +571,19 @@ def test_documented_problem_file_example_works(tmp_path):
     assert np.array_equal(held.measurements["h_dgps"], gps, equal_nan=True)
 
 
+def test_only_a_held_own_rate_column_is_cut_to_its_changes():
+    from estimator.io.assemble import held_samples
+
+    held = np.repeat(np.arange(10.0), 5)
+    held[-1] = np.nan  # an empty last row does not hide the hold
+    assert np.flatnonzero(np.isfinite(held_samples(held))).tolist() == list(range(0, 50, 5))
+    sparse = np.where(np.arange(40) % 4 == 0, np.arange(40.0), np.nan)  # empty between its samples
+    assert np.array_equal(held_samples(sparse), sparse, equal_nan=True)
+    rng = np.random.default_rng(3)
+    quantised = np.round(np.cumsum(rng.normal(0, 0.3, 400)))  # full rate, repeats now and then
+    assert np.array_equal(held_samples(quantised), quantised)
+
+
 def test_estimator_io_imports_neither_synth_nor_jsbsim():
     code = ("import sys, estimator.io, estimator.problem; "
             "print([m for m in sys.modules if m.split('.')[0] in ('synth', 'jsbsim')])")

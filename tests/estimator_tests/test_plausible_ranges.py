@@ -37,17 +37,33 @@ def test_a_slow_uav_airspeed_is_refused_by_default_with_the_fix_named():
 def test_a_declared_range_replaces_the_built_in_one():
     t, v = _uav_airspeed()
     ranges = parse_ranges({"tas": {"range": [10.0, 80.0], "unit": "kt"}}, "test")
-    assert ranges["tas"] == pytest.approx((10.0 * 1852 / 3600, 80.0 * 1852 / 3600))
+    assert ranges["tas"][:2] == pytest.approx((10.0 * 1852 / 3600, 80.0 * 1852 / 3600))
+    assert ranges["tas"][2] == "speed"
     check_plausible("tas", "tas", v, "m/s", t, np.arange(t.size), WHERE, ranges)  # 23 kt: plausible
-    with pytest.raises(DataError, match="cannot be a true airspeed"):  # narrower: 150 m/s is out
+    with pytest.raises(DataError, match=r"cannot be a true airspeed.*outside the range declared for it"):
         check_plausible("tas", "tas", np.full(t.size, 150.0), "m/s", t, np.arange(t.size), WHERE, ranges)
+    with pytest.raises(DataError, match=r"is in speed units, the column in 'deg' \(angle\)"):
+        check_plausible("tas", "tas", v, "deg", t, np.arange(t.size), WHERE, ranges)
+
+
+def test_an_angle_or_rate_range_bounds_its_largest_magnitude():
+    t = np.arange(500) * 0.02
+    p = np.radians(400.0) * np.sin(t)  # an agile UAV rolling at 400 deg/s
+    with pytest.raises(DataError, match=r"\[plausible\]"):
+        check_plausible("p", "p", p, "rad/s", t, np.arange(t.size), WHERE)
+    ranges = parse_ranges({"p": {"range": [-500.0, 450.0], "unit": "deg/s"}}, "test")
+    check_plausible("p", "p", p, "rad/s", t, np.arange(t.size), WHERE, ranges)  # |p| <= 500 deg/s
 
 
 @pytest.mark.parametrize("bad", [{"tas": [5, 40]}, {"tas": {"range": [40, 5], "unit": "m/s"}},
-                                 {"tas": {"range": [5, 40], "unit": "furlong"}}])
+                                 {"tas": {"range": [5, 40], "unit": "furlong"}},
+                                 {"tas": {"range": [5, float("inf")], "unit": "m/s"}},
+                                 {"t": {"range": [0, 1], "unit": "s"}},
+                                 {"az": {"range": [0, 100], "unit": "m/s^2"}},
+                                 {"airspeed": {"range": [5, 40], "unit": "m/s"}}])
 def test_a_malformed_range_is_named(bad):
-    with pytest.raises(DataError, match=r"\[plausible\] tas|unknown unit"):
-        parse_ranges(bad, "problem.toml")
+    with pytest.raises(DataError, match=r"\[plausible\] (tas|t|az|airspeed)|unknown unit"):
+        parse_ranges(bad, "problem.toml", names=["tas", "h", "accel"])
 
 
 def test_the_problem_file_and_the_model_set_declare_ranges(tiny_dataset, tmp_path):
