@@ -571,10 +571,55 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("log", type=Path, help="the log file (.ulg, .mat)")
     st.add_argument("--format", choices=("ulog", "mat"), default=None,
                     help="the log's format (default: from the extension)")
+    ap_help = ("write a calibrated airspeed scale as the autopilot's parameter (PX4 ASPD_SCALE_1, "
+               "ArduPilot ARSPD_RATIO) in the ground station's parameter-file format, from the result.json "
+               "of fpr calibrate --single; refused (exit 1) when the verdict or the estimate says it must "
+               "not be used")
+    ap = sub.add_parser("autopilot", help=ap_help, description=ap_help[0].upper() + ap_help[1:] + ".")
+    ap.add_argument("result", type=Path,
+                    help="result.json, or the folder of fpr calibrate --single holding it")
+    ap.add_argument("--autopilot", choices=("px4", "ardupilot"), required=True)
+    src = ap.add_mutually_exclusive_group(required=True)
+    src.add_argument("--in-force", type=float, help="the parameter's value during the flight")
+    src.add_argument("--log", type=Path, help="a PX4 ULog of the flight: the value in force read from it")
+    ap.add_argument("--scale", default="k_tas",
+                    help="the airspeed's scale factor in the model set (default k_tas)")
+    ap.add_argument("--name", default=None, help="the parameter's name (default ASPD_SCALE_1 / ARSPD_RATIO)")
+    ap.add_argument("--out", type=Path, required=True,
+                    help="the parameter file to write (.params for QGroundControl, .param for Mission "
+                    "Planner); an existing file is never replaced")
     from campaigns import montecarlo_cli
 
     montecarlo_cli.add_parser(sub)
     return parser
+
+
+def _autopilot(args: argparse.Namespace) -> int:
+    from estimator.autopilot import (
+        PARAMETERS,
+        ExportRefused,
+        from_result,
+        in_force_from_ulog,
+        write_mission_planner,
+        write_qgc,
+    )
+
+    result = args.result / "result.json" if args.result.is_dir() else args.result
+    if args.out.exists():
+        print(f"fpr autopilot: error: {args.out} exists: choose another --out (it is never replaced)",
+              file=sys.stderr)
+        return 2
+    name = args.name or PARAMETERS[args.autopilot]
+    in_force = args.in_force if args.log is None else in_force_from_ulog(args.log, name)
+    try:
+        p = from_result(result, args.autopilot, in_force, args.scale, name)
+    except ExportRefused as exc:
+        print(f"fpr autopilot: refused: {exc}", file=sys.stderr)
+        return 1
+    (write_qgc if args.autopilot == "px4" else write_mission_planner)(args.out, [p])
+    print(f"{p.name}: in force {p.in_force:.6g} -> {p.value:.6g} +- {p.std:.2g} ({p.scale_key} = "
+          f"{p.k:.5g} +- {p.k_std:.2g}); written to {args.out}")
+    return 0
 
 
 def _streams(args: argparse.Namespace) -> int:
@@ -593,6 +638,7 @@ def main(argv: list[str] | None = None) -> int:
     from campaigns import montecarlo_cli
 
     handlers = {"fly": _fly, "demo": _demo, "show": _show, "calibrate": _calibrate, "streams": _streams,
+                "autopilot": _autopilot,
                 **dict.fromkeys(montecarlo_cli.COMMANDS, montecarlo_cli.run)}
     try:
         code = handlers[args.command](args)

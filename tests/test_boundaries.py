@@ -341,7 +341,7 @@ ESTIMATOR_LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
                     "estimator.finding_groups", "estimator.result", "estimator.accuracy")),
     # reading flight data into a problem; the model of its channels and its normal equations
     ("io and model", ("estimator.io", "estimator.model", "estimator.normal_equations",
-                      "estimator.calibrated", "estimator.start")),
+                      "estimator.calibrated", "estimator.start", "estimator.autopilot")),
     # the parts of an estimation: likelihoods, iterations, identifiability, deviations, diagnostics
     ("estimation", ("estimator.likelihood", "estimator.gauss_newton", "estimator.identifiability",
                     "estimator.uncertainty", "estimator.diagnostics", "estimator.filter_error",
