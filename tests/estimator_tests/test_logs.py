@@ -110,6 +110,38 @@ def test_a_matlab_file_estimates_to_the_parquet_numbers(formats):
     assert np.allclose(res.std_crb, ref.std_crb, rtol=1e-9, equal_nan=True)
 
 
+@pytest.mark.slow
+def test_a_streams_clock_offset_is_estimated_as_its_channels_common_delay(tiny_dataset, tmp_path):
+    """The INS attitude on its own clock, 0.5 s ahead of the IMU's: declared as one delay for the
+    stream's channels (tau_ins), the estimate moves by the offset, within its honest deviation."""
+    cols = {k: USER_COLUMNS[k] for k in ("ax", "ay", "az", "p", "q", "r", *CHANNELS)}
+    problem = write_user_files(tiny_dataset, tmp_path / "csv", cols, CHANNELS, "two clocks")
+    frame = pd.read_csv(tmp_path / "csv" / "flight.csv")
+    ins = ("PHI", "THETA", "PSI")
+    stream_of = {c: "ins" if c in ins else "dru" for c in frame.columns}
+    body = re.sub(r'column = "([^"]+)"', lambda m: f'column = "{stream_of[m[1]]}.{m[1]}"',
+                  problem.read_text())
+    body = body.replace('path = "flight.csv"', 'path = "f.mat"')
+    # each maneuver from 1 s in: the INS stream, 0.5 s off, has no samples before its own start
+    body = re.sub(r"t_start_s = ([0-9.]+)", lambda m: f"t_start_s = {float(m[1]) + 1.0:.6f}", body)
+    body += "".join(f'\n[[channel]]\nname = "{a}"\nmodel = "{a}"\ndelay = "tau_ins"\nrecorder = "ins"\n'
+                    'unit = "rad"\n' for a in ("phi", "theta", "psi"))
+    body += '\n[parameter.tau_ins]\nunit = "s"\nkind = "time_delay"\nbounds = [-1.0, 1.0]\n'
+    tau = {}
+    for offset_s in (0.0, 0.5):
+        d = tmp_path / f"offset{offset_s}"
+        d.mkdir()
+        write_mat(d / "f.mat", {
+            "dru": {c: frame[c].to_numpy() for c in frame.columns if c not in ins},
+            "ins": {"Time": frame["Time"].to_numpy() + offset_s, **{c: frame[c].to_numpy() for c in ins}}})
+        (d / "problem.toml").write_text(body)
+        r = estimate(_load(d / "problem.toml"), SolverOptions(max_iterations=200))
+        assert r.converged, r.message
+        tau[offset_s] = (r.value("tau_ins"), r.std("tau_ins", colored=True))
+    shift, std = tau[0.5][0] - tau[0.0][0], tau[0.5][1]
+    assert abs(shift - 0.5) < 3.0 * std, f"tau_ins moved {shift:.5f} s for a 0.5-s offset (+- {std:.2g} s)"
+
+
 # --------------------------------------------------------------------------------------------------
 # streams on their own clocks
 
