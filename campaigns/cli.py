@@ -582,8 +582,8 @@ def build_parser() -> argparse.ArgumentParser:
     src = ap.add_mutually_exclusive_group(required=True)
     src.add_argument("--in-force", type=float, help="the parameter's value during the flight")
     src.add_argument("--log", type=Path, help="a PX4 ULog of the flight: the value in force read from it")
-    ap.add_argument("--scale", default="k_tas",
-                    help="the airspeed's scale factor in the model set (default k_tas)")
+    ap.add_argument("--scale", required=True,
+                    help="the model set's scale factor of the airspeed (the uav model set's: k_tas)")
     ap.add_argument("--name", default=None, help="the parameter's name (default ASPD_SCALE_1 / ARSPD_RATIO)")
     ap.add_argument("--out", type=Path, required=True,
                     help="the parameter file to write (.params for QGroundControl, .param for Mission "

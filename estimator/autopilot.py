@@ -1,7 +1,7 @@
 """A calibrated airspeed scale written the way an autopilot takes it: PX4 and ArduPilot parameters.
 
 The airspeed channel's model is ``tas_measured = (1 + k) tas_true`` (``k``: the model set's scale
-factor of the airspeed, ``k_tas`` in ``uav``), where the measured airspeed is what the autopilot
+factor of the airspeed, named by the caller), where the measured airspeed is what the autopilot
 computed in flight with the parameters then in force. The corrected parameters are:
 
 - PX4 ``ASPD_SCALE_n`` multiplies the indicated airspeed: ``scale_new = scale_old / (1 + k)``;
@@ -65,7 +65,7 @@ class AutopilotParameter:
 
 
 def corrected(autopilot: str, in_force: float, k: float, k_std: float, name: str | None = None,
-              scale_key: str = "k_tas") -> AutopilotParameter:
+              scale_key: str = "") -> AutopilotParameter:
     """The corrected airspeed parameter of ``autopilot`` for a scale factor ``k`` +- ``k_std``.
 
     Parameters
@@ -74,6 +74,7 @@ def corrected(autopilot: str, in_force: float, k: float, k_std: float, name: str
     in_force : the parameter's value during the flight.
     k, k_std : the airspeed scale factor (``tas_measured = (1 + k) tas_true``) and its deviation [1].
     name : the parameter's name (default: :data:`PARAMETERS`; ``ASPD_SCALE_2`` for a second sensor).
+    scale_key : the scale factor's parameter key, carried into the result.
     """
     if autopilot not in PARAMETERS:
         raise ValueError(f"autopilot {autopilot!r}: one of {sorted(PARAMETERS)}")
@@ -88,9 +89,10 @@ def corrected(autopilot: str, in_force: float, k: float, k_std: float, name: str
                               float(std), scale_key, float(k), float(k_std))
 
 
-def from_result(result_json: str | Path, autopilot: str, in_force: float, scale_key: str = "k_tas",
+def from_result(result_json: str | Path, autopilot: str, in_force: float, scale_key: str,
                 name: str | None = None) -> AutopilotParameter:
-    """The corrected parameter from a calibration's ``result.json`` (``fpr calibrate --single``).
+    """The corrected parameter from a calibration's ``result.json`` (``fpr calibrate --single``);
+    ``scale_key``: the model set's scale factor of the airspeed (the ``uav`` set's ``k_tas``).
 
     Raises
     ------

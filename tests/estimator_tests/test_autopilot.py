@@ -56,7 +56,7 @@ def _result(tmp_path: Path, verdict: str = "SUCCESS", state: str = "estimated") 
 
 
 def test_a_result_to_use_gives_its_parameter_with_the_honest_deviation(tmp_path):
-    p = from_result(_result(tmp_path), "ardupilot", 2.0)
+    p = from_result(_result(tmp_path), "ardupilot", 2.0, "k_tas")
     assert p.value == pytest.approx(2.0 / (1 - 0.0614) ** 2) and p.k_std == 0.0105
 
 
@@ -65,27 +65,27 @@ def test_a_result_to_use_gives_its_parameter_with_the_honest_deviation(tmp_path)
                                                        ("SUCCESS", "held", "k_tas is held")])
 def test_an_estimate_not_to_use_is_refused_with_the_reason(tmp_path, verdict, state, why):
     with pytest.raises(ExportRefused, match=why):
-        from_result(_result(tmp_path, verdict, state), "px4", 1.0)
+        from_result(_result(tmp_path, verdict, state), "px4", 1.0, "k_tas")
     with pytest.raises(ExportRefused, match=r"no parameter 'k_ias'.*\['k_a', 'k_tas'\]"):
         from_result(_result(tmp_path), "px4", 1.0, scale_key="k_ias")
 
 
 def test_fpr_autopilot_writes_the_ground_stations_files_and_refuses_a_failure(tmp_path, capsys):
     res = _result(tmp_path)
-    assert main(["autopilot", str(tmp_path), "--autopilot", "px4", "--in-force", "1.0",
+    assert main(["autopilot", str(tmp_path), "--autopilot", "px4", "--in-force", "1.0", "--scale", "k_tas",
                  "--out", str(tmp_path / "aspd.params")]) == 0
     text = (tmp_path / "aspd.params").read_text()
     rows = [ln.split("\t") for ln in text.splitlines() if not ln.startswith("#")]
     assert rows == [["1", "1", "ASPD_SCALE_1", f"{1 / (1 - 0.0614):.6f}", "9"]]
-    assert main(["autopilot", str(res), "--autopilot", "ardupilot", "--in-force", "2.0",
+    assert main(["autopilot", str(res), "--autopilot", "ardupilot", "--in-force", "2.0", "--scale", "k_tas",
                  "--out", str(tmp_path / "arspd.param")]) == 0
     lines = [ln for ln in (tmp_path / "arspd.param").read_text().splitlines() if not ln.startswith("#")]
     assert lines == [f"ARSPD_RATIO,{2.0 / (1 - 0.0614) ** 2:.6f}"]
-    assert main(["autopilot", str(res), "--autopilot", "ardupilot", "--in-force", "2.0",
+    assert main(["autopilot", str(res), "--autopilot", "ardupilot", "--in-force", "2.0", "--scale", "k_tas",
                  "--out", str(tmp_path / "arspd.param")]) == 2, "an existing file is never replaced"
     _result(tmp_path, "FAILURE")
     capsys.readouterr()
-    assert main(["autopilot", str(res), "--autopilot", "px4", "--in-force", "1.0",
+    assert main(["autopilot", str(res), "--autopilot", "px4", "--in-force", "1.0", "--scale", "k_tas",
                  "--out", str(tmp_path / "bad.params")]) == 1
     assert "refused" in capsys.readouterr().err and not (tmp_path / "bad.params").exists()
 
