@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from estimator.io.errors import DataError, close_match
+from estimator.io.errors import DataError, close_match, warn
 
 #: The log formats and their extensions.
 LOG_FORMATS = ("ulog", "mat")
@@ -106,8 +106,6 @@ def read_streams(path: Path, fmt: str, streams: Sequence[str] | None = None) -> 
 
 def _read_ulog(path: Path, streams: Sequence[str] | None) -> dict[str, Stream]:
     from pyulog import ULog
-
-    from estimator.io.errors import warn
 
     topics = None if streams is None else sorted({s.split(":", 1)[0] for s in streams})
     try:
