@@ -46,6 +46,8 @@ class SourceTable:
     rows : (N,) data row of each sample (0-based after the header).
     own_rate : canonical names recorded at their own, slower rate: empty (NaN) between their
         samples, fitted only where they have one (``own_rate = true`` in ``[columns]``).
+    holes : canonical name -> where a log's stream has no samples (s, the time base's clock; what
+        it is), for naming the dropout behind a missing value (:func:`estimator.io.logs.stream_holes`).
     """
 
     path: Path
@@ -56,6 +58,7 @@ class SourceTable:
     raw_text: dict[str, np.ndarray] = field(default_factory=dict)
     rows: np.ndarray | None = None
     own_rate: frozenset[str] = frozenset()
+    holes: Mapping[str, list[tuple[float, float, str]]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         missing = [c for c in REQUIRED if c not in self.values]
@@ -152,6 +155,8 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
                             "maneuver; widen the time range or leave the channel out")
         if name not in own and not not_num.any():
             _check_slower(name, vi, t_s, where, table.labels[name], name in channel_columns)
+        if name not in own and name in table.holes:
+            _check_holes(vi, t_s, table.holes[name], where, table.labels[name])
         check_finite(vi[keep], not_num[keep],
                      table.raw_text[name][idx][keep] if name in table.raw_text else None, t_s[keep],
                      rows[keep], where, table.labels[name])
@@ -215,6 +220,19 @@ def regular_period(present: np.ndarray) -> int | None:
     d = np.diff(rows)
     k = int(np.median(d))
     return k if k >= 2 and np.mean(d == k) >= 0.9 else None
+
+
+def _check_holes(v: np.ndarray, t_s: np.ndarray, holes: list[tuple[float, float, str]], where: Where,
+                 label: str) -> None:
+    """A missing value where the column's log stream has no samples: name the dropout (or the
+    stream's end) and its times, rather than a bare missing value."""
+    missing = np.isnan(v)
+    for lo, hi, what in holes:
+        inside = missing & (t_s > lo) & (t_s < hi)
+        if inside.any():
+            t0, t1 = float(t_s[inside][0]), float(t_s[inside][-1])
+            raise DataError(f"{where}: {label} has no value from t = {t0:.3f} to {t1:.3f} s: {what}; trim "
+                            "the maneuver's t_start_s/t_end_s to exclude it, or split the maneuver around it")
 
 
 def _ordinal(k: int) -> str:

@@ -315,7 +315,7 @@ def log_frame(path: Path, fmt: str, columns: Mapping[str, Mapping], where: str,
         raise _no_stream(path, fmt, streams, paths["t"], "t")
     t_base = field_values(base, t_field, f"{path}: t")  # raw stamps, in the t column's unit
     offsets = _checked_offsets(offsets_s, streams, paths, base, where)
-    frame = {paths["t"]: t_base}
+    frame, holes = {paths["t"]: t_base}, {}
     for name, src in paths.items():
         if name == "t":
             continue
@@ -327,11 +327,31 @@ def log_frame(path: Path, fmt: str, columns: Mapping[str, Mapping], where: str,
         label = f"{path}: {name} (column {src!r})"
         values = field_values(stream, field, label)
         if stream is not base:
-            values = _onto_base(t_base, stream, t_field, values, field, label,
-                                offsets.get(stream.name, 0.0) / time_factor_s,
+            offset = offsets.get(stream.name, 0.0) / time_factor_s
+            values = _onto_base(t_base, stream, t_field, values, field, label, offset,
                                 columns[name].get("own_rate", False))
+            t_own = _stream_time(stream, t_field, label)
+            if t_own is not None:
+                holes[src] = stream_holes(t_own + offset, stream.name, time_factor_s)
         frame[src] = values
-    return pd.DataFrame(frame)
+    df = pd.DataFrame(frame)
+    df.attrs["holes"] = holes
+    return df
+
+
+def stream_holes(t_own: np.ndarray, stream: str, time_factor_s: float) -> list[tuple[float, float, str]]:
+    """Where a stream has no samples, s on the base clock: its dropouts (steps over
+    :data:`DROPOUT_FACTOR` times its median) as ``(start_s, end_s, what)``, and the open ends
+    before its first and after its last sample."""
+    t = np.asarray(t_own, dtype=float) * time_factor_s
+    out = [(-math.inf, float(t[0]), f"before stream {stream!r}'s first sample"),
+           (float(t[-1]), math.inf, f"after stream {stream!r}'s last sample")]
+    if t.size > 2:
+        steps = np.diff(t)
+        for i in np.flatnonzero(steps > DROPOUT_FACTOR * np.median(steps)):
+            out.append((float(t[i]), float(t[i + 1]),
+                        f"in a dropout of stream {stream!r} (no samples for {steps[i]:.3g} s)"))
+    return out
 
 
 def _check_paths(paths: Mapping[str, object], columns: Mapping[str, Mapping], where: str) -> None:

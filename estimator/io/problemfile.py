@@ -192,8 +192,10 @@ def _read_file(entry: Mapping, columns: Mapping[str, dict], base: Path, where: s
     own = frozenset(n for n, spec in columns.items() if spec.get("own_rate", False) and n in values)
     for name in own:
         values[name] = held_samples(values[name])
+    holes = {name: df.attrs.get("holes", {}).get(spec["column"], []) for name, spec in columns.items()
+             if name in values and spec["column"] in df.attrs.get("holes", {})}
     return SourceTable(path=path, values=values, not_numeric=bad, raw_text=text, units=units, labels=labels,
-                       own_rate=own)
+                       own_rate=own, holes=holes)
 
 
 def _read_log(path: Path, fmt: str, entry: Mapping, columns: Mapping[str, dict], where: str):

@@ -110,36 +110,60 @@ def test_a_matlab_file_estimates_to_the_parquet_numbers(formats):
     assert np.allclose(res.std_crb, ref.std_crb, rtol=1e-9, equal_nan=True)
 
 
+INS_COLUMNS = ("PHI", "THETA", "PSI")
+
+
+def _two_streams(tiny_dataset, root: Path, ins_time, keep=None, trim_s: float = 1.0) -> Path:
+    """The tiny flight as a MATLAB file of two structs on their own clocks, ``dru`` (IMU, air data)
+    and ``ins`` (attitude, stamped ``ins_time(Time)``, only its rows ``keep``), and a problem file
+    over it giving phi, theta and psi one delay, tau_ins; each maneuver from ``trim_s`` in."""
+    cols = {k: USER_COLUMNS[k] for k in ("ax", "ay", "az", "p", "q", "r", *CHANNELS)}
+    problem = write_user_files(tiny_dataset, root / "csv", cols, CHANNELS, "two clocks")
+    frame = pd.read_csv(root / "csv" / "flight.csv")
+    keep = np.ones(len(frame), bool) if keep is None else keep(frame["Time"].to_numpy())
+    stream_of = {c: "ins" if c in INS_COLUMNS else "dru" for c in frame.columns}
+    body = re.sub(r'column = "([^"]+)"', lambda m: f'column = "{stream_of[m[1]]}.{m[1]}"',
+                  problem.read_text())
+    body = body.replace('path = "flight.csv"', 'path = "f.mat"')
+    body = re.sub(r"t_start_s = ([0-9.]+)", lambda m: f"t_start_s = {float(m[1]) + trim_s:.6f}", body)
+    body += "".join(f'\n[[channel]]\nname = "{a}"\nmodel = "{a}"\ndelay = "tau_ins"\nrecorder = "ins"\n'
+                    'unit = "rad"\n' for a in ("phi", "theta", "psi"))
+    body += '\n[parameter.tau_ins]\nunit = "s"\nkind = "time_delay"\nbounds = [-1.0, 1.0]\n'
+    d = root / "mat"
+    d.mkdir()
+    write_mat(d / "f.mat", {
+        "dru": {c: frame[c].to_numpy() for c in frame.columns if c not in INS_COLUMNS},
+        "ins": {"Time": ins_time(frame["Time"].to_numpy())[keep],
+                **{c: frame[c].to_numpy()[keep] for c in INS_COLUMNS}}})
+    (d / "problem.toml").write_text(body)
+    return d / "problem.toml"
+
+
 @pytest.mark.slow
 def test_a_streams_clock_offset_is_estimated_as_its_channels_common_delay(tiny_dataset, tmp_path):
     """The INS attitude on its own clock, 0.5 s ahead of the IMU's: declared as one delay for the
     stream's channels (tau_ins), the estimate moves by the offset, within its honest deviation."""
-    cols = {k: USER_COLUMNS[k] for k in ("ax", "ay", "az", "p", "q", "r", *CHANNELS)}
-    problem = write_user_files(tiny_dataset, tmp_path / "csv", cols, CHANNELS, "two clocks")
-    frame = pd.read_csv(tmp_path / "csv" / "flight.csv")
-    ins = ("PHI", "THETA", "PSI")
-    stream_of = {c: "ins" if c in ins else "dru" for c in frame.columns}
-    body = re.sub(r'column = "([^"]+)"', lambda m: f'column = "{stream_of[m[1]]}.{m[1]}"',
-                  problem.read_text())
-    body = body.replace('path = "flight.csv"', 'path = "f.mat"')
-    # each maneuver from 1 s in: the INS stream, 0.5 s off, has no samples before its own start
-    body = re.sub(r"t_start_s = ([0-9.]+)", lambda m: f"t_start_s = {float(m[1]) + 1.0:.6f}", body)
-    body += "".join(f'\n[[channel]]\nname = "{a}"\nmodel = "{a}"\ndelay = "tau_ins"\nrecorder = "ins"\n'
-                    'unit = "rad"\n' for a in ("phi", "theta", "psi"))
-    body += '\n[parameter.tau_ins]\nunit = "s"\nkind = "time_delay"\nbounds = [-1.0, 1.0]\n'
     tau = {}
     for offset_s in (0.0, 0.5):
-        d = tmp_path / f"offset{offset_s}"
-        d.mkdir()
-        write_mat(d / "f.mat", {
-            "dru": {c: frame[c].to_numpy() for c in frame.columns if c not in ins},
-            "ins": {"Time": frame["Time"].to_numpy() + offset_s, **{c: frame[c].to_numpy() for c in ins}}})
-        (d / "problem.toml").write_text(body)
-        r = estimate(_load(d / "problem.toml"), SolverOptions(max_iterations=200))
+        problem = _two_streams(tiny_dataset, tmp_path / f"offset{offset_s}", lambda t, o=offset_s: t + o)
+        r = estimate(_load(problem), SolverOptions(max_iterations=200))
         assert r.converged, r.message
         tau[offset_s] = (r.value("tau_ins"), r.std("tau_ins", colored=True))
     shift, std = tau[0.5][0] - tau[0.0][0], tau[0.5][1]
     assert abs(shift - 0.5) < 3.0 * std, f"tau_ins moved {shift:.5f} s for a 0.5-s offset (+- {std:.2g} s)"
+
+
+def test_a_streams_dropout_or_end_inside_a_maneuver_is_named(tiny_dataset, tmp_path):
+    first = pd.read_parquet(next((tiny_dataset / "maneuvers").glob("*.parquet")))["t_s"]
+    t0 = 1000.0  # write_user_files puts the first maneuver's first sample there
+    gap = lambda t: ~((t > t0 + 4.0) & (t < t0 + 5.0))  # noqa: E731 - one second of the INS lost
+    with pytest.raises(DataError, match=r"phi \(column 'ins.PHI'\) has no value from t = 100\d.\d+ to "
+                                        r"100\d.\d+ s: in a dropout of stream 'ins' \(no samples for 1 s\)"):
+        _load(_two_streams(tiny_dataset, tmp_path / "gap", lambda t: t, keep=gap))
+    # its stamps 0.5 s late and the maneuvers not trimmed: the first half second has no INS sample
+    with pytest.raises(DataError, match=r"has no value from t = 1000.000 to .*before stream 'ins''s first"):
+        _load(_two_streams(tiny_dataset, tmp_path / "late", lambda t: t + 0.5, trim_s=0.0))
+    assert len(first) > 200  # the gap lies inside the first maneuver
 
 
 # --------------------------------------------------------------------------------------------------
