@@ -15,7 +15,13 @@ import numpy as np
 
 from estimator.io.consistency import check_euler_rates
 from estimator.io.errors import DataError, Where, warn
-from estimator.io.plausibility import Ranges, SpikeError, check_plausible, check_tas_against_mach
+from estimator.io.plausibility import (
+    Ranges,
+    SpikeError,
+    check_plausible,
+    check_tas_against_mach,
+    check_zero_dropouts,
+)
 from estimator.io.timebase import check_finite, check_sampling, check_time, resample, select_range
 from estimator.io.units import UNITS, get_unit, to_si
 from estimator.problem import ManeuverData
@@ -157,6 +163,8 @@ def build_maneuver(table: SourceTable, req: ManeuverRequest, channel_columns: se
             _check_slower(name, vi, t_s, where, table.labels[name], name in channel_columns)
         if name not in own and name in table.holes:
             _check_holes(vi, t_s, table.holes[name], where, table.labels[name])
+        if name != "t" and not not_num.any():
+            check_zero_dropouts(vi[keep], table.units[name], t_s[keep], rows[keep], where, table.labels[name])
         check_finite(vi[keep], not_num[keep],
                      table.raw_text[name][idx][keep] if name in table.raw_text else None, t_s[keep],
                      rows[keep], where, table.labels[name])

@@ -155,6 +155,41 @@ def parse_ranges(table: object, where: str, names: Sequence[str] | None = None
     return out
 
 
+#: A run of exact zeros at most this long, whose neighbours on both sides lie further from zero
+#: than :data:`ZERO_JUMP` times the column's median step, is a dropout written as zero.
+ZERO_RUN_MAX = 5
+ZERO_JUMP = 20.0
+#: The quantities a dropout written as zero is looked for in (flags and Mach are left alone).
+ZERO_DIMENSIONS = ("angle", "angular rate", "acceleration", "speed", "length", "pressure")
+
+
+def check_zero_dropouts(values: np.ndarray, unit: str, t_s: np.ndarray, rows: np.ndarray, where: Where,
+                        label: str) -> None:
+    """Raise :class:`DataError` for a dropout written as zero: a run of at most
+    :data:`ZERO_RUN_MAX` samples that are exactly 0 between samples far from 0 (a sample-and-hold
+    that lost its input, a logger's empty value: 0 m/s for one sample of a 17 m/s airspeed),
+    whatever the column is named. A signal passing through 0 steps there as it steps elsewhere."""
+    v = np.asarray(values, dtype=float)
+    if UNITS[unit].dimension not in ZERO_DIMENSIONS or v.size < 3:
+        return
+    zero = v == 0.0
+    if not zero.any() or zero.all():
+        return
+    steps = np.abs(np.diff(v[~zero & np.isfinite(v)]))
+    jump = ZERO_JUMP * float(np.median(steps)) if steps.size else 0.0
+    edges = np.flatnonzero(np.diff(np.r_[0, zero.astype(np.int8), 0]))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):  # v[a:b] == 0
+        if b - a > ZERO_RUN_MAX or a == 0 or b == v.size:
+            continue
+        before, after = abs(v[a - 1]), abs(v[b])
+        if min(before, after) > jump > 0.0:
+            raise DataError(
+                f"{where}: {label} is exactly 0 {at_row(t_s[a], int(rows[a]))} ({b - a} sample(s)) between "
+                f"{v[a - 1]:.6g} and {v[b]:.6g} {unit}: a dropout written as zero (a sample-and-hold that "
+                "lost its input, a logger's empty value), not a measurement; blank those samples in the file "
+                "or trim the maneuver's t_start_s/t_end_s around them")
+
+
 def declared(check: Check | None, name: str, lo: float, hi: float) -> Check:
     """``check`` with a declared plausible range of its statistic, SI; every sample's range
     widened to hold it. A largest-|value| check takes max(|lo|, |hi|); a name without a built-in

@@ -18,7 +18,7 @@ from campaigns.benchmarks.user_files import USER_COLUMNS, write_user_files
 from estimator.io import load_problem
 from estimator.io.errors import DataError, Where
 from estimator.io.modelset import MODELS_DIR
-from estimator.io.plausibility import check_plausible, parse_ranges
+from estimator.io.plausibility import check_plausible, check_zero_dropouts, parse_ranges
 
 WHERE = Where("uav.csv", "leg1")
 
@@ -87,3 +87,18 @@ def test_the_problem_file_and_the_model_set_declare_ranges(tiny_dataset, tmp_pat
         problem.write_text(text.replace('model = "tejas"', 'model = "narrow.toml"')
                            + '\n[plausible]\ntas = { range = [50.0, 900.0], unit = "kt" }\n')
         load_problem(problem)
+
+
+def test_a_dropout_written_as_zero_is_named_whatever_the_column():
+    t = np.arange(500) * 0.02
+    for unit, v in (("m/s", 17.0 + 0.5 * np.sin(t)), ("kPa", 0.16 + 0.01 * np.sin(t)),
+                    ("deg", 3.0 + np.sin(t))):
+        v = v.copy()
+        v[[200, 201]] = 0.0  # a sample-and-hold that lost its input for two samples
+        with pytest.raises(DataError, match=r"exactly 0 at t = 4.000 s .*2 sample\(s\).*written as zero"):
+            check_zero_dropouts(v, unit, t, np.arange(t.size), WHERE, "x (column 'X')")
+    # a signal passing through 0 (a sideslip, one sample exactly 0) steps there as elsewhere: no dropout
+    beta = np.round(np.sin(t), 2)
+    assert (beta == 0.0).any()
+    check_zero_dropouts(beta, "deg", t, np.arange(t.size), WHERE, "beta")
+    check_zero_dropouts(np.r_[np.ones(10), 0.0, np.ones(10)], "1", t[:21], np.arange(21), WHERE, "gear")
