@@ -155,8 +155,9 @@ def parse_ranges(table: object, where: str, names: Sequence[str] | None = None
     return out
 
 
-#: A run of exact zeros at most this long, whose neighbours on both sides lie further from zero
-#: than :data:`ZERO_JUMP` times the column's median step, is a dropout written as zero.
+#: A run of exact zeros at most this long, between neighbours of one sign, close to each other and
+#: further from zero than :data:`ZERO_JUMP` times the column's median step, is a dropout written
+#: as zero (:func:`check_zero_dropouts`).
 ZERO_RUN_MAX = 5
 ZERO_JUMP = 20.0
 #: The quantities a dropout written as zero is looked for in (flags and Mach are left alone).
@@ -168,7 +169,9 @@ def check_zero_dropouts(values: np.ndarray, unit: str, t_s: np.ndarray, rows: np
     """Raise :class:`DataError` for a dropout written as zero: a run of at most
     :data:`ZERO_RUN_MAX` samples that are exactly 0 between samples far from 0 (a sample-and-hold
     that lost its input, a logger's empty value: 0 m/s for one sample of a 17 m/s airspeed),
-    whatever the column is named. A signal passing through 0 steps there as it steps elsewhere."""
+    whatever the column is named: continuous across the zeros (the samples either side of one
+    sign, closer to each other than a fifth of their distance from 0) and far from 0 there
+    (:data:`ZERO_JUMP` times the column's median step). A signal crossing 0 changes sign."""
     v = np.asarray(values, dtype=float)
     if UNITS[unit].dimension not in ZERO_DIMENSIONS or v.size < 3:
         return
@@ -181,8 +184,11 @@ def check_zero_dropouts(values: np.ndarray, unit: str, t_s: np.ndarray, rows: np
     for a, b in zip(edges[::2], edges[1::2], strict=True):  # v[a:b] == 0
         if b - a > ZERO_RUN_MAX or a == 0 or b == v.size:
             continue
-        before, after = abs(v[a - 1]), abs(v[b])
-        if min(before, after) > jump > 0.0:
+        # continuous through it and far from 0 on both sides, of one sign: a signal crossing 0
+        # (a rate through a doublet) changes sign there, however steep its step
+        before, after = v[a - 1], v[b]
+        far = min(abs(before), abs(after))
+        if before * after > 0.0 and far > max(jump, 5.0 * abs(before - after)) and jump > 0.0:
             raise DataError(
                 f"{where}: {label} is exactly 0 {at_row(t_s[a], int(rows[a]))} ({b - a} sample(s)) between "
                 f"{v[a - 1]:.6g} and {v[b]:.6g} {unit}: a dropout written as zero (a sample-and-hold that "

@@ -102,3 +102,7 @@ def test_a_dropout_written_as_zero_is_named_whatever_the_column():
     assert (beta == 0.0).any()
     check_zero_dropouts(beta, "deg", t, np.arange(t.size), WHERE, "beta")
     check_zero_dropouts(np.r_[np.ones(10), 0.0, np.ones(10)], "1", t[:21], np.arange(21), WHERE, "gear")
+    # a pitch rate crossing 0 steeply in a doublet (quiet elsewhere): a crossing, not a dropout
+    quiet = 1e-4 * np.random.default_rng(5).normal(size=400)
+    q = np.r_[quiet[:200], -0.0063, 0.0, 0.0054, quiet[200:]]
+    check_zero_dropouts(q, "rad/s", np.arange(q.size) * 0.025, np.arange(q.size), WHERE, "q")
