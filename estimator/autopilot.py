@@ -119,14 +119,19 @@ def from_result(result_json: str | Path, autopilot: str, in_force: float, scale_
     return corrected(autopilot, in_force, float(p["value"]), float(std), name, scale_key)
 
 
+def _comment(p: AutopilotParameter) -> str:
+    """The comment line beside a parameter: its value in force, the corrected one and its deviation."""
+    return (f"# {p.name}: in force {p.in_force:.6g}, corrected {p.value:.6g} +- {p.std:.2g} "
+            f"({p.scale_key} = {p.k:.5g} +- {p.k_std:.2g})")
+
+
 def write_qgc(path: str | Path, params: list[AutopilotParameter], vehicle: int = 1,
               component: int = 1) -> Path:
     """A QGroundControl parameter file (``.params``) of the PX4 parameters, their deviations as comments."""
     lines = ["# Onboard parameters for Vehicle 1: airspeed calibration by fpr (estimator.autopilot)",
              "#", "# Vehicle-Id Component-Id Name Value Type"]
     for p in params:
-        lines.append(f"# {p.name}: in force {p.in_force:.6g}, corrected {p.value:.6g} +- {p.std:.2g} "
-                     f"({p.scale_key} = {p.k:.5g} +- {p.k_std:.2g})")
+        lines.append(_comment(p))
         lines.append(f"{vehicle}\t{component}\t{p.name}\t{p.value:.6f}\t{QGC_FLOAT}")
     out = Path(path)
     out.write_text("\n".join(lines) + "\n", encoding="utf-8")
@@ -137,8 +142,7 @@ def write_mission_planner(path: str | Path, params: list[AutopilotParameter]) ->
     """A Mission Planner parameter file (``.param``: ``NAME,VALUE``) of the ArduPilot parameters."""
     lines = []
     for p in params:
-        lines.append(f"# {p.name}: in force {p.in_force:.6g}, corrected {p.value:.6g} +- {p.std:.2g} "
-                     f"({p.scale_key} = {p.k:.5g} +- {p.k_std:.2g})")
+        lines.append(_comment(p))
         lines.append(f"{p.name},{p.value:.6f}")
     out = Path(path)
     out.write_text("\n".join(lines) + "\n", encoding="utf-8")

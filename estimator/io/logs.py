@@ -327,12 +327,12 @@ def log_frame(path: Path, fmt: str, columns: Mapping[str, Mapping], where: str,
         label = f"{path}: {name} (column {src!r})"
         values = field_values(stream, field, label)
         if stream is not base:
-            offset = offsets.get(stream.name, 0.0) / time_factor_s
-            values = _onto_base(t_base, stream, t_field, values, field, label, offset,
-                                columns[name].get("own_rate", False))
             t_own = _stream_time(stream, t_field, label)
             if t_own is not None:
-                holes[src] = stream_holes(t_own + offset, stream.name, time_factor_s)
+                t_own = t_own + offsets.get(stream.name, 0.0) / time_factor_s
+                holes[src] = stream_holes(t_own, stream.name, time_factor_s)
+            values = _onto_base(t_base, t_own, stream.name, values, field, label,
+                                columns[name].get("own_rate", False))
         frame[src] = values
     df = pd.DataFrame(frame)
     df.attrs["holes"] = holes
@@ -393,17 +393,16 @@ def _checked_offsets(offsets_s: Mapping[str, float] | None, streams: Mapping[str
     return offsets
 
 
-def _onto_base(t_base: np.ndarray, stream: Stream, t_field: str, values: np.ndarray, field: str,
-               label: str, offset: float, own_rate: bool) -> np.ndarray:
-    """A column of another stream on the base stamps (``offset`` in the stamps' unit)."""
-    t_own = _stream_time(stream, t_field, label)
+def _onto_base(t_base: np.ndarray, t_own: np.ndarray | None, stream: str, values: np.ndarray, field: str,
+               label: str, own_rate: bool) -> np.ndarray:
+    """A column of another stream on the base stamps; ``t_own``: its own stamps on the base clock
+    (offset applied), in the base's unit, or None when the stream has no time field."""
     if t_own is None:
         if len(values) != len(t_base):
-            raise DataError(f"{label}: stream {stream.name!r} has {len(values)} samples and no time "
-                            f"field {t_field!r} of its own, the time base {len(t_base)}: give it one, "
-                            "or take the column from the base stream")
+            raise DataError(f"{label}: stream {stream!r} has {len(values)} samples and no time field of "
+                            f"its own, the time base {len(t_base)}: give it one, or take the column from "
+                            "the base stream")
         return values
-    t_own = t_own + offset
     if own_rate:
         return _nearest(t_base, t_own, values, label)
     if field.endswith((".roll", ".yaw")):
