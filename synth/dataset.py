@@ -726,7 +726,7 @@ SORTIE_FILES = {
 }
 #: The columns of a sortie's boundary table, in order.
 BOUNDARY_COLUMNS = ("id", "job_index", "segment", "kind", "mach", "altitude_m", "gear_down",
-                    "t_start_s", "t_end_s", "missed")
+                    "t_start_s", "t_end_s", "missed", "t_excitation_start_s", "t_excitation_end_s")
 
 
 def read_sortie_manifest(directory: str | Path) -> dict | None:

@@ -455,6 +455,14 @@ class Controller(ABC):
         """
         return None
 
+    def excitation_s(self, si: np.ndarray, t_s: np.ndarray) -> tuple[float, float]:
+        """When the maneuver's own inputs act, s from its start: from the end of the hands-off
+        lead-in to the end of the last input (the truth a maneuver extraction is judged by).
+
+        The default: the whole run after the lead-in (the input is held to the end).
+        """
+        return self.lead_in_s, float(t_s[-1])
+
 
 class _WingsLevel(Controller, ABC):
     """Stick program in load factor, wings level (gentle heading hold), throttle at trim."""
@@ -502,6 +510,9 @@ class PitchDoublet(_WingsLevel):
     def dnz(self, t_s):
         return self.spec.delta_nz * _pulse_train(t_s, self.starts, self.widths, self.signs)
 
+    def excitation_s(self, si, t_s):
+        return float(self.starts[0]), float(self.starts[-1] + sum(self.widths))
+
 
 class Multistep3211(PitchDoublet):
     """3-2-1-1 load-factor multisteps (unit ``pulse_s``), every 12 s."""
@@ -528,6 +539,9 @@ class PullupPushover(_WingsLevel):
     def dnz(self, t_s):
         return _pulse_train(t_s, self.starts, self.widths, self.signs)
 
+    def excitation_s(self, si, t_s):
+        return float(self.starts[0]), float(self.starts[-1] + sum(self.widths))
+
 
 class RollerCoaster(_WingsLevel):
     """Sinusoidal load factor 1 +- ``delta_nz`` with period ``period_s``."""
@@ -538,6 +552,10 @@ class RollerCoaster(_WingsLevel):
         if tau < 0 or tau > n_cycles * self.spec.period_s:
             return 0.0
         return self.spec.delta_nz * math.sin(2 * math.pi * tau / self.spec.period_s)
+
+    def excitation_s(self, si, t_s):
+        n_cycles = math.floor((self.spec.duration_s - self.lead_in_s - 1.0) / self.spec.period_s)
+        return self.lead_in_s, self.lead_in_s + n_cycles * self.spec.period_s
 
 
 class PullupRudderDoublets(RollerCoaster):
@@ -862,6 +880,15 @@ class LevelSpeedChange(Controller):
             raise ManeuverFailure(
                 f"Mach changed by only {dm:.3f} of the requested {self.spec.delta_mach:.3f}",
                 float(t_s[-1]), "lengthen duration_s or reduce delta_mach")
+
+    def excitation_s(self, si, t_s):
+        """From the power change to the speed's end: the first time 95 % of the run's Mach
+        change is done (the throttle returns to holding Mach about 4 s before, on a prediction)."""
+        mach = si[:, _MACH]
+        k0 = int(np.searchsorted(t_s, self.lead_in_s))
+        change = self.sign * (mach[k0:] - mach[k0])
+        done = np.flatnonzero(change >= 0.95 * float(np.max(change)))
+        return self.lead_in_s, float(t_s[k0 + done[0]]) if len(done) else float(t_s[-1])
 
 
 CONTROLLERS: dict[str, type[Controller]] = {

@@ -293,11 +293,15 @@ def _fly_test_point(run: _SortieRun, spec: ManeuverSpec, trim, job_index: int, n
         missed = ""
     except ManeuverFailure as exc:
         missed = f"{exc.what} (t = {exc.t_s:.2f} s into it; try: {exc.advice})"
+    # the truth an extraction is judged by: when the pilot's inputs act, cut to each piece
+    ex0, ex1 = controller.excitation_s(si, np.arange(n) * dt_s)
     return [{
         "id": maneuver_id(job_index, k, n_seg), "job_index": job_index, "segment": k,
         "kind": spec.kind, "mach": spec.mach, "altitude_m": spec.altitude_m,
         "gear_down": bool(spec.gear_down), "t_start_s": (start + lo) * dt_s,
         "t_end_s": (start + hi - 1) * dt_s, "missed": missed,
+        "t_excitation_start_s": start * dt_s + max(ex0, lo * dt_s),
+        "t_excitation_end_s": start * dt_s + min(ex1, (hi - 1) * dt_s),
     } for k, (lo, hi) in enumerate(segment_bounds(n, n_seg))]
 
 
