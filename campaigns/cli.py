@@ -588,6 +588,20 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--out", type=Path, required=True,
                     help="the parameter file to write (.params for QGroundControl, .param for Mission "
                     "Planner); an existing file is never replaced")
+    mh = ("find the test maneuvers in a whole flight (a sortie of fpr fly --sortie, or the files of a "
+          "problem file read whole) from its motion alone: kind, excitation start and end, the window "
+          "for a calibration, speed and its drift, an excitation measure and a grade (keep / "
+          "borderline / discard) with its reason; --out writes a problem file of them for fpr calibrate")
+    mp = sub.add_parser("maneuvers", help=mh, description=mh[0].upper() + mh[1:] + ".")
+    mp.add_argument("source", type=Path,
+                    help="a sortie directory, or a problem file (.toml) whose [columns] map at least az "
+                    "and q (and ay, p, r, phi, psi, h, tas or mach); its [extraction] table sets the "
+                    "thresholds")
+    mp.add_argument("--out", type=Path, default=None,
+                    help="write a problem file (.toml) calibrating the maneuvers graded keep and "
+                    "borderline (an existing file is never replaced)")
+    mp.add_argument("--keep-only", action="store_true", help="with --out: leave the borderline ones out")
+    mp.add_argument("--csv", type=Path, default=None, help="also write the table as CSV")
     from campaigns import montecarlo_cli
 
     montecarlo_cli.add_parser(sub)
@@ -622,6 +636,37 @@ def _autopilot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _maneuvers(args: argparse.Namespace) -> int:
+    import pandas as pd
+
+    from estimator.extraction import find_maneuvers
+    from estimator.io.flight import found_problem, read_flights
+
+    for path in (args.out, args.csv):
+        if path is not None and path.exists():
+            print(f"fpr maneuvers: error: {path} exists: choose another name (it is never replaced)",
+                  file=sys.stderr)
+            return 2
+    flights, options = read_flights(args.source)
+    tables = [find_maneuvers(f.signals, options) for f in flights]
+    shown = ["kind", "t_start_s", "t_end_s", "t_excitation_start_s", "t_excitation_end_s", "speed",
+             "speed_variation", "excitation", "excitation_unit", "grade", "reason"]
+    for table in tables:
+        with pd.option_context("display.width", 250, "display.max_rows", None, "display.max_columns", None,
+                               "display.max_colwidth", 80):
+            df = table.to_pandas()
+            print(df[shown].to_string(float_format=lambda v: f"{v:.3f}") if len(df) else "(none)")
+        print(table.message)
+    if args.csv is not None:
+        pd.concat([t.to_pandas().assign(source=t.source) for t in tables]).to_csv(args.csv)
+        print(f"table written to {args.csv}")
+    if args.out is not None:
+        args.out.write_text(found_problem(args.source, tables, args.out, borderline=not args.keep_only),
+                            encoding="utf-8")
+        print(f"problem file written to {args.out}: fpr calibrate {args.out}")
+    return 0
+
+
 def _streams(args: argparse.Namespace) -> int:
     import pandas as pd
 
@@ -638,7 +683,7 @@ def main(argv: list[str] | None = None) -> int:
     from campaigns import montecarlo_cli
 
     handlers = {"fly": _fly, "demo": _demo, "show": _show, "calibrate": _calibrate, "streams": _streams,
-                "autopilot": _autopilot,
+                "autopilot": _autopilot, "maneuvers": _maneuvers,
                 **dict.fromkeys(montecarlo_cli.COMMANDS, montecarlo_cli.run)}
     try:
         code = handlers[args.command](args)

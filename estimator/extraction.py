@@ -29,7 +29,8 @@ first crossing, the roll-in, the sideslip's or the speed's departure) and ends w
 input ends (the last step, the last crossing, the turn's roll-out, the sideslip's release, 95 %
 of the speed change done). Where two candidates overlap, the one found first in the table above
 wins. The window written for a calibration adds ``lead_s`` of the steady flight before (the
-initial conditions) and ``trail_s`` of the response after, never into a neighbour.
+initial conditions) and ``trail_s`` of the response after (none after a sideslip's release or a
+turn's roll-out: what follows is the next leg), never into a neighbour.
 
 Each maneuver is graded ``keep``, ``borderline`` or ``discard`` with its reason: too short, the
 speed drifting (a maneuver of one test point), too little excitation, a data dropout (a gap in
@@ -112,6 +113,8 @@ class ExtractionOptions:
     #: steady flight kept before each excitation, and response after it, s
     lead_s: float = 2.0
     trail_s: float = 3.0
+    #: a steady sideslip's or wind-up turn's window ends this long before its release is seen, s
+    release_margin_s: float = 0.5
     #: grades: shortest excitation kept, s
     min_excitation_s: float = 4.0
     #: grades: the drift of a one-point maneuver's speed, Mach (or airspeed change / mean), from
@@ -229,9 +232,9 @@ class ManeuverTable:
             text += f"; not looked for: {'; '.join(self.not_searched)}"
         return text + "".join(f"; {n}" for n in self.notes)
 
-    def problem_maneuvers(self, borderline: bool = True) -> list[dict]:
-        """The ``maneuvers = [...]`` entries of a problem file's ``[[files]]`` (the windows)."""
-        return [{"id": m.id, "t_start_s": round(m.t_start_s, 3), "t_end_s": round(m.t_end_s, 3)}
+    def problem_maneuvers(self, borderline: bool = True, prefix: str = "") -> list[dict]:
+        """The ``maneuvers = [...]`` entries of a problem file (the windows, ids ``prefix + id``)."""
+        return [{"id": prefix + m.id, "t_start_s": round(m.t_start_s, 3), "t_end_s": round(m.t_end_s, 3)}
                 for m in self.kept(borderline)]
 
 
@@ -523,9 +526,14 @@ def _windups(pp: _Prepared, o: ExtractionOptions) -> list[_Candidate]:
         i0 = _ramp_start(pp, _roll_in(_smooth(phi, int(round(0.5 / dt))), a, 1.0 / RAD2DEG), a)
         k_peak = a + int(np.argmax(pp.nz[a:b]))
         rise = float(pp.nz[k_peak] - pp.nz[i0])
+        if rise < o.turn_min_rise_g:
+            continue
         after = np.flatnonzero(pp.nz[k_peak:b] < pp.nz[k_peak] - 0.25 * rise)
         i1 = k_peak + int(after[0]) if len(after) else b - 1
-        if rise < o.turn_min_rise_g or (i1 - a) * dt < o.turn_min_s or k_peak < i0 + 0.6 * (i1 - i0):
+        # back to where the fall starts: the last sample still within 5 % of the rise of the peak
+        held = np.flatnonzero(pp.nz[k_peak:i1 + 1] >= pp.nz[k_peak] - 0.05 * rise)
+        i1 = k_peak + int(held[-1])
+        if (i1 - a) * dt < o.turn_min_s or k_peak < i0 + 0.6 * (i1 - i0):
             continue
         out.append(_Candidate("windup_turn", i0, i1, rise, "g"))
     return out
@@ -571,9 +579,10 @@ def _steady_before(pp: _Prepared, i0: int, o: ExtractionOptions) -> bool:
 
 
 def _speed_changes(pp: _Prepared, o: ExtractionOptions) -> list[_Candidate]:
-    """Level accelerations and decelerations: the speed changing at a steady altitude, wings
-    level, from steady flight; one starting within ``return_gap_s`` of the end of a change of
-    the other sign is the way back to a test point's speed and is not one."""
+    """Level accelerations and decelerations: the speed changing at a steady altitude (the climb
+    rate within ``level_climb_rate_mps`` most of the time), wings level, from steady flight; one
+    starting within ``return_gap_s`` of the end of a change of the other sign is the way back to
+    a test point's speed and is not one."""
     mach = pp.signals.get("mach")
     v, thr, unit = ((mach, o.speed_rate_mach_per_s, "Mach") if mach is not None
                     else (pp.signals.get("tas_mps"), o.speed_rate_mps2, "m/s"))
@@ -596,12 +605,12 @@ def _speed_changes(pp: _Prepared, o: ExtractionOptions) -> list[_Candidate]:
                 e += 1
             change = sign * (v[i0:e + 1] - v[i0])
             i1 = i0 + int(np.flatnonzero(change >= 0.95 * float(np.max(change)))[0])
-            ok = (b - a) * dt >= o.speed_min_s and level[a:b].mean() > 0.9 and _steady_before(pp, i0, o)
-            found.append((_Candidate(kind, i0, i1, float(np.max(change)), unit), ok))
+            ok = (b - a) * dt >= o.speed_min_s and level[a:b].mean() > 0.5 and _steady_before(pp, i0, o)
+            found.append((_Candidate(kind, i0, i1, float(np.max(change)), unit), e, ok))
     found.sort(key=lambda f: f[0].i0)
     gap = int(round(o.return_gap_s / dt))
-    return [c for k, (c, ok) in enumerate(found)
-            if ok and not any(p.kind != c.kind and p.i0 < c.i0 and c.i0 - p.i1 <= gap for p, _ in found[:k])]
+    return [c for k, (c, _, ok) in enumerate(found)
+            if ok and not any(p.kind != c.kind and p.i0 < c.i0 and c.i0 - e <= gap for p, e, _ in found[:k])]
 
 
 #: The finders in their order of precedence (module docstring).
@@ -628,8 +637,11 @@ def _windows(pp: _Prepared, found: list[_Candidate], o: ExtractionOptions) -> li
         if e0 > s1:
             mid = 0.5 * (t[found[k - 1].i1] + t[found[k].i0])
             wins[k - 1], wins[k] = (s0, min(e0, mid)), (max(s1, mid), e1)
-    # a steady sideslip's pieces end with the release: its window has no trail
-    return [(s, t[c.i1]) if c.kind == "shss" else (s, e) for (s, e), c in zip(wins, found, strict=True)]
+    # a steady sideslip ends with its release and a wind-up turn with its roll-out: what follows
+    # is the next leg's flight, not their response; their windows end release_margin_s before
+    # the release is seen (the load factor or side force lags it by the aircraft's response)
+    return [(s, t[c.i1] - o.release_margin_s) if c.kind in ("shss", "windup_turn") else (s, e)
+            for (s, e), c in zip(wins, found, strict=True)]
 
 
 def _little(c: _Candidate, o: ExtractionOptions) -> float:

@@ -462,6 +462,9 @@ def fly_sortie_campaign(
             "mach_max": float(np.max(truth.mach)),
             "altitude_min_m": float(np.min(truth.h_m)),
             "altitude_max_m": float(np.max(truth.h_m)),
+            # the weight and balance a calibration takes as known (fuel frozen: one CG)
+            "r_cg_body_m_mean": np.mean(truth.r_cg_body_m, axis=0).tolist(),
+            "g_mps2_mean": float(np.mean(truth.g_mps2)),
             "environment": env.to_dict(),
             "flight_meta": truth.meta,
             "injected": inst.injected,

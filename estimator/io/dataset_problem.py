@@ -6,17 +6,20 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
+import pyarrow.parquet as pq
 
 from estimator.io.assemble import ManeuverRequest, SourceTable
 from estimator.io.build import StateEquations, StateSetup, build_problem
 from estimator.io.errors import DataError
 from estimator.io.fprdataset import (
+    FPR_COLUMNS,
     canonical_name,
     column_unit,
     dataset_sensors,
     read_maneuver,
     read_manifest,
     select_entries,
+    sortie_manifest,
 )
 from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
 from estimator.io.tables import numeric
@@ -76,6 +79,71 @@ def load_dataset_maneuvers(path: str | Path, select: Mapping | None = None,
             r_cg_body_m=np.asarray(e["r_cg_body_m_mean"], dtype=float),
             meta={**e, "dataset": str(directory)},
         )))
+    return pairs, dataset_sensors(manifest)
+
+
+def _windows(maneuvers, where: str) -> list[tuple[str, float, float]]:
+    """``(id, t_start_s, t_end_s)`` of a ``maneuvers = [...]`` list (unique ids, start < end)."""
+    if not isinstance(maneuvers, list) or not maneuvers:
+        raise DataError(f"{where}: maneuvers must be a list of {{ id = \"...\", t_start_s = ..., "
+                        "t_end_s = ... }} (as fpr maneuvers writes it), or \"boundaries\"")
+    out, seen = [], set()
+    for j, m in enumerate(maneuvers):
+        ok = isinstance(m, Mapping) and set(m) == {"id", "t_start_s", "t_end_s"} and all(
+            isinstance(m[k], (int, float)) and not isinstance(m[k], bool) for k in ("t_start_s", "t_end_s"))
+        if not ok or not m["t_start_s"] < m["t_end_s"] or str(m["id"]) in seen:
+            raise DataError(f"{where}: maneuvers[{j}] = {m!r}: needs id (unique), t_start_s < t_end_s (s)")
+        seen.add(str(m["id"]))
+        out.append((str(m["id"]), float(m["t_start_s"]), float(m["t_end_s"])))
+    return out
+
+
+def load_sortie_maneuvers(path: str | Path, maneuvers, channels: Iterable[ChannelSpec] = ()
+                          ) -> tuple[list[tuple[SourceTable, ManeuverRequest]], dict[str, np.ndarray]]:
+    """Maneuvers cut out of a testbed sortie (``fpr fly --sortie``) by their windows, as
+    (table, request) pairs, and the sensor positions.
+
+    Parameters
+    ----------
+    path : the sortie directory.
+    maneuvers : ``[{id, t_start_s, t_end_s}, ...]`` in the sortie's time (what ``fpr maneuvers``
+        writes), or ``"boundaries"``: the sortie's own record of where each maneuver was flown.
+    channels : the model set's channels (which columns are read, as :func:`load_dataset_maneuvers`).
+    """
+    directory = Path(path)
+    manifest = sortie_manifest(directory)
+    if manifest is None:
+        raise DataError(f"{directory}: not a sortie (fpr fly --sortie)")
+    s = manifest["sortie"]
+    where = f"{directory}: [data] maneuvers"
+    boundaries = maneuvers == "boundaries"
+    if boundaries:
+        maneuvers = [{"id": b["id"], "t_start_s": b["t_start_s"], "t_end_s": b["t_end_s"]}
+                     for b in s["boundaries"]]
+    windows = _windows(maneuvers, where)
+    file = directory / s["files"]["data"]
+    present = pq.read_schema(file).names
+    wanted = [c for c in present if not c.startswith("true_")
+              and (c in FPR_COLUMNS or canonical_name(c) in data_names(channels))]
+    df = pq.read_table(file, columns=wanted).to_pandas()
+    if boundaries:  # the flight's record, in the truth's time: within the recorders' span
+        t = df["t_s"].to_numpy()
+        windows = [(m, max(t0, float(t[0])), min(t1, float(t[-1]))) for m, t0, t1 in windows]
+    values, bad = {}, {}
+    for col in df.columns:
+        values[canonical_name(col)], bad[canonical_name(col)] = numeric(df[col])
+    table = SourceTable(path=file, values=values, not_numeric=bad,
+                        units={canonical_name(c): column_unit(c) for c in df.columns},
+                        labels={canonical_name(c): f"{canonical_name(c)} (column {c!r})" for c in df.columns},
+                        own_rate=frozenset(canonical_name(c) for c in s.get("own_rate_columns", ())
+                                           if c in df.columns))
+    keep = ("configuration", "aircraft", "nose_sensor", "sensors", "g_mps2_mean", "environment", "injected")
+    pairs = [(table, ManeuverRequest(
+        id=mid, t_start_s=t0, t_end_s=t1, aircraft=str(s["aircraft"]), configuration=str(s["configuration"]),
+        r_cg_body_m=np.asarray(s["r_cg_body_m_mean"], dtype=float),
+        meta={**{k: s[k] for k in keep if k in s}, "dataset": str(directory), "file": s["files"]["data"],
+              "sortie_window_s": [t0, t1]},
+    )) for mid, t0, t1 in windows]
     return pairs, dataset_sensors(manifest)
 
 

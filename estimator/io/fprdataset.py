@@ -119,6 +119,22 @@ def read_manifest(path: str | Path) -> tuple[Path, dict]:
     return path, manifest
 
 
+#: The manifest format of a testbed sortie (``fpr fly --sortie``): one flight, one time base.
+SORTIE_FORMAT = "fpr-sortie"
+
+
+def sortie_manifest(directory: Path) -> dict | None:
+    """The parsed manifest of a sortie directory, else None (not a sortie)."""
+    mpath = Path(directory) / MANIFEST
+    if not mpath.is_file():
+        return None
+    try:
+        manifest = json.loads(mpath.read_text())
+    except json.JSONDecodeError as exc:
+        raise DataError(f"{mpath}: not valid JSON ({exc}); the sortie is damaged") from None
+    return manifest if isinstance(manifest, dict) and manifest.get("format") == SORTIE_FORMAT else None
+
+
 def _as_list(v) -> list:
     return list(v) if isinstance(v, (list, tuple)) else [v]
 
@@ -207,4 +223,8 @@ def load_truth(problem_or_dataset, maneuver_id: str) -> pd.DataFrame:
         directory, entry = Path(meta["dataset"]), meta
     path = directory / entry["file"]
     names = [n for n in pq.read_schema(path).names if n == "t_s" or n.startswith("true_")]
-    return pq.read_table(path, columns=names).to_pandas()
+    truth = pq.read_table(path, columns=names).to_pandas()
+    if "sortie_window_s" in entry:  # a maneuver cut out of a whole sortie
+        t0, t1 = entry["sortie_window_s"]
+        truth = truth[(truth["t_s"] >= t0 - 1e-9) & (truth["t_s"] <= t1 + 1e-9)].reset_index(drop=True)
+    return truth

@@ -12,10 +12,12 @@ from pathlib import Path
 import numpy as np
 
 from aircraft_models.schema import SUFFIXES, Key, check, did_you_mean
+from estimator.extraction import ExtractionOptions
 from estimator.io.assemble import DIMENSIONS, REQUIRED, ManeuverRequest, SourceTable, held_samples
 from estimator.io.build import StateEquations, StateSetup, build_problem
-from estimator.io.dataset_problem import load_dataset_maneuvers
+from estimator.io.dataset_problem import load_dataset_maneuvers, load_sortie_maneuvers
 from estimator.io.errors import DataError
+from estimator.io.fprdataset import sortie_manifest
 from estimator.io.logs import LOG_FORMATS, log_frame
 from estimator.io.modelset import DEFAULT_MODEL_SET, OWN_SIGNALS, merge_model_set, read_model_set
 from estimator.io.plausibility import Ranges, parse_ranges
@@ -28,7 +30,7 @@ from estimator.problem import STATE_SIGNALS, ChannelSpec, Problem
 
 TOP_KEYS = ("title", "g_mps2", "lever_arm", "model", "channels", "resample_hz", "sensors", "aircraft",
             "columns", "files", "data", "parameter", "channel", "workflow", "solver", "report",
-            "positions_checked", "plausible")
+            "positions_checked", "plausible", "extraction")
 #: the CG, in m (or r_cg_body_in, r_cg_body_ft)
 _CG_KEYS = {"r_cg_body_m": Key(unit="m")}
 FILE_KEYS = {**dict.fromkeys(("path", "format", "header", "delimiter", "decimal", "skip_rows", "encoding",
@@ -270,6 +272,29 @@ def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[s
     return pairs
 
 
+def read_whole_files(path: Path, raw: Mapping) -> list[tuple[dict, SourceTable]]:
+    """Each ``[[files]]`` entry of the parsed problem file ``raw`` (at ``path``) with its data read
+    whole, in the file's units (its ``maneuvers`` not cut: the maneuver finder reads a flight)."""
+    where = str(path)
+    raw_model, msource = read_model_set(raw.get("model", DEFAULT_MODEL_SET), path.resolve().parent)
+    chans, specs, _ = merge_model_set(raw_model, raw.get("parameter"), raw.get("channel"), msource, where)
+    valid = column_names(chans, specs)
+    global_cols = _column_specs(raw.get("columns", {}), f"{where}: [columns]", valid)
+    files = raw.get("files")
+    if not files:
+        raise DataError(f"{where}: no [[files]]: the maneuver finder reads the files a problem file names")
+    out = []
+    for i, entry in enumerate(files):
+        entry = check(entry, FILE_KEYS, f"{where}: [[files]] #{i + 1}", DataError)
+        if "path" not in entry:
+            raise DataError(f"{where}: [[files]] #{i + 1}: needs path = \"...\" (relative to the "
+                            "problem file)")
+        w = f"{where}: [[files]] {entry['path']}"
+        cols = {**global_cols, **_column_specs(entry.get("columns", {}), f"{w} columns", valid)}
+        out.append((dict(entry), _read_file(entry, cols, path.resolve().parent, w)))
+    return out
+
+
 def parse_options(raw: Mapping, where: str) -> dict:
     """The ``[workflow]``, ``[solver]`` and ``[report]`` tables as one flat mapping of option names.
 
@@ -323,6 +348,10 @@ def load_problem(path: str | Path) -> Problem:
     where = str(path)
     check(raw, TOP_KEYS, where, DataError)
     options = parse_options(raw, where)
+    try:  # the maneuver finder's thresholds (fpr maneuvers): checked here too, never ignored
+        ExtractionOptions.from_mapping(raw.get("extraction", {}), f"{where}: [extraction]")
+    except ValueError as exc:
+        raise DataError(str(exc)) from None
     base = path.resolve().parent
     raw_model, msource = read_model_set(raw.get("model", DEFAULT_MODEL_SET), base)
     chans, specs, declared = merge_model_set(raw_model, raw.get("parameter"), raw.get("channel"),
@@ -335,7 +364,7 @@ def load_problem(path: str | Path) -> Problem:
     check_positions(positions_of(raw, path.read_text(encoding="utf-8", errors="replace")), where, checked)
     data = raw.get("data")
     if data is not None:
-        check(data, ("dataset", "select"), f"{where}: [data]", DataError)
+        check(data, ("dataset", "select", "maneuvers"), f"{where}: [data]", DataError)
         # a dataset of fpr fly is the testbed's aircraft: its plausible ranges are the built-in ones
         clash = [k for k in ("files", "columns", "aircraft", "plausible") if k in raw]
         if clash:
@@ -344,8 +373,18 @@ def load_problem(path: str | Path) -> Problem:
         if "dataset" not in data:
             raise DataError(f"{where}: [data] needs dataset = \"path/to/dataset\"")
         ds = Path(data["dataset"])
-        pairs, pos = load_dataset_maneuvers(ds if ds.is_absolute() else base / ds, data.get("select"),
-                                            chans)
+        ds = ds if ds.is_absolute() else base / ds
+        if sortie_manifest(ds) is not None:  # a whole sortie, cut by the given windows
+            if "maneuvers" not in data or "select" in data:
+                raise DataError(f"{where}: [data] dataset = {str(ds)!r} is a whole sortie: say which "
+                                "maneuvers with maneuvers = [...] (fpr maneuvers writes them) or "
+                                "maneuvers = \"boundaries\" (the sortie's own record); no select")
+            pairs, pos = load_sortie_maneuvers(ds, data["maneuvers"], chans)
+        else:
+            if "maneuvers" in data:
+                raise DataError(f"{where}: [data] maneuvers = ... is for a whole sortie; a dataset of "
+                                "maneuvers is chosen with select = { ... }")
+            pairs, pos = load_dataset_maneuvers(ds, data.get("select"), chans)
         sensors = {**pos, **sensors}
     else:
         # the aircraft's plausible ranges: the model set's, then the problem file's

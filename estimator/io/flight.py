@@ -1,0 +1,151 @@
+"""A whole flight read for the maneuver finder (:mod:`estimator.extraction`): from a testbed
+sortie (``fpr fly --sortie``) or from the files of a problem file, read whole.
+
+A sortie directory (manifest format ``fpr-sortie``) holds the flight on one time base in
+``sortie.parquet``, columns named as in a dataset (:data:`~estimator.io.fprdataset.FPR_COLUMNS`);
+the truth (``true_*``) is never read. A problem file's ``[[files]]`` are read as ``fpr calibrate``
+reads them (its ``[columns]``, units, log streams and clock offsets), each whole, its
+``maneuvers`` ignored; its ``[extraction]`` table sets the finder's thresholds.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import tomli_w
+
+from estimator.extraction import ExtractionOptions, FlightSignals, ManeuverTable
+from estimator.io.errors import DataError
+from estimator.io.fprdataset import MANIFEST, SORTIE_FORMAT, sortie_manifest
+from estimator.io.problemfile import read_whole_files
+from estimator.io.units import to_si
+
+#: FlightSignals field -> canonical channel name (problem files) and sortie column
+_FIELDS = {
+    "az_mps2": ("az", "az_imu_mps2"), "q_rps": ("q", "q_rps"), "ay_mps2": ("ay", "ay_imu_mps2"),
+    "p_rps": ("p", "p_rps"), "r_rps": ("r", "r_rps"), "phi_rad": ("phi", "phi_rad"),
+    "psi_rad": ("psi", "psi_rad"), "h_m": ("h", "h_baro_m"), "mach": ("mach", "mach"),
+    "tas_mps": ("tas", "tas_mps"),
+}
+
+
+@dataclass(frozen=True)
+class FlightFile:
+    """One recorded flight to search: its signals, and how a problem file names its data.
+
+    Attributes
+    ----------
+    signals : the motion, SI (:class:`~estimator.extraction.FlightSignals`).
+    path : the data file (a sortie's ``sortie.parquet``, a problem file's ``[[files]] path``).
+    entry : the problem file's ``[[files]]`` entry it came from (empty for a sortie).
+    """
+
+    signals: FlightSignals
+    path: Path
+    entry: dict
+
+
+def read_sortie_flight(directory: str | Path) -> FlightFile:
+    """The whole flight of a testbed sortie directory (its truth never read)."""
+    directory = Path(directory)
+    manifest = sortie_manifest(directory)
+    if manifest is None:
+        raise DataError(f"{directory}: not a sortie (no {MANIFEST} of format {SORTIE_FORMAT!r}); "
+                        "a sortie is written by `fpr fly CAMPAIGN --sortie --out DIR`")
+    path = directory / manifest["sortie"]["files"]["data"]
+    if not path.is_file():
+        raise DataError(f"{path}: the sortie's data file is missing; fly the sortie again")
+    names = set(pq.read_schema(path).names)
+    cols = ["t_s", *(c for _, c in _FIELDS.values() if c in names)]
+    df = pq.read_table(path, columns=cols).to_pandas()
+    values = {f: df[c].to_numpy(dtype=float) for f, (_, c) in _FIELDS.items() if c in names}
+    return FlightFile(FlightSignals(t_s=df["t_s"].to_numpy(dtype=float), source=str(directory), **values),
+                      path, {})
+
+
+def _signals(table, where: str) -> FlightSignals:
+    """FlightSignals of a problem file's source table (its values in the file's units)."""
+    values = {}
+    for field_name, (name, _) in _FIELDS.items():
+        if name in table.values:
+            label = f"{where}: {table.labels[name]}"
+            values[field_name] = to_si(table.values[name], table.units[name], label)
+    if "az_mps2" not in values or "q_rps" not in values:
+        raise DataError(f"{where}: the maneuver finder needs az and q mapped under [columns]")
+    return FlightSignals(t_s=table.t_s, source=where, **values)
+
+
+def read_problem_flights(path: str | Path) -> tuple[list[FlightFile], ExtractionOptions]:
+    """Every ``[[files]]`` of a problem file read whole, and its ``[extraction]`` thresholds."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such problem file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise DataError(f"{path}: not valid TOML: {exc}") from None
+    try:
+        options = ExtractionOptions.from_mapping(raw.get("extraction", {}), f"{path}: [extraction]")
+    except ValueError as exc:
+        raise DataError(str(exc)) from None
+    flights = [FlightFile(_signals(table, f"{path}: [[files]] {entry['path']}"), table.path, entry)
+               for entry, table in read_whole_files(path, raw)]
+    return flights, options
+
+
+def read_flights(source: str | Path) -> tuple[list[FlightFile], ExtractionOptions]:
+    """The flights of ``source``: a sortie directory, or a problem file (TOML) whose files are
+    read whole; and the thresholds (the problem file's ``[extraction]``, else the defaults)."""
+    source = Path(source)
+    if source.is_dir():
+        return [read_sortie_flight(source)], ExtractionOptions()
+    if source.suffix.lower() == ".toml":
+        return read_problem_flights(source)
+    raise DataError(f"{source}: give a sortie directory (fpr fly --sortie) or a problem file (.toml) "
+                    "whose [columns] map the log's az, q (and ay, p, r, phi, psi, h, tas or mach)")
+
+
+def _rebased(path: str, base: Path, out_dir: Path) -> str:
+    """``path`` (relative to ``base`` unless absolute) relative to ``out_dir`` where it can be."""
+    p = Path(path)
+    p = p if p.is_absolute() else (base / p).resolve()
+    try:
+        return Path(os.path.relpath(p, out_dir.resolve())).as_posix()
+    except ValueError:  # another drive
+        return str(p)
+
+
+def found_problem(source: str | Path, tables: Sequence[ManeuverTable], out: str | Path,
+                  borderline: bool = True) -> str:
+    """The TOML text of a problem file that calibrates the maneuvers found in ``source``.
+
+    Parameters
+    ----------
+    source : what :func:`read_flights` read: a sortie directory (the file reads it with
+        ``[data] dataset``, the windows as its ``maneuvers``) or a problem file (a copy of it,
+        each ``[[files]]`` entry's ``maneuvers`` replaced by the windows found in that file).
+    tables : one :class:`~estimator.extraction.ManeuverTable` per flight, in ``read_flights``'s order.
+    out : where the file will be written (relative paths are made relative to its folder).
+    borderline : include the maneuvers graded borderline (those graded keep always are).
+    """
+    source, out_dir = Path(source), Path(out).parent
+    if source.is_dir():
+        return tomli_w.dumps({
+            "title": f"maneuvers found in {source.name} by fpr maneuvers",
+            "data": {"dataset": _rebased(str(source), Path.cwd(), out_dir),
+                     "maneuvers": tables[0].problem_maneuvers(borderline)}})
+    raw = tomllib.loads(source.read_text(encoding="utf-8"))
+    base = source.resolve().parent
+    many = len(tables) > 1
+    for i, (entry, table) in enumerate(zip(raw["files"], tables, strict=True)):
+        entry["path"] = _rebased(entry["path"], base, out_dir)
+        entry["maneuvers"] = table.problem_maneuvers(borderline, prefix=f"f{i}" if many else "")
+    model = raw.get("model")
+    if isinstance(model, str) and model.endswith(".toml"):
+        raw["model"] = _rebased(model, base, out_dir)
+    return tomli_w.dumps(raw)
