@@ -340,8 +340,10 @@ ESTIMATOR_LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
                     "estimator.options", "estimator.verdict", "estimator.finding_kinds",
                     "estimator.finding_groups", "estimator.result", "estimator.accuracy")),
     # reading flight data into a problem; the model of its channels and its normal equations
+    # (and the maneuver finder, which io's flight reader and the problem file's checks use)
     ("io and model", ("estimator.io", "estimator.model", "estimator.normal_equations",
-                      "estimator.calibrated", "estimator.start", "estimator.autopilot")),
+                      "estimator.calibrated", "estimator.start", "estimator.autopilot",
+                      "estimator.extraction")),
     # the parts of an estimation: likelihoods, iterations, identifiability, deviations, diagnostics
     ("estimation", ("estimator.likelihood", "estimator.gauss_newton", "estimator.identifiability",
                     "estimator.uncertainty", "estimator.diagnostics", "estimator.filter_error",
