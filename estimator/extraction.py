@@ -22,6 +22,9 @@ steady-heading sideslip     a lateral specific force held beyond ``sideslip_ay_m
                             ``piece_s``
 level acceleration /        the speed changing by ``speed_rate`` for ``speed_min_s`` at a
 deceleration                steady altitude, wings level
+steady turn, straight leg   a bank held (or the wings level and the heading held) for
+                            ``leg_min_s``: a small UAV's waypoint course; only with
+                            ``legs_and_turns``
 ==========================  ==============================================================
 
 A maneuver starts where its signal leaves the steady flight before it (the first step, the
@@ -56,7 +59,7 @@ G0_MPS2 = 9.80665
 RAD2DEG = 180.0 / math.pi
 #: Kinds this module finds, in the order of precedence where candidates overlap.
 KINDS = ("pitch_doublet", "3211", "pullup_pushover", "windup_turn", "shss", "roller_coaster",
-         "pullup_rudder_doublets", "level_accel", "level_decel")
+         "pullup_rudder_doublets", "level_accel", "level_decel", "steady_turn", "straight_leg")
 GRADES = ("keep", "borderline", "discard")
 
 
@@ -106,15 +109,23 @@ class ExtractionOptions:
     #: a speed change starting this soon after one of the other sign ends is the way back to
     #: the test point's speed (a transition), not a maneuver, s
     return_gap_s: float = 10.0
-    #: a level speed change starts from steady flight: this long, s, the load factor within
-    #: steady_nz_g of its mean, wings level, the altitude held
+    #: every maneuver but a turn or leg starts from steady flight: this long, s, the load factor
+    #: within steady_nz_g of its mean, wings level, the altitude held
     steady_s: float = 3.0
-    steady_nz_g: float = 0.03
+    steady_nz_g: float = 0.05
     #: steady flight kept before each excitation, and response after it, s
     lead_s: float = 2.0
     trail_s: float = 3.0
     #: a steady sideslip's or wind-up turn's window ends this long before its release is seen, s
     release_margin_s: float = 0.5
+    #: steady turns and straight legs (a small UAV's waypoint course) are looked for too
+    legs_and_turns: bool = False
+    #: bank of a steady turn, deg; bank of a straight leg at most, deg; its heading rate at most,
+    #: deg/s; the shortest turn or leg, s (longer ones are cut into pieces of about piece_s)
+    steady_turn_bank_deg: float = 15.0
+    level_bank_deg: float = 5.0
+    leg_heading_rate_dps: float = 3.0
+    leg_min_s: float = 8.0
     #: grades: shortest excitation kept, s
     min_excitation_s: float = 4.0
     #: grades: the drift of a one-point maneuver's speed, Mach (or airspeed change / mean), from
@@ -139,6 +150,10 @@ class ExtractionOptions:
                         and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
                     raise ValueError(f"{where}: {k} = {v!r} must be two numbers, e.g. {list(default)}")
                 out[k] = (float(v[0]), float(v[1]))
+            elif isinstance(default, bool):
+                if not isinstance(v, bool):
+                    raise ValueError(f"{where}: {k} = {v!r} must be true or false (no quotes)")
+                out[k] = v
             elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{where}: {k} = {v!r} must be a number, 0 or more")
             else:
@@ -394,7 +409,9 @@ def _pitch_steps(pp: _Prepared, o: ExtractionOptions) -> list[_Candidate]:
             out[-1] = replace(prev, i1=i1)
         else:
             out.append(_Candidate(kind, i0, i1, 0.0, "g"))
-    return [replace(c, excitation=float(np.ptp(pp.nz[c.i0:c.i1 + 1]))) for c in out]
+    # a test input is flown from a trimmed test point (a turn's entry and exit are not one)
+    return [replace(c, excitation=float(np.ptp(pp.nz[c.i0:c.i1 + 1]))) for c in out
+            if _steady_before(pp, c.i0, o)]
 
 
 def _crossings(x: np.ndarray, n_merge: int) -> np.ndarray:
@@ -533,7 +550,7 @@ def _windups(pp: _Prepared, o: ExtractionOptions) -> list[_Candidate]:
         # back to where the fall starts: the last sample still within 5 % of the rise of the peak
         held = np.flatnonzero(pp.nz[k_peak:i1 + 1] >= pp.nz[k_peak] - 0.05 * rise)
         i1 = k_peak + int(held[-1])
-        if (i1 - a) * dt < o.turn_min_s or k_peak < i0 + 0.6 * (i1 - i0):
+        if (i1 - a) * dt < o.turn_min_s or k_peak < i0 + 0.6 * (i1 - i0) or not _steady_before(pp, i0, o):
             continue
         out.append(_Candidate("windup_turn", i0, i1, rise, "g"))
     return out
@@ -555,25 +572,27 @@ def _sideslips(pp: _Prepared, o: ExtractionOptions) -> list[_Candidate]:
             continue
         level = float(np.median(x[a:b]))
         i0 = _departure(x * np.sign(level), a, abs(level), 0.05, int(round(3.0 / dt)))
+        if not _steady_before(pp, i0, o):
+            continue
         inside = np.flatnonzero(np.abs(x[a:b]) >= 0.8 * abs(level))
         out.append(_Candidate("shss", i0, a + int(inside[-1]), abs(level), "m/s^2"))
     return out
 
 
 def _steady_before(pp: _Prepared, i0: int, o: ExtractionOptions) -> bool:
-    """Whether the ``steady_s`` ending 0.5 s before sample ``i0`` are steady flight: the load
-    factor within ``steady_nz_g`` of its mean, wings level, the altitude held (a test point,
-    trimmed)."""
-    n, off = int(round(o.steady_s / pp.dt_s)), int(round(0.5 / pp.dt_s))
-    if i0 < n + off:
-        return False
-    i0 -= off  # an excitation found a few tenths of a second late
-    sl = slice(i0 - n, i0)
+    """Whether the ``steady_s`` ending 1 s before sample ``i0`` are steady flight: the load
+    factor within ``steady_nz_g`` of its mean, wings within ``level_bank_deg`` of level, the
+    altitude held (a trimmed test point, which every test input is flown from)."""
+    n, off = int(round(o.steady_s / pp.dt_s)), int(round(1.0 / pp.dt_s))
+    i0 -= off  # an excitation found late (a pull's load factor first dips, non-minimum phase)
+    if i0 < off // 2:
+        return False  # under half a second of flight to judge
+    sl = slice(max(0, i0 - n), i0)  # at the start of a recording, what there is
     ok = float(np.ptp(pp.nz[sl])) <= 2 * o.steady_nz_g
     if "phi_rad" in pp.signals:
-        ok &= float(np.max(np.abs(pp.signals["phi_rad"][sl]))) * RAD2DEG < 5.0
+        ok &= float(np.max(np.abs(pp.signals["phi_rad"][sl]))) * RAD2DEG < o.level_bank_deg
     if "h_m" in pp.signals:
-        h = _smooth(pp.signals["h_m"][max(0, i0 - 2 * n):i0], int(round(2.0 / pp.dt_s)))[-n:]
+        h = _smooth(pp.signals["h_m"][max(0, i0 - 2 * n):i0], int(round(2.0 / pp.dt_s)))[-(i0 - sl.start):]
         ok &= float(np.ptp(h)) < o.level_climb_rate_mps * o.steady_s
     return bool(ok)
 
@@ -613,8 +632,45 @@ def _speed_changes(pp: _Prepared, o: ExtractionOptions) -> list[_Candidate]:
             if ok and not any(p.kind != c.kind and p.i0 < c.i0 and c.i0 - e <= gap for p, e, _ in found[:k])]
 
 
+def _held_runs(mask: np.ndarray, pp: _Prepared, o: ExtractionOptions) -> list[tuple[int, int]]:
+    """Runs of ``mask`` (gaps under 1 s bridged) at least ``leg_min_s`` long, cut into pieces of
+    about ``piece_s``."""
+    dt = pp.dt_s
+    out = []
+    for a, b in _runs(_bridge(mask, int(round(1.0 / dt)))):
+        if (b - a) * dt < o.leg_min_s:
+            continue
+        k = max(1, int(round((b - a) * dt / o.piece_s)))
+        edges = np.linspace(a, b - 1, k + 1).round().astype(int)
+        out += list(zip(edges[:-1], edges[1:], strict=True))
+    return out
+
+
+def _turns_and_legs(pp: _Prepared, o: ExtractionOptions) -> list[_Candidate]:
+    """Steady turns (a bank beyond ``steady_turn_bank_deg`` held within 10 deg of its median)
+    and straight legs (wings within ``level_bank_deg`` of level, the heading held within
+    ``leg_heading_rate_dps``): a small UAV's waypoint course, found only with
+    ``legs_and_turns`` (a test sortie's steady flight between maneuvers is not one)."""
+    phi, psi = pp.signals.get("phi_rad"), pp.signals.get("psi_rad")
+    if not o.legs_and_turns or phi is None or psi is None:
+        return []
+    dt = pp.dt_s
+    bank = _smooth(phi, int(round(1.0 / dt))) * RAD2DEG
+    psidot = np.gradient(_smooth(psi, int(round(2.0 / dt))), dt) * RAD2DEG
+    out = []
+    for sign in (1.0, -1.0):
+        turning = sign * bank > o.steady_turn_bank_deg
+        for a, b in _held_runs(turning, pp, o):
+            if np.max(np.abs(bank[a:b] - np.median(bank[a:b]))) <= 10.0:
+                out.append(_Candidate("steady_turn", a, b, float(np.median(np.abs(bank[a:b]))), "deg"))
+    level = (np.abs(bank) < o.level_bank_deg) & (np.abs(psidot) < o.leg_heading_rate_dps)
+    out += [_Candidate("straight_leg", a, b, float(np.ptp(pp.nz[a:b])), "g")
+            for a, b in _held_runs(level, pp, o)]
+    return out
+
+
 #: The finders in their order of precedence (module docstring).
-_FINDERS = (_pitch_steps, _windups, _sideslips, _sines, _speed_changes)
+_FINDERS = (_pitch_steps, _windups, _sideslips, _sines, _speed_changes, _turns_and_legs)
 
 
 def _resolved(pp: _Prepared, o: ExtractionOptions) -> list[_Candidate]:
@@ -646,11 +702,12 @@ def _windows(pp: _Prepared, found: list[_Candidate], o: ExtractionOptions) -> li
 
 def _little(c: _Candidate, o: ExtractionOptions) -> float:
     """The excitation below which a maneuver is borderline: 1.5 x what finds it (a pitch input's
-    load-factor range: 0.2 g; a sinusoid's: twice its smallest amplitude)."""
+    load-factor range: 0.2 g; a sinusoid's: twice its smallest amplitude; steady turns and legs
+    are steady flight, none)."""
     speed = (o.speed_rate_mach_per_s if c.unit == "Mach" else o.speed_rate_mps2) * o.speed_min_s
     base = {"windup_turn": o.turn_min_rise_g, "shss": o.sideslip_ay_mps2, "level_accel": speed,
             "level_decel": speed, "roller_coaster": 2 * o.sine_min_amplitude_g,
-            "pullup_rudder_doublets": 2 * o.sine_min_amplitude_g}
+            "pullup_rudder_doublets": 2 * o.sine_min_amplitude_g, "steady_turn": 0.0, "straight_leg": 0.0}
     return 1.5 * base.get(c.kind, 0.2)
 
 
