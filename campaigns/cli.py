@@ -588,6 +588,12 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--out", type=Path, required=True,
                     help="the parameter file to write (.params for QGroundControl, .param for Mission "
                     "Planner); an existing file is never replaced")
+    eh = ("write a whole sortie (fpr fly --sortie) as a PX4 log: a ULog (.ulg) or a MATLAB file (.mat), "
+          "PX4's topic names and units, each recorder's stream on its own clock")
+    ep = sub.add_parser("export", help=eh, description=eh[0].upper() + eh[1:] + ".")
+    ep.add_argument("sortie", type=Path, help="the sortie directory")
+    ep.add_argument("--out", type=Path, required=True,
+                    help="the log to write (.ulg or .mat); an existing file is never replaced")
     mh = ("find the test maneuvers in a whole flight (a sortie of fpr fly --sortie, or the files of a "
           "problem file read whole) from its motion alone: kind, excitation start and end, the window "
           "for a calibration, speed and its drift, an excitation measure and a grade (keep / "
@@ -633,6 +639,23 @@ def _autopilot(args: argparse.Namespace) -> int:
     (write_qgc if args.autopilot == "px4" else write_mission_planner)(args.out, [p])
     print(f"{p.name}: in force {p.in_force:.6g} -> {p.value:.6g} +- {p.std:.2g} ({p.scale_key} = "
           f"{p.k:.5g} +- {p.k_std:.2g}); written to {args.out}")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from synth.dataset import read_sortie_manifest
+    from synth.export import PX4_TOPICS, write_sortie_log
+
+    if args.out.exists():
+        print(f"fpr export: error: {args.out} exists: choose another --out (it is never replaced)",
+              file=sys.stderr)
+        return 2
+    if read_sortie_manifest(args.sortie) is None:
+        print(f"fpr export: error: {args.sortie} is not a sortie (fpr fly CAMPAIGN --sortie --out DIR)",
+              file=sys.stderr)
+        return 2
+    write_sortie_log(args.sortie, args.out)
+    print(f"{args.out}: topics {', '.join(PX4_TOPICS)} (fpr streams {args.out} lists them)")
     return 0
 
 
@@ -683,7 +706,7 @@ def main(argv: list[str] | None = None) -> int:
     from campaigns import montecarlo_cli
 
     handlers = {"fly": _fly, "demo": _demo, "show": _show, "calibrate": _calibrate, "streams": _streams,
-                "autopilot": _autopilot, "maneuvers": _maneuvers,
+                "autopilot": _autopilot, "maneuvers": _maneuvers, "export": _export,
                 **dict.fromkeys(montecarlo_cli.COMMANDS, montecarlo_cli.run)}
     try:
         code = handlers[args.command](args)

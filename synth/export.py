@@ -104,3 +104,65 @@ def write_mat(path: str | Path, structs: Mapping[str, Mapping[str, np.ndarray]],
         fh.write(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, written by synth.export".ljust(116)
                  + bytes(8) + struct.pack("<H", 0x0200) + b"IM")
     return out
+
+
+#: A sortie's recorder streams as PX4 topics: topic -> (stream, {field: column or columns}); the
+#: flow angles of the side probe as PX4's airflow_aoa / airflow_slip (its AOA and sideslip vanes).
+PX4_TOPICS: dict[str, tuple[str, dict[str, str | tuple[str, ...]]]] = {
+    "sensor_combined": ("dru", {"gyro_rad": ("p_rps", "q_rps", "r_rps"),
+                                "accelerometer_m_s2": ("ax_imu_mps2", "ay_imu_mps2", "az_imu_mps2")}),
+    "vehicle_attitude": ("ins", {"q": ("phi_rad", "theta_rad", "psi_rad")}),
+    "vehicle_local_position": ("ins", {"vx": "vn_mps", "vy": "ve_mps", "vz": "vd_mps"}),
+    "airspeed_validated": ("dru", {"true_airspeed_m_s": "tas_mps"}),
+    "vehicle_air_data": ("dru", {"baro_alt_meter": "h_baro_m"}),
+    "airflow_aoa": ("dru", {"aoa_rad": "alpha_zsp_rad"}),
+    "airflow_slip": ("dru", {"slip_rad": "beta_zsp_rad"}),
+}
+
+
+def quaternion_from_euler(phi_rad: np.ndarray, theta_rad: np.ndarray, psi_rad: np.ndarray) -> np.ndarray:
+    """(N, 4) unit quaternions, scalar first, body to NED, of 3-2-1 Euler angles (rad)."""
+    cr, sr = np.cos(phi_rad / 2), np.sin(phi_rad / 2)
+    cp, sp = np.cos(theta_rad / 2), np.sin(theta_rad / 2)
+    cy, sy = np.cos(psi_rad / 2), np.sin(psi_rad / 2)
+    return np.column_stack([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+                            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
+
+
+def sortie_px4_topics(directory: str | Path) -> dict[str, dict[str, np.ndarray]]:
+    """A testbed sortie's recorder streams as PX4 topics (:data:`PX4_TOPICS`), each on its own
+    recorder's clock (``timestamp``: the stream's ``t_s`` in us, rounded), SI as PX4 logs them."""
+    import pandas as pd
+
+    directory = Path(directory)
+    streams: dict[str, pd.DataFrame] = {}
+    topics = {}
+    for topic, (stream, fields) in PX4_TOPICS.items():
+        if stream not in streams:
+            streams[stream] = pd.read_parquet(directory / "streams" / f"{stream}.parquet")
+        df = streams[stream]
+        out = {"timestamp": np.round(df["t_s"].to_numpy() * 1e6).astype(np.int64)}
+        if (out["timestamp"] < 0).any():
+            raise ValueError(f"{directory}: stream {stream} starts before t = 0; a ULog's stamps are "
+                             "unsigned")
+        for name, cols in fields.items():
+            if name == "q":
+                out[name] = quaternion_from_euler(*(df[c].to_numpy() for c in cols))
+            elif isinstance(cols, tuple):
+                out[name] = np.column_stack([df[c].to_numpy() for c in cols])
+            else:
+                out[name] = df[cols].to_numpy()
+        topics[topic] = out
+    return topics
+
+
+def write_sortie_log(directory: str | Path, path: str | Path) -> Path:
+    """A testbed sortie written as a PX4 log: a ULog (``.ulg``) or a MATLAB file (``.mat``: v5;
+    one struct per topic), PX4's topic names (:func:`sortie_px4_topics`)."""
+    path = Path(path)
+    topics = sortie_px4_topics(directory)
+    if path.suffix == ".ulg":
+        return write_ulog(path, topics)
+    if path.suffix == ".mat":
+        return write_mat(path, topics)
+    raise ValueError(f"{path}: write a .ulg (PX4 ULog) or a .mat (MATLAB v5) file")
