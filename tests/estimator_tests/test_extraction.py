@@ -11,6 +11,7 @@ campaigns/studies/maneuver_extraction.py.
 from __future__ import annotations
 
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -20,24 +21,22 @@ from campaigns.cli import main
 from estimator.extraction import ExtractionOptions, FlightSignals, find_maneuvers
 from estimator.io import DataError, load_problem
 from estimator.io.flight import read_flights
-from synth.campaign import parse_campaign
+from synth.campaign import load_campaign
 from synth.dataset import load_sortie
+from synth.export import write_sortie_log
 from synth.sortie import fly_sortie_campaign
-
-#: every kind once at one test point (SHSS in three pieces): 11 truth pieces, about 780 s
-ALL_KINDS = {
-    "name": "sortie-all-kinds", "seed": 7, "fleet": "fleet_default",
-    "environment": {"planet": "flat", "turbulence": "none", "wind_ned_mps": [6.0, -4.0, 0.0]},
-    "errors": {"preset": "typical"},
-    "flights": [{"configurations": ["PV1-NP"], "mach": [0.6], "maneuvers": "all", "altitude_m": 6000.0}],
-}
 
 
 @pytest.fixture(scope="module")
 def sortie(tmp_path_factory):
+    """The shipped all-kinds sortie (campaigns/sortie_all_kinds.toml): every kind once at one test
+    point, the SHSS in three pieces: 11 truth pieces, about 780 s of flight, 3 s to fly."""
     out = tmp_path_factory.mktemp("extraction") / "sortie"
-    fly_sortie_campaign(parse_campaign(ALL_KINDS, source="all-kinds.toml"), out)
+    fly_sortie_campaign(load_campaign("sortie_all_kinds"), out)
     return out
+
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _matched(truth: pd.DataFrame, found: pd.DataFrame) -> pd.DataFrame:
@@ -94,6 +93,27 @@ def test_cli_writes_a_problem_file_calibrate_reads(sortie, tmp_path, capsys):
     # never replaced
     assert main(["maneuvers", str(sortie), "--out", str(out)]) == 2
     assert "never replaced" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_px4_log_of_the_sortie_read_as_recorded(sortie, tmp_path):
+    """The sortie written as PX4 logs it (fpr export), read through the shipped PX4 problem file
+    (docs/examples/px4_sortie.toml: topics on their own clocks, airspeed without Mach): every
+    maneuver found, kind right, within 1 s of the truth, as from the sortie itself."""
+    log = write_sortie_log(sortie, tmp_path / "all-kinds.ulg")
+    text = (REPO / "docs" / "examples" / "px4_sortie.toml").read_text()
+    problem_file = tmp_path / "px4.toml"
+    problem_file.write_text(text.replace('path = "../../data/all-kinds.ulg"', f'path = "{log.name}"'))
+    flights, options = read_flights(problem_file)
+    from_log = find_maneuvers(flights[0].signals, options).to_pandas()
+    m = _matched(load_sortie(sortie).boundaries, from_log)
+    assert m.found.notna().all() and (from_log.loc[m.found, "kind"].to_numpy() == m.kind.to_numpy()).all()
+    assert ((m.d_start_s.abs() <= 1.0) & (m.d_end_s.abs() <= 1.0)).all(), m
+    assert len(from_log) == len(m)
+    out = tmp_path / "found.toml"
+    assert main(["maneuvers", str(problem_file), "--out", str(out)]) == 0
+    problem = load_problem(out)
+    assert len(problem.maneuvers) == len(from_log[from_log.grade != "discard"])
 
 
 @pytest.mark.slow
