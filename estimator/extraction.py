@@ -297,14 +297,16 @@ class _Prepared:
     nz: np.ndarray            # load factor, g (0.2-s smoothed)
     qdot_dps2: np.ndarray     # pitch acceleration, deg/s^2
     signals: dict             # optional channels on the grid (name -> array)
-    gaps: list                # (t0, t1) of the gaps in the original samples, s
+    gaps: list                # (t0, t1, channel or "") of the gaps in the samples, s
 
 
 def _prepare(f: FlightSignals) -> _Prepared:
+    """The flight on a uniform grid at its median step; the gaps: steps over 3 x the median, and
+    runs of over 3 samples without a value in a channel (a log's dropout), named."""
     t = np.asarray(f.t_s, dtype=float)
     steps = np.diff(t)
     dt = float(np.median(steps))
-    gaps = [(float(t[i]), float(t[i + 1])) for i in np.flatnonzero(steps > 3.0 * dt)]
+    gaps = [(float(t[i]), float(t[i + 1]), "") for i in np.flatnonzero(steps > 3.0 * dt)]
     grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
     names = ("az_mps2", "q_rps", "ay_mps2", "p_rps", "r_rps", "phi_rad", "psi_rad", "h_m", "mach",
              "tas_mps")
@@ -315,10 +317,16 @@ def _prepare(f: FlightSignals) -> _Prepared:
             continue
         v = np.asarray(v, dtype=float)
         ok = np.isfinite(v)
+        if not ok.any():
+            if name in ("az_mps2", "q_rps"):
+                raise ValueError(f"{f.source}: {name} has no value at all; the maneuver finder needs it")
+            continue
+        gaps += [(float(t[max(a - 1, 0)]), float(t[min(b, len(t) - 1)]), name)
+                 for a, b in _runs(~ok) if b - a > 3]
         if name == "psi_rad":
-            v = np.unwrap(np.where(ok, v, 0.0))
-        sig[name] = np.interp(grid, t[ok], v[ok]) if ok.any() else None
-    sig = {k: v for k, v in sig.items() if v is not None}
+            v = v.copy()
+            v[ok] = np.unwrap(v[ok])  # heading crosses 180 deg
+        sig[name] = np.interp(grid, t[ok], v[ok])
     n02 = int(round(0.2 / dt))
     nz = -_smooth(sig["az_mps2"], n02) / G0_MPS2
     qdot = np.gradient(_smooth(sig["q_rps"], n02), dt) * RAD2DEG
@@ -728,9 +736,9 @@ def _speed(pp: _Prepared, s: float, e: float) -> tuple[float, float, str]:
 def _grade(pp: _Prepared, c: _Candidate, s: float, e: float, ex0: float, ex1: float,
            o: ExtractionOptions) -> tuple[str, str]:
     """``(grade, reason)`` of a maneuver with window ``[s, e]`` and excitation ``[ex0, ex1]``."""
-    for g0, g1 in pp.gaps:
+    for g0, g1, name in pp.gaps:
         if g0 < e and g1 > s:
-            return "discard", f"a data dropout from t = {g0:.2f} to {g1:.2f} s"
+            return "discard", f"a data dropout from t = {g0:.2f} to {g1:.2f} s" + (f" ({name})" * bool(name))
     tas = pp.signals.get("tas_mps")
     sel = (pp.t_s >= s) & (pp.t_s <= e)
     if tas is not None and float(np.mean(tas[sel])) < o.min_airspeed_mps:
