@@ -32,11 +32,13 @@ def runs(tiny_dataset, tmp_path_factory):
 
     root = tmp_path_factory.mktemp("calibrate-api")
     cli_out = root / "cli"
-    code = main(["calibrate", str(tiny_dataset), "--out", str(cli_out)])
+    # without figures: they are drawn by the same code for both (tests/estimator_tests/test_outdir.py
+    # draws them), and three reports' figures would be most of this module's time
+    code = main(["calibrate", str(tiny_dataset), "--no-plots", "--out", str(cli_out)])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         problem = problem_from_dataset(tiny_dataset)
-    cal = calibrate(problem)
+    cal = calibrate(problem, CalibrationOptions(plots=False))
     lib_out, free_out = root / "lib", root / "lib-truth-free"
     written = cal.write(lib_out, truth=truth_sections)
     cal.write(free_out)
