@@ -28,7 +28,7 @@ from hypothesis import strategies as st
 from campaigns.benchmarks.user_files import USER_COLUMNS, write_user_files
 from campaigns.cli import main
 from estimator.io import load_problem
-from estimator.io.errors import DataError
+from estimator.io.errors import DataError, DataWarning
 from estimator.io.logs import euler_from_quaternion, log_frame, stream_table
 from estimator.solver import SolverOptions, estimate
 from synth.export import write_mat, write_ulog
@@ -382,6 +382,20 @@ def test_the_shipped_thor_example_reads_the_flight_from_its_matlab_file():
         assert m.t_s.size == 2999 and set(m.measurements) >= {"vn", "ve", "vd", "tas", "alpha_v", "beta_v"}
         fixes = np.count_nonzero(np.isfinite(m.measurements["vn"]))
         assert 55 <= fixes <= 61, f"{m.id}: {fixes} GPS fixes in 60 s, at 1 Hz"
+
+
+@needs_thor
+def test_the_thor_probe_from_its_raw_pressures_reads_them_as_channels():
+    # docs/examples/thor75_pressures.toml: the probe's pressures as channels of the file's own,
+    # its dynamic pressure a data signal; the uav set's angle channels, without a column, left out
+    example = Path(__file__).resolve().parents[2] / "docs" / "examples" / "thor75_pressures.toml"
+    with pytest.warns(DataWarning, match=r"\['alpha_v', 'beta_v'\] of the model set have no data"):
+        p = load_problem(example)
+    assert {c.name for c in p.channels} >= {"pda", "pds"}
+    assert not {"alpha_v", "beta_v"} & {c.name for c in p.channels}
+    m = p.maneuvers[0]
+    ratio = m.measurements["pda"] / m.signals["pd"]
+    assert 0.0 < np.nanmedian(ratio) < 1.0, "the AOA pressure a fraction of the dynamic pressure"
 
 
 def test_fpr_streams_prints_the_table(tmp_path, capsys):
