@@ -600,9 +600,9 @@ def build_parser() -> argparse.ArgumentParser:
           "borderline / discard) with its reason; --out writes a problem file of them for fpr calibrate")
     mp = sub.add_parser("maneuvers", help=mh, description=mh[0].upper() + mh[1:] + ".")
     mp.add_argument("source", type=Path,
-                    help="a sortie directory, or a problem file (.toml) whose [columns] map at least az "
-                    "and q (and ay, p, r, phi, psi, h, tas or mach); its [extraction] table sets the "
-                    "thresholds")
+                    help="a sortie directory, or a problem file (.toml) whose [columns] map t, ax, ay, "
+                    "az, p, q, r (and phi, psi, h, tas or mach: the more, the more kinds are found); its "
+                    "[extraction] table sets the thresholds")
     mp.add_argument("--out", type=Path, default=None,
                     help="write a problem file (.toml) calibrating the maneuvers graded keep and "
                     "borderline (an existing file is never replaced)")
@@ -665,6 +665,9 @@ def _maneuvers(args: argparse.Namespace) -> int:
     from estimator.extraction import find_maneuvers
     from estimator.io.flight import found_problem, read_flights
 
+    if args.out is not None and args.csv is not None and args.out.resolve() == args.csv.resolve():
+        print("fpr maneuvers: error: --out and --csv name the same file; give two", file=sys.stderr)
+        return 2
     for path in (args.out, args.csv):
         if path is not None and path.exists():
             print(f"fpr maneuvers: error: {path} exists: choose another name (it is never replaced)",

@@ -8,10 +8,11 @@ makes it:
 ==========================  ==============================================================
 pitch doublet, 3211,        step inputs in load factor: spikes of the pitch acceleration
 pull-up/push-over           :math:`\dot q` (a step's onset), taken in runs of alternating
-                            sign (each input returns); a doublet's three steps 1-2.5 s
-                            apart, a 3211's four or five at widths 3:2:1:1, a pull-up/
-                            push-over's three at 2.5 s or more; runs of one kind less than
-                            ``maneuver_gap_s`` apart are one maneuver
+                            sign (each input returns); a doublet's three steps up to 2.5 s
+                            apart at about equal widths, a 3211's four or more whose first
+                            widths go 3:2:1, a pull-up/push-over's three at 2 s or more
+                            apart; runs of one kind less than ``maneuver_gap_s`` apart are
+                            one maneuver
 roller coaster, pull-ups    a sinusoidal load factor: at least ``sine_min_half_cycles``
 with rudder doublets        regular half-cycles of :math:`n_z - 1`; with yaw-rate pulses
                             it is the rudder-doublet kind
@@ -30,14 +31,16 @@ steady turn, straight leg   a bank held (or the wings level and the heading held
 A maneuver starts where its signal leaves the steady flight before it (the first step, the
 first crossing, the roll-in, the sideslip's or the speed's departure) and ends where its last
 input ends (the last step, the last crossing, the turn's roll-out, the sideslip's release, 95 %
-of the speed change done). Where two candidates overlap, the one found first in the table above
-wins. The window written for a calibration adds ``lead_s`` of the steady flight before (the
-initial conditions) and ``trail_s`` of the response after (none after a sideslip's release or a
-turn's roll-out: what follows is the next leg), never into a neighbour.
+of the speed change done). Where two candidates overlap, the one found first wins, in this
+order: pitch steps, wind-up turns, sideslips, sinusoids, speed changes, turns and legs. The
+window written for a calibration adds ``lead_s`` of the steady flight before (the initial
+conditions) and ``trail_s`` of the response after (none after a sideslip's release or a turn's
+roll-out: what follows is the next leg), never into a neighbour.
 
 Each maneuver is graded ``keep``, ``borderline`` or ``discard`` with its reason: too short, the
 speed drifting (a maneuver of one test point), too little excitation, a data dropout (a gap in
-the samples), on the ground (below ``min_airspeed_mps``).
+the samples, or a channel without values), on the ground (an airspeed, where one is recorded,
+below ``min_airspeed_mps``).
 
 The thresholds (:class:`ExtractionOptions`) are the defaults of the testbed's fighter-class
 sorties; a small UAV's doublets and turns are faster and smaller: set them in the problem file's
@@ -61,6 +64,11 @@ RAD2DEG = 180.0 / math.pi
 KINDS = ("pitch_doublet", "3211", "pullup_pushover", "windup_turn", "shss", "roller_coaster",
          "pullup_rudder_doublets", "level_accel", "level_decel", "steady_turn", "straight_leg")
 GRADES = ("keep", "borderline", "discard")
+
+
+#: Thresholds that may be 0 (a margin, a limit that can be switched off); the others must be > 0.
+_ZERO_ALLOWED = frozenset({"lead_s", "trail_s", "release_margin_s", "min_excitation_s", "min_airspeed_mps",
+                           "return_gap_s", "rudder_yaw_rate_dps", "sideslip_heading_rate_dps"})
 
 
 @dataclass(frozen=True)
@@ -135,6 +143,22 @@ class ExtractionOptions:
     #: grades: below this airspeed the aircraft is on the ground, m/s
     min_airspeed_mps: float = 10.0
 
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, tuple):
+                if not (0 <= v[0] < v[1]):
+                    raise ValueError(f"{f.name} = {list(v)}: two numbers, the first 0 or more and "
+                                     f"smaller than the second, e.g. {list(f.default)}")
+            elif isinstance(v, bool):
+                continue
+            elif not math.isfinite(v) or v < 0 or (v == 0 and f.name not in _ZERO_ALLOWED):
+                least = "0 or more" if f.name in _ZERO_ALLOWED else "more than 0"
+                raise ValueError(f"{f.name} = {v!r}: must be a number, {least} (default {f.default})")
+        if self.sine_min_half_cycles < 2:
+            raise ValueError(f"sine_min_half_cycles = {self.sine_min_half_cycles}: at least 2 (one "
+                             "cycle); the default is 4")
+
     @classmethod
     def from_mapping(cls, table: Mapping, where: str = "[extraction]") -> ExtractionOptions:
         """Options from a table (``[extraction]`` of a problem file); unknown keys refused."""
@@ -154,11 +178,16 @@ class ExtractionOptions:
                 if not isinstance(v, bool):
                     raise ValueError(f"{where}: {k} = {v!r} must be true or false (no quotes)")
                 out[k] = v
-            elif isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-                raise ValueError(f"{where}: {k} = {v!r} must be a number, 0 or more")
+            elif isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise ValueError(f"{where}: {k} = {v!r} must be a number (default {default})")
+            elif isinstance(default, int) and not float(v).is_integer():
+                raise ValueError(f"{where}: {k} = {v!r} must be a whole number (default {default})")
             else:
                 out[k] = type(default)(v)
-        return cls(**out)
+        try:
+            return cls(**out)
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
 
 
 @dataclass(frozen=True)
@@ -173,6 +202,8 @@ class FlightSignals:
         not looked for, and the table says so).
     mach, tas_mps : speed (at least one of them for the level speed changes and the grades).
     source : what the flight was read from (for messages).
+    own_rate : the fields recorded at their own, slower rate, without a value between their
+        samples (interpolated; not a dropout).
     """
 
     t_s: np.ndarray
@@ -187,6 +218,7 @@ class FlightSignals:
     mach: np.ndarray | None = None
     tas_mps: np.ndarray | None = None
     source: str = "flight"
+    own_rate: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -197,7 +229,8 @@ class FoundManeuver:
     the window written for a calibration (with ``lead_s``/``trail_s``); ``excitation`` is the
     kind's measure in ``excitation_unit`` (load-factor range, g; sideslip force, m/s^2; speed
     change, Mach or m/s); ``speed`` the mean Mach (or airspeed, m/s) and ``speed_variation`` its
-    range over the window (for a level speed change: the change).
+    drift over the window: its mean over the last 2 s minus that over the first 2 s (for a level
+    speed change, about the change).
     """
 
     id: str
@@ -302,7 +335,8 @@ class _Prepared:
 
 def _prepare(f: FlightSignals) -> _Prepared:
     """The flight on a uniform grid at its median step; the gaps: steps over 3 x the median, and
-    runs of over 3 samples without a value in a channel (a log's dropout), named."""
+    runs of over 3 samples without a value in a channel not recorded at its own rate (a log's
+    dropout), named."""
     t = np.asarray(f.t_s, dtype=float)
     steps = np.diff(t)
     dt = float(np.median(steps))
@@ -321,8 +355,9 @@ def _prepare(f: FlightSignals) -> _Prepared:
             if name in ("az_mps2", "q_rps"):
                 raise ValueError(f"{f.source}: {name} has no value at all; the maneuver finder needs it")
             continue
-        gaps += [(float(t[max(a - 1, 0)]), float(t[min(b, len(t) - 1)]), name)
-                 for a, b in _runs(~ok) if b - a > 3]
+        if name not in f.own_rate:
+            gaps += [(float(t[max(a - 1, 0)]), float(t[min(b, len(t) - 1)]), name)
+                     for a, b in _runs(~ok) if b - a > 3]
         if name == "psi_rad":
             v = v.copy()
             v[ok] = np.unwrap(v[ok])  # heading crosses 180 deg
@@ -649,8 +684,10 @@ def _held_runs(mask: np.ndarray, pp: _Prepared, o: ExtractionOptions) -> list[tu
         if (b - a) * dt < o.leg_min_s:
             continue
         k = max(1, int(round((b - a) * dt / o.piece_s)))
-        edges = np.linspace(a, b - 1, k + 1).round().astype(int)
-        out += list(zip(edges[:-1], edges[1:], strict=True))
+        edges = np.linspace(a, b, k + 1).round().astype(int)
+        # neighbouring pieces share no sample (one that touched the last would be dropped as
+        # overlapping it)
+        out += [(int(lo), int(hi) - 1) for lo, hi in zip(edges[:-1], edges[1:], strict=True)]
     return out
 
 

@@ -160,9 +160,11 @@ def write_sortie_log(directory: str | Path, path: str | Path) -> Path:
     """A testbed sortie written as a PX4 log: a ULog (``.ulg``) or a MATLAB file (``.mat``: v5;
     one struct per topic), PX4's topic names (:func:`sortie_px4_topics`)."""
     path = Path(path)
+    if path.suffix.lower() not in (".ulg", ".mat"):
+        raise ValueError(f"{path}: write a .ulg (PX4 ULog) or a .mat (MATLAB v5) file")
     topics = sortie_px4_topics(directory)
-    if path.suffix == ".ulg":
+    if path.suffix.lower() == ".ulg":
         return write_ulog(path, topics)
-    if path.suffix == ".mat":
+    if path.suffix.lower() == ".mat":
         return write_mat(path, topics)
     raise ValueError(f"{path}: write a .ulg (PX4 ULog) or a .mat (MATLAB v5) file")

@@ -86,7 +86,7 @@ def _windows(maneuvers, where: str) -> list[tuple[str, float, float]]:
     """``(id, t_start_s, t_end_s)`` of a ``maneuvers = [...]`` list (unique ids, start < end)."""
     if not isinstance(maneuvers, list) or not maneuvers:
         raise DataError(f"{where}: maneuvers must be a list of {{ id = \"...\", t_start_s = ..., "
-                        "t_end_s = ... }} (as fpr maneuvers writes it), or \"boundaries\"")
+                        "t_end_s = ... } (as fpr maneuvers writes it), or \"boundaries\"")
     out, seen = [], set()
     for j, m in enumerate(maneuvers):
         ok = isinstance(m, Mapping) and set(m) == {"id", "t_start_s", "t_end_s"} and all(
@@ -98,7 +98,8 @@ def _windows(maneuvers, where: str) -> list[tuple[str, float, float]]:
     return out
 
 
-def load_sortie_maneuvers(path: str | Path, maneuvers, channels: Iterable[ChannelSpec] = ()
+def load_sortie_maneuvers(path: str | Path, maneuvers, channels: Iterable[ChannelSpec] = (), *,
+                          where: str | None = None
                           ) -> tuple[list[tuple[SourceTable, ManeuverRequest]], dict[str, np.ndarray]]:
     """Maneuvers cut out of a testbed sortie (``fpr fly --sortie``) by their windows, as
     (table, request) pairs, and the sensor positions.
@@ -109,13 +110,17 @@ def load_sortie_maneuvers(path: str | Path, maneuvers, channels: Iterable[Channe
     maneuvers : ``[{id, t_start_s, t_end_s}, ...]`` in the sortie's time (what ``fpr maneuvers``
         writes), or ``"boundaries"``: the sortie's own record of where each maneuver was flown.
     channels : the model set's channels (which columns are read, as :func:`load_dataset_maneuvers`).
+    where : how messages name the request (default: the sortie directory).
     """
     directory = Path(path)
     manifest = sortie_manifest(directory)
     if manifest is None:
         raise DataError(f"{directory}: not a sortie (fpr fly --sortie)")
     s = manifest["sortie"]
-    where = f"{directory}: [data] maneuvers"
+    where = f"{where or directory}: maneuvers"
+    if "r_cg_body_m_mean" not in s:
+        raise DataError(f"{directory}: the sortie's manifest has no weight and balance "
+                        "(r_cg_body_m_mean): it was flown by an older fpr; fly it again")
     boundaries = maneuvers == "boundaries"
     if boundaries:
         maneuvers = [{"id": b["id"], "t_start_s": b["t_start_s"], "t_end_s": b["t_end_s"]}

@@ -4,8 +4,9 @@ sortie (``fpr fly --sortie``) or from the files of a problem file, read whole.
 A sortie directory (manifest format ``fpr-sortie``) holds the flight on one time base in
 ``sortie.parquet``, columns named as in a dataset (:data:`~estimator.io.fprdataset.FPR_COLUMNS`);
 the truth (``true_*``) is never read. A problem file's ``[[files]]`` are read as ``fpr calibrate``
-reads them (its ``[columns]``, units, log streams and clock offsets), each whole, its
-``maneuvers`` ignored; its ``[extraction]`` table sets the finder's thresholds.
+reads them (its ``[columns]``, units, log streams and clock offsets; t, ax, ay, az, p, q, r
+required), each whole, its ``maneuvers`` ignored; its ``[extraction]`` table sets the finder's
+thresholds.
 """
 
 from __future__ import annotations
@@ -75,9 +76,8 @@ def _signals(table, where: str) -> FlightSignals:
         if name in table.values:
             label = f"{where}: {table.labels[name]}"
             values[field_name] = to_si(table.values[name], table.units[name], label)
-    if "az_mps2" not in values or "q_rps" not in values:
-        raise DataError(f"{where}: the maneuver finder needs az and q mapped under [columns]")
-    return FlightSignals(t_s=table.t_s, source=where, **values)
+    own = frozenset(f for f, (name, _) in _FIELDS.items() if name in table.own_rate)
+    return FlightSignals(t_s=table.t_s, source=where, own_rate=own, **values)
 
 
 def read_problem_flights(path: str | Path) -> tuple[list[FlightFile], ExtractionOptions]:
@@ -107,7 +107,8 @@ def read_flights(source: str | Path) -> tuple[list[FlightFile], ExtractionOption
     if source.suffix.lower() == ".toml":
         return read_problem_flights(source)
     raise DataError(f"{source}: give a sortie directory (fpr fly --sortie) or a problem file (.toml) "
-                    "whose [columns] map the log's az, q (and ay, p, r, phi, psi, h, tas or mach)")
+                    "whose [columns] map the log's t, ax, ay, az, p, q, r (and phi, psi, h, tas or "
+                    "mach: the more, the more kinds are found)")
 
 
 def _rebased(path: str, base: Path, out_dir: Path) -> str:
@@ -132,19 +133,28 @@ def found_problem(source: str | Path, tables: Sequence[ManeuverTable], out: str 
     tables : one :class:`~estimator.extraction.ManeuverTable` per flight, in ``read_flights``'s order.
     out : where the file will be written (relative paths are made relative to its folder).
     borderline : include the maneuvers graded borderline (those graded keep always are).
+
+    A file in which none is kept is left out. Raises ValueError when none is kept at all.
     """
     source, out_dir = Path(source), Path(out).parent
+    kept = [t.problem_maneuvers(borderline, prefix=f"f{i}" if len(tables) > 1 else "")
+            for i, t in enumerate(tables)]
+    if not any(kept):
+        raise ValueError(f"{source}: no maneuver graded keep{' or borderline' * borderline} to write; "
+                         "read the table's reasons, or set the thresholds in [extraction]")
     if source.is_dir():
         return tomli_w.dumps({
             "title": f"maneuvers found in {source.name} by fpr maneuvers",
-            "data": {"dataset": _rebased(str(source), Path.cwd(), out_dir),
-                     "maneuvers": tables[0].problem_maneuvers(borderline)}})
+            "data": {"dataset": _rebased(str(source), Path.cwd(), out_dir), "maneuvers": kept[0]}})
     raw = tomllib.loads(source.read_text(encoding="utf-8"))
     base = source.resolve().parent
-    many = len(tables) > 1
-    for i, (entry, table) in enumerate(zip(raw["files"], tables, strict=True)):
-        entry["path"] = _rebased(entry["path"], base, out_dir)
-        entry["maneuvers"] = table.problem_maneuvers(borderline, prefix=f"f{i}" if many else "")
+    files = []
+    for entry, windows in zip(raw["files"], kept, strict=True):
+        if windows:  # a file with nothing to calibrate is left out (an empty list is refused)
+            entry["path"] = _rebased(entry["path"], base, out_dir)
+            entry["maneuvers"] = windows
+            files.append(entry)
+    raw["files"] = files
     model = raw.get("model")
     if isinstance(model, str) and model.endswith(".toml"):
         raw["model"] = _rebased(model, base, out_dir)

@@ -251,6 +251,9 @@ def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[s
             raise DataError(f"{w}: no CG for aircraft {ac!r}: add [aircraft.{ac}] r_cg_body_m = [x, y, z] "
                             "(or r_cg_body_m under this [[files]] entry or its maneuvers)")
         rate = _number(entry.get("resample_hz", raw.get("resample_hz")), "resample_hz", w, "Hz, e.g. 40.0")
+        if "maneuvers" in entry and not entry["maneuvers"]:
+            raise DataError(f"{w}: maneuvers = [] lists none; list the maneuvers (id, t_start_s, "
+                            "t_end_s), or remove the key to take the whole file as one maneuver")
         mans = entry.get("maneuvers") or [{"id": Path(entry["path"]).stem}]
         for j, man in enumerate(mans):
             mw = f"{w} maneuvers[{j}]"
@@ -379,7 +382,7 @@ def load_problem(path: str | Path) -> Problem:
                 raise DataError(f"{where}: [data] dataset = {str(ds)!r} is a whole sortie: say which "
                                 "maneuvers with maneuvers = [...] (fpr maneuvers writes them) or "
                                 "maneuvers = \"boundaries\" (the sortie's own record); no select")
-            pairs, pos = load_sortie_maneuvers(ds, data["maneuvers"], chans)
+            pairs, pos = load_sortie_maneuvers(ds, data["maneuvers"], chans, where=f"{where}: [data]")
         else:
             if "maneuvers" in data:
                 raise DataError(f"{where}: [data] maneuvers = ... is for a whole sortie; a dataset of "

@@ -187,9 +187,64 @@ def test_grades_say_why():
     assert nan.grade.iloc[0] == "discard" and nan.reason.iloc[0].endswith("s (q_rps)")
 
 
-def test_same_flight_same_table():
-    f = FlightSignals(**_doublets(_flight(), [40.0, 50.0, 60.0]))
-    assert find_maneuvers(f).to_pandas().equals(find_maneuvers(f).to_pandas())
+def test_a_drifting_speed_is_borderline_then_discarded():
+    f = _doublets(_flight(), [40.0, 50.0, 60.0])
+    for drift, grade in ((0.07, "borderline"), (0.15, "discard")):
+        tas = 150.0 * (1.0 + drift * np.clip((f["t_s"] - 38.0) / 30.0, 0.0, 1.0))
+        g = find_maneuvers(FlightSignals(**{**f, "tas_mps": tas})).to_pandas()
+        assert g.grade.iloc[0] == grade, g.reason.iloc[0]
+        assert g.reason.iloc[0].startswith("airspeed drifting by +")  # % of the mean airspeed
+
+
+def test_an_own_rate_channel_is_no_dropout():
+    f = _doublets(_flight(), [40.0, 50.0, 60.0])
+    h = np.full_like(f["t_s"], np.nan)
+    h[::50] = 3000.0  # a 1-Hz height among 50-Hz samples, empty between
+    assert find_maneuvers(FlightSignals(**f, h_m=h, own_rate=frozenset({"h_m"}))).to_pandas(
+        ).grade.iloc[0] == "keep"
+    held = find_maneuvers(FlightSignals(**f, h_m=h)).to_pandas()  # not declared: a dropout
+    assert held.grade.iloc[0] == "discard" and held.reason.iloc[0].endswith("(h_m)")
+
+
+def test_a_long_straight_leg_is_cut_into_pieces_that_all_stay():
+    f = _flight(200.0)
+    zeros = np.zeros_like(f["t_s"])
+    table = find_maneuvers(FlightSignals(**f, phi_rad=zeros, psi_rad=zeros),
+                           ExtractionOptions(legs_and_turns=True, piece_s=30.0))
+    legs = table.to_pandas()
+    assert list(legs.kind) == ["straight_leg"] * 7, legs  # 200 s in about 30-s pieces
+    gaps = legs.t_excitation_start_s.to_numpy()[1:] - legs.t_excitation_end_s.to_numpy()[:-1]
+    assert np.all((gaps > 0) & (gaps <= 0.021)), gaps  # one sample apart, none dropped
+
+
+def test_a_problem_file_source_written_back_with_its_paths_and_without_empty_files(tmp_path, capsys):
+    f = _doublets(_flight(), [40.0, 50.0, 60.0])
+    quiet = _flight()
+    for name, fl in (("a.csv", f), ("b.csv", quiet)):
+        pd.DataFrame({"t": fl["t_s"], "ax": 0.0, "ay": 0.0, "az": fl["az_mps2"], "p": 0.0,
+                      "q": fl["q_rps"], "r": 0.0, "tas": fl["tas_mps"]}).to_csv(tmp_path / name, index=False)
+    columns = "".join(f'{c} = {{ column = "{c}", unit = "{u}" }}\n' for c, u in (
+        ("t", "s"), ("ax", "m/s^2"), ("ay", "m/s^2"), ("az", "m/s^2"), ("p", "rad/s"), ("q", "rad/s"),
+        ("r", "rad/s"), ("tas", "m/s")))
+    src = tmp_path / "problem.toml"
+    src.write_text('[sensors]\nimu = [0.0, 0.0, 0.0]\n[aircraft.x]\nr_cg_body_m = [0.0, 0.0, 0.0]\n'
+                   f'[columns]\n{columns}[[files]]\npath = "a.csv"\n[[files]]\npath = "b.csv"\n')
+    (tmp_path / "out").mkdir()
+    out = tmp_path / "out" / "found.toml"
+    assert main(["maneuvers", str(src), "--out", str(out)]) == 0
+    raw = tomllib.loads(out.read_text())
+    assert [e["path"] for e in raw["files"]] == ["../a.csv"]  # b.csv: nothing found, left out
+    assert [m["id"] for m in raw["files"][0]["maneuvers"]] == ["f0x000"]
+    # nothing kept at all: nothing written
+    (tmp_path / "b.toml").write_text(src.read_text().replace('path = "a.csv"', 'path = "b.csv"'))
+    assert main(["maneuvers", str(tmp_path / "b.toml"), "--out", str(tmp_path / "none.toml")]) == 2
+    assert "no maneuver graded keep or borderline to write" in capsys.readouterr().err
+    assert not (tmp_path / "none.toml").exists()
+    # and a written empty list is never taken for the whole file
+    bad = tmp_path / "empty.toml"
+    bad.write_text(src.read_text().replace('path = "a.csv"\n', 'path = "a.csv"\nmaneuvers = []\n'))
+    with pytest.raises(DataError, match=r"maneuvers = \[\] lists none"):
+        load_problem(bad)
 
 
 def test_bad_time_and_options_refused():
@@ -200,7 +255,12 @@ def test_bad_time_and_options_refused():
         ExtractionOptions.from_mapping({"lead": 2.0})
     with pytest.raises(ValueError, match="must be two numbers"):
         ExtractionOptions.from_mapping({"drift_limits": 0.05})
-    assert ExtractionOptions.from_mapping({"lead_s": 1}).lead_s == 1.0
+    for bad, says in (({"steady_s": 0}, "more than 0"), ({"sine_min_half_cycles": 1}, "at least 2"),
+                      ({"sine_min_half_cycles": 2.7}, "whole number"), ({"piece_s": -1.0}, "more than 0"),
+                      ({"drift_limits": [0.1, 0.05]}, "smaller than the second")):
+        with pytest.raises(ValueError, match=says):
+            ExtractionOptions.from_mapping(bad)
+    assert ExtractionOptions.from_mapping({"lead_s": 0}).lead_s == 0.0
 
 
 def test_extraction_table_checked_by_calibrate_too(tmp_path):
