@@ -571,6 +571,22 @@ def _ramp_start(pp: _Prepared, i_roll: int, k: int) -> int:
     return int(np.clip(round((level - offset) / slope), i_roll - n3, i_roll))
 
 
+def _pull_start(pp: _Prepared, i_roll: int) -> int:
+    """Where the pull of a wind-up starts: walking back from the roll-in while the pitch rate
+    (0.5-s mean) is above its level 3-6 s before by 0.1 deg/s, at most 3 s (the pull rotates the
+    aircraft before the load factor, and the bank that follows it, show it)."""
+    dt = pp.dt_s
+    n3, n6 = int(round(3.0 / dt)), int(round(6.0 / dt))
+    if i_roll < n6:
+        return i_roll
+    q = _smooth(pp.signals["q_rps"], int(round(0.5 / dt))) * RAD2DEG
+    level = float(np.median(q[i_roll - n6:i_roll - n3]))
+    j = i_roll
+    while j > i_roll - n3 and q[j - 1] > level + 0.1:
+        j -= 1
+    return j
+
+
 def _windups(pp: _Prepared, o: ExtractionOptions) -> list[_Candidate]:
     """Wind-up turns: a steep bank held while the load factor winds up to a peak; the turn ends
     where the load factor falls from it (the roll-out; the bank may stay, turning back)."""
@@ -583,7 +599,8 @@ def _windups(pp: _Prepared, o: ExtractionOptions) -> list[_Candidate]:
     for a, b in _runs(bank):
         if (b - a) * dt < o.turn_min_s:
             continue
-        i0 = _ramp_start(pp, _roll_in(_smooth(phi, int(round(0.5 / dt))), a, 1.0 / RAD2DEG), a)
+        i_roll = _roll_in(_smooth(phi, int(round(0.5 / dt))), a, 1.0 / RAD2DEG)
+        i0 = min(_ramp_start(pp, i_roll, a), _pull_start(pp, i_roll))
         k_peak = a + int(np.argmax(pp.nz[a:b]))
         rise = float(pp.nz[k_peak] - pp.nz[i0])
         if rise < o.turn_min_rise_g:

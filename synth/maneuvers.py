@@ -883,7 +883,10 @@ class LevelSpeedChange(Controller):
 
     def excitation_s(self, si, t_s):
         """From the power change to the speed's end: the first time 95 % of the run's Mach
-        change is done (the throttle returns to holding Mach about 4 s before, on a prediction)."""
+        change is done when the target was reached (the throttle returns to holding Mach about
+        4 s before, on a prediction); the run's end when it was not (the power held to it)."""
+        if not self.reached:
+            return self.lead_in_s, float(t_s[-1])
         mach = si[:, _MACH]
         k0 = int(np.searchsorted(t_s, self.lead_in_s))
         change = self.sign * (mach[k0:] - mach[k0])
