@@ -20,6 +20,8 @@ from aircraft_models.schema import check
 from estimator.io.errors import DataError
 
 FORMAT = "fpr-dataset"
+#: The manifest format of a testbed sortie (``fpr fly --sortie``): one flight, one time base.
+SORTIE_FORMAT = "fpr-sortie"
 MANIFEST = "manifest.json"
 #: The format's own columns, which every dataset has (time, IMU, INS attitude, air data, gear):
 #: dataset column -> canonical name. Everything is SI already; units follow the name suffix. Any
@@ -105,6 +107,11 @@ def read_manifest(path: str | Path) -> tuple[Path, dict]:
         raise DataError(f"{mpath}: not valid JSON ({exc}); the dataset is damaged") from None
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         got = manifest.get("format") if isinstance(manifest, dict) else type(manifest).__name__
+        if got == SORTIE_FORMAT:
+            where = shlex.quote(str(path))
+            raise DataError(f"{path}: a whole sortie, not a dataset of maneuvers: find its maneuvers "
+                            f"first, then calibrate them: fpr maneuvers {where} --out found.toml; "
+                            "fpr calibrate found.toml")
         raise DataError(f"{mpath}: format is {got!r}, expected {FORMAT!r}")
     if manifest.get("complete", True) is False:
         # `fpr fly` writes the manifest first, "complete": false, and says "complete": true when
@@ -117,10 +124,6 @@ def read_manifest(path: str | Path) -> tuple[Path, dict]:
     if not manifest.get("maneuvers"):
         raise DataError(f"{mpath}: the manifest lists no maneuvers")
     return path, manifest
-
-
-#: The manifest format of a testbed sortie (``fpr fly --sortie``): one flight, one time base.
-SORTIE_FORMAT = "fpr-sortie"
 
 
 def sortie_manifest(directory: Path) -> dict | None:

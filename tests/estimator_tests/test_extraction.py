@@ -118,6 +118,14 @@ def test_a_px4_log_of_the_sortie_read_as_recorded(sortie, tmp_path):
 
 
 @pytest.mark.slow
+def test_a_sortie_given_to_calibrate_says_to_find_its_maneuvers_first(sortie, capsys):
+    assert main(["calibrate", str(sortie), "--single", "--out", str(sortie.parent / "r")]) == 2
+    err = capsys.readouterr().err
+    assert "a whole sortie, not a dataset of maneuvers" in err and f"fpr maneuvers {sortie}" in err
+    assert not (sortie.parent / "r").exists()
+
+
+@pytest.mark.slow
 def test_sortie_calibrated_by_its_boundaries(sortie, tmp_path):
     p = tmp_path / "truth.toml"
     p.write_text(f'[data]\ndataset = "{sortie.as_posix()}"\nmaneuvers = "boundaries"\n')
