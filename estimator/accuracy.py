@@ -18,7 +18,10 @@ uncertainty, propagated to the channel at each sample (:func:`calibration_varian
 ``J_c(t)`` the sensitivity of the channel's model output to its own calibration parameters
 (biases, scale factors, tables, time delay) at sample ``t``, ``C`` their covariance (the
 estimation's honest one). With no calibration uncertainty (``s_cal = 0``) it is the scatter of the
-residual, to the bit.
+residual, to the bit. Under the filter-error method the residual is taken against the model plus
+the turbulent wind smoothed from the other sensors, an estimate whose own error the residual holds
+and the sensor does not: its variance ``s_w^2`` is taken out first,
+``3 sqrt(max(mean(e^2) - mean(s_w^2), 0) + mean(s_cal^2))``.
 """
 
 from __future__ import annotations
@@ -31,10 +34,12 @@ import pandas as pd
 __all__ = ["alpha_limit", "calibration_variance", "three_sigma"]
 
 
-def three_sigma(e: np.ndarray, calibration_var: np.ndarray | None = None) -> float:
+def three_sigma(e: np.ndarray, calibration_var: np.ndarray | None = None,
+                wind_var: np.ndarray | None = None) -> float:
     """3 x the rms about zero (a mean offset is an error too), with the calibration's own variance.
 
-    ``3 sqrt(mean(e^2) + mean(s_cal^2))`` (module docstring).
+    ``3 sqrt(mean(e^2) + mean(s_cal^2))`` (module docstring); with ``wind_var``,
+    ``3 sqrt(max(mean(e^2) - mean(s_w^2), 0) + mean(s_cal^2))``.
 
     Parameters
     ----------
@@ -42,6 +47,10 @@ def three_sigma(e: np.ndarray, calibration_var: np.ndarray | None = None) -> flo
     calibration_var : (n,) the calibration's own variance ``s_cal^2`` at the same samples
         (:func:`calibration_variance`), ``e``'s unit squared; None: the scatter of ``e`` alone
         (a channel without calibration uncertainty gives the same number to the bit).
+    wind_var : (n,) filter-error method: the variance ``s_w^2`` of the turbulent wind's response
+        that ``e`` was corrected by (the wind smoothed from the other sensors), ``e``'s unit
+        squared. ``e`` holds that estimate's own error and the sensor does not: it is taken out of
+        the residual's mean square (never below zero). None: nothing taken out.
 
     Returns
     -------
@@ -50,10 +59,13 @@ def three_sigma(e: np.ndarray, calibration_var: np.ndarray | None = None) -> flo
     if not e.size:
         return math.nan
     ms = np.mean(np.square(e))
+    for name, var in (("calibration_var", calibration_var), ("wind_var", wind_var)):
+        if var is not None and np.shape(var) != np.shape(e):
+            raise ValueError(f"three_sigma: {name} has shape {np.shape(var)}, the errors "
+                             f"{np.shape(e)}: give one variance per error sample")
+    if wind_var is not None:
+        ms = max(ms - np.mean(wind_var), 0.0)
     if calibration_var is not None:
-        if np.shape(calibration_var) != np.shape(e):
-            raise ValueError(f"three_sigma: calibration_var has shape {np.shape(calibration_var)}, "
-                             f"the errors {np.shape(e)}: give one variance per error sample")
         # adding an exact 0.0 leaves the mean square as it was: no calibration term, the old value
         ms = ms + np.mean(calibration_var)
     return float(3.0 * np.sqrt(ms))
@@ -94,13 +106,14 @@ def calibration_variance(J: np.ndarray, C: np.ndarray) -> np.ndarray:
 
 
 def alpha_limit(alpha_deg: np.ndarray, err_deg: np.ndarray, desired_deg: float, band_deg: float,
-                min_samples: int, calibration_var_deg2: np.ndarray | None = None
-                ) -> tuple[pd.DataFrame, float | None]:
+                min_samples: int, calibration_var_deg2: np.ndarray | None = None,
+                wind_var_deg2: np.ndarray | None = None) -> tuple[pd.DataFrame, float | None]:
     """3 sigma of an error in alpha bands and the highest alpha up to which every band passes.
 
     ``calibration_var_deg2``: (n,) the calibration's own variance at the samples, deg^2
     (:func:`three_sigma`: each band's 3 sigma is Table 2's, the residual's scatter and the
-    calibration's uncertainty); None: the scatter of ``err_deg`` alone.
+    calibration's uncertainty); None: the scatter of ``err_deg`` alone. ``wind_var_deg2``: the
+    filter-error wind response's variance taken out of it (:func:`three_sigma`).
 
     Returns
     -------
@@ -115,7 +128,8 @@ def alpha_limit(alpha_deg: np.ndarray, err_deg: np.ndarray, desired_deg: float, 
     for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         sel = (alpha_deg >= lo) & (alpha_deg < hi)
         n = int(sel.sum())
-        s = three_sigma(err_deg[sel], None if calibration_var_deg2 is None else calibration_var_deg2[sel])
+        s = three_sigma(err_deg[sel], None if calibration_var_deg2 is None else calibration_var_deg2[sel],
+                        None if wind_var_deg2 is None else wind_var_deg2[sel])
         rows.append({"alpha_lo_deg": float(lo), "alpha_hi_deg": float(hi), "n": n, "three_sigma_deg": s,
                      "passed": bool(n >= min_samples and s <= desired_deg) if n >= min_samples else None})
     bands = pd.DataFrame(rows)

@@ -85,17 +85,19 @@ give, its own channels left out of the smoother's measurement updates
     e_i = z_i - y_i(theta) - h_i . E[dW_k | e_j : sensor_j != sensor_i]
 
 (a sensor's channels together: the side probes' sideslip takes their angle of attack as input, and
-a fault of the pair shows in both). The left-out wind's own error stays in ``e`` and adds to the
-sensor's scatter (analytic flights in the filter's own turbulence: the residual's scatter 5-16 %
-above the sensors' noise, where the model output alone is 3-4.5 times it;
-``tests/estimator_tests/test_filter_error_table2.py``). What no measurement minus model shows is a
-calibration error the fit shares out consistently over the sensors: an aircraft's common sideslip
-offset, which the wind states leave weakly fixed (``filter_error_partial``), moves every sideslip
-channel's bias and the reconstructed sideslip alike (the demo's light-turbulence block: PT1's
-sideslip biases 0.10 deg off at one honest deviation; the residual's scatter in its sideslip cells
-0.10-0.19 deg against 0.22-0.42 deg against the truth). Table 2 therefore adds the calibration's
-own uncertainty to the scatter (:mod:`estimator.accuracy`, :func:`estimator.workflow.calibration_deviations`):
-there 0.30-0.41 deg (``tests/estimator_tests/test_table2_uncertainty.py``).
+a fault of the pair shows in both). The left-out wind's own error stays in ``e``, which the sensor
+does not have: Table 2 takes its variance ``h_i P_s h_i^T`` (the left-out smoother's) out of the
+residual's mean square (:func:`estimator.accuracy.three_sigma`). Analytic flights in the filter's
+own turbulence: 0-4 % above the sensors' noise so, 5-14 % with it left in, where the model output
+alone is 3-4.5 times it (``tests/estimator_tests/test_filter_error_table2.py``). What no
+measurement minus model shows is a calibration error the fit shares out consistently over the
+sensors: an aircraft's common sideslip offset, which the wind states leave weakly fixed
+(``filter_error_partial``), moves every sideslip channel's bias and the reconstructed sideslip
+alike (the demo's light-turbulence block: PT1's sideslip biases 0.10 deg off at one honest
+deviation; the residual's scatter in its sideslip cells 0.10-0.19 deg against 0.22-0.42 deg against
+the truth). Table 2 therefore adds the calibration's own uncertainty to the scatter
+(:mod:`estimator.accuracy`, :func:`estimator.workflow.calibration_deviations`): there 0.30-0.41 deg
+(``tests/estimator_tests/test_table2_uncertainty.py``).
 The filter reruns from the result alone: its values, ``R`` and
 :attr:`estimator.result.EstimationResult.wind_model` (the wind states' form, scale length and
 each maneuver's intensity); the observations are placed on the samples by the delays at the
@@ -864,7 +866,8 @@ class FilterErrorLikelihood:
         return WindModel(self.wind.form, self.wind.scale_length_m,
                          dict(zip(ids, (float(x) for x in noise.sigma_mps), strict=True)))
 
-    def left_out_wind(self, ev: Evaluation, noise: FilterNoise, group: np.ndarray) -> list[np.ndarray]:
+    def left_out_wind(self, ev: Evaluation, noise: FilterNoise, group: np.ndarray
+                      ) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Every channel's response to the wind smoothed from the other groups' channels.
 
         Parameters
@@ -877,33 +880,36 @@ class FilterErrorLikelihood:
 
         Returns
         -------
-        Per channel of ``ev`` (laid out as its ``ChannelEval.y``), ``h . E[dW | the other groups'
-        residuals]``, the channel's SI unit (:func:`estimator.core.wind_filter.smooth_left_out`);
-        zero in maneuvers without wind states and in channels that do not see the air.
+        Two lists, per channel of ``ev`` (laid out as its ``ChannelEval.y``): ``h . E[dW | the
+        other groups' residuals]``, the channel's SI unit, and its variance ``h^T Cov(dW | ...) h``,
+        SI squared (:func:`estimator.core.wind_filter.smooth_left_out`); zero in maneuvers
+        without wind states and in channels that do not see the air.
         """
         es = [ce.e for ce in ev.channels]
         out = [np.zeros(ce.y.shape) for ce in ev.channels]
+        var = [np.zeros(ce.y.shape) for ce in ev.channels]
 
-        def one(m: _Maneuver) -> np.ndarray | None:
+        def one(m: _Maneuver) -> tuple[np.ndarray, np.ndarray] | None:
             sigma = float(noise.sigma_mps[m.k])
             if sigma == 0.0:
                 return None
             Phi, Qd, P0 = self._process(m, sigma)
-            p, _ = self._wf.smooth_left_out(m.sample, self._residuals(ev, m, es), m.h, noise.R[m.channel],
+            p, v = self._wf.smooth_left_out(m.sample, self._residuals(ev, m, es), m.h, noise.R[m.channel],
                                             group[m.channel], self._wf.WindModel(Phi, Qd, P0),
                                             m.n_samples)
-            back = np.empty_like(p)
-            back[m.order] = p  # back to the pieces' order
-            return back
+            back, back_v = np.empty_like(p), np.empty_like(v)
+            back[m.order], back_v[m.order] = p, v  # back to the pieces' order
+            return back, back_v
 
-        for m, w in zip(noise.maneuvers, self._map(one, noise.maneuvers), strict=True):
-            if w is None:
+        for m, wv in zip(noise.maneuvers, self._map(one, noise.maneuvers), strict=True):
+            if wv is None:
                 continue
             at = 0
             for ci, _, r0, r1 in m.pieces:
-                out[ci][r0:r1] = w[at:at + r1 - r0]
+                out[ci][r0:r1] = wv[0][at:at + r1 - r0]
+                var[ci][r0:r1] = wv[1][at:at + r1 - r0]
                 at += r1 - r0
-        return out
+        return out, var
 
     @property
     def noise(self) -> FilterNoise | None:
@@ -1278,6 +1284,8 @@ def wind_responses(model: Model, values: np.ndarray, R: np.ndarray, wind: WindMo
         residuals]``, the channel's SI unit (:meth:`FilterErrorLikelihood.left_out_wind`,
         :func:`sensor_groups`); zero where the maneuver has no wind states or the channel does
         not see the air.
+    w_var : per channel likewise, the variance of ``w`` (the smoother's, conditional on the
+        estimate and the wind model), SI squared.
 
     Raises
     ------
@@ -1300,7 +1308,8 @@ def wind_responses(model: Model, values: np.ndarray, R: np.ndarray, wind: WindMo
     # the wind sensitivities come with the Jacobian pass; the Jacobian itself is not kept
     ev = model.evaluate_all(np.asarray(values, dtype=float), jacobian=True, keep_jacobian=False, wind=True)
     noise = FilterNoise(R, sigma, lik._linearise(ev), lik.dt_s)
-    return ev, lik.left_out_wind(ev, noise, sensor_groups(model))
+    w, w_var = lik.left_out_wind(ev, noise, sensor_groups(model))
+    return ev, w, w_var
 
 
 def _parabolic_minimum(f, x0: float, lo: float, hi: float, step: float, xtol: float,

@@ -946,6 +946,10 @@ class ChannelResiduals:
     covariance : which covariance ``C`` ``calibration_sd`` comes from: "honest" (the stage's
         coloured-residual covariance), or "Cramér-Rao ..." saying why the honest one was not
         available; "" without ``calibration_sd``.
+    wind_var : (n,) filter-error method: the variance of ``wind`` (the smoother's), SI squared;
+        the residual holds that estimate's own error and the sensor does not, so Table 2 takes it
+        out of the residual's mean square (:func:`estimator.accuracy.three_sigma`). None for
+        output error.
     """
 
     maneuver: np.ndarray
@@ -956,10 +960,11 @@ class ChannelResiduals:
     wind: np.ndarray | None = None
     calibration_sd: np.ndarray | None = None
     covariance: str = ""
+    wind_var: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # read-only copies
-        for name in ("maneuver", "t_s", "z", "y", "alpha_t_rad", "wind", "calibration_sd"):
+        for name in ("maneuver", "t_s", "z", "y", "alpha_t_rad", "wind", "calibration_sd", "wind_var"):
             if getattr(self, name) is None:
                 continue
             a = np.array(getattr(self, name), copy=True)
@@ -1000,7 +1005,7 @@ def stage_residuals(stage: Stage | tuple[Problem, EstimationResult], calibration
         ev = model.evaluate_all(result.values, jacobian=False)
     else:
         R = np.array([result.R[c.name] for c in problem.channels])
-        ev, seen = wind_responses(model, result.values, R, wm)
+        ev, seen, seen_var = wind_responses(model, result.values, R, wm)
     pos = {k: i for i, k in enumerate(ev.maneuvers)}
     out = {}
     for i, ce in enumerate(ev.channels):
@@ -1022,7 +1027,7 @@ def stage_residuals(stage: Stage | tuple[Problem, EstimationResult], calibration
         else:
             out[ch.name] = ChannelResiduals(np.concatenate(ids), np.concatenate(ts), ce.z,
                                             ce.y + seen[i], np.concatenate(al), wind=seen[i],
-                                            calibration_sd=sd, covariance=source)
+                                            calibration_sd=sd, covariance=source, wind_var=seen_var[i])
     return out
 
 
@@ -1115,10 +1120,16 @@ def _calibration_var_deg2(r: ChannelResiduals) -> np.ndarray:
     return np.zeros(r.e.size) if r.calibration_sd is None else np.square(r.calibration_sd * RAD2DEG)
 
 
+def _wind_var_deg2(r: ChannelResiduals) -> np.ndarray | None:
+    """The filter-error wind response's variance at a channel's samples, deg^2 (None: none)."""
+    return None if r.wind_var is None else r.wind_var * RAD2DEG ** 2
+
+
 def accuracy_table(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowOptions, decl: Declarations):
     """Table 2 (module docstring, step 6): per sensor and stage, 3 sigma of the calibrated channel,
-    ``3 sqrt(mean(e^2) + mean(s_cal^2))``, and the usable alpha range of the alpha-limit channel
-    judged on the same 3 sigma per alpha band."""
+    ``3 sqrt(mean(e^2) + mean(s_cal^2))`` (filter error: the wind response's variance taken out of
+    ``mean(e^2)``, :func:`estimator.accuracy.three_sigma`), and the usable alpha range of the
+    alpha-limit channel judged on the same 3 sigma per alpha band."""
     lim_ch = decl.alpha_limit_channel
     growth, limit = pd.DataFrame(), None
     req_np = decl.requirements.get(lim_ch) if lim_ch else None
@@ -1127,8 +1138,10 @@ def accuracy_table(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowO
         a = np.concatenate([p.alpha_t_rad for p in pooled]) * RAD2DEG
         e = np.concatenate([p.e for p in pooled]) * RAD2DEG
         v = np.concatenate([_calibration_var_deg2(p) for p in pooled])
+        wv = None if any(p.wind_var is None for p in pooled) else np.concatenate(
+            [_wind_var_deg2(p) for p in pooled])
         growth, limit = alpha_limit(a, e, req_np.desired_deg, opt.alpha_band_deg, opt.min_band_samples,
-                                    calibration_var_deg2=v)
+                                    calibration_var_deg2=v, wind_var_deg2=wv)
     rows = []
     for st in (*final, *gear):
         for name, r in st.residuals.items():
@@ -1136,7 +1149,7 @@ def accuracy_table(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowO
             if req is None:
                 continue
             e = r.e * RAD2DEG
-            v = _calibration_var_deg2(r)
+            v, wv = _calibration_var_deg2(r), _wind_var_deg2(r)
             notes = []
             if req.low_alpha_only:
                 if limit is None:
@@ -1144,10 +1157,11 @@ def accuracy_table(final: Sequence[Stage], gear: Sequence[Stage], opt: WorkflowO
                 else:
                     keep = r.alpha_t_rad * RAD2DEG < limit
                     e, v = e[keep], v[keep]
+                    wv = None if wv is None else wv[keep]
                     notes.append(f"alpha < {limit:.0f} deg")
             if r.covariance not in ("", "honest"):  # say when the honest covariance was missing
                 notes.append(f"calibration deviation: {r.covariance}")
-            s = three_sigma(e, v)
+            s = three_sigma(e, v, wv)
             rows.append({"sensor": req.sensor, "channel": name, "mach": st.mach,
                          "gear": "down" if st.gear_down else "up", "n": int(e.size),
                          "three_sigma_deg": s, "desired_deg": req.desired_deg,
