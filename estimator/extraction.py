@@ -55,8 +55,6 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 import pandas as pd
-from scipy.ndimage import uniform_filter1d
-from scipy.signal import find_peaks
 
 G0_MPS2 = 9.80665
 RAD2DEG = 180.0 / math.pi
@@ -288,6 +286,10 @@ class ManeuverTable:
 
 # ------------------------------------------------------------------------------ signal helpers
 def _smooth(x: np.ndarray, n: int) -> np.ndarray:
+    # imported here: reading a problem file imports this module for its options, and scipy's
+    # signal processing would add half a second to every fpr calibrate
+    from scipy.ndimage import uniform_filter1d
+
     return uniform_filter1d(x, max(1, n), mode="nearest")
 
 
@@ -391,6 +393,8 @@ def _step_list(pp: _Prepared, o: ExtractionOptions) -> list[tuple[int, float, fl
     """Step inputs as ``(peak sample, sign, |qdot|)``: peaks of the pitch acceleration, without
     the response's own settling (an opposite peak within 0.45 s smaller than 0.7 x the step, or
     within 0.7 s smaller than 0.4 x it; a 3211's unit steps, 0.6 s apart, are as large)."""
+    from scipy.signal import find_peaks  # (as in _smooth)
+
     h = np.abs(pp.qdot_dps2)
     peaks, _ = find_peaks(h, height=o.step_qdot_dps2, distance=max(1, int(round(0.3 / pp.dt_s))))
     kept: list[tuple[int, float, float]] = []

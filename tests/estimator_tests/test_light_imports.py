@@ -15,8 +15,9 @@ import sys
 from _problem_files import si_problem
 
 #: modules reading a problem file must not load (the estimation, its workflow and the report's plots)
+#: and scipy's signal processing (the maneuver finder's peak search: half a second to import)
 HEAVY = ("estimator.workflow", "estimator.solver", "estimator.calibration", "estimator.filter_error",
-         "estimator.report", "matplotlib")
+         "estimator.report", "matplotlib", "scipy.signal")
 OPTIONS = "[solver]\nmax_iterations = 7\nmethod = \"filter_error\"\n[workflow]\nreference_mach = 0.6\n" \
           "[report]\nplots = false\n"
 
