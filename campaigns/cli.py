@@ -571,6 +571,9 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("log", type=Path, help="the log file (.ulg, .mat)")
     st.add_argument("--format", choices=("ulog", "mat"), default=None,
                     help="the log's format (default: from the extension)")
+    st.add_argument("--time-unit", default=None, metavar="UNIT",
+                    help="the unit of the streams' stamps, e.g. s, ms, us (default: us for a ULog, s for "
+                    "a MATLAB file; a MATLAB file of PX4 topics, as fpr export writes it, stamps in us)")
     ap_help = ("write a calibrated airspeed scale as the autopilot's parameter (PX4 ASPD_SCALE_1, "
                "ArduPilot ARSPD_RATIO) in the ground station's parameter-file format, from the result.json "
                "of fpr calibrate --single; refused (exit 1) when the verdict or the estimate says it must "
@@ -697,8 +700,17 @@ def _streams(args: argparse.Namespace) -> int:
     import pandas as pd
 
     from estimator.io.logs import stream_table
+    from estimator.io.units import get_unit
 
-    table = stream_table(args.log, args.format)
+    factor = None
+    if args.time_unit is not None:
+        unit = get_unit(args.time_unit, "fpr streams --time-unit")
+        if unit.dimension != "time":
+            print(f"fpr streams: error: --time-unit {args.time_unit} is a unit of {unit.dimension}; give "
+                  "one of time: s, ms, us", file=sys.stderr)
+            return 2
+        factor = unit.factor
+    table = stream_table(args.log, args.format, time_factor_s=factor)
     with pd.option_context("display.width", 200, "display.max_rows", None, "display.max_columns", None):
         print(table.to_string(index=False, float_format=lambda v: f"{v:.3f}"))
     return 0

@@ -10,6 +10,7 @@ campaigns/studies/maneuver_extraction.py.
 
 from __future__ import annotations
 
+import re
 import tomllib
 from pathlib import Path
 
@@ -115,6 +116,16 @@ def test_a_px4_log_of_the_sortie_read_as_recorded(sortie, tmp_path):
     assert main(["maneuvers", str(problem_file), "--out", str(out)]) == 0
     problem = load_problem(out)
     assert len(problem.maneuvers) == len(from_log[from_log.grade != "discard"])
+
+
+@pytest.mark.slow
+def test_a_sortie_exported_as_matlab_lists_its_streams_in_seconds(sortie, tmp_path, capsys):
+    mat = write_sortie_log(sortie, tmp_path / "all-kinds.MAT")  # the suffix in any case
+    assert main(["streams", str(mat), "--time-unit", "us"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"sensor_combined\s+3\s+\d+\s+timestamp\s+0\.\d+\s+78\d\.\d+ .* 64\.000", out), out
+    assert main(["streams", str(mat), "--time-unit", "deg"]) == 2
+    assert "a unit of angle" in capsys.readouterr().err
 
 
 @pytest.mark.slow
