@@ -22,17 +22,14 @@ import tomli_w
 
 from estimator.extraction import ExtractionOptions, FlightSignals, ManeuverTable
 from estimator.io.errors import DataError
-from estimator.io.fprdataset import MANIFEST, SORTIE_FORMAT, sortie_manifest
+from estimator.io.fprdataset import MANIFEST, SORTIE_FORMAT, dataset_column, sortie_manifest
 from estimator.io.problemfile import read_whole_files
 from estimator.io.units import to_si
 
-#: FlightSignals field -> canonical channel name (problem files) and sortie column
-_FIELDS = {
-    "az_mps2": ("az", "az_imu_mps2"), "q_rps": ("q", "q_rps"), "ay_mps2": ("ay", "ay_imu_mps2"),
-    "p_rps": ("p", "p_rps"), "r_rps": ("r", "r_rps"), "phi_rad": ("phi", "phi_rad"),
-    "psi_rad": ("psi", "psi_rad"), "h_m": ("h", "h_baro_m"), "mach": ("mach", "mach"),
-    "tas_mps": ("tas", "tas_mps"),
-}
+#: FlightSignals field -> canonical channel name (a problem file's; a sortie's column is the
+#: dataset format's for it, :func:`~estimator.io.fprdataset.dataset_column`)
+_FIELDS = {"az_mps2": "az", "q_rps": "q", "ay_mps2": "ay", "p_rps": "p", "r_rps": "r", "phi_rad": "phi",
+           "psi_rad": "psi", "h_m": "h", "mach": "mach", "tas_mps": "tas"}
 
 
 @dataclass(frozen=True)
@@ -61,10 +58,11 @@ def read_sortie_flight(directory: str | Path) -> FlightFile:
     path = directory / manifest["sortie"]["files"]["data"]
     if not path.is_file():
         raise DataError(f"{path}: the sortie's data file is missing; fly the sortie again")
-    names = set(pq.read_schema(path).names)
-    cols = ["t_s", *(c for _, c in _FIELDS.values() if c in names)]
-    df = pq.read_table(path, columns=cols).to_pandas()
-    values = {f: df[c].to_numpy(dtype=float) for f, (_, c) in _FIELDS.items() if c in names}
+    names = pq.read_schema(path).names
+    column = {f: dataset_column(canonical, names) for f, canonical in _FIELDS.items()}
+    column = {f: c for f, c in column.items() if c in names}
+    df = pq.read_table(path, columns=["t_s", *column.values()]).to_pandas()
+    values = {f: df[c].to_numpy(dtype=float) for f, c in column.items()}
     return FlightFile(FlightSignals(t_s=df["t_s"].to_numpy(dtype=float), source=str(directory), **values),
                       path, {})
 
@@ -72,11 +70,11 @@ def read_sortie_flight(directory: str | Path) -> FlightFile:
 def _signals(table, where: str) -> FlightSignals:
     """FlightSignals of a problem file's source table (its values in the file's units)."""
     values = {}
-    for field_name, (name, _) in _FIELDS.items():
+    for field_name, name in _FIELDS.items():
         if name in table.values:
             label = f"{where}: {table.labels[name]}"
             values[field_name] = to_si(table.values[name], table.units[name], label)
-    own = frozenset(f for f, (name, _) in _FIELDS.items() if name in table.own_rate)
+    own = frozenset(f for f, name in _FIELDS.items() if name in table.own_rate)
     return FlightSignals(t_s=table.t_s, source=where, own_rate=own, **values)
 
 

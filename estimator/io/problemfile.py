@@ -6,7 +6,7 @@ import codecs
 import dataclasses
 import re
 import tomllib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -218,9 +218,6 @@ def _read_log(path: Path, fmt: str, entry: Mapping, columns: Mapping[str, dict],
 def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[str]],
                 plausible: Ranges | None = None
                 ) -> list[tuple[SourceTable, ManeuverRequest]]:
-    files = raw.get("files")
-    if not files:
-        raise DataError(f"{where}: no data: add [[files]] entries (path = ...) or [data] dataset = ...")
     aircraft = raw.get("aircraft", {})
     cgs = {}
     for ac, d in aircraft.items():
@@ -228,16 +225,8 @@ def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[s
             raise DataError(f"{where}: [aircraft.{ac}] must be a table with r_cg_body_m = [x, y, z]")
         w = f"{where}: [aircraft.{ac}]"
         cgs[ac] = _cg(check(d, _CG_KEYS, w, DataError), w)
-    global_cols = _column_specs(raw.get("columns", {}), f"{where}: [columns]", valid)
     pairs = []
-    for i, entry in enumerate(files):
-        w = f"{where}: [[files]] #{i + 1}"
-        entry = check(entry, FILE_KEYS, w, DataError)
-        if "path" not in entry:
-            raise DataError(f"{w}: needs path = \"...\" (relative to the problem file)")
-        w = f"{where}: [[files]] {entry['path']}"
-        cols = {**global_cols, **_column_specs(entry.get("columns", {}), f"{w} columns", valid)}
-        table = _read_file(entry, cols, base, w)
+    for entry, w, table in _file_tables(raw, base, where, valid):
         if "aircraft" in entry:
             ac = str(entry["aircraft"])
         elif len(cgs) == 1:
@@ -275,18 +264,14 @@ def _file_pairs(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[s
     return pairs
 
 
-def read_whole_files(path: Path, raw: Mapping) -> list[tuple[dict, SourceTable]]:
-    """Each ``[[files]]`` entry of the parsed problem file ``raw`` (at ``path``) with its data read
-    whole, in the file's units (its ``maneuvers`` not cut: the maneuver finder reads a flight)."""
-    where = str(path)
-    raw_model, msource = read_model_set(raw.get("model", DEFAULT_MODEL_SET), path.resolve().parent)
-    chans, specs, _ = merge_model_set(raw_model, raw.get("parameter"), raw.get("channel"), msource, where)
-    valid = column_names(chans, specs)
-    global_cols = _column_specs(raw.get("columns", {}), f"{where}: [columns]", valid)
+def _file_tables(raw: Mapping, base: Path, where: str, valid: Mapping[str, list[str]]
+                 ) -> Iterator[tuple[dict, str, SourceTable]]:
+    """Each ``[[files]]`` entry checked, how messages name it, and its data read whole (the
+    ``[columns]`` and the entry's own), in the file's units."""
     files = raw.get("files")
     if not files:
-        raise DataError(f"{where}: no [[files]]: the maneuver finder reads the files a problem file names")
-    out = []
+        raise DataError(f"{where}: no data: add [[files]] entries (path = ...) or [data] dataset = ...")
+    global_cols = _column_specs(raw.get("columns", {}), f"{where}: [columns]", valid)
     for i, entry in enumerate(files):
         entry = check(entry, FILE_KEYS, f"{where}: [[files]] #{i + 1}", DataError)
         if "path" not in entry:
@@ -294,8 +279,17 @@ def read_whole_files(path: Path, raw: Mapping) -> list[tuple[dict, SourceTable]]
                             "problem file)")
         w = f"{where}: [[files]] {entry['path']}"
         cols = {**global_cols, **_column_specs(entry.get("columns", {}), f"{w} columns", valid)}
-        out.append((dict(entry), _read_file(entry, cols, path.resolve().parent, w)))
-    return out
+        yield dict(entry), w, _read_file(entry, cols, base, w)
+
+
+def read_whole_files(path: Path, raw: Mapping) -> list[tuple[dict, SourceTable]]:
+    """Each ``[[files]]`` entry of the parsed problem file ``raw`` (at ``path``) with its data read
+    whole, in the file's units (its ``maneuvers`` not cut: the maneuver finder reads a flight)."""
+    where = str(path)
+    raw_model, msource = read_model_set(raw.get("model", DEFAULT_MODEL_SET), path.resolve().parent)
+    chans, specs, _ = merge_model_set(raw_model, raw.get("parameter"), raw.get("channel"), msource, where)
+    return [(entry, table) for entry, _, table in
+            _file_tables(raw, path.resolve().parent, where, column_names(chans, specs))]
 
 
 def parse_options(raw: Mapping, where: str) -> dict:
