@@ -465,14 +465,17 @@ def _fmt_table2(acc, title: str) -> str:
     """Table 2 as text: sensors x Mach, 3 sigma in deg, * where it misses the desired accuracy."""
     if acc is None or acc.empty:
         return f"{title}: no data"
+    # a table without the column (the truth's Table 2) judges every cell
+    judged = acc["judged"].astype(bool) if "judged" in acc else acc["passed"] | True
     a = acc.assign(col=[f"M{m:.2f}{' down' if g == 'down' else ''}" for m, g in zip(acc["mach"], acc["gear"],
                                                                                     strict=True)],
-                   cell=[f"{v:.3f}{'' if ok else '*'}" for v, ok in zip(acc["three_sigma_deg"], acc["passed"],
-                                                                       strict=True)])
+                   cell=[f"{v:.3f}{'' if ok else '*' if j else '?'}" for v, ok, j in
+                         zip(acc["three_sigma_deg"], acc["passed"], judged, strict=True)])
     t = a.pivot_table(index=["sensor", "desired_deg"], columns="col", values="cell", aggfunc="first",
                       sort=False)
-    verdict = "every sensor meets its desired accuracy" if acc["passed"].all() else \
-        f"{int((~acc['passed']).sum())} cell(s) miss it (*)"
+    missed, unjudged = int((~acc["passed"] & judged).sum()), int((~judged).sum())
+    verdict = "every sensor meets its desired accuracy" if acc["passed"].all() else ", ".join(
+        [f"{missed} cell(s) miss it (*)"] * bool(missed) + [f"{unjudged} not judged (?)"] * bool(unjudged))
     return f"{title} (deg; desired = +- 3-sigma target): {verdict}\n{t.to_string()}"
 
 

@@ -90,6 +90,8 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
          "paper Fig. 7); WARNING beyond it, or with no stated accuracy; FAILURE beyond it with the "
          "channel's own calibration parameters on a bound (the model cannot represent the sensor)"),
     Kind("accuracy_miss", "WARNING", _W, "a Table 2 cell beyond its desired accuracy"),
+    Kind("accuracy_unjudged", "WARNING", _W,
+         "a Table 2 cell whose calibration deviation lies along a parameter on or near its bound"),
     Kind("coloured", "NOTE", _D, "a slow, coloured residual: Cramér-Rao deviations optimistic",
          "NOTE: the honest (coloured-residual) deviations take it in"),
     Kind("no_floor", "NOTE", _D, "too few samples to judge a channel's residual"),

@@ -572,6 +572,8 @@ def accuracy_table_html(acc: pd.DataFrame, title: str) -> str:
             tip = f"{r['channel']}; n = {n:,}" + (f"; {note}" if note else "")
             if not np.isfinite(value) or pd.isna(r["passed"]):
                 cls, text = "na", "—"
+            elif not bool(r.get("judged", True)):
+                cls, text = "na", f"{value:.2f}?"
             else:
                 cls, text = ("pass" if bool(r["passed"]) else "fail"), f"{value:.2f}"
             out.append(f'<td class="{cls}" title="{e(tip)}">{text}{mark}</td>')
@@ -579,7 +581,8 @@ def accuracy_table_html(acc: pd.DataFrame, title: str) -> str:
         out.append(f'<td class="desired">{e(desired)}</td></tr>\n')
     out.append("</tbody>\n</table>\n")
     out.append('<p class="legend"><span class="pass">green</span>: 3&sigma; within the desired accuracy; '
-               '<span class="fail">red</span>: exceeds it; — no data. Cells: 3&sigma; [deg].</p>\n')
+               '<span class="fail">red</span>: exceeds it; ?: not judged (its note says why); — no data. '
+               'Cells: 3&sigma; [deg].</p>\n')
     if notes:
         out.append('<ol class="notes">' + "".join(f"<li>{e(n)}</li>" for n in notes) + "</ol>\n")
     return "".join(out)

@@ -24,10 +24,13 @@ from estimator.io.modelset import declarations_of, load_model_set
 from estimator.model import Model
 from estimator.parameters import FLIGHT_KINDS
 from estimator.solver import SolverOptions, estimate
+from estimator.verdict import Finding, Severity
 from estimator.workflow import (
+    BOUND_SHARE,
     RAD2DEG,
     Stage,
     WorkflowOptions,
+    accuracy_misses,
     accuracy_table,
     calibration_deviations,
     stage_residuals,
@@ -133,7 +136,7 @@ def test_a_bias_only_channel_adds_the_bias_variance(turbulent):
     bias = replace(res, free_estimated=only)
     var_b = float(bias.covariance(["b_l[AC1]"], colored=True)[0, 0])
     assert var_b > 0.0, "the bias is estimated: it has an honest variance"
-    s, source = calibration_deviations(prob, bias)["alpha_zl"]
+    s, source, _ = calibration_deviations(prob, bias)["alpha_zl"]
     assert source == "honest"
     np.testing.assert_array_equal(s, np.full(s.size, np.sqrt(var_b)),
                                   err_msg="1 * var(b) * 1 is var(b) in floating point too")
@@ -221,3 +224,50 @@ def test_table2_against_the_truth(turbulent):
             f"{name}: Table 2 {table2:.3f} deg against the truth's {truth:.3f} deg: more than this "
             "draw's calibration error below its deviation explains")
         assert table2 > three_sigma(e), f"{name}: the calibration term added nothing"
+
+
+def test_a_cell_whose_deviation_lies_along_a_bound_parameter_is_not_judged(turbulent):
+    """A parameter on or near its bound (an ``on_bound`` / ``near_bound`` WARNING) truncates what its
+    deviation describes: the part of a channel's calibration deviation along it,
+    ``|J_c C_cb| / sqrt(C_bb)``, is never more than the whole (Cauchy-Schwarz) and is the whole
+    where that parameter is the channel's only estimated calibration parameter (its bias, with J_c
+    = 1). A Table 2 cell with at least :data:`BOUND_SHARE` of its calibration variance there is not
+    judged (not passed, its note and an ``accuracy_unjudged`` warning say why, no
+    ``accuracy_miss``); a channel that shares nothing with it keeps its verdict. Without the
+    warning nothing changes."""
+    prob, res, _ = turbulent
+    only = res.free_estimated.copy()
+    for i, p in enumerate(res.parameters.parameters):
+        if p.name in ("f1", "f2", "tau_alpha_zl"):
+            only[i] = False
+    warn = Finding("on_bound", Severity.WARNING, "b_l[AC1] is on its lower bound", parameters=("b_l[AC1]",))
+    bias = replace(res, free_estimated=only, findings=(*res.findings, warn))
+    cal = calibration_deviations(prob, bias)
+    sd, _, along = cal["alpha_zl"]
+    np.testing.assert_allclose(along["b_l[AC1]"], sd, rtol=1e-12, err_msg="the bias alone: the whole")
+    for name, (sd_c, _, along_c) in cal.items():
+        for part in along_c.values():
+            assert np.all(part <= sd_c * (1 + 1e-12) + 1e-18), f"{name}: a part above the whole"
+    stage = Stage("installation biases fixed", 0.6, False, prob, bias)
+    t2, _, _ = accuracy_table((stage,), (), WorkflowOptions(), declarations_of(prob))
+    row = t2.set_index("channel").loc["alpha_zl"]
+    assert not row["judged"] and not row["passed"], row.to_dict()
+    assert "not judged: 100 % of its calibration variance lies along b_l[AC1]" in row["note"], row["note"]
+    others = t2[t2.channel != "alpha_zl"]
+    shares = {}
+    for r in others.itertuples():
+        rr = stage.residuals[r.channel]
+        part = rr.bound_sd.get("b_l[AC1]", np.zeros(1))
+        shares[r.channel] = float(np.mean(part ** 2)) / max(float(np.mean(rr.calibration_sd ** 2)), 1e-300)
+    assert all(others[others.channel.map(shares) < BOUND_SHARE]["judged"]), shares
+    assert not any(others[others.channel.map(shares) >= BOUND_SHARE]["judged"]), shares
+    found = accuracy_misses(t2, (stage,))
+    codes = {(f.code, f.channel) for f in found}
+    assert ("accuracy_unjudged", "alpha_zl") in codes and ("accuracy_miss", "alpha_zl") not in codes, codes
+    (f,) = [f for f in found if f.code == "accuracy_unjudged" and f.channel == "alpha_zl"]
+    assert f.severity == Severity.WARNING and "b_l[AC1]" in f.message and f.advice
+    # the same estimate without the warning: every cell judged
+    plain = Stage("installation biases fixed", 0.6, False, prob, replace(res, free_estimated=only))
+    t2p, _, _ = accuracy_table((plain,), (), WorkflowOptions(), declarations_of(prob))
+    assert t2p["judged"].all()
+    assert t2p.set_index("channel").loc["alpha_zl", "three_sigma_deg"] == row["three_sigma_deg"]
