@@ -517,7 +517,8 @@ def accuracy_table_html(acc: pd.DataFrame, title: str) -> str:
         ``channel`` (str), ``mach`` (float [-]), ``n`` (int, samples), ``three_sigma_deg`` (3 sigma of
         the error [deg]; NaN: not available), ``desired_deg`` (the desired 3-sigma accuracy [deg]),
         ``passed`` (bool), ``note`` (str, may be empty); optionally ``gear`` ("up"/"down": a
-        gear-down bin gets its own column beside the gear-up one of the same Mach).
+        gear-down bin gets its own column beside the gear-up one of the same Mach) and ``judged``
+        (bool: False greys the cell and marks it "?", its note says why).
 
     title : the table's caption.
 

@@ -92,7 +92,8 @@ JSON_FORMAT = "fpr-workflow-result/1"
 
 
 __all__ = [
-    "ChannelResiduals", "Requirement", "Stage", "WorkflowOptions", "WorkflowResult", "accuracy_misses",
+    "BOUND_SHARE", "CalibrationDeviation", "ChannelResiduals", "Requirement", "Stage", "WorkflowOptions",
+    "WorkflowResult", "accuracy_misses", "bound_share", "bound_shares",
     "accuracy_table", "alpha_limit", "apportion", "apportion_biases", "assign_bins", "hold_unexcited",
     "no_bins_message", "run_workflow",
     "calibration_deviations", "stage_residuals", "three_sigma", "vane_biases",
@@ -203,8 +204,10 @@ class WorkflowResult:
     installation : per aircraft: installation biases (``installation_<label>_deg`` per
         apportioned family, their mean, and stds), and the Mach they were taken at.
     accuracy : Table 2: sensor, channel, mach, gear, n, three_sigma_deg (the residual's scatter and
-        the calibration's own uncertainty), desired_deg, passed, note, scatter_three_sigma_deg
-        (the residual's alone), calibration_sd_deg (rms of the calibration's deviation).
+        the calibration's own uncertainty), desired_deg, judged (False: a quarter or more of the
+        calibration's variance lies along a parameter on or near its bound, :data:`BOUND_SHARE`),
+        passed (judged and within desired_deg), note, scatter_three_sigma_deg (the residual's
+        alone), calibration_sd_deg (rms of the calibration's deviation).
     alpha_limit_growth : alpha band (deg), samples, 3 sigma (deg; Table 2's, with the calibration's
         own uncertainty) of the residual of the model set's ``alpha_limit_channel`` (Tejas: the
         nose probe's sideslip).
@@ -668,8 +671,9 @@ def accuracy_misses(accuracy: pd.DataFrame, stages: Sequence[Stage]) -> list[Fin
                 "accuracy_unjudged", Severity.WARNING,
                 f"Table 2: {r.sensor} ({r.channel}) at Mach {r.mach:.2f} gear {r.gear} is not judged: "
                 f"3 sigma {r.three_sigma_deg:.3g} deg from the data, but {r.note.split('not judged: ')[-1]}",
-                "free or widen that parameter's bounds if physics allows, or calibrate these channels where "
-                "it is determined (the filter-error method's sideslip offsets: in calm air by output error)",
+                "read that parameter's bound warning: check the data of the channels it enters before "
+                "widening its bounds, or calibrate this channel from maneuvers that determine it (the "
+                "filter-error method's sideslip offsets: in calm air, by output error)",
                 channel=r.channel, stage=label.get((r.mach, r.gear == "down")),
                 value=float(r.three_sigma_deg)))
             continue
@@ -1087,6 +1091,19 @@ def _calibration_covariance(result: EstimationResult, names: list[str]) -> tuple
     return C, source
 
 
+def _bound_columns(result: EstimationResult, names: list[str], bound: list[str], honest: bool
+                   ) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+    """Per bound parameter ``k``: its covariance with each of ``names`` and its own variance, of
+    the covariance the channel's deviation uses (honest or Cramér-Rao); not finite: zero. A
+    parameter the result keeps no correlations for (a maneuver's own) is uncorrelated here."""
+    cols, var = {}, {}
+    for k in bound:
+        C = result.covariance([*names, k], colored=honest)
+        C = np.where(np.isfinite(C), C, 0.0)
+        cols[k], var[k] = C[:-1, -1], float(C[-1, -1])
+    return cols, var
+
+
 def calibration_deviations(problem: Problem, result: EstimationResult, model: Model | None = None
                            ) -> dict[str, CalibrationDeviation]:
     r"""Channel name -> the calibration's own deviation of its model output at each sample, SI; which
@@ -1120,7 +1137,9 @@ def calibration_deviations(problem: Problem, result: EstimationResult, model: Mo
     covariance of the channel's parameters with ``b``; ``b`` need not be one of them): the
     deviation the channel's output has through what it shares with ``b``. There the bound
     truncates what the deviations describe, and Table 2 does not judge a cell whose deviation lies
-    mostly there (:data:`BOUND_SHARE`).
+    mostly there (:data:`BOUND_SHARE`). A maneuver's own parameter (an initial condition) on a
+    bound counts as uncorrelated with the calibration: the result keeps the correlations of the
+    global parameters only (:meth:`EstimationResult.covariance`).
 
     Returns
     -------
@@ -1149,12 +1168,12 @@ def calibration_deviations(problem: Problem, result: EstimationResult, model: Mo
         along: dict[str, np.ndarray] = {}
         if used.size:
             names = [keys[i] for i in used]
-            extra = [k for k in bound if k not in names]
-            C, source = _calibration_covariance(result, names + extra)
-            at = {k: j for j, k in enumerate(names + extra)}
+            C, source = _calibration_covariance(result, names)
+            # the bound parameters' columns (of the same covariance as C), for the parts along them
+            Cb, var_b = _bound_columns(result, names, bound, source == "honest")
             pos = {int(p): j for j, p in enumerate(used)}
             # a bound parameter without a deviation (unidentifiable) has no direction to project on
-            a2 = {k: np.zeros(ce.y.size) for k in bound if C[at[k], at[k]] > 0.0}
+            a2 = {k: np.zeros(ce.y.size) for k in bound if var_b[k] > 0.0}
             for b in range(cm.shape[0]):
                 r0, r1 = int(ce.rseg[b]), int(ce.rseg[b + 1])
                 slots = np.flatnonzero(calib[cm[b]])
@@ -1164,7 +1183,7 @@ def calibration_deviations(problem: Problem, result: EstimationResult, model: Mo
                 J = JT[slots, r0:r1].T
                 s2[r0:r1] = calibration_variance(J, C[np.ix_(idx, idx)])
                 for k in a2:
-                    a2[k][r0:r1] = np.square(J @ C[idx, at[k]]) / C[at[k], at[k]]
+                    a2[k][r0:r1] = np.square(J @ Cb[k][idx]) / var_b[k]
             along = {k: np.sqrt(v) for k, v in a2.items() if v.any()}
         out[problem.channels[ce.channel].name] = CalibrationDeviation(np.sqrt(s2), source, along)
 
@@ -1186,29 +1205,37 @@ def _wind_var_deg2(r: ChannelResiduals) -> np.ndarray | None:
 #: parameter the estimation put on or near its bound (:func:`bound_share`): there the deviation is
 #: truncated and the error can be several times it. Evidence (campaigns/studies/results/
 #: filter_error_table2.txt, the demo's light-turbulence block over eight seeds, filter error): where
-#: the vanes' sideslip reference c_vb[PV1] ran to or near its bound (three seeds), PV1's sideslip
-#: offsets are correlated 1.00 with it, and the side-probe and nose-probe sideslip cells against
-#: the truth came out 2.3-3.4 times Table 2 from the data. Set on seeds 14001-14003: those cells'
-#: shares along c_vb[PV1] 0.50-0.86, every other cell's along any bound parameter at most 0.12
-#: (the demo's seed: 0.02 along the nose table's f5[3]). Reported on 14004, 14006, 14008: the two
-#: such cells 0.67 and 0.88 (not judged), every other at most 0.18 (judged). Not caught: a cell
-#: optimistic for another reason (14006's boom sideslip, 2.1 times, with c_vb[PT1] "unsettled" but
-#: off its bound: the ``unsettled`` warning says that one).
+#: the vanes' sideslip reference c_vb[PV1] ran to or near its bound (three seeds), and PV1's
+#: side-probe and nose-probe sideslip cells against the truth came out 2.3-3.4 times Table 2 from
+#: the data. Set on seeds 14001-14003: those cells' shares along c_vb[PV1] 0.50-0.86, every other
+#: cell's along any bound parameter at most 0.12 (the demo's seed: 0.02 along the nose table's
+#: f5[3]). Reported on 14004, 14006, 14008: the two such cells 0.67 and 0.87 (not judged), every
+#: other at most 0.18 (judged; 14006 and 14008 have no parameter on or near a bound). Not caught:
+#: a cell optimistic for another reason (14006's boom sideslip, 2.1 times, with c_vb[PT1]
+#: "unsettled" but off its bound: the ``unsettled`` warning says that one).
 BOUND_SHARE = 0.25
 
 
-def bound_share(r: ChannelResiduals, keep: np.ndarray | None, cal_var_deg2: np.ndarray
-                ) -> tuple[str, float] | None:
-    """The parameter on or near its bound along which the largest share of a Table 2 cell's
-    calibration variance lies, and that share, where it is at least :data:`BOUND_SHARE`; else None.
+def bound_shares(r: ChannelResiduals, keep: np.ndarray | None, cal_var_deg2: np.ndarray) -> dict[str, float]:
+    """Per parameter on or near its bound (:attr:`ChannelResiduals.bound_sd`), the share of a Table 2
+    cell's calibration variance along it (empty without one, or without calibration variance).
 
     ``keep``: the cell's samples (None: all); ``cal_var_deg2``: the cell's calibration variance at
     those samples, deg^2 (:attr:`ChannelResiduals.calibration_sd` squared)."""
     total = float(np.mean(cal_var_deg2)) if cal_var_deg2.size else 0.0
-    if total <= 0.0 or not r.bound_sd:
+    if total <= 0.0:
+        return {}
+    return {k: float(np.mean(np.square((sd if keep is None else sd[keep]) * RAD2DEG))) / total
+            for k, sd in r.bound_sd.items()}
+
+
+def bound_share(r: ChannelResiduals, keep: np.ndarray | None, cal_var_deg2: np.ndarray
+                ) -> tuple[str, float] | None:
+    """The parameter along which the largest of :func:`bound_shares` lies, and that share, where it
+    is at least :data:`BOUND_SHARE`; else None."""
+    shares = bound_shares(r, keep, cal_var_deg2)
+    if not shares:
         return None
-    shares = {k: float(np.mean(np.square((sd if keep is None else sd[keep]) * RAD2DEG))) / total
-              for k, sd in r.bound_sd.items()}
     k = max(shares, key=shares.get)
     return (k, shares[k]) if shares[k] >= BOUND_SHARE else None
 

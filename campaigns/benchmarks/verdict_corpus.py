@@ -266,7 +266,8 @@ def good_cases(root: Path, seeds: Sequence[int], workers: int | None) -> list[Ca
             # (then its warning is deserved and not counted), and a cell that misses against the
             # truth but passes Table 2 is a wrong result that looks right: said, not hidden
             truth = _true_cells(wf)
-            said = [r for r in wf.accuracy.itertuples() if not r.passed]
+            # a cell Table 2 does not judge (accuracy_unjudged) is no miss: its warning counts below
+            said = [r for r in wf.accuracy.itertuples() if not r.passed and getattr(r, "judged", True)]
             confirmed = all(truth.get((r.channel, r.mach, r.gear), math.nan) > r.desired_deg for r in said)
             unwarned = [f"{r.channel} M{r.mach:.1f}" for r in wf.accuracy.itertuples() if r.passed
                         and truth.get((r.channel, r.mach, r.gear), 0.0) > r.desired_deg]

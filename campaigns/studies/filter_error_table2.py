@@ -60,10 +60,11 @@ def fly(out: Path, seed: int) -> Path:
 
 
 def cells(path: Path, seed: int) -> pd.DataFrame:
-    """Per sensor of the final stage: Table 2 from the data and against the truth, each split
-    into the sensor's and the calibration's part (module docstring), deg."""
-    from campaigns.truth import true_parameters
-    from campaigns.workflow_truth import calibrated_errors, true_accuracy
+    """Per Table 2 cell (sensor, Mach bin, gear): Table 2 from the data and against the truth, each
+    split into the sensor's and the calibration's part (module docstring), deg; whether Table 2
+    judges it, and its largest share of calibration variance along a parameter on or near its
+    bound."""
+    from campaigns.workflow_truth import true_accuracy
     from estimator.calibration import calibrate
     from estimator.io import problem_from_dataset
 
@@ -76,42 +77,60 @@ def cells(path: Path, seed: int) -> pd.DataFrame:
     (path.parent / f"findings_{seed}.txt").write_text(
         f"{calib.verdict.name}\n" + "\n".join(f"{f.severity.name}: {f.message}" for f in calib.findings
                                              if f.severity.name != "NOTE") + "\n")
-    truth, _ = true_accuracy(wf)
-    model = wf.accuracy
-    limit = wf.alpha_limit_deg
-    rows = []
+    model, rows = wf.accuracy, []
     if model.empty:  # no Table 2: the verdict says why
-        return pd.DataFrame([{"seed": seed, "sensor": "(none)", "verdict": calib.verdict.name,
+        return pd.DataFrame([{"seed": seed, "cell": "(none)", "verdict": calib.verdict.name,
                               "said": "; ".join(said)}])
-    for st in wf.final:
-        tv = true_parameters(st.problem, st.result.free_estimated).values
-        keys = st.result.parameters.keys
-        at_truth = np.array([tv.get(k, v) if math.isfinite(tv.get(k, math.nan)) else v
-                             for k, v in zip(keys, st.result.values, strict=True)])
-        hat = calibrated_errors(st.problem, st.result)
-        # calibrated_errors reads the result's values only
-        true = calibrated_errors(st.problem, SimpleNamespace(values=at_truth))
+    truth, _ = true_accuracy(wf)
+    for st in (*wf.final, *wf.gear_down):
         gear = "down" if st.gear_down else "up"
-        for _, r in model[(model.mach == st.mach) & (model.gear == gear)].iterrows():
-            name = r.channel
-            if name not in hat:
-                continue
-            h, t = hat[name], true[name]
-            keep = np.ones(len(h), dtype=bool)
-            if "alpha <" in r.note and limit is not None:
-                keep = h["alpha_t_rad"].to_numpy() * RAD2DEG < limit
-            e_hat = h["error_rad"].to_numpy()[keep] * RAD2DEG
-            e_true = t["error_rad"].to_numpy()[keep] * RAD2DEG
-            tr = truth[(truth.channel == name) & (truth.mach == st.mach) & (truth.gear == r.gear)]
-            cal = float(r.calibration_sd_deg)
-            rows.append({"seed": seed, "sensor": r.sensor, "model_deg": float(r.three_sigma_deg),
-                         "truth_deg": float(tr.three_sigma_deg.iloc[0]),
-                         "model_sensor_deg": 3 * math.sqrt(max((r.three_sigma_deg / 3) ** 2 - cal ** 2, 0.0)),
-                         "truth_sensor_deg": 3 * float(np.sqrt(np.mean(e_true ** 2))),
-                         "cal_expected_deg": 3 * cal,
-                         "cal_realized_deg": 3 * float(np.sqrt(np.mean((e_hat - e_true) ** 2))),
-                         "verdict": calib.verdict.name, "said": "; ".join(said)})
+        mine = model[(model.mach == st.mach) & (model.gear == gear)]
+        if len(mine):
+            rows += [{"seed": seed, **r, "verdict": calib.verdict.name, "said": "; ".join(said)}
+                     for r in _stage_cells(wf, st, mine, truth)]
     return pd.DataFrame(rows)
+
+
+def _stage_cells(wf, st, mine: pd.DataFrame, truth: pd.DataFrame) -> list[dict]:
+    """The cells of one stage (``mine``: its rows of Table 2 from the data; ``truth``: Table 2
+    against the truth), each split into its parts (module docstring), deg."""
+    from campaigns.truth import true_parameters
+    from campaigns.workflow_truth import calibrated_errors
+    from estimator.workflow import bound_shares
+
+    limit = wf.alpha_limit_deg
+    tv = true_parameters(st.problem, st.result.free_estimated).values
+    at_truth = np.array([tv.get(k, v) if math.isfinite(tv.get(k, math.nan)) else v
+                         for k, v in zip(st.result.parameters.keys, st.result.values, strict=True)])
+    hat = calibrated_errors(st.problem, st.result)
+    # calibrated_errors reads the result's values only
+    true = calibrated_errors(st.problem, SimpleNamespace(values=at_truth))
+    out = []
+    for _, r in mine.iterrows():
+        name = r.channel
+        tr = truth[(truth.channel == name) & (truth.mach == st.mach) & (truth.gear == r.gear)]
+        if name not in hat or not len(tr):
+            continue
+        low = wf.declarations.requirements[name].low_alpha_only and limit is not None
+        h, t, res = hat[name], true[name], st.residuals[name]
+        keep = h["alpha_t_rad"].to_numpy() * RAD2DEG < limit if low else np.ones(len(h), dtype=bool)
+        e_hat = h["error_rad"].to_numpy()[keep] * RAD2DEG
+        e_true = t["error_rad"].to_numpy()[keep] * RAD2DEG
+        # Table 2's own samples (the residual's layout) for the share along a bound parameter
+        keep_r = res.alpha_t_rad * RAD2DEG < limit if low else None
+        cal_var = np.square(res.calibration_sd * RAD2DEG)
+        shares = bound_shares(res, keep_r, cal_var if keep_r is None else cal_var[keep_r])
+        cal = float(r.calibration_sd_deg)
+        out.append({"cell": f"{r.sensor}, M{st.mach:.2f}{' down' if st.gear_down else ''}",
+                    "model_deg": float(r.three_sigma_deg), "truth_deg": float(tr.three_sigma_deg.iloc[0]),
+                    "model_sensor_deg": 3 * math.sqrt(max((r.three_sigma_deg / 3) ** 2 - cal ** 2, 0.0)),
+                    "truth_sensor_deg": 3 * float(np.sqrt(np.mean(e_true ** 2))),
+                    "cal_expected_deg": 3 * cal,
+                    "cal_realized_deg": 3 * float(np.sqrt(np.mean((e_hat - e_true) ** 2))),
+                    "judged": bool(r.judged),
+                    "bound_share": max(shares.values(), default=0.0),
+                    "bound_parameter": max(shares, key=shares.get) if shares else ""})
+    return out
 
 
 def agreement(df: pd.DataFrame) -> pd.Series:
@@ -120,11 +139,11 @@ def agreement(df: pd.DataFrame) -> pd.Series:
 
 
 def summary(all_cells: pd.DataFrame) -> pd.DataFrame:
-    """Per sensor, over seeds: the root mean square of each column (the expectation of a 3-sigma
+    """Per cell, over seeds: the root mean square of each column (the expectation of a 3-sigma
     figure's square is what a 3-sigma figure predicts) and the cells within 30 % or 0.05 deg."""
     cols = ["model_deg", "truth_deg", "model_sensor_deg", "truth_sensor_deg", "cal_expected_deg",
             "cal_realized_deg"]
-    g = all_cells.assign(agree=agreement(all_cells)).groupby("sensor", sort=False)
+    g = all_cells.assign(agree=agreement(all_cells)).groupby("cell", sort=False)
     out = g[cols].apply(lambda x: np.sqrt((x ** 2).mean()))
     out["model/truth"] = out.model_deg / out.truth_deg
     out["cal realized/expected"] = out.cal_realized_deg / out.cal_expected_deg
@@ -132,17 +151,26 @@ def summary(all_cells: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
+def _worst(cells: pd.DataFrame) -> str:
+    """The largest truth / model of ``cells`` and its sensor ("" without cells)."""
+    if not len(cells):
+        return ""
+    w = cells.iloc[int(np.argmax(cells.truth_deg / cells.model_deg))]
+    return f"{w.truth_deg / w.model_deg:.2f} ({w.cell})"
+
+
 def per_seed(all_cells: pd.DataFrame) -> pd.DataFrame:
     """Per seed: verdict, the kinds of its warnings and failures, the cells agreeing, the worst
-    optimism (truth / model) and where."""
+    optimism (truth / model) and where, over every cell and over the cells Table 2 judges, and the
+    cells it does not judge (a parameter on its bound truncates their deviation)."""
     rows = []
     for seed, g in all_cells.groupby("seed"):
-        ok = g[g.sensor != "(none)"]
-        worst = ok.iloc[int(np.argmax(ok.truth_deg / ok.model_deg))] if len(ok) else None
+        ok = g[g.cell != "(none)"]
+        judged = ok[ok.judged.astype(bool)] if "judged" in ok else ok
         rows.append({"seed": seed, "verdict": g.verdict.iloc[0],
                      "cells_within": f"{int(agreement(ok).sum())} of {len(ok)}" if len(ok) else "no Table 2",
-                     "worst_truth/model": (f"{worst.truth_deg / worst.model_deg:.2f} ({worst.sensor})"
-                                           if worst is not None else ""),
+                     "worst_truth/model": _worst(ok), "worst_judged": _worst(judged),
+                     "not_judged": ", ".join(ok.cell[~ok.cell.isin(judged.cell)]),
                      "said": g.said.iloc[0] if isinstance(g.said.iloc[0], str) else ""})
     return pd.DataFrame(rows).set_index("seed")
 
@@ -163,6 +191,7 @@ def main(argv: list[str] | None = None) -> int:
         frames.append(pd.read_csv(f))
         print(f"seed {seed} done ({time.perf_counter() - t0:.0f} s)", flush=True)
     allc = pd.concat(frames, ignore_index=True)
+    ok = allc[allc.cell != "(none)"]
     pd.set_option("display.width", 200)
     text = "\n".join([
         f"# python -m campaigns.studies.filter_error_table2 --out {args.out} --seeds {args.seeds}"
@@ -171,13 +200,22 @@ def main(argv: list[str] | None = None) -> int:
         f"The demo's light-turbulence block (seed {SEED0}), measurement - model against the truth, per cell "
         "(deg, 3 sigma; within: 30 % or 0.05 deg):",
         allc[allc.seed == SEED0].assign(within=agreement(allc[allc.seed == SEED0]))
-        .drop(columns="seed").set_index("sensor").round(3).to_string(),
+        .drop(columns=["seed", "verdict", "said"]).set_index("cell").round(3).to_string(),
         "",
-        f"Over {args.seeds} seeds ({SEED0}-{SEED0 + args.seeds - 1}), root mean square per sensor:",
-        summary(allc[allc.sensor != "(none)"]).round(3).to_string(),
+        f"Over {args.seeds} seeds ({SEED0}-{SEED0 + args.seeds - 1}), root mean square per cell:",
+        summary(ok).round(3).to_string(),
         "",
-        "Per seed: the verdict, what it warned of, the cells within 30 % or 0.05 deg of the truth's, and the "
-        "largest truth / model (a cell the data call better than it is):",
+        "Truth / model per cell and seed (above 1: the data call the cell better than it is):",
+        ok.assign(r=ok.truth_deg / ok.model_deg).pivot(index="cell", columns="seed", values="r")
+        .round(2).to_string(),
+        "",
+        "The largest share of each cell's calibration variance along a parameter on or near its bound "
+        "(Table 2 does not judge a cell at 0.25 or more; 0: no such parameter):",
+        ok.pivot(index="cell", columns="seed", values="bound_share").round(3).to_string(),
+        "",
+        "Per seed: the verdict, what it warned of, the cells within 30 % or 0.05 deg of the truth's, the "
+        "largest truth / model (a cell the data call better than it is), among every cell and among the "
+        "cells Table 2 judges, and the cells it does not judge:",
         per_seed(allc).to_string(),
         "",
     ])

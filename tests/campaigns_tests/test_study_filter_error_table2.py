@@ -14,14 +14,15 @@ from campaigns.studies.filter_error_table2 import agreement, per_seed, summary
 
 def _cells() -> pd.DataFrame:
     base = {"model_sensor_deg": 0.1, "truth_sensor_deg": 0.1, "cal_expected_deg": 0.2,
-            "cal_realized_deg": 0.2, "said": "WARNING unsettled"}
+            "cal_realized_deg": 0.2, "said": "WARNING unsettled", "judged": True}
     return pd.DataFrame([
         # 30 % or 0.05 deg: 0.20 against 0.16 is within 0.05 deg; 0.40 against 0.30 is not (0.09 allowed)
-        {"seed": 1, "sensor": "a", "model_deg": 0.20, "truth_deg": 0.16, "verdict": "SUCCESS", **base},
-        {"seed": 1, "sensor": "b", "model_deg": 0.40, "truth_deg": 0.30, "verdict": "SUCCESS", **base},
-        {"seed": 2, "sensor": "a", "model_deg": 0.20, "truth_deg": 0.60, "verdict": "SUCCESS", **base},
-        {"seed": 2, "sensor": "b", "model_deg": 0.30, "truth_deg": 0.30, "verdict": "SUCCESS", **base},
-        {"seed": 3, "sensor": "(none)", "verdict": "FAILURE", "said": "FAILURE not_converged"},
+        {"seed": 1, "cell": "a", "model_deg": 0.20, "truth_deg": 0.16, "verdict": "SUCCESS", **base},
+        {"seed": 1, "cell": "b", "model_deg": 0.40, "truth_deg": 0.30, "verdict": "SUCCESS", **base},
+        {"seed": 2, "cell": "a", "model_deg": 0.20, "truth_deg": 0.60, "verdict": "SUCCESS",
+         **base, "judged": False},
+        {"seed": 2, "cell": "b", "model_deg": 0.30, "truth_deg": 0.30, "verdict": "SUCCESS", **base},
+        {"seed": 3, "cell": "(none)", "verdict": "FAILURE", "said": "FAILURE not_converged"},
     ])
 
 
@@ -39,6 +40,8 @@ def test_the_summary_is_the_root_mean_square_over_seeds():
 def test_each_seed_names_its_worst_optimism_and_a_failed_one_has_no_table2():
     p = per_seed(_cells())
     assert p.loc[2, "worst_truth/model"].startswith("3.00 (a)")
+    # the cell Table 2 does not judge is not its worst judged one
+    assert p.loc[2, "worst_judged"] == "1.00 (b)" and p.loc[2, "not_judged"] == "a"
     assert p.loc[1, "cells_within"] == "1 of 2"
     assert p.loc[3, "cells_within"] == "no Table 2" and p.loc[3, "verdict"] == "FAILURE"
     assert np.all(p.index == [1, 2, 3])
