@@ -1152,8 +1152,9 @@ def calibration_deviations(problem: Problem, result: EstimationResult, model: Mo
     est = np.asarray(result.free_estimated if result.free_estimated is not None else ps.free_mask, dtype=bool)
     calib = est & np.array([p.kind not in FLIGHT_KINDS for p in ps.parameters], dtype=bool)
     keys = ps.keys
+    known = set(keys)
     bound = list(dict.fromkeys(k for f in result.findings if f.code in ("on_bound", "near_bound")
-                               and f.severity >= Severity.WARNING for k in f.parameters if k in set(keys)))
+                               and f.severity >= Severity.WARNING for k in f.parameters if k in known))
     n0 = len(STATE_PARAMS)  # the state-equation slots come first in every channel's slot space
     out: dict[str, CalibrationDeviation] = {}
 
@@ -1170,7 +1171,9 @@ def calibration_deviations(problem: Problem, result: EstimationResult, model: Mo
             names = [keys[i] for i in used]
             C, source = _calibration_covariance(result, names)
             # the bound parameters' columns (of the same covariance as C), for the parts along them
-            Cb, var_b = _bound_columns(result, names, bound, source == "honest")
+            Cb, var_b = _bound_columns(result, names, bound, source.startswith("honest"))
+            for col in Cb.values():  # a parameter left out of C (no deviation) is left out here too
+                col[np.diag(C) == 0.0] = 0.0
             pos = {int(p): j for j, p in enumerate(used)}
             # a bound parameter without a deviation (unidentifiable) has no direction to project on
             a2 = {k: np.zeros(ce.y.size) for k in bound if var_b[k] > 0.0}
