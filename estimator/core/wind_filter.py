@@ -434,13 +434,13 @@ def _rts(obs_sample, e, h, r, Phi, Qd, P0, n_samples, xs, Ps):
     for k in range(n_samples):
         if k > 0:
             _time_update(Phi, Qd, x, P, xt, T)
-        xp[k] = x
-        Pp[k] = P
+        # element by element: a whole-row assignment makes numba compile its shape-mismatch message
+        # (about 3 s of every cold start) for copies whose shapes cannot mismatch
+        _copy_state(x, P, xp, Pp, k)
         while i < n and obs_sample[i] == k:
             _scalar_update(h[i], r[i], e[i], x, P, K, hP, T, Th)
             i += 1
-        xs[k] = x  # filtered, overwritten by the backward pass below
-        Ps[k] = P
+        _copy_state(x, P, xs, Ps, k)  # filtered, overwritten by the backward pass below
     # the backward pass in place, without allocations (one small solve per sample)
     dxk = np.zeros(ns)
     A = np.zeros((ns, ns))
@@ -483,6 +483,16 @@ def _rts(obs_sample, e, h, r, Phi, Qd, P0, n_samples, xs, Ps):
                 v = 0.5 * (Ps[k, a, b] + Ps[k, b, a] + acc + acc2)
                 Ps[k, a, b] = v
                 Ps[k, b, a] = v
+
+
+@njit(cache=True, nogil=True)
+def _copy_state(x, P, xs, Ps, k):
+    """``xs[k] = x``, ``Ps[k] = P``."""
+    ns = x.shape[0]
+    for a in range(ns):
+        xs[k, a] = x[a]
+        for b in range(ns):
+            Ps[k, a, b] = P[a, b]
 
 
 @njit(cache=True, nogil=True)
