@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -33,6 +34,7 @@ from estimator.core.residual_spectrum import (
     ar_from_autocovariance,
     innovation_cross_spectrum,
 )
+from estimator.core.sensitivity import worker_threads
 from estimator.model import Model
 from estimator.normal_equations import NormalEquations, Structure, lm_solve
 from estimator.problem import Problem
@@ -135,19 +137,21 @@ class _ChunkMiddles:
     """One chunk of maneuvers' middle matrices in the making: each channel's spectra, added by
     :meth:`spectra` on the evaluation's worker threads, then reduced per maneuver (:meth:`reduce`).
 
-    ``held``: "ar", each channel's spectra by maneuver; ``Y``: the periodogram's cross-channel
-    factor; ``B``, ``dEq``: the IMU noise's ``J^T W J_IC`` summed over the channels on the grid
-    (parameter, sample, 7) and the input increments (scaled by Q^1/2)."""
+    ``held``: by maneuver, each channel's spectra ("ar"), its part of the periodogram's
+    cross-channel factor, or its own middle (without the cross-channel terms); ``B``, ``dEq``: the
+    IMU noise's parts, each channel's ``J^T W`` and ``J_IC``, and the input increments (scaled by
+    Q^1/2). Each maneuver's channels are summed in :meth:`reduce`, in channel order: summed in the
+    order the evaluation's threads finished them, the sums' rounding, and so the deviations, changed
+    from run to run."""
 
     shared: _Shared
     held: dict[int, list]
-    Y: dict[int, np.ndarray]
-    B: dict[int, np.ndarray]
+    B: dict[int, list]
     dEq: dict[int, np.ndarray]
 
     def spectra(self, ce) -> None:
         """Take one evaluated channel's Jacobian spectra (its Jacobian dropped once used)."""
-        st, R, lay, opt, C, lock = self.shared
+        st, R, lay, opt, _, lock = self.shared
         ar = opt.spectrum == "ar"
         # only the slots that are free somewhere: fixed columns drop out of the sandwich
         keep = np.nonzero(st.free[ce.colmap].any(axis=0))[0]
@@ -166,16 +170,10 @@ class _ChunkMiddles:
                 Jb = JT[keep[ok], r0:r1]
                 pos = np.searchsorted(lay.union[k], pidx[ok])
                 if k in self.B and (opt.imu_channels is None or opt.imu_channels[k, ce.channel]):
-                    # the IMU noise: J^T W J_IC on the grid, summed over the channels (the suffix
-                    # sums and the product with dE Q^1/2 are linear: taken once, in reduce)
-                    outer = Jb[:, :, None] * JT[:7, r0:r1].T[None, :, :]
-                    outer *= w
-                    if rows.size < lay.n_of[k]:  # on the grid, zero where the channel has no sample
-                        grid = np.zeros((Jb.shape[0], int(lay.n_of[k]), 7))
-                        grid[:, rows] = outer
-                        outer = grid
+                    # the IMU noise: J^T W and J_IC, summed over the channels in reduce (the
+                    # suffix sums and the product with dE Q^1/2 are linear: taken once there)
                     with lock:
-                        _scatter_add(self.B[k], pos, outer)
+                        self.B[k].append((ce.channel, pos, Jb.copy(), JT[:7, r0:r1].T.copy(), rows, w))
                 if opt.imu_only:
                     continue
                 Lk = int(lay.L_of[k])
@@ -190,52 +188,85 @@ class _ChunkMiddles:
                         self.held[k].append((ce.channel, pos, F, Ef, rows, e[r0:r1].copy(), w))
                     continue
                 F *= np.conj(Ef) * (w * np.sqrt(lay.n_of[k] / (r1 - r0)))
-                if opt.cross_channel:
-                    with lock:
-                        _scatter_add(self.Y[k], pos, F)
-                else:
+                if not opt.cross_channel:  # the channel's own middle
                     Yc = (F * np.sqrt(_one_sided_weights(Lk) / (lay.n_of[k] * Lk))).view(np.float64)
-                    with lock:
-                        C.add_blocks((Yc @ Yc.T)[None], np.zeros((1, pos.size)),
-                                     np.ascontiguousarray(pidx[ok][None, :]), np.array([k]), 1.0)
+                    F = Yc @ Yc.T
+                with lock:  # summed over the channels in reduce
+                    self.held[k].append((ce.channel, pos, F))
         ce.JT = None  # used once: do not hold every channel's Jacobian at the same time
 
     def reduce(self, chunk: tuple[int, ...], problem: Problem, N: NormalEquations, Sinv: np.ndarray,
                Ainv: list[np.ndarray], Cp: NormalEquations | None) -> None:
         """Add each maneuver's coloured middle to the shared ``C`` and its IMU noise's to ``Cp``
-        (``Sinv``, ``Ainv``: the inverses of ``N``'s Schur complement and local blocks)."""
-        st, _, lay, opt, C, _ = self.shared
-        ar = opt.spectrum == "ar"
-        for k in chunk:
-            u = lay.union[k]
-            if not u.size:
-                continue
-            Lk = int(lay.L_of[k])
-            middle = None
-            if ar and self.held[k]:
-                items = sorted(self.held.pop(k), key=lambda it: it[0])
-                cov_u = _union_covariance(st, Sinv, Ainv, N, k, u)
-                middle = _ar_middle(items, cov_u, u.size, int(lay.n_of[k]), Lk, problem.maneuvers[k].dt_s,
-                                    opt.cross_channel)
-            elif k in self.Y:
-                Yk = self.Y.pop(k) * np.sqrt(_one_sided_weights(Lk) / (lay.n_of[k] * Lk))[None, :]
-                Yr = np.ascontiguousarray(Yk).view(np.float64).reshape(u.size, -1)
-                middle = Yr @ Yr.T
+        (``Sinv``, ``Ainv``: the inverses of ``N``'s Schur complement and local blocks).
+
+        The maneuvers' middles are independent: computed on the worker threads (FFTs and products
+        that release the interpreter), added in maneuver order (the sums do not depend on which
+        thread finished first)."""
+        lay, C = self.shared.lay, self.shared.C
+        ks = [k for k in chunk if lay.union[k].size]
+
+        def middles(k: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+            return self._middles(k, problem, N, Sinv, Ainv)
+
+        if worker_threads() > 1 and len(ks) > 1:
+            with ThreadPoolExecutor(worker_threads()) as ex:
+                done = list(ex.map(middles, ks))
+        else:
+            done = [middles(k) for k in ks]
+        for k, (middle, imu) in zip(ks, done, strict=True):
+            u = np.ascontiguousarray(lay.union[k][None, :])
             if middle is not None:
-                C.add_blocks(middle[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
-                             np.array([k]), 1.0)
-            if k in self.B:
-                V = suffix_middle_factor(self.B.pop(k).transpose(1, 0, 2), self.dEq.pop(k))
-                Yv = np.ascontiguousarray(V.transpose(1, 0, 2)).reshape(u.size, -1)
-                Cp.add_blocks((Yv @ Yv.T)[None], np.zeros((1, u.size)), np.ascontiguousarray(u[None, :]),
-                              np.array([k]), 1.0)
+                C.add_blocks(middle[None], np.zeros((1, u.size)), u, np.array([k]), 1.0)
+            if imu is not None:
+                Cp.add_blocks(imu[None], np.zeros((1, u.size)), u, np.array([k]), 1.0)
+
+    def _middles(self, k: int, problem: Problem, N: NormalEquations, Sinv: np.ndarray,
+                 Ainv: list[np.ndarray]) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Maneuver ``k``'s coloured middle and its IMU noise's, (U, U) each (None: none), its
+        channels' spectra and Jacobians dropped."""
+        st, _, lay, opt, _, _ = self.shared
+        u = lay.union[k]
+        Lk = int(lay.L_of[k])
+        middle = imu = None
+        if opt.spectrum == "ar" and self.held[k]:
+            items = sorted(self.held.pop(k), key=lambda it: it[0])
+            cov_u = _union_covariance(st, Sinv, Ainv, N, k, u)
+            middle = _ar_middle(items, cov_u, u.size, int(lay.n_of[k]), Lk, problem.maneuvers[k].dt_s,
+                                opt.cross_channel)
+        elif self.held[k] and opt.cross_channel:  # the periodogram's factor, summed over the channels
+            Yk = np.zeros((u.size, Lk // 2 + 1), dtype=complex)
+            for _, pos, F in sorted(self.held.pop(k), key=lambda it: it[0]):
+                _scatter_add(Yk, pos, F)
+            Yk *= np.sqrt(_one_sided_weights(Lk) / (lay.n_of[k] * Lk))[None, :]
+            Yr = np.ascontiguousarray(Yk).view(np.float64).reshape(u.size, -1)
+            middle = Yr @ Yr.T
+        elif self.held[k]:  # each channel's own middle, summed
+            middle = np.zeros((u.size, u.size))
+            for _, pos, Mc in sorted(self.held.pop(k), key=lambda it: it[0]):
+                np.add.at(middle, np.ix_(pos, pos), Mc)
+        if k in self.B:
+            # J^T W J_IC on the grid, summed over the channels (in channel order: class docstring)
+            B = np.zeros((u.size, int(lay.n_of[k]), 7))
+            for _, pos, Jb, J_ic, rows, w in sorted(self.B.pop(k), key=lambda it: it[0]):
+                outer = Jb[:, :, None] * J_ic[None, :, :]
+                outer *= w
+                if rows.size < lay.n_of[k]:  # on the grid, zero where the channel has no sample
+                    grid = np.zeros((Jb.shape[0], int(lay.n_of[k]), 7))
+                    grid[:, rows] = outer
+                    outer = grid
+                _scatter_add(B, pos, outer)
+            V = suffix_middle_factor(B.transpose(1, 0, 2), self.dEq.pop(k))
+            Yv = np.ascontiguousarray(V.transpose(1, 0, 2)).reshape(u.size, -1)
+            imu = Yv @ Yv.T
+        return middle, imu
 
 
 def _chunk_middles(model: Model, theta: np.ndarray, chunk: tuple[int, ...], imu_psd: dict | None,
                    shared: _Shared) -> _ChunkMiddles:
     """A chunk's empty accumulators, with its IMU noise's input increments computed."""
-    lay, opt = shared.lay, shared.opt
-    B: dict[int, np.ndarray] = {}
+    opt = shared.opt
+    B: dict[int, list] = {}
     dEq: dict[int, np.ndarray] = {}
     imu_chunk = tuple(k for k in chunk if opt.imu_maneuvers is None or opt.imu_maneuvers[k])
     if imu_psd is not None and imu_chunk:
@@ -244,13 +275,11 @@ def _chunk_middles(model: Model, theta: np.ndarray, chunk: tuple[int, ...], imu_
             m = p.maneuvers[k]
             q = np.sqrt(np.nan_to_num(imu_psd[m.aircraft]) / m.dt_s)  # unknown: left out
             dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
-            B[k] = np.zeros((lay.union[k].size, m.n, 7))
+            B[k] = []  # each channel's J^T W and J_IC, summed in reduce
         if imu_chunk != chunk:  # the chunk's own layout is evaluated next (honest_std forgets it)
             model.forget(imu_chunk)
-    Y = ({k: np.zeros((lay.union[k].size, int(lay.L_of[k]) // 2 + 1), dtype=complex) for k in chunk}
-         if opt.cross_channel and opt.spectrum != "ar" else {})
-    # "ar": each channel's spectra, for later
-    return _ChunkMiddles(shared, {k: [] for k in chunk}, Y, B, dEq)
+    # each channel's spectra (or, without the cross-channel terms, its middle), for reduce
+    return _ChunkMiddles(shared, {k: [] for k in chunk}, B, dEq)
 
 
 def _floored(std_crb: np.ndarray, sandwiches: tuple, glob: np.ndarray, imu_only: bool
