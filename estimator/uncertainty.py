@@ -472,16 +472,15 @@ def _ar_middle(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: fl
                ) -> np.ndarray:
     """One maneuver's coloured middle ``1/L sum_f w_f Re(Y_f Y_f^H)`` (U, U) from its channels'
     spectra (:func:`_ar_factor`'s arguments; ``w_f`` the one-sided spectrum's weights)."""
-    Yf = _ar_factor(items, cov_u, nu, n, L, dt_s, cross)  # (nf, U, r), frequency-major
-    Yf *= np.sqrt(_one_sided_weights(L) / L)[:, None, None]
-    Yr = np.ascontiguousarray(Yf.transpose(1, 0, 2)).view(np.float64).reshape(nu, -1)
+    Y = _ar_factor(items, cov_u, nu, n, L, dt_s, cross)  # (U, nf, r): one real gemm, no copy
+    Yr = Y.view(np.float64).reshape(nu, -1)
     return Yr @ Yr.T
 
 
 def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: float, cross: bool
                ) -> np.ndarray:
-    """``Y_f`` (nf, U, r) of one maneuver from its channels' Jacobian spectra and autoregressive
-    residual models (:func:`honest_std`, ``colored_spectrum = "ar"``).
+    """``Y_f sqrt(w_f / L)`` (U, nf, r) of one maneuver from its channels' Jacobian spectra and
+    autoregressive residual models (:func:`honest_std`, ``colored_spectrum = "ar"``).
 
     Each channel's residual periodogram is corrected for the fit's leverage ``h_c(f)`` (capped at
     0.95: the few bins the parameters empty almost completely carry no information either way)
@@ -533,14 +532,19 @@ def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: fl
             factors[i, :, j:] = models[i].inverse_filter(L)[:, None] * Lam[:, t, :]
     # Y_f = sum_i w_i F_i,f factors_i,f: each channel's spectra placed once (its own column of H),
     # then one product per frequency (placing each channel's product with its factor costs the
-    # columns over again)
-    H = np.zeros((nu, len(items), nf), dtype=complex)
+    # columns over again), written straight into the (U, nf, r) layout the middle's product reads
+    # (a transposed copy of it, and H in the parameters' layout, held the memory twice over: the
+    # maneuvers' middles are computed two at a time)
+    H = np.zeros((nf, nu, len(items)), dtype=complex)
     for i, (_, pos, F, _, _, _, w) in enumerate(items):
         if np.unique(pos).size == pos.size:
-            H[pos, i] = w * F
+            H[:, pos, i] = (w * F).T
         else:
-            np.add.at(H[:, i, :], pos, w * F)
-    return np.matmul(H.transpose(2, 0, 1), factors.transpose(1, 0, 2))
+            np.add.at(H[:, :, i].T, pos, w * F)
+    Y = np.empty((nu, nf, cols), dtype=complex)
+    np.matmul(H, np.ascontiguousarray(factors.transpose(1, 0, 2)), out=Y.transpose(1, 0, 2))
+    Y *= np.sqrt(_one_sided_weights(L) / L)[None, :, None]
+    return Y
 
 
 def _psd_factor(gam: np.ndarray) -> np.ndarray:
