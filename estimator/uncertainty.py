@@ -122,7 +122,8 @@ def _layout(model: Model, st: Structure) -> _Layout:
 
 class _Shared(NamedTuple):
     """What every chunk shares: the structure, the channels' residual variances (SI^2), the layout,
-    the options, the coloured middle being gathered and the lock guarding it."""
+    the options, the coloured middle being gathered (added to in :meth:`_ChunkMiddles.reduce`, on the
+    calling thread) and the lock guarding the per-channel parts the evaluation's threads hand over."""
 
     st: Structure
     R: np.ndarray
@@ -139,10 +140,10 @@ class _ChunkMiddles:
 
     ``held``: by maneuver, each channel's spectra ("ar"), its part of the periodogram's
     cross-channel factor, or its own middle (without the cross-channel terms); ``B``, ``dEq``: the
-    IMU noise's parts, each channel's ``J^T W`` and ``J_IC``, and the input increments (scaled by
-    Q^1/2). Each maneuver's channels are summed in :meth:`reduce`, in channel order: summed in the
-    order the evaluation's threads finished them, the sums' rounding, and so the deviations, changed
-    from run to run."""
+    IMU noise's parts, each channel's ``J`` (its weight ``W`` beside it) and ``J_IC``, and the input
+    increments (scaled by Q^1/2). Each maneuver's channels are summed in :meth:`reduce`, in channel
+    order: summed in the order the evaluation's threads finished them, the sums' rounding, and so
+    the deviations, changed from run to run."""
 
     shared: _Shared
     held: dict[int, list]
@@ -173,7 +174,8 @@ class _ChunkMiddles:
                     # the IMU noise: J^T W and J_IC, summed over the channels in reduce (the
                     # suffix sums and the product with dE Q^1/2 are linear: taken once there)
                     with lock:
-                        self.B[k].append((ce.channel, pos, Jb.copy(), JT[:7, r0:r1].T.copy(), rows, w))
+                        # Jb is a copy already (fancy indexing); J_IC copied: JT is dropped below
+                        self.B[k].append((ce.channel, pos, Jb, JT[:7, r0:r1].T.copy(), rows, w))
                 if opt.imu_only:
                     continue
                 Lk = int(lay.L_of[k])

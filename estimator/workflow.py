@@ -1214,8 +1214,8 @@ def _wind_var_deg2(r: ChannelResiduals) -> np.ndarray | None:
 #: bound parameter at most 0.12 (the demo's seed: 0.02 along the nose table's f5[3]). Reported on
 #: the 16 converged seeds after them: 14 such cells 0.44-0.89 (not judged; c_vb[PT1]'s boom cells
 #: among them, 1.2 times), every other at most 0.18 (judged). Not caught: a cell optimistic for
-#: another reason (the boom's sideslip, 1.8-2.1 times on two seeds, with c_vb[PT1] off its bound:
-#: the ``unsettled`` warning says those).
+#: another reason (the boom's sideslip, 1.8-2.1 times on two seeds, no boom parameter on or near a
+#: bound).
 BOUND_SHARE = 0.25
 
 

@@ -209,7 +209,8 @@ def main(argv: list[str] | None = None) -> int:
         allc[allc.seed == SEED0].assign(within=agreement(allc[allc.seed == SEED0]))
         .drop(columns=["seed", "verdict", "said"]).set_index("cell").round(3).to_string(),
         "",
-        f"Over {args.seeds} seeds ({SEED0}-{SEED0 + args.seeds - 1}), root mean square per cell:",
+        f"Over {args.seeds} seeds ({SEED0}-{SEED0 + args.seeds - 1}; {ok.seed.nunique()} converged), root "
+        "mean square per cell:",
         summary(ok).round(3).to_string(),
         "",
         "Truth / model per cell and seed (above 1: the data call the cell better than it is):",

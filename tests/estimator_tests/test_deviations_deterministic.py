@@ -2,9 +2,9 @@
 
 A problem of more than 20,000 samples evaluates its channels on two threads, which hand each
 channel's Jacobian to the honest deviations as they finish (here a small problem is made to, the
-threshold lowered). The IMU
-noise's middle sums those channels; summed in the order the threads finished, its rounding (about
-1e-9 of a deviation, enough to change the bytes of ``parameters.csv``) changed from run to run.
+threshold lowered). The IMU noise's middle sums those channels; summed in the order the threads
+finished, its rounding (about 1e-9 of a deviation, enough to change the bytes of
+``parameters.csv``) changed from run to run.
 Here the deviations of one estimate are computed again, with the threads finishing in whatever
 order they do, and must come out bit-identical.
 """
