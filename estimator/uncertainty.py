@@ -277,7 +277,7 @@ def _chunk_middles(model: Model, theta: np.ndarray, chunk: tuple[int, ...], imu_
             m = p.maneuvers[k]
             q = np.sqrt(np.nan_to_num(imu_psd[m.aircraft]) / m.dt_s)  # unknown: left out
             dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
-            B[k] = []  # each channel's J^T W and J_IC, summed in reduce
+            B[k] = []  # each channel's J (its weight beside it) and J_IC, summed in reduce
         if imu_chunk != chunk:  # the chunk's own layout is evaluated next (honest_std forgets it)
             model.forget(imu_chunk)
     # each channel's spectra (or, without the cross-channel terms, its middle), for reduce
