@@ -465,8 +465,8 @@ def _fmt_table2(acc, title: str) -> str:
     """Table 2 as text: sensors x Mach, 3 sigma in deg, * where it misses the desired accuracy."""
     if acc is None or acc.empty:
         return f"{title}: no data"
-    # a table without the column (the truth's Table 2) judges every cell: all True
-    judged = acc["judged"].astype(bool) if "judged" in acc else acc["passed"].astype(bool) | True
+    # a table without the column (the truth's Table 2) judges every cell
+    judged = (acc if "judged" in acc else acc.assign(judged=True))["judged"].astype(bool)
     a = acc.assign(col=[f"M{m:.2f}{' down' if g == 'down' else ''}" for m, g in zip(acc["mach"], acc["gear"],
                                                                                     strict=True)],
                    cell=[f"{v:.3f}{'' if ok else '*' if j else '?'}" for v, ok, j in

@@ -40,7 +40,7 @@ STATES = ("estimated", "on_bound", "held", "unidentifiable", "fixed", "not estim
 JSON_FORMAT = "fpr-estimation-result/2"
 
 
-def _read_only(a, dtype=float) -> np.ndarray | None:
+def read_only(a, dtype=float) -> np.ndarray | None:
     """A read-only copy of ``a`` (None stays None; an array already read-only and owning its
     memory — one made here — is kept, so copying a result does not copy its matrices again)."""
     if a is None:
@@ -82,12 +82,12 @@ class ReadOnlyTable:
         ix = table.index
         if keep_index and not (isinstance(ix, pd.RangeIndex) and ix.start == 0 and ix.step == 1):
             names = tuple(None if n is None else str(n) for n in ix.names)
-            levels = tuple(_read_only(ix.get_level_values(i).to_numpy(copy=True), dtype=None)
+            levels = tuple(read_only(ix.get_level_values(i).to_numpy(copy=True), dtype=None)
                            for i in range(ix.nlevels))
         if keep_index and table.columns.name is not None:
             axis = str(table.columns.name)
         return cls(tuple(str(c) for c in table.columns),
-                   tuple(_read_only(table[c].to_numpy(copy=True), dtype=None) for c in table.columns),
+                   tuple(read_only(table[c].to_numpy(copy=True), dtype=None) for c in table.columns),
                    names, levels, axis)
 
     def __len__(self) -> int:
@@ -129,8 +129,8 @@ class ReadOnlyTable:
                 return np.array([_num(v) for v in values], dtype=dtype)
             return np.array(values, dtype=dtype)
 
-        return cls(tuple(d["columns"]), tuple(_read_only(col(c), dtype=None) for c in d["data"]),
-                   tuple(d["index_names"]), tuple(_read_only(col(c), dtype=None) for c in d["index"]),
+        return cls(tuple(d["columns"]), tuple(read_only(col(c), dtype=None) for c in d["data"]),
+                   tuple(d["index_names"]), tuple(read_only(col(c), dtype=None) for c in d["index"]),
                    d.get("columns_name"))
 
 
@@ -268,17 +268,17 @@ class EstimationResult:
 
         put("status", Status(self.status))
         for a in ("std_crb", "std_colored", "correlation", "std_imu_noise", "correlation_colored"):
-            put(a, _read_only(getattr(self, a)))
-        put("free_estimated", _read_only(self.free_estimated, dtype=bool))
+            put(a, read_only(getattr(self, a)))
+        put("free_estimated", read_only(self.free_estimated, dtype=bool))
         for a in ("correlation_keys", "residuals", "confounding", "state", "state_reason", "findings"):
             put(a, tuple(getattr(self, a)))
         put("cost_history", tuple(float(c) for c in self.cost_history))
         put("R", MappingProxyType({str(k): float(v) for k, v in dict(self.R).items()}))
         put("channel_display", MappingProxyType(
             {str(k): (float(v[0]), str(v[1])) for k, v in dict(self.channel_display).items()}))
-        put("outliers", MappingProxyType({tuple(k): _read_only(v) for k, v in dict(self.outliers).items()}))
+        put("outliers", MappingProxyType({tuple(k): read_only(v) for k, v in dict(self.outliers).items()}))
         if self.imu_noise_psd is not None:
-            psd = {k: _read_only(v) for k, v in dict(self.imu_noise_psd).items()}
+            psd = {k: read_only(v) for k, v in dict(self.imu_noise_psd).items()}
             put("imu_noise_psd", MappingProxyType(psd))
         if self.fit_quality is not None:
             put("fit_quality", ReadOnlyTable.of(self.fit_quality))

@@ -81,7 +81,7 @@ from estimator.model import Model
 from estimator.options import WorkflowOptions
 from estimator.parameters import FLIGHT_KINDS, family_of, make_key
 from estimator.problem import STATE_PARAMS, Problem, ReadOnlyMapping
-from estimator.result import EstimationResult, ReadOnlyTable, json_clean
+from estimator.result import EstimationResult, ReadOnlyTable, json_clean, read_only
 from estimator.solver import estimate
 from estimator.verdict import Finding, Severity, Verdict, findings_frame, judge
 from estimator.verdict import Status as _Status
@@ -942,13 +942,6 @@ def run_workflow(problem: Problem, options: WorkflowOptions | None = None) -> Wo
 
 
 # --------------------------------------------------------------------------------------- accuracy
-def _frozen(a) -> np.ndarray:
-    """A read-only copy of ``a``."""
-    a = np.array(a, copy=True)
-    a.setflags(write=False)
-    return a
-
-
 @dataclass(frozen=True)
 class ChannelResiduals:
     """Measurement minus model of one channel over a stage's maneuvers, at the cost's samples.
@@ -992,8 +985,8 @@ class ChannelResiduals:
         for name in ("maneuver", "t_s", "z", "y", "alpha_t_rad", "wind", "calibration_sd", "wind_var"):
             if getattr(self, name) is None:
                 continue
-            object.__setattr__(self, name, _frozen(getattr(self, name)))
-        frozen = ReadOnlyMapping({k: _frozen(v) for k, v in self.bound_sd.items()})
+            object.__setattr__(self, name, read_only(getattr(self, name), dtype=None))
+        frozen = ReadOnlyMapping({k: read_only(v, dtype=None) for k, v in self.bound_sd.items()})
         object.__setattr__(self, "bound_sd", frozen)
 
     @property
