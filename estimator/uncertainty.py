@@ -27,10 +27,16 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from scipy import fft as sfft
 
-from estimator.core.process_noise import input_increments, suffix_middle_factor, white_noise_psd
+from estimator.core.process_noise import (
+    add_channel_products,
+    input_increments,
+    suffix_middle_factor,
+    white_noise_psd,
+)
 from estimator.core.residual_spectrum import (
     AR_MAX_ORDER,
     ARModel,
+    add_spectral_factor,
     ar_from_autocovariance,
     innovation_cross_spectrum,
 )
@@ -249,17 +255,10 @@ class _ChunkMiddles:
                 np.add.at(middle, np.ix_(pos, pos), Mc)
         if k in self.B:
             # J^T W J_IC on the grid, summed over the channels (in channel order: class docstring)
-            B = np.zeros((u.size, int(lay.n_of[k]), 7))
+            B = np.zeros((int(lay.n_of[k]), u.size, 7))
             for _, pos, Jb, J_ic, rows, w in sorted(self.B.pop(k), key=lambda it: it[0]):
-                outer = Jb[:, :, None] * J_ic[None, :, :]
-                outer *= w
-                if rows.size < lay.n_of[k]:  # on the grid, zero where the channel has no sample
-                    grid = np.zeros((Jb.shape[0], int(lay.n_of[k]), 7))
-                    grid[:, rows] = outer
-                    outer = grid
-                _scatter_add(B, pos, outer)
-            V = suffix_middle_factor(B.transpose(1, 0, 2), self.dEq.pop(k))
-            Yv = np.ascontiguousarray(V.transpose(1, 0, 2)).reshape(u.size, -1)
+                add_channel_products(B, pos, Jb, J_ic, rows, w)
+            Yv = suffix_middle_factor(B, self.dEq.pop(k))
             imu = Yv @ Yv.T
         return middle, imu
 
@@ -505,8 +504,11 @@ def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: fl
             models.append(ARModel(np.zeros(0), float(e @ e) / nc, 1))
             alone.append(True)
             continue
-        G = cov_u[np.ix_(pos, pos)] @ F
-        h = np.minimum(w / nc * np.real(np.sum(np.conj(F) * G, axis=0)), 0.95)
+        # the leverage Re(F^H Cov F) per frequency, in real arithmetic on the interleaved parts
+        # (Cov is real: a complex product would multiply its zero imaginary part too)
+        Fr = F.view(np.float64)
+        quad = np.sum(Fr * (cov_u[np.ix_(pos, pos)] @ Fr), axis=0).reshape(-1, 2).sum(axis=1)
+        h = np.minimum(w / nc * quad, 0.95)
         I_corr = (np.abs(Ef) ** 2 / nc) / (1.0 - h)
         r = sfft.irfft(I_corr, L)[:(AR_MAX_ORDER + 1) * stride:stride]
         models.append(ar_from_autocovariance(r, nc, stride=stride))
@@ -532,19 +534,12 @@ def _ar_factor(items: list, cov_u: np.ndarray, nu: int, n: int, L: int, dt_s: fl
         Lam = _psd_factor(gam)  # (nf, Ct, Ct)
         for t, i in enumerate(together):
             factors[i, :, j:] = models[i].inverse_filter(L)[:, None] * Lam[:, t, :]
-    # Y_f = sum_i w_i F_i,f factors_i,f: each channel's spectra placed once (its own column of H),
-    # then one product per frequency (placing each channel's product with its factor costs the
-    # columns over again), written straight into the (U, nf, r) layout the middle's product reads
-    # (a transposed copy of it, and H in the parameters' layout, held the memory twice over: the
-    # maneuvers' middles are computed two at a time)
-    H = np.zeros((nf, nu, len(items)), dtype=complex)
+    # Y_f = sum_i w_i F_i,f factors_i,f, channel by channel in their order, written straight into
+    # the (U, nf, r) layout the middle's product reads (a product per frequency over every
+    # parameter and channel multiplies mostly zeros: a channel depends on a few of the parameters)
+    Y = np.zeros((nu, nf, cols), dtype=complex)
     for i, (_, pos, F, _, _, _, w) in enumerate(items):
-        if np.unique(pos).size == pos.size:
-            H[:, pos, i] = (w * F).T
-        else:
-            np.add.at(H[:, :, i].T, pos, w * F)
-    Y = np.empty((nu, nf, cols), dtype=complex)
-    np.matmul(H, np.ascontiguousarray(factors.transpose(1, 0, 2)), out=Y.transpose(1, 0, 2))
+        add_spectral_factor(Y, pos, F, float(w), np.ascontiguousarray(factors[i]))
     Y *= np.sqrt(_one_sided_weights(L) / L)[None, :, None]
     return Y
 

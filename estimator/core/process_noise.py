@@ -43,6 +43,7 @@ given instead.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 #: The band the noise level is read in, in cycles per sample (upper third below Nyquist).
 NOISE_BAND = (0.3, 0.45)
@@ -89,18 +90,58 @@ def input_increments(phi: np.ndarray, s_bias: np.ndarray) -> np.ndarray:
     return np.diff(E, axis=0, prepend=np.zeros((1,) + E.shape[1:]))
 
 
-def suffix_middle_factor(b: np.ndarray, dE_q: np.ndarray) -> np.ndarray:
-    """``V_j = (sum_{i >= j} b_i) dE_q_j`` for one channel of one maneuver.
+@njit(cache=True, nogil=True)
+def add_channel_products(b: np.ndarray, pos: np.ndarray, J: np.ndarray, J_ic: np.ndarray,
+                         rows: np.ndarray, w: float) -> None:
+    """Add one channel's ``J_i^T W J_IC,i`` to a maneuver's ``b`` in place (channels in common
+    parameters add up; called channel by channel, in a fixed order).
 
     Parameters
     ----------
-    b : (N, m, 7) ``J_i^T W J_IC,i`` on the maneuver's sample grid (zero where the channel has no
-        sample in the cost).
+    b : (N, U, 7) the maneuver's sums on its sample grid, over its ``U`` parameters.
+    pos : (m,) each Jacobian row's parameter position in ``b`` (repeats add up).
+    J : (m, n) the channel's Jacobian over those parameters at its ``n`` samples in the cost, SI.
+    J_ic : (n, 7) its initial-condition columns.
+    rows : (n,) the samples' indices on the grid.
+    w : the channel's weight ``W = 1 / R``, 1/SI^2.
+    """
+    m, n = J.shape
+    c = J_ic.shape[1]
+    for a in range(m):
+        u = pos[a]
+        for r in range(n):
+            t = rows[r]
+            ja = J[a, r]
+            for j in range(c):
+                b[t, u, j] += ja * J_ic[r, j] * w
+
+
+@njit(cache=True, nogil=True)
+def suffix_middle_factor(b: np.ndarray, dE_q: np.ndarray) -> np.ndarray:
+    """The factor ``Y`` of a maneuver's ``C_proc = Y Y^T``: ``V_j = (sum_{i >= j} b_i) dE_q_j``
+    (module docstring), parameter-major.
+
+    Parameters
+    ----------
+    b : (N, U, 7) ``sum_c J_i^T W J_IC,i`` on the maneuver's sample grid, summed over its channels
+        (:func:`add_channel_products`; zero where no channel has a sample in the cost).
     dE_q : (N, 7, 6) the input increments times ``Q^1/2``.
 
     Returns
     -------
-    (N, m, 6); ``C_proc = sum_j V_j V_j^T`` summed over the channels' ``V`` in common parameters.
+    (U, N * 6): row ``u`` holds ``V_j[u, :]`` for ``j = 0 .. N-1`` in turn.
     """
-    A = np.cumsum(b[::-1], axis=0)[::-1]
-    return np.einsum("jsc,jcq->jsq", A, dE_q)
+    n, nu, c = b.shape
+    q = dE_q.shape[2]
+    Y = np.empty((nu, n * q))
+    A = np.zeros((nu, c))  # the suffix sum, from the last sample back
+    for t in range(n - 1, -1, -1):
+        for u in range(nu):
+            for j in range(c):
+                A[u, j] += b[t, u, j]
+            for k in range(q):
+                s = 0.0
+                for j in range(c):
+                    s += A[u, j] * dE_q[t, j, k]
+                Y[u, t * q + k] = s
+    return Y

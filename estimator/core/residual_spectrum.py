@@ -40,6 +40,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 #: Longest autoregressive model, in samples (1 s at 40 Hz), and the fewest samples per order.
 AR_MAX_ORDER = 40
@@ -103,21 +104,38 @@ def ar_from_autocovariance(r: np.ndarray, n: int, max_order: int = AR_MAX_ORDER,
     pmax = int(min(max_order, n // AR_SAMPLES_PER_ORDER, r.size - 1))
     if pmax < 1 or not r[0] > 0.0:
         return ARModel(np.zeros(0), float(max(r[0], 0.0)), stride)
-    a = np.zeros(0)
+    a, var = _levinson_aic(r, n, pmax)
+    return ARModel(a, float(var), stride)
+
+
+@njit(cache=True, nogil=True)
+def _levinson_aic(r: np.ndarray, n: int, pmax: int) -> tuple[np.ndarray, float]:
+    """Levinson-Durbin up to order ``pmax`` (``r[0] > 0``); the coefficients and innovation
+    variance of the order of least ``n ln var + 2 p`` (order 0 included)."""
+    a = np.zeros(pmax)
+    prev = np.zeros(pmax)
     var = r[0]
-    best = (n * np.log(var), a, var)
+    best_aic, best_p, best_var = n * np.log(var), 0, var
+    best = np.zeros(pmax)
     for p in range(1, pmax + 1):
-        k = (r[p] - a @ r[p - 1:0:-1]) / var if a.size else r[1] / var
+        acc = r[p]
+        for j in range(p - 1):  # a_1 .. a_{p-1} against r[p-1] .. r[1]
+            acc -= a[j] * r[p - 1 - j]
+        k = acc / var
         if not abs(k) < 1.0:  # round-off at a perfectly predictable series: stop there
             break
-        a = np.concatenate([a - k * a[::-1], [k]])
+        prev[:p - 1] = a[:p - 1]
+        for j in range(p - 1):
+            a[j] = prev[j] - k * prev[p - 2 - j]
+        a[p - 1] = k
         var *= 1.0 - k * k
         if not var > 0.0:
             break
         aic = n * np.log(var) + 2.0 * p
-        if aic < best[0]:
-            best = (aic, a.copy(), var)
-    return ARModel(best[1], float(best[2]), stride)
+        if aic < best_aic:
+            best_aic, best_p, best_var = aic, p, var
+            best[:p] = a[:p]
+    return best[:best_p].copy(), best_var
 
 #: Full width of the frequency smoothing of the innovations' cross-periodogram, Hz.
 COHERENCE_BANDWIDTH_HZ = 0.3
@@ -142,19 +160,72 @@ def innovation_cross_spectrum(U: np.ndarray, variances: np.ndarray, L: int, dt_s
     dt_s : the sample interval, s.
     bandwidth_hz : the smoothing width.
     """
-    n, C = U.shape
     Fu = np.fft.rfft(U, L, axis=0)  # (nf, C)
-    P = Fu[:, :, None] * np.conj(Fu[:, None, :])  # (nf, C, C), rank one per frequency
-    nf = P.shape[0]
     h = max(1, int(round(0.5 * bandwidth_hz * L * dt_s)))
-    # reflect: the periodogram of a real series is conjugate-symmetric about 0 and about L/2 (the
-    # last bin is Nyquist itself for an even L; for an odd L the mirror starts at the last bin)
-    top = np.conj(P[-2:-h - 2:-1]) if L % 2 == 0 else np.conj(P[-1:-h - 1:-1])
-    ext = np.concatenate([np.conj(P[h:0:-1]), P, top], axis=0)
-    cs = np.cumsum(ext, axis=0)
-    cs = np.concatenate([np.zeros((1, C, C), dtype=complex), cs], axis=0)
-    K = (cs[2 * h + 1:2 * h + 1 + nf] - cs[:nf]) / (2 * h + 1)
-    d = np.sqrt(np.maximum(np.real(np.einsum("fcc->fc", K)), 1e-300))
-    sd = np.sqrt(np.maximum(variances, 0.0))
-    scale = sd[None, :] / d
-    return K * scale[:, :, None] * scale[:, None, :]
+    sd = np.sqrt(np.maximum(np.asarray(variances, dtype=float), 0.0))
+    return _smoothed_coherency(np.ascontiguousarray(Fu), h, L % 2 == 0, sd)
+
+
+@njit(cache=True, nogil=True)
+def _smoothed_coherency(Fu: np.ndarray, h: int, even: bool, sd: np.ndarray) -> np.ndarray:
+    """The Daniell-smoothed cross-periodogram ``K(f) = 1/(2h+1) sum_{|g-f|<=h} Fu_g Fu_g^H``
+    (nf, C, C), reflected at zero and Nyquist (the periodogram of a real series is
+    conjugate-symmetric about 0 and about L/2: the last bin is Nyquist itself for an even ``L``;
+    for an odd one the mirror starts at the last bin), as a running sum over the window, then
+    scaled to the coherency times ``sd``."""
+    nf, C = Fu.shape
+    K = np.empty((nf, C, C), dtype=np.complex128)
+    S = np.zeros((C, C), dtype=np.complex128)
+    top = 2 * (nf - 1) if even else 2 * nf - 1
+    for g in range(-h, h + 1):
+        _add_periodogram(S, Fu, g, top, 1.0)
+    width = 2 * h + 1
+    d = np.empty(C)
+    for f in range(nf):
+        if f > 0:
+            _add_periodogram(S, Fu, f + h, top, 1.0)
+            _add_periodogram(S, Fu, f - h - 1, top, -1.0)
+        for i in range(C):
+            d[i] = np.sqrt(max(S[i, i].real / width, 1e-300))
+        for i in range(C):
+            for j in range(C):
+                K[f, i, j] = S[i, j] / width * (sd[i] / d[i]) * (sd[j] / d[j])
+    return K
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _add_periodogram(S: np.ndarray, Fu: np.ndarray, g: int, top: int, sign: float) -> None:
+    """``S += sign Fu_g Fu_g^H`` for bin ``g`` of the reflected sequence (``g < 0``: the conjugate
+    of bin ``-g``; beyond the last bin, of bin ``top - g``)."""
+    nf, C = Fu.shape
+    src = -g if g < 0 else (top - g if g >= nf else g)
+    mirrored = g < 0 or g >= nf
+    for i in range(C):
+        for j in range(C):
+            v = Fu[src, i] * np.conj(Fu[src, j])
+            S[i, j] += sign * (np.conj(v) if mirrored else v)
+
+
+@njit(cache=True, nogil=True)
+def add_spectral_factor(Y: np.ndarray, pos: np.ndarray, F: np.ndarray, w: float,
+                        factor: np.ndarray) -> None:
+    """``Y[pos[a], f, :] += w F[a, f] factor[f, :]`` in place: one channel's part of the
+    coloured-residual sandwich's factor ``Y_f = sum_c W_c F_c,f B_c(f)``
+    (:func:`estimator.uncertainty.honest_std`), channels in common parameters adding up.
+
+    Parameters
+    ----------
+    Y : (U, nf, r) complex, the maneuver's factor over its ``U`` parameters.
+    pos : (m,) each Jacobian row's parameter position in ``Y`` (repeats add up).
+    F : (m, nf) complex, the DFT of the channel's Jacobian rows on the maneuver's grid.
+    w : the channel's weight, 1/SI^2.
+    factor : (nf, r) complex, the channel's row of the residual spectrum's factor ``B_c(f)``.
+    """
+    m, nf = F.shape
+    r = factor.shape[1]
+    for a in range(m):
+        u = pos[a]
+        for f in range(nf):
+            c = w * F[a, f]
+            for k in range(r):
+                Y[u, f, k] += c * factor[f, k]
