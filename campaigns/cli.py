@@ -614,10 +614,24 @@ def build_parser() -> argparse.ArgumentParser:
                     "borderline (an existing file is never replaced)")
     mp.add_argument("--keep-only", action="store_true", help="with --out: leave the borderline ones out")
     mp.add_argument("--csv", type=Path, default=None, help="also write the table as CSV")
+    xh = ("write a small flight to calibrate, as a user's would come: three maneuvers of a target drone "
+          "(an AOA vane and a sideslip vane with biases, scale factors and delays) as CSV files, and "
+          "the problem file that names them; then run fpr calibrate DIR/uav.toml")
+    xp = sub.add_parser("example", help=xh, description=xh[0].upper() + xh[1:] + ".")
+    xp.add_argument("out", type=Path, help="the folder to write into (its example files must not exist)")
+    xp.add_argument("--seed", type=int, default=12, help="the noise's and trajectories' seed (default 12)")
     from campaigns import montecarlo_cli
 
     montecarlo_cli.add_parser(sub)
     return parser
+
+
+def _example(args: argparse.Namespace) -> int:
+    from campaigns.example import write_example
+
+    path = write_example(args.out, seed=args.seed)
+    print(f"wrote {path} and its three CSV files; calibrate them with:\n  fpr calibrate {path}")
+    return 0
 
 
 def _autopilot(args: argparse.Namespace) -> int:
@@ -724,7 +738,7 @@ def main(argv: list[str] | None = None) -> int:
     from campaigns import montecarlo_cli
 
     handlers = {"fly": _fly, "demo": _demo, "show": _show, "calibrate": _calibrate, "streams": _streams,
-                "autopilot": _autopilot, "maneuvers": _maneuvers, "export": _export,
+                "autopilot": _autopilot, "maneuvers": _maneuvers, "export": _export, "example": _example,
                 **dict.fromkeys(montecarlo_cli.COMMANDS, montecarlo_cli.run)}
     try:
         code = handlers[args.command](args)

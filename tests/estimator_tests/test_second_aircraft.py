@@ -6,8 +6,9 @@ a scale factor, and everything the workflow and its report need (Table 2's rows,
 to apportion, the reference Mach, the initial conditions' sources, the figures' channels). No
 Python names its channels.
 
-The data are made here as a user's would come: CSV files (angles in deg, rates in deg/s) and a
-problem file naming the model set. The flight is the analytic one of ``campaigns/analytic_flight.py``
+The data are made as a user's would come, by the pieces of ``fpr example``
+(``campaigns/example.py``): CSV files (angles in deg, rates in deg/s) and a problem file naming the
+model set. The flight is the analytic one of ``campaigns/analytic_flight.py``
 (states and IMU inputs that satisfy the state equations exactly): three aircraft, four maneuvers
 each, two at 500 m (Mach 0.44: the Mach 0.4 bin) and two at 8000 m (Mach 0.49: the 0.5 bin); each
 vane reads its model with the injected installation biases, fleet offset, scale factors and time
@@ -32,105 +33,22 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from campaigns.analytic_flight import analytic
+from campaigns.example import (
+    B_A_DEG,
+    B_B_DEG,
+    C_A_DEG,
+    D2R,
+    K_A,
+    K_B,
+    TAU_S,
+    uav_maneuver,
+    write_problem_file,
+)
 from estimator.io import load_problem
 from estimator.io.modelset import declarations_of
 
-D2R = math.pi / 180.0
-RATE_HZ = 50.0
-DURATION_S = 20.0
-IMU_M = np.array([0.1, 0.0, 0.05])      # the IMU sits at the CG: the analytic specific force is the CG's
-SENSORS_M = {"aoa_vane": np.array([1.6, -0.25, 0.05]), "sideslip_vane": np.array([1.9, 0.0, -0.10])}
-#: the injected calibration (deg where angles): installation biases per aircraft, the fleet offset
-B_A_DEG = {"U1": 0.4, "U2": -0.2, "U3": 0.1}
-B_B_DEG = {"U1": -0.3, "U2": 0.25, "U3": 0.0}
-C_A_DEG = 0.3
-K_A, K_B = 0.05, -0.04
-TAU_S = {"tas": 0.05, "a": 0.04, "b": 0.02}
-NOISE = {"phi": 0.03 * D2R, "theta": 0.03 * D2R, "psi": 0.03 * D2R, "tas": 0.2, "h": 1.0,
-         "alpha_v": 0.05 * D2R, "beta_v": 0.05 * D2R}
 ALTITUDES_M = (500.0, 8000.0)
 Z_MAX = 3.0
-
-
-def _speed_of_sound(h_m):
-    return np.sqrt(1.4 * 287.053 * (288.15 - 0.0065 * h_m))
-
-
-def _flow_at(states, omega, sensor):
-    """alpha and flank at a sensor: V + omega x (r_sensor - r_cg), the CG at the IMU."""
-    v = states[:, :3] + np.cross(omega, SENSORS_M[sensor] - IMU_M)
-    return np.arctan2(v[:, 2], v[:, 0]), np.arctan2(v[:, 1], v[:, 0])
-
-
-def _maneuver(rng, h0_m, t0_s, ac):
-    """One maneuver's file contents (SI) and its true Mach."""
-    amp = {k: rng.uniform(0.6, 1.2) * base for k, base in
-           (("au", 5.0), ("av", 3.0), ("aw", 4.0), ("aphi", 0.5), ("ath", 0.2))}
-    inputs, states = analytic(amp)
-    t = np.arange(int(round(DURATION_S * RATE_HZ)) + 1) / RATE_HZ
-    tt = t + t0_s                                       # a phase of its own
-    acc, om = inputs(tt)
-    x = states(tt, h0_m)
-
-    def at(tau):                                         # the flow and speed a sensor saw tau earlier
-        xs, (_, oms) = states(tt - tau, h0_m), inputs(tt - tau)
-        return xs, oms
-
-    xa, oma = at(TAU_S["a"])
-    xb, omb = at(TAU_S["b"])
-    xt, _ = at(TAU_S["tas"])
-    alpha_a, _ = _flow_at(xa, oma, "aoa_vane")
-    _, flank_b = _flow_at(xb, omb, "sideslip_vane")
-    tas = np.linalg.norm(x[:, :3], axis=1)
-    clean = {
-        "phi": x[:, 3], "theta": x[:, 4], "psi": x[:, 5], "h": x[:, 6],
-        "tas": np.linalg.norm(xt[:, :3], axis=1),
-        "alpha_v": (1 + K_A) * alpha_a + (C_A_DEG + B_A_DEG[ac]) * D2R,
-        "beta_v": (1 + K_B) * flank_b + B_B_DEG[ac] * D2R,
-    }
-    meas = {k: v + NOISE[k] * rng.standard_normal(v.shape) for k, v in clean.items()}
-    imu_bias = rng.normal(0.0, [0.05, 0.05, 0.05, 0.002, 0.002, 0.002])
-    mach = tas / _speed_of_sound(x[:, 6])
-    df = pd.DataFrame({
-        "time": t,
-        "AX": acc[:, 0] + imu_bias[0], "AY": acc[:, 1] + imu_bias[1], "AZ": acc[:, 2] + imu_bias[2],
-        "P": (om[:, 0] + imu_bias[3]) / D2R, "Q": (om[:, 1] + imu_bias[4]) / D2R,
-        "R": (om[:, 2] + imu_bias[5]) / D2R,
-        "PHI": meas["phi"] / D2R, "THETA": meas["theta"] / D2R, "PSI": meas["psi"] / D2R,
-        "TAS": meas["tas"], "HGT": meas["h"], "AOA": meas["alpha_v"] / D2R, "AOS": meas["beta_v"] / D2R,
-        "MACH": mach,
-    })
-    return df, float(mach.mean())
-
-
-PROBLEM = """title = "UAV fleet, hand-made data"
-model = "uav_example"
-
-[sensors]
-imu = [{imu}]
-aoa_vane = [{aoa}]
-sideslip_vane = [{aos}]
-
-{aircraft}
-[columns]
-t = {{ column = "time", unit = "s" }}
-ax = {{ column = "AX", unit = "m/s^2" }}
-ay = {{ column = "AY", unit = "m/s^2" }}
-az = {{ column = "AZ", unit = "m/s^2" }}
-p = {{ column = "P", unit = "deg/s" }}
-q = {{ column = "Q", unit = "deg/s" }}
-r = {{ column = "R", unit = "deg/s" }}
-phi = {{ column = "PHI", unit = "deg" }}
-theta = {{ column = "THETA", unit = "deg" }}
-psi = {{ column = "PSI", unit = "deg" }}
-tas = {{ column = "TAS", unit = "m/s" }}
-h = {{ column = "HGT", unit = "m" }}
-alpha_v = {{ column = "AOA", unit = "deg" }}
-beta_v = {{ column = "AOS", unit = "deg" }}
-mach = {{ column = "MACH", unit = "1" }}
-
-{files}"""
 
 
 @pytest.fixture(scope="module")
@@ -142,17 +60,10 @@ def uav_problem_file(tmp_path_factory):
     for ac in B_A_DEG:
         for k, h0 in enumerate(ALTITUDES_M * 2):
             name = f"{ac}_{k}"
-            df, machs[name] = _maneuver(rng, h0, t0_s=7.0 * k + 3.0 * int(ac[1]), ac=ac)
+            df, machs[name] = uav_maneuver(rng, h0, t0_s=7.0 * k + 3.0 * int(ac[1]), aircraft=ac)
             df.to_csv(folder / f"{name}.csv", index=False)
-            files.append(f'[[files]]\npath = "{name}.csv"\naircraft = "{ac}"\n')
-    fmt = ", ".join
-    text = PROBLEM.format(
-        imu=fmt(map(str, IMU_M)), aoa=fmt(map(str, SENSORS_M["aoa_vane"])),
-        aos=fmt(map(str, SENSORS_M["sideslip_vane"])),
-        aircraft="".join(f"[aircraft.{ac}]\nr_cg_body_m = [{fmt(map(str, IMU_M))}]\n" for ac in B_A_DEG),
-        files="\n".join(files))
-    path = folder / "uav.toml"
-    path.write_text(text)
+            files.append((f"{name}.csv", ac))
+    path = write_problem_file(folder / "uav.toml", files, "UAV fleet, hand-made data")
     return path, machs
 
 
