@@ -242,7 +242,7 @@ def _begin(run: _Run) -> tuple[np.ndarray, Structure, list] | EstimationResult:
     if not cnt.any():
         raise ValueError(f"{problem.source}: no channel has data in any maneuver")
     if staged:
-        ended, stage_notes = staged_start(problem, theta, run.requested, opt)
+        ended, stage_notes = staged_start(problem, theta, run.requested, opt, model)
         run.notes += stage_notes
         try:
             # the stages fit subsets of the channels: an implicit channel left out may be outside
