@@ -560,12 +560,13 @@ class FilterErrorLikelihood:
         return N
 
     # --- the solver's hooks around the iterations (estimator.likelihood.Likelihood) ------------
-    def before_iterations(self, theta: np.ndarray, st: Structure, opt: SolverOptions) -> Prelude:
+    def before_iterations(self, theta: np.ndarray, st: Structure, opt: SolverOptions,
+                          evals: Evaluation | None = None) -> Prelude:
         """The maneuvers that get wind states (:meth:`turbulent_maneuvers`), then, where some have
         none, a few filter-error iterations and the maneuvers without wind states whose
         innovations are turbulent given them too (at once, not at the solution: 70 maneuvers, 4
         missed by the output-error fit, 18 filter-error iterations to a solution, 7 more after
-        widening)."""
+        widening). ``evals``: unused (the method evaluates with the wind sensitivities)."""
         theta, turbulent, n_oem = self.turbulent_maneuvers(theta, st, opt)
         lik = self if turbulent is None else FilterErrorLikelihood(self.model, self.wind, turbulent)
         notes, history = [], []

@@ -8,8 +8,9 @@ The solver (:func:`estimator.solver.estimate`) chooses a likelihood once, by
   the cost needs of an evaluation), ``relax`` (the noise statistics at an iterate, held through
   its step), ``cost`` and ``normal`` (the normal equations);
 - hooks around the iterations: ``before_iterations`` (what the method does first, and the
-  likelihood to iterate with), ``screen_normal`` (the information the identifiability screen at a
-  solution judges by) and ``after_iterations`` (what it does once the iterations converged);
+  likelihood to iterate with; given the caller's evaluation at the start where it has one),
+  ``screen_normal`` (the information the identifiability screen at a solution judges by) and
+  ``after_iterations`` (what it does once the iterations converged);
 - at the estimate: ``at_estimate`` (its noise statistics, cost and normal equations, a
   :class:`Fit`), ``deviations``, ``findings`` (the method's own), ``predictions`` (what the
   fit-quality diagnostics judge the measurements against) and ``result_fields`` (what it adds to
@@ -140,7 +141,8 @@ class Likelihood(Protocol):
     def normal(self, st: Structure, ev: Evaluation, noise) -> NormalEquations: ...
 
     # --- around them ---------------------------------------------------------------------------
-    def before_iterations(self, theta: np.ndarray, st: Structure, opt: SolverOptions) -> Prelude: ...
+    def before_iterations(self, theta: np.ndarray, st: Structure, opt: SolverOptions,
+                          evals: Evaluation | None = None) -> Prelude: ...
 
     def screen_normal(self, st: Structure, ev: Evaluation
                       ) -> Callable[[Structure], NormalEquations] | None: ...
@@ -185,8 +187,11 @@ class OutputErrorLikelihood:
     def normal(self, st: Structure, ev: Evaluation, noise):
         return build_normal(st, ev, noise)
 
-    def before_iterations(self, theta: np.ndarray, st: Structure, opt: SolverOptions) -> Prelude:
-        return Prelude(self, theta, self.evaluate(theta, True), 0, [], [])
+    def before_iterations(self, theta: np.ndarray, st: Structure, opt: SolverOptions,
+                          evals: Evaluation | None = None) -> Prelude:
+        """Nothing to do first: the iterations start at ``theta``, with ``evals`` (the model there
+        with the Jacobian, as :meth:`evaluate` gives it) where the caller has it."""
+        return Prelude(self, theta, self.evaluate(theta, True) if evals is None else evals, 0, [], [])
 
     def screen_normal(self, st: Structure, ev: Evaluation) -> None:
         return None  # the screen's own output-error normal equations

@@ -208,10 +208,10 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
     began = _begin(run)
     if isinstance(began, EstimationResult):
         return began
-    theta, st, holds = began
+    theta, st, holds, evals = began
     try:
         lik = _likelihood(model, opt)
-        pre = lik.before_iterations(theta, st, opt)
+        pre = lik.before_iterations(theta, st, opt, evals)
         run.spent(pre.iterations, pre.history, pre.notes)
         lik, it, st, holds = _rounds(run, pre.likelihood, pre.theta, pre.evals, st, holds)
         post = lik.after_iterations(it, st, opt)
@@ -221,10 +221,11 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
     return _finish(run, post.likelihood, post.it, st, holds, post.moved)
 
 
-def _begin(run: _Run) -> tuple[np.ndarray, Structure, list] | EstimationResult:
+def _begin(run: _Run) -> tuple[np.ndarray, Structure, list, Evaluation | None] | EstimationResult:
     """Where the iterations start (the staged start's estimate, or the given values), the free
-    parameters the screen before them leaves and what it holds; a failed result where the model
-    cannot be evaluated at the start or the data determine no free parameter."""
+    parameters the screen before them leaves, what it holds and the model there with the Jacobian
+    (None if the screen moved a parameter back to its start value); a failed result where the
+    model cannot be evaluated at the start or the data determine no free parameter."""
     problem, model, opt, t0, start = run.problem, run.model, run.opt, run.t0, run.start
     nch = len(problem.channels)
     theta = start.copy()
@@ -264,8 +265,11 @@ def _begin(run: _Run) -> tuple[np.ndarray, Structure, list] | EstimationResult:
                        + "; ".join(f"{h.kind}: {', '.join(h.confounding.parameters[:12])}" for h in holds),
                        "fly maneuvers that excite the parameters asked for, or fix them in the problem file",
                        Status.UNDETERMINED)
+    before = theta.copy()
     run.notes += _restore_held(model, theta, start, run.requested & ~st.free)
-    return theta, st, holds
+    # the evaluation at the start with the Jacobian, for the iterations (unless the screen put a
+    # parameter back at its start value)
+    return theta, st, holds, (evals if np.array_equal(theta, before) else None)
 
 
 def _rounds(run: _Run, lik: Likelihood, theta: np.ndarray, evals: Evaluation, st: Structure, holds: list):
