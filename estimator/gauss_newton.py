@@ -259,12 +259,15 @@ def iterate(model: Model, theta: np.ndarray, st: Structure, opt: SolverOptions,
 
 
 def staged_start(problem: Problem, theta: np.ndarray, free: np.ndarray, opt: SolverOptions,
-                 model: Model | None = None) -> tuple[np.ndarray, list[str]]:
+                 model: Model | None = None) -> tuple[np.ndarray, list[str], Evaluation | None]:
     """Run the stages of :func:`estimator.start.staged_plan` from ``theta``; returns the last
-    stage's estimate and one line per stage. ``model``: the whole problem's, which a stage with
-    every channel uses (a model of its own would hold the data and the sensitivities' scratch a
-    second time: at the paper's bin size, 70 maneuvers, about 100 MB at the start's peak)."""
+    stage's estimate, one line per stage and ``model`` evaluated there with the Jacobian where
+    the last stage that moved it ran on ``model`` (else None). ``model``: the whole problem's,
+    which a stage with every channel uses (a model of its own would hold the data and the
+    sensitivities' scratch a second time: at the paper's bin size, 70 maneuvers, about 100 MB at
+    the start's peak)."""
     notes = []
+    ended: Evaluation | None = None
     every = tuple(range(len(problem.channels)))
     for stage in staged_plan(problem, free):
         if stage.channels == every and model is not None:
@@ -285,8 +288,9 @@ def staged_start(problem: Problem, theta: np.ndarray, free: np.ndarray, opt: Sol
             continue
         it = gauss_newton(model_k, theta, st, opt, ev, label=f"start ({stage.name}) ")
         theta = it.theta
+        ended = it.evals if model_k is model else None  # the full model at theta, with the Jacobian
         notes.append(f"start stage {stage.name}: {len(stage.channels)} channels, {int(st.free.sum())} "
                      f"free, {it.iterations} iterations, {it.status.name.lower()}")
         if opt.verbose:
             print(notes[-1])
-    return theta, notes
+    return theta, notes, ended

@@ -243,12 +243,12 @@ def _begin(run: _Run) -> tuple[np.ndarray, Structure, list, Evaluation | None] |
     if not cnt.any():
         raise ValueError(f"{problem.source}: no channel has data in any maneuver")
     if staged:
-        ended, stage_notes = staged_start(problem, theta, run.requested, opt, model)
+        ended, stage_notes, ended_evals = staged_start(problem, theta, run.requested, opt, model)
         run.notes += stage_notes
         try:
             # the stages fit subsets of the channels: an implicit channel left out may be outside
             # its domain where they ended; then the full estimation starts from the given values
-            evals = evaluate(model, ended, True)
+            evals = evaluate(model, ended, True) if ended_evals is None else ended_evals
             theta = ended
         except ModelEvaluationError as exc:
             run.notes.append(f"the staged start is left: the full model cannot be evaluated where it "
