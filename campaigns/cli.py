@@ -618,7 +618,8 @@ def build_parser() -> argparse.ArgumentParser:
           "(an AOA vane and a sideslip vane with biases, scale factors and delays) as CSV files, and "
           "the problem file that names them; then run fpr calibrate DIR/uav.toml")
     xp = sub.add_parser("example", help=xh, description=xh[0].upper() + xh[1:] + ".")
-    xp.add_argument("out", type=Path, help="the folder to write into (its example files must not exist)")
+    xp.add_argument("out", type=Path, metavar="DIR",
+                    help="the folder to write into (its example files must not exist)")
     xp.add_argument("--seed", type=int, default=12, help="the noise's and trajectories' seed (default 12)")
     from campaigns import montecarlo_cli
 

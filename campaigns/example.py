@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from campaigns.analytic_flight import analytic
+from synth.airdata_computer import GAMMA, ISA_LAPSE_KPM, ISA_T0_K, R_AIR_JPKGK
 
 D2R = math.pi / 180.0
 RATE_HZ = 50.0
@@ -35,8 +36,8 @@ B_B_DEG = {"U1": -0.3, "U2": 0.25, "U3": 0.0}
 C_A_DEG = 0.3
 K_A, K_B = 0.05, -0.04
 TAU_S = {"tas": 0.05, "a": 0.04, "b": 0.02}
-#: each channel's white noise, SI
-NOISE = {"phi": 0.03 * D2R, "theta": 0.03 * D2R, "psi": 0.03 * D2R, "tas": 0.2, "h": 1.0,
+#: each channel's white noise, SI (rad for the angles, m/s, m)
+NOISE_SI = {"phi": 0.03 * D2R, "theta": 0.03 * D2R, "psi": 0.03 * D2R, "tas": 0.2, "h": 1.0,
          "alpha_v": 0.05 * D2R, "beta_v": 0.05 * D2R}
 
 PROBLEM = """title = "{title}"
@@ -70,7 +71,7 @@ mach = {{ column = "MACH", unit = "1" }}
 
 def speed_of_sound_mps(h_m: np.ndarray) -> np.ndarray:
     """The standard atmosphere's speed of sound below 11 km, m/s, at altitude ``h_m`` (m)."""
-    return np.sqrt(1.4 * 287.053 * (288.15 - 0.0065 * h_m))
+    return np.sqrt(GAMMA * R_AIR_JPKGK * (ISA_T0_K - ISA_LAPSE_KPM * np.asarray(h_m, dtype=float)))
 
 
 def _flow_at(states: np.ndarray, omega_rps: np.ndarray, sensor: str) -> tuple[np.ndarray, np.ndarray]:
@@ -119,7 +120,7 @@ def uav_maneuver(rng: np.random.Generator, h0_m: float, t0_s: float, aircraft: s
         "alpha_v": (1 + K_A) * alpha_a + (C_A_DEG + B_A_DEG[aircraft]) * D2R,
         "beta_v": (1 + K_B) * flank_b + B_B_DEG[aircraft] * D2R,
     }
-    meas = {k: v + NOISE[k] * rng.standard_normal(v.shape) for k, v in clean.items()}
+    meas = {k: v + NOISE_SI[k] * rng.standard_normal(v.shape) for k, v in clean.items()}
     imu_bias = rng.normal(0.0, [0.05, 0.05, 0.05, 0.002, 0.002, 0.002])
     mach = tas / speed_of_sound_mps(x[:, 6])
     df = pd.DataFrame({
@@ -134,9 +135,11 @@ def uav_maneuver(rng: np.random.Generator, h0_m: float, t0_s: float, aircraft: s
     return df, float(mach.mean())
 
 
-def write_problem_file(path: Path, files: list[tuple[str, str]], title: str) -> Path:
+def write_problem_file(path: Path, files: list[tuple[str, str]], title: str, exclusive: bool = False
+                       ) -> Path:
     """The problem file naming ``files`` (``(csv name, aircraft)``, relative to it) with the
-    drone's sensor positions, CG and column map; returns ``path``."""
+    drone's sensor positions, CG and column map; returns ``path`` (``exclusive``: refused if it
+    exists)."""
     fmt = ", ".join
     aircraft = dict.fromkeys(ac for _, ac in files)
     text = PROBLEM.format(
@@ -144,12 +147,14 @@ def write_problem_file(path: Path, files: list[tuple[str, str]], title: str) -> 
         aos=fmt(map(str, SENSORS_M["sideslip_vane"])),
         aircraft="".join(f"[aircraft.{ac}]\nr_cg_body_m = [{fmt(map(str, IMU_M))}]\n" for ac in aircraft),
         files="\n".join(f'[[files]]\npath = "{name}"\naircraft = "{ac}"\n' for name, ac in files))
-    path.write_text(text)
+    with open(path, "x" if exclusive else "w") as f:
+        f.write(text)
     return path
 
 
-#: What :func:`write_example` writes (and only ever replaces).
-EXAMPLE_FILES = ("uav.toml", "U1_0.csv", "U1_1.csv", "U1_2.csv")
+#: The example's maneuver files and everything :func:`write_example` writes (never replacing a file).
+EXAMPLE_CSV = tuple(f"U1_{k}.csv" for k in range(3))
+EXAMPLE_FILES = ("uav.toml", *EXAMPLE_CSV)
 
 
 def write_example(folder: str | Path, seed: int = 12, duration_s: float = 14.0) -> Path:
@@ -163,17 +168,18 @@ def write_example(folder: str | Path, seed: int = 12, duration_s: float = 14.0) 
     duration_s : each maneuver's length, s.
     """
     out = Path(folder)
-    taken = [n for n in EXAMPLE_FILES if (out / n).exists()]
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"{out} is a file; give a folder (new or existing) for the example")
+    taken = [n for n in EXAMPLE_FILES if (out / n).exists() or (out / n).is_symlink()]
     if taken:
         raise FileExistsError(f"{out}: {', '.join(taken)} already exist(s); the example writes only "
                               "into a folder without them: give another folder, or remove them")
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     files = []
-    for k in range(3):
-        name = f"U1_{k}.csv"
+    for k, name in enumerate(EXAMPLE_CSV):
         df, _ = uav_maneuver(rng, 500.0, t0_s=7.0 * k + 3.0, aircraft="U1", duration_s=duration_s)
-        df.to_csv(out / name, index=False)
+        df.to_csv(out / name, index=False, mode="x")  # "x": never through a file that appeared since
         files.append((name, "U1"))
-    return write_problem_file(out / "uav.toml", files,
-                              "Example: a target drone's vanes, three maneuvers (fpr example)")
+    title = "Example: a target drone's vanes, three maneuvers (fpr example)"
+    return write_problem_file(out / "uav.toml", files, title, exclusive=True)

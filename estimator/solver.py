@@ -208,10 +208,11 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
     began = _begin(run)
     if isinstance(began, EstimationResult):
         return began
-    theta, st, holds, evals = began
+    theta, st, holds, start_evals = began
     try:
         lik = _likelihood(model, opt)
-        pre = lik.before_iterations(theta, st, opt, evals)
+        pre = lik.before_iterations(theta, st, opt, start_evals)
+        del start_evals  # held by pre where the method uses it; not beside the filter-error one's own
         run.spent(pre.iterations, pre.history, pre.notes)
         lik, it, st, holds = _rounds(run, pre.likelihood, pre.theta, pre.evals, st, holds)
         post = lik.after_iterations(it, st, opt)

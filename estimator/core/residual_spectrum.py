@@ -110,8 +110,20 @@ def ar_from_autocovariance(r: np.ndarray, n: int, max_order: int = AR_MAX_ORDER,
 
 @njit(cache=True, nogil=True)
 def _levinson_aic(r: np.ndarray, n: int, pmax: int) -> tuple[np.ndarray, float]:
-    """Levinson-Durbin up to order ``pmax`` (``r[0] > 0``); the coefficients and innovation
-    variance of the order of least ``n ln var + 2 p`` (order 0 included)."""
+    """Levinson-Durbin up to order ``pmax``, the order chosen by Akaike's criterion.
+
+    Parameters
+    ----------
+    r : (>= pmax + 1,) the autocovariance at lags 0, 1, ..., ``r[0] > 0``, SI^2.
+    n : the number of samples it was estimated from.
+    pmax : the longest model tried.
+
+    Returns
+    -------
+    The coefficients ``a_1 .. a_p`` of the order ``p`` (0 included) of least ``n ln var_p + 2 p``
+    and that order's innovation variance, SI^2; the recursion stops early where round-off makes
+    a reflection coefficient reach 1 or the variance vanish.
+    """
     a = np.zeros(pmax)
     prev = np.zeros(pmax)
     var = r[0]
@@ -161,18 +173,32 @@ def innovation_cross_spectrum(U: np.ndarray, variances: np.ndarray, L: int, dt_s
     bandwidth_hz : the smoothing width.
     """
     Fu = np.fft.rfft(U, L, axis=0)  # (nf, C)
-    h = max(1, int(round(0.5 * bandwidth_hz * L * dt_s)))
+    # no wider than the spectrum itself: the reflection mirrors the record's own bins only
+    h = min(max(1, int(round(0.5 * bandwidth_hz * L * dt_s))), Fu.shape[0] - 1)
     sd = np.sqrt(np.maximum(np.asarray(variances, dtype=float), 0.0))
     return _smoothed_coherency(np.ascontiguousarray(Fu), h, L % 2 == 0, sd)
 
 
 @njit(cache=True, nogil=True)
 def _smoothed_coherency(Fu: np.ndarray, h: int, even: bool, sd: np.ndarray) -> np.ndarray:
-    """The Daniell-smoothed cross-periodogram ``K(f) = 1/(2h+1) sum_{|g-f|<=h} Fu_g Fu_g^H``
-    (nf, C, C), reflected at zero and Nyquist (the periodogram of a real series is
-    conjugate-symmetric about 0 and about L/2: the last bin is Nyquist itself for an even ``L``;
-    for an odd one the mirror starts at the last bin), as a running sum over the window, then
-    scaled to the coherency times ``sd``."""
+    """The Daniell-smoothed cross-periodogram, scaled to the coherency times the deviations.
+
+    ``K(f) = 1/(2h+1) sum_{|g-f|<=h} Fu_g Fu_g^H``, reflected at zero and Nyquist (the periodogram
+    of a real series is conjugate-symmetric about 0 and about L/2: the last bin is Nyquist itself
+    for an even ``L``; for an odd one the mirror starts at the last bin), as a running sum over
+    the window; then ``K_cd sd_c sd_d / sqrt(K_cc K_dd)``.
+
+    Parameters
+    ----------
+    Fu : (nf, C) complex, the innovations' DFT (length ``L``, ``nf = L // 2 + 1``), SI.
+    h : the window's half width in bins, ``0 <= h <= nf - 1``.
+    even : whether ``L`` is even.
+    sd : (C,) each channel's innovation standard deviation, SI.
+
+    Returns
+    -------
+    (nf, C, C) complex, SI^2: positive semi-definite per frequency, its diagonal ``sd^2``.
+    """
     nf, C = Fu.shape
     K = np.empty((nf, C, C), dtype=np.complex128)
     S = np.zeros((C, C), dtype=np.complex128)

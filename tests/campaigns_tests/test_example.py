@@ -55,3 +55,6 @@ def test_the_same_seed_writes_the_same_bytes_and_a_taken_folder_is_refused(examp
     assert main(["example", str(tmp_path), "--seed", "3"]) == 2
     assert "already exist" in capsys.readouterr().err
     assert {n: (tmp_path / n).read_bytes() for n in EXAMPLE_FILES} == before
+    # a file where the folder should be: refused, saying what to give instead
+    assert main(["example", str(tmp_path / "uav.toml")]) == 2
+    assert "give a folder" in capsys.readouterr().err

@@ -89,16 +89,18 @@ def _cross_spectrum_reference(U, variances, L, dt_s, bandwidth_hz=0.3):
     return K * scale[:, :, None] * scale[:, None, :]
 
 
-@pytest.mark.parametrize("L", [256, 255])  # the Nyquist bin itself (even) or not (odd)
-def test_cross_spectrum_running_window_matches_the_cumulative_sum(L):
+# the Nyquist bin itself (even L) or not (odd); a window of one bin each side (dt 0.025 s) or of
+# four (0.1 s), reflected over several bins at both ends
+@pytest.mark.parametrize("L, dt_s", [(256, 0.025), (255, 0.025), (256, 0.1), (255, 0.1)])
+def test_cross_spectrum_running_window_matches_the_cumulative_sum(L, dt_s):
     rng = np.random.default_rng(3)
     n = 120
     common = np.convolve(rng.normal(size=n + 9), np.ones(10) / 10, mode="valid")
     U = rng.normal(size=(n, 3)) + common[:, None] * np.array([1.0, 0.5, -0.8])
     U[::7, 2] = 0.0  # a channel's missing samples are zeros of its series
     var = np.array([1.2, 0.9, 1.5])
-    K = innovation_cross_spectrum(U, var, L, 0.025)
-    ref = _cross_spectrum_reference(U, var, L, 0.025)
+    K = innovation_cross_spectrum(U, var, L, dt_s)
+    ref = _cross_spectrum_reference(U, var, L, dt_s)
     assert K.shape == ref.shape == (L // 2 + 1, 3, 3)
     # a running sum over a few hundred bins: its round-off relative to the largest bin
     assert _close(K, ref, 1e-11), "the smoothed cross-periodogram differs beyond round-off"
