@@ -136,7 +136,8 @@ def _levinson_aic(r: np.ndarray, n: int, pmax: int) -> tuple[np.ndarray, float]:
         k = acc / var
         if not abs(k) < 1.0:  # round-off at a perfectly predictable series: stop there
             break
-        prev[:p - 1] = a[:p - 1]
+        for j in range(p - 1):  # loops, not slice assignments: no shape-check message to compile
+            prev[j] = a[j]
         for j in range(p - 1):
             a[j] = prev[j] - k * prev[p - 2 - j]
         a[p - 1] = k
@@ -146,7 +147,8 @@ def _levinson_aic(r: np.ndarray, n: int, pmax: int) -> tuple[np.ndarray, float]:
         aic = n * np.log(var) + 2.0 * p
         if aic < best_aic:
             best_aic, best_p, best_var = aic, p, var
-            best[:p] = a[:p]
+            for j in range(p):
+                best[j] = a[j]
     return best[:best_p].copy(), best_var
 
 #: Full width of the frequency smoothing of the innovations' cross-periodogram, Hz.
