@@ -24,15 +24,15 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 import numpy as np
 import pandas as pd
-from matplotlib import colormaps
-from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
+
+if TYPE_CHECKING:  # matplotlib is imported where a figure is drawn: a report without plots needs none
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 __all__ = [
     "Banner",
@@ -73,6 +73,9 @@ def _new_figure(width_in: float, height_in: float) -> Figure:
     ----------
     width_in, height_in : figure size [inch].
     """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(width_in, height_in), layout="constrained")
     FigureCanvasAgg(fig)
     return fig
@@ -249,6 +252,9 @@ def figure_bias_vs_mach(bias: pd.DataFrame, reference_mach: float | None = None,
     aircraft = list(dict.fromkeys(b["aircraft"]))
     mach = b["mach"].to_numpy(dtype=float)
     width = 0.25 * _min_spacing(mach)
+    from matplotlib import colormaps
+    from matplotlib.lines import Line2D
+
     colors = colormaps["tab10"]
     with_truth = _has_values(b, "true_mean_bias_deg")
 
@@ -415,6 +421,9 @@ def figure_table_updates(updates: pd.DataFrame, *, max_columns: int = 3) -> Figu
         raise ValueError(f"table updates: gear must be 'up' or 'down', got {bad_gear}")
     tables = list(dict.fromkeys(u["table"]))
     machs = np.sort(u["mach"].astype(float).unique())
+    from matplotlib import colormaps
+    from matplotlib.lines import Line2D
+
     # one colour per Mach shared by every subplot; the colormap's pale yellow end is left out
     cmap = colormaps["viridis"]
     color = {m: cmap(0.85 * k / max(len(machs) - 1, 1)) for k, m in enumerate(machs)}

@@ -66,3 +66,15 @@ def test_the_options_keep_their_old_homes():
     from estimator import declarations
     assert (Declarations, InitialConditionSources, Requirement) == (
         declarations.Declarations, declarations.InitialConditionSources, declarations.Requirement)
+
+
+def test_the_calibration_front_loads_matplotlib_only_to_draw():
+    """``calibrate`` and the report's tables need no matplotlib: a run without plots (``--no-plots``,
+    ``[report] plots = false``, a Monte Carlo worker) does not pay for importing it; drawing a
+    figure imports it."""
+    code = "import estimator.calibration, estimator.report, estimator.workflow, estimator.plots"
+    assert not [m for m in _loaded_after(code) if m.startswith("matplotlib")]
+    drawn = _loaded_after(code + "\nimport pandas as pd\nfrom estimator.report import figure_bias_vs_mach\n"
+                          "figure_bias_vs_mach(pd.DataFrame({'mach': [0.5], 'aircraft': ['A'], "
+                          "'mean_bias_deg': [0.1], 'std_deg': [0.01]}))")
+    assert "matplotlib" in drawn
