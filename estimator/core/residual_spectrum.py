@@ -221,7 +221,7 @@ def _smoothed_coherency(Fu: np.ndarray, h: int, even: bool, sd: np.ndarray) -> n
     return K
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _add_periodogram(S: np.ndarray, Fu: np.ndarray, g: int, top: int, sign: float) -> None:
     """``S += sign Fu_g Fu_g^H`` for bin ``g`` of the reflected sequence (``g < 0``: the conjugate
     of bin ``-g``; beyond the last bin, of bin ``top - g``)."""
