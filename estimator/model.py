@@ -519,6 +519,17 @@ class Model:
         _, S = integrate_many(lay.inputs, values[lay.state_idx], self.problem.g_mps2, sensitivities=True)
         return [S[lay.seg[i]:lay.seg[i + 1]] for i in range(len(lay.ks))]
 
+    def last_sensitivities(self, maneuvers: tuple[int, ...]) -> list[np.ndarray]:
+        """The sensitivities ``dX/d(x0, IMU biases)`` (N_k, 7, 13) per maneuver that the last
+        :meth:`evaluate_all` with the Jacobian of exactly this maneuver set integrated: views of
+        its scratch, valid until the set is evaluated again, forgotten or its scratch released
+        (what :meth:`state_sensitivities` would integrate once more)."""
+        lay = self._layouts.get(tuple(int(k) for k in maneuvers))
+        if lay is None or lay.S is None:
+            raise ValueError(f"maneuvers {maneuvers}: not evaluated with the Jacobian as a set; call "
+                             "evaluate_all(values, jacobian=True, maneuvers=...) first")
+        return [lay.S[lay.seg[i]:lay.seg[i + 1]] for i in range(len(lay.ks))]
+
     def evaluate(self, values: np.ndarray, k: int, jacobian: bool = True) -> ManeuverEval:
         """Outputs (and Jacobian blocks) of every channel present in maneuver ``k``."""
         ev = self.evaluate_all(values, jacobian, maneuvers=(k,))

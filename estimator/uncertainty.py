@@ -203,6 +203,19 @@ class _ChunkMiddles:
                     self.held[k].append((ce.channel, pos, F))
         ce.JT = None  # used once: do not hold every channel's Jacobian at the same time
 
+    def take_increments(self, model: Model, chunk: tuple[int, ...], imu_psd: dict | None) -> None:
+        """The IMU noise's input increments (scaled by ``Q^1/2``) of the chunk's maneuvers with IMU
+        noise, from the state sensitivities the chunk's evaluation with the Jacobian integrated
+        (``imu_psd``: aircraft -> (6,) white-noise densities, SI^2 s; NaN: unknown, left out)."""
+        if not self.B:
+            return
+        p = model.problem
+        for k, Sk in zip(chunk, model.last_sensitivities(chunk), strict=True):
+            if k in self.B:
+                m = p.maneuvers[k]
+                q = np.sqrt(np.nan_to_num(imu_psd[m.aircraft]) / m.dt_s)
+                self.dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
+
     def reduce(self, chunk: tuple[int, ...], problem: Problem, N: NormalEquations, Sinv: np.ndarray,
                Ainv: list[np.ndarray], Cp: NormalEquations | None) -> None:
         """Add each maneuver's coloured middle to the shared ``C`` and its IMU noise's to ``Cp``
@@ -263,24 +276,14 @@ class _ChunkMiddles:
         return middle, imu
 
 
-def _chunk_middles(model: Model, theta: np.ndarray, chunk: tuple[int, ...], imu_psd: dict | None,
-                   shared: _Shared) -> _ChunkMiddles:
-    """A chunk's empty accumulators, with its IMU noise's input increments computed."""
+def _chunk_middles(chunk: tuple[int, ...], imu_psd: dict | None, shared: _Shared) -> _ChunkMiddles:
+    """A chunk's empty accumulators: each channel's spectra (or, without the cross-channel terms,
+    its middle) and, for the maneuvers with IMU noise, each channel's parts of it; the input
+    increments follow the chunk's evaluation (:meth:`_ChunkMiddles.take_increments`)."""
     opt = shared.opt
-    B: dict[int, list] = {}
-    dEq: dict[int, np.ndarray] = {}
     imu_chunk = tuple(k for k in chunk if opt.imu_maneuvers is None or opt.imu_maneuvers[k])
-    if imu_psd is not None and imu_chunk:
-        p = model.problem
-        for k, Sk in zip(imu_chunk, model.state_sensitivities(theta, imu_chunk), strict=True):
-            m = p.maneuvers[k]
-            q = np.sqrt(np.nan_to_num(imu_psd[m.aircraft]) / m.dt_s)  # unknown: left out
-            dEq[k] = input_increments(Sk[:, :, :7], Sk[:, :, 7:]) * q[None, None, :]
-            B[k] = []  # each channel's J (its weight beside it) and J_IC, summed in reduce
-        if imu_chunk != chunk:  # the chunk's own layout is evaluated next (honest_std forgets it)
-            model.forget(imu_chunk)
-    # each channel's spectra (or, without the cross-channel terms, its middle), for reduce
-    return _ChunkMiddles(shared, {k: [] for k in chunk}, B, dEq)
+    B: dict[int, list] = {k: [] for k in imu_chunk} if imu_psd is not None else {}
+    return _ChunkMiddles(shared, {k: [] for k in chunk}, B, {})
 
 
 def _floored(std_crb: np.ndarray, sandwiches: tuple, glob: np.ndarray, imu_only: bool
@@ -360,10 +363,11 @@ def honest_std(model: Model, theta: np.ndarray, N: NormalEquations, st: Structur
     if len(chunks) > 1:  # the chunks have their own scratch: the whole problem's is not held beside
         model.release_scratch()
     for chunk in chunks:
-        mid = _chunk_middles(model, theta, chunk, imu_psd, shared)
+        mid = _chunk_middles(chunk, imu_psd, shared)
         # the chunk once more, now with its Jacobian, each channel's spectra computed (on the
         # evaluation's worker threads) as soon as the channel is done
         model.evaluate_all(theta, jacobian=True, keep_jacobian=True, maneuvers=chunk, on_channel=mid.spectra)
+        mid.take_increments(model, chunk, imu_psd)  # from the sensitivities it integrated
         model.forget(chunk)  # its layout's scratch, not to be held beside the next chunk's
         mid.reduce(chunk, model.problem, N, Sinv, Ainv, Cp)
     std_mk, cov_mk = sandwich_std(N, st, C, Sinv, Ainv, nparam)
