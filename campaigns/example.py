@@ -38,7 +38,7 @@ K_A, K_B = 0.05, -0.04
 TAU_S = {"tas": 0.05, "a": 0.04, "b": 0.02}
 #: each channel's white noise, SI (rad for the angles, m/s, m)
 NOISE_SI = {"phi": 0.03 * D2R, "theta": 0.03 * D2R, "psi": 0.03 * D2R, "tas": 0.2, "h": 1.0,
-         "alpha_v": 0.05 * D2R, "beta_v": 0.05 * D2R}
+            "alpha_v": 0.05 * D2R, "beta_v": 0.05 * D2R}
 
 PROBLEM = """title = "{title}"
 model = "uav_example"
