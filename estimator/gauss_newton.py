@@ -185,11 +185,30 @@ def _at_the_limit(moved_max: float, opt: SolverOptions) -> tuple[Status, str]:
                                     f"the undamped Gauss-Newton step is still {moved_max:.2g} deviations")
 
 
+#: How a start stage that ends where its quadratic model turned poor says so (staged_start)
+POOR_MODEL_END = ("ended where its quadratic model turned poor (a step achieved under a tenth of "
+                  "the decrease it predicted, and that under one log-likelihood unit): the rest is "
+                  "left to the estimation")
+#: ... only near the stage's minimum: the whole decrease the undamped step predicts below this
+#: (log-likelihood units: within about 1.4 joint deviations of it, in its basin). Far from it a
+#: first step can be poorly predicted too (large IMU biases from a zero start), and there the
+#: stage's iterations are what keeps the fit out of a wrong minimum
+POOR_MODEL_NEAR = 1.0
+
+
 def gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOptions,
-                 evals: Evaluation | None = None, label: str = "", lik=None) -> Iterated:
+                 evals: Evaluation | None = None, label: str = "", lik=None,
+                 end_where_poor: bool = False) -> Iterated:
     """Levenberg-Marquardt-safeguarded Gauss-Newton iterations with relaxation of ``R`` (module
     docstring) until the undamped step is negligible; ``lik`` the likelihood (default: the
-    output-error one, :class:`~estimator.likelihood.OutputErrorLikelihood`)."""
+    output-error one, :class:`~estimator.likelihood.OutputErrorLikelihood`).
+
+    ``end_where_poor``: end after the first step that the search along the undamped direction had
+    to find (the damped steps achieved under a tenth of the predicted decrease) where that
+    prediction is below :data:`POOR_MODEL_NEAR`, with the status ``CONVERGED_DECREASE`` and the
+    message :data:`POOR_MODEL_END` -- a stage of the staged start, whose premise is a nearly linear
+    sub-problem.
+    """
     nch = len(model.problem.channels)
     keys = model.problem.parameters.keys
     lik = OutputErrorLikelihood(model) if lik is None else lik
@@ -229,6 +248,9 @@ def gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpti
         decrease, theta, trial_ev, stats, with_jac = best
         lam = max(lam * 0.1, 1e-9)
         evals = trial_ev if with_jac else lik.evaluate(theta, True)
+        if end_where_poor and scanned and at.predicted < POOR_MODEL_NEAR:
+            status, message = Status.CONVERGED_DECREASE, POOR_MODEL_END
+            break
         if opt.verbose:
             rel = decrease / max(abs(at.cost0), 1e-300)
             print(f"{label}iteration {it:3d}: cost {at.cost0: .6e}, rel. decrease {rel:.2e}, undamped step "
@@ -286,11 +308,17 @@ def staged_start(problem: Problem, theta: np.ndarray, free: np.ndarray, opt: Sol
         st = Structure(sub, stage.free & has_data(N, st, opt.min_support_samples))
         if not st.free.any():
             continue
-        it = gauss_newton(model_k, theta, st, opt, ev, label=f"start ({stage.name}) ")
+        # a stage is a nearly linear sub-problem (estimator.start): where its quadratic model
+        # turns poor, what is left is a crawl along weakly determined directions (the tiny test
+        # campaign: the vanes' sideslip gains f2, 0.03 per iteration to their bound, 33 iterations
+        # to the limit), which the estimation, every parameter free, takes with the same safeguards
+        it = gauss_newton(model_k, theta, st, opt, ev, label=f"start ({stage.name}) ", end_where_poor=True)
         theta = it.theta
         ended = it.evals if model_k is model else None  # the full model at theta, with the Jacobian
+        how = "ended where its quadratic model turned poor" if it.message == POOR_MODEL_END \
+            else it.status.name.lower()
         notes.append(f"start stage {stage.name}: {len(stage.channels)} channels, {int(st.free.sum())} "
-                     f"free, {it.iterations} iterations, {it.status.name.lower()}")
+                     f"free, {it.iterations} iterations, {how}")
         if opt.verbose:
             print(notes[-1])
     return theta, notes, ended
