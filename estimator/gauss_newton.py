@@ -248,13 +248,13 @@ def gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpti
         decrease, theta, trial_ev, stats, with_jac = best
         lam = max(lam * 0.1, 1e-9)
         evals = trial_ev if with_jac else lik.evaluate(theta, True)
-        if end_where_poor and scanned and at.predicted < POOR_MODEL_NEAR:
-            status, message = Status.CONVERGED_DECREASE, POOR_MODEL_END
-            break
         if opt.verbose:
             rel = decrease / max(abs(at.cost0), 1e-300)
             print(f"{label}iteration {it:3d}: cost {at.cost0: .6e}, rel. decrease {rel:.2e}, undamped step "
                   f"{moved_max:.2e} sigma ({keys[order[int(np.argmax(at.moved))]]}), lambda {lam:.1e}")
+        if end_where_poor and scanned and at.predicted < POOR_MODEL_NEAR:
+            status, message = Status.CONVERGED_DECREASE, POOR_MODEL_END
+            break
     else:
         status, message = _at_the_limit(moved_max, opt)
     sse, cnt = residual_sums(evals, nch)
