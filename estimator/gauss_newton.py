@@ -203,11 +203,11 @@ def gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpti
     docstring) until the undamped step is negligible; ``lik`` the likelihood (default: the
     output-error one, :class:`~estimator.likelihood.OutputErrorLikelihood`).
 
-    ``end_where_poor``: end after the first step that the search along the undamped direction had
-    to find (the damped steps achieved under a tenth of the predicted decrease) where that
-    prediction is below :data:`POOR_MODEL_NEAR`, with the status ``CONVERGED_DECREASE`` and the
-    message :data:`POOR_MODEL_END` -- a stage of the staged start, whose premise is a nearly linear
-    sub-problem.
+    ``end_where_poor``: end after the first step that achieved under a tenth of the decrease the
+    undamped step predicts (the damped steps did, and so did the search along the undamped
+    direction), that prediction below :data:`POOR_MODEL_NEAR`, with the status
+    ``CONVERGED_DECREASE`` and the message :data:`POOR_MODEL_END` — a stage of the staged start,
+    whose premise is a nearly linear sub-problem.
     """
     nch = len(model.problem.channels)
     keys = model.problem.parameters.keys
@@ -252,7 +252,7 @@ def gauss_newton(model: Model, theta: np.ndarray, st: Structure, opt: SolverOpti
             rel = decrease / max(abs(at.cost0), 1e-300)
             print(f"{label}iteration {it:3d}: cost {at.cost0: .6e}, rel. decrease {rel:.2e}, undamped step "
                   f"{moved_max:.2e} sigma ({keys[order[int(np.argmax(at.moved))]]}), lambda {lam:.1e}")
-        if end_where_poor and scanned and at.predicted < POOR_MODEL_NEAR:
+        if end_where_poor and scanned and decrease < 0.1 * at.predicted and at.predicted < POOR_MODEL_NEAR:
             status, message = Status.CONVERGED_DECREASE, POOR_MODEL_END
             break
     else:

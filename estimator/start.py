@@ -22,15 +22,15 @@ every sub-problem is nearly linear:
 3. **flow** — every channel; free: everything but the time shifts (``v0``, ``day`` and the
    flow-channel biases, scales and tables join).
 
-The full estimation, time shifts included, starts from the last stage. Each stage starts from
-the previous one's estimate, and ends where its quadratic model turns poor near its minimum (a step
-that achieved under a tenth of the decrease the model predicted, that under one log-likelihood
-unit: :func:`estimator.gauss_newton.gauss_newton`'s ``end_where_poor``): the premise of a nearly
-linear sub-problem no longer holds there, and the crawl along weakly determined directions that
-would follow is the estimation's to take. A stage whose channels are those of the next one, or
-that frees nothing, is skipped. Which channels and parameters belong where follows from the model
-set (a channel's flow sensor, the state signals its model uses, the parameter families it names),
-so a user's own channels are staged without code.
+The full estimation, time shifts included, starts from the last stage. Each stage starts from the
+previous one's estimate, and ends at convergence or, earlier, where its quadratic model turns poor
+near its minimum (a step that achieved under a tenth of the decrease the model predicted, that under
+one log-likelihood unit: :func:`estimator.gauss_newton.gauss_newton`'s ``end_where_poor``): the
+premise of a nearly linear sub-problem no longer holds there, and the crawl along weakly determined
+directions that would follow is the estimation's to take. A stage whose channels are those of the
+next one, or that frees nothing, is skipped. Which channels and parameters belong where follows from
+the model set (a channel's flow sensor, the state signals its model uses, the parameter families it
+names), so a user's own channels are staged without code.
 """
 
 from __future__ import annotations

@@ -44,7 +44,11 @@ def filter_error(problem, workflow):
     """The filter-error estimate of the flight: the workflow's first stage, every maneuver of the
     problem with the default options (shared by the tests that only read it)."""
     (first,) = workflow.first
+    # the same estimation as estimate(problem, filter_error): every maneuver, parameter and start value
     assert [m.id for m in first.problem.maneuvers] == [m.id for m in problem.maneuvers]
+    ps, ours = first.problem.parameters, problem.parameters
+    assert ps.keys == ours.keys and np.array_equal(ps.free_mask, ours.free_mask)
+    assert np.array_equal(ps.values, ours.values)
     return first.result
 
 

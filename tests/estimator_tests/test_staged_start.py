@@ -5,7 +5,7 @@ doublets and 3211s, no sideslip excitation) leaves the vanes' sideslip gains ``f
 valley with the maneuvers' initial sideslip velocities: the flow stage's steps achieved a tenth of
 the decrease their model predicted and crawled 0.03 per iteration towards the bound, to the
 iteration limit (40 iterations, 300 model evaluations; the whole estimation crawled the same
-valley again). It now ends at the first such step, and the estimation converges at least as low.
+valley again). It now ends at the first such step, and the estimation converges from there.
 """
 
 from __future__ import annotations
