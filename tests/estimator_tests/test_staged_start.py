@@ -21,6 +21,9 @@ from estimator.model import Model
 from estimator.options import SolverOptions
 from estimator.solver import estimate
 
+#: each test flies the tiny campaign (once per session) and estimates for seconds: the full suite
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def problem(tiny_dataset):
