@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from estimator.core.process_noise import add_channel_products, suffix_middle_factor
@@ -133,6 +133,9 @@ def _levinson_reference(r, n, max_order=40, per_order=10):
 @given(phi=st.floats(-0.95, 0.95), phi2=st.floats(-0.4, 0.4), n=st.integers(20, 2000),
        seed=st.integers(0, 2**16))
 def test_levinson_matches_the_recursion(phi, phi2, n, seed):
+    # a stationary AR(2) (its characteristic roots inside the unit circle): an explosive one
+    # overflows over 2000 samples and its autocovariance is no autocovariance
+    assume(phi + phi2 < 0.98 and phi2 - phi < 0.98)
     rng = np.random.default_rng(seed)
     x = rng.normal(size=n + 2)
     for t in range(2, x.size):
