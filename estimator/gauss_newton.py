@@ -309,9 +309,8 @@ def staged_start(problem: Problem, theta: np.ndarray, free: np.ndarray, opt: Sol
         if not st.free.any():
             continue
         # a stage is a nearly linear sub-problem (estimator.start): where its quadratic model
-        # turns poor, what is left is a crawl along weakly determined directions (the tiny test
-        # campaign: the vanes' sideslip gains f2, 0.03 per iteration to their bound, 33 iterations
-        # to the limit), which the estimation, every parameter free, takes with the same safeguards
+        # turns poor near its minimum, what is left is a crawl along weakly determined directions,
+        # which the estimation, every parameter free, takes with the same safeguards
         it = gauss_newton(model_k, theta, st, opt, ev, label=f"start ({stage.name}) ", end_where_poor=True)
         theta = it.theta
         ended = it.evals if model_k is model else None  # the full model at theta, with the Jacobian
