@@ -511,19 +511,10 @@ class Model:
         return [(cl.c, cl.mans, cl.colmap, cl.rseg) for cl in lay.channels]
 
     # ------------------------------------------------------------------ evaluation
-    def state_sensitivities(self, values: np.ndarray, maneuvers: tuple[int, ...]) -> list[np.ndarray]:
-        """The sensitivities ``dX/d(x0, IMU biases)`` (N_k, 7, 13) of some maneuvers (one
-        integration of the set, as :meth:`evaluate_all` of the same maneuvers integrates them)."""
-        lay = self._layout(tuple(int(k) for k in maneuvers))
-        values = np.asarray(values, dtype=float)
-        _, S = integrate_many(lay.inputs, values[lay.state_idx], self.problem.g_mps2, sensitivities=True)
-        return [S[lay.seg[i]:lay.seg[i + 1]] for i in range(len(lay.ks))]
-
     def last_sensitivities(self, maneuvers: tuple[int, ...]) -> list[np.ndarray]:
         """The sensitivities ``dX/d(x0, IMU biases)`` (N_k, 7, 13) per maneuver that the last
         :meth:`evaluate_all` with the Jacobian of exactly this maneuver set integrated: views of
-        its scratch, valid until the set is evaluated again, forgotten or its scratch released
-        (what :meth:`state_sensitivities` would integrate once more)."""
+        its scratch, valid until the set is evaluated again, forgotten or its scratch released."""
         lay = self._layouts.get(tuple(int(k) for k in maneuvers))
         if lay is None or lay.S is None:
             raise ValueError(f"maneuvers {maneuvers}: not evaluated with the Jacobian as a set; call "
