@@ -4,8 +4,6 @@
 - :func:`near_bounds` — estimates within :data:`NEAR_BOUND_DEVIATIONS` deviations of a bound;
 - :func:`not_invertible` — a flow channel whose estimated calibration cannot be applied
   (:data:`MIN_CALIBRATION_SLOPE`);
-- :func:`unsettled` — an estimate a fresh linearisation of the likelihood still moves (the
-  filter-error method's wind sensitivities);
 - :func:`widened_said` — a delay near its bound whose deviation the feedback check widened is said
   by that note;
 - :func:`diagnosed` — the fit-quality diagnostics (:mod:`estimator.diagnostics`) at the estimate,
@@ -29,7 +27,6 @@ from estimator.identifiability import maneuver_nuisance
 from estimator.io.modelset import declarations_of
 from estimator.model import Evaluation
 from estimator.normal_equations import Structure
-from estimator.parameters import FLIGHT_KINDS
 from estimator.problem import SENSOR_SIGNALS, STATE_PARAMS, Problem
 from estimator.result import ResidualStats
 from estimator.verdict import Finding, Severity
@@ -154,45 +151,6 @@ def not_invertible(problem: Problem, evals: Evaluation, st: Structure) -> list[F
             "range of the flow angle",
             channel=ch.name, parameters=params[:12], value=float(np.min(ce.slope * sign))))
     return out
-
-
-def unsettled(move: np.ndarray | None, std: np.ndarray, problem: Problem,
-               std_honest: np.ndarray | None = None) -> list[Finding]:
-    """The filter-error method's last fresh linearisation of the wind sensitivities
-    (:meth:`estimator.filter_error.FilterErrorLikelihood.refresh`) still moved the estimate by more
-    than a deviation (nothing otherwise): a warning where it moved a calibration parameter, a note
-    where only the maneuvers' own parameters moved (their initial conditions, steady winds and IMU
-    biases: what describes the flight, not the calibration; the demo's turbulent block, 9.3
-    deviations on one maneuver's initial velocities and steady wind)."""
-    if move is None:
-        return []
-    with np.errstate(invalid="ignore", divide="ignore"):
-        z = np.abs(move) / std
-    z = np.where(np.isfinite(z), z, 0.0)
-    if z.max() <= 1.0:
-        return []
-    ps = problem.parameters.parameters
-    keys = problem.parameters.keys
-    worst = [keys[i] for i in np.argsort(-z)[:6] if z[i] > 1.0]
-    # a calibration parameter moved by more than its honest deviation (which the user reads) is what
-    # the estimate's users must know; within it, the move is covered
-    with np.errstate(invalid="ignore", divide="ignore"):
-        zh = z if std_honest is None else np.abs(move) / np.where(np.isfinite(std_honest), std_honest, std)
-    calibration = [i for i in np.flatnonzero(np.nan_to_num(zh) > 1.0) if ps[i].kind not in FLIGHT_KINDS]
-    named = ", ".join(f"{keys[i]} {zh[i]:.1f}" for i in sorted(calibration, key=lambda i: -zh[i])[:6])
-    what = (f"; calibration parameters beyond their honest deviations: {named} of them" if calibration else
-            "; the calibration parameters move within their honest deviations, the rest are the "
-            "maneuvers' own (initial conditions, steady winds, IMU biases)")
-    return [Finding(
-        "unsettled", Severity.WARNING if calibration else Severity.NOTE,
-        f"filter-error method: with the noise statistics held, each fresh linearisation of the wind "
-        f"sensitivities still moves the estimate, the last by up to {z.max():.1f} Cramér-Rao "
-        f"deviations ({', '.join(worst)}): the estimate is the optimum of the last linearisation, "
-        f"and uncertain by about that much beyond its deviations{what}",
-        "look for a model-structure error the wind states partly take up (a scale factor or table "
-        "the model set lacks: fit the calm maneuvers by output error and read its diagnostics)"
-        if calibration else "",
-        parameters=tuple(dict.fromkeys([keys[i] for i in calibration] + worst)), value=float(z.max()))]
 
 
 def widened_said(findings: list[Finding], widened: set[str]) -> list[Finding]:

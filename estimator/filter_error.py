@@ -69,10 +69,9 @@ the innovations do not show: a systematic one the filter fits away as white (on 
 turbulence, the sideslip biases; docs/method.md). The fit-quality diagnostics judge the innovations
 scaled to the measurement noise, ``nu sqrt(R / s)`` (:meth:`FilterErrorLikelihood.predictions`):
 outliers, stuck channels, unit errors and gross misfits are found as in the output-error
-residuals, and air motion the wind states do not follow still reads as turbulence; a moderate
-scale error the wind states partly take up (a vane scaled 1.1: innovations at the noise, where the
-output-error residuals are 1.5-1.9x it), and it shows instead as an estimate that each fresh
-linearisation of the wind sensitivities moves (the "unsettled" warning of the solver).
+residuals, and air motion the wind states do not follow still reads as turbulence; what they
+cannot see is a moderate scale error the wind states partly take up (a vane scaled 1.1:
+innovations at the noise, where the output-error residuals are 1.5-1.9x it).
 
 **Table 2** (measurement minus model, :func:`estimator.workflow.stage_residuals`): the sensor saw
 the model's flow plus the turbulent wind, so each channel is compared with the model output plus
@@ -182,8 +181,6 @@ HOLD_AFTER = 6
 PREFIT_ITERATIONS = 10
 #: Filter-error iterations at most before the maneuvers without wind states are diagnosed again
 PROBE_ITERATIONS = 5
-#: Fresh linearisations at most once the noise statistics are held (after_iterations)
-REFRESH_ROUNDS = 3
 #: The aircraft's answer to the gusts (FilterErrorLikelihood.answer_findings): a flow channel's
 #: innovations against the IMU's specific force along the body axis the channel sees the air on,
 #: high-passed over ANSWER_HIGH_PASS_S (a maneuver's own motion is slower; a gust's answer is
@@ -398,33 +395,30 @@ class FilterErrorLikelihood:
     def relax(self, ev: Evaluation, stats) -> FilterNoise:
         """Linearise at ``ev`` (an evaluation with the Jacobian) and relax ``sigma`` and ``R``.
 
-        Where the residuals moved by less than :data:`HOLD_NOISE_BELOW` of each channel's noise
-        since the last relaxation (:data:`SETTLED_BELOW` after :data:`SETTLE_AFTER` relaxations),
-        its noise model is kept: relaxing again there only moves the noise statistics within
-        their own tolerance, and the Gauss-Newton iterations would chase that (a two-cycle of the
-        cost, 2 in 9e5, along a weakly determined table node) instead of converging on a fixed
-        cost. After :data:`HOLD_AFTER` relaxations they are held for good: the iterations then
-        converge on a fixed cost, as in the alternating scheme of Jategaonkar (2006, §5.5)
-        (relaxing at every step, 3 of 8 light-turbulence fits of planning study (c) ran into the
-        iteration limit, the cost two-cycling by 1e-5 with each new ``R``); :meth:`noise_drift`
-        measures what the hold left.
+        The linearisation (the wind sensitivities ``h``, which move with the table slopes, scale
+        factors and attitude, and the flight speed) is always ``ev``'s, as the filter-error method
+        relinearises its system matrices at every iteration (Jategaonkar 2006, ch. 5); what may be
+        kept is the noise statistics. Where the residuals moved by less than
+        :data:`HOLD_NOISE_BELOW` of each channel's noise since the last relaxation
+        (:data:`SETTLED_BELOW` after :data:`SETTLE_AFTER` relaxations), ``R`` and the intensities
+        are kept: relaxing again there only moves them within their own tolerance, and the
+        Gauss-Newton iterations would chase that (a two-cycle of the cost, 2 in 9e5, along a weakly
+        determined table node) instead of converging on a fixed cost. After :data:`HOLD_AFTER`
+        relaxations they are held for good, as in the alternating scheme of Jategaonkar (2006,
+        §5.5); :meth:`noise_drift` measures what the hold left. The estimate is then the fixed
+        point of the iterations: the optimum of the likelihood linearised at itself.
+
+        Why not hold the linearisation with the noise statistics, relinearising only between whole
+        runs of iterations: the optimum of a held linearisation is not the fixed point, and where
+        the wind states take up part of a sensor's error, each fresh linearisation moves that
+        optimum back and forth by several deviations, so the estimate is wherever the last run
+        stopped.
         """
         if self._last is not None and (self._relaxed >= HOLD_AFTER or self._moved_little(
                 ev, self._last, HOLD_NOISE_BELOW if self._relaxed < SETTLE_AFTER else SETTLED_BELOW)):
+            self._last = FilterNoise(self._last.R, self._last.sigma_mps, self._linearise(ev), self.dt_s)
             return self._last
         return self._relax_now(ev)
-
-    def refresh(self, ev: Evaluation) -> None:
-        """The held noise statistics (``R``, the intensities) relinearised at ``ev``: the wind
-        sensitivities ``h`` (which move with the table slopes and scale factors) and the flight
-        speed taken anew, the observation placement kept. After the iterations on the held
-        linearisation the estimate is the optimum of that linearisation's cost, not of the
-        current one's (a vane scaled 1.1: 11.6 deviations apart; review of 7897c6e); the solver
-        iterates again from there until a fresh linearisation no longer moves it."""
-        if self._last is None:
-            return
-        self._last = FilterNoise(self._last.R, self._last.sigma_mps, self._linearise(ev), self.dt_s)
-        self._last_e = [ce.e.copy() for ce in ev.channels]
 
     def noise_drift(self, ev: Evaluation) -> tuple[float, float]:
         """How far the noise statistics would move if relaxed at ``ev`` once more: the largest
@@ -659,23 +653,10 @@ class FilterErrorLikelihood:
         return partial(self.normal_of, blocks=self.normal_blocks(st, ev, self.noise))
 
     def after_iterations(self, it: Iterated, st: Structure, opt: SolverOptions) -> Postlude:
-        """With the noise held for good, its linearisation (the wind sensitivities) is the one of
-        the 6th relaxation: iterate again on fresh ones (:meth:`refresh`) until they no longer move
-        the estimate. Then a safety net: the check after the first filter-error iterations can miss
-        a maneuver (:meth:`widened_where_turbulent`), which gets wind states and more iterations."""
-        lik, iterations, history, notes, moved = self, 0, [], [], None
+        """A safety net: the check after the first filter-error iterations can miss a maneuver
+        (:meth:`widened_where_turbulent`), which gets wind states and more iterations."""
+        lik, iterations, history, notes = self, 0, [], []
         theta, evals = it.theta, it.evals
-        if self.held and it.status.converged:
-            for _ in range(REFRESH_ROUNDS):
-                self.refresh(evals)
-                before = theta
-                it = iterate(self.model, theta, st, opt, None, self)
-                theta, evals = it.theta, it.evals
-                iterations += it.iterations
-                history += it.history
-                moved = theta - before
-                if it.iterations <= 1 or not it.status.converged:
-                    break
         missed: frozenset[str] = frozenset()
         if it.status.converged or it.status == Status.ITERATION_LIMIT:
             lik, evals, missed = self.widened_where_turbulent(st, theta, evals)
@@ -684,7 +665,7 @@ class FilterErrorLikelihood:
             iterations += it.iterations
             history += it.history
             notes.append(_missed_note(missed, "at its solution") + f" ({it.iterations} iterations)")
-        return Postlude(lik, it, iterations, history, notes, moved)
+        return Postlude(lik, it, iterations, history, notes)
 
     # --- at the estimate (estimator.likelihood.Likelihood) ----------------------------------
     def at_estimate(self, theta: np.ndarray, st: Structure, ev: Evaluation, it: Iterated,

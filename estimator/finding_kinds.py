@@ -107,9 +107,6 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
          "beyond its low-alpha channel's usable alpha range", by_channel=False),
     Kind("poor_model", "WARNING", _S, "the Gauss-Newton model is poor: some parameters barely determined",
          by_channel=False),
-    Kind("unsettled", "rule", _S, "filter error: each fresh linearisation still moves the estimate",
-         "WARNING where it moves a calibration parameter by more than a deviation; NOTE where only "
-         "the maneuvers' initial conditions, steady winds and IMU biases move", by_channel=False),
     Kind("imu_noise_unknown", "WARNING", _U, "the IMU noise could not be estimated for the deviations",
          by_channel=False),
     Kind("delay_feedback", "NOTE", _F, "filter error: time delays biased by the aircraft's answer to gusts",

@@ -89,15 +89,13 @@ class Prelude(NamedTuple):
 
 class Postlude(NamedTuple):
     """What a likelihood's ``after_iterations`` leaves: the likelihood at the estimate, the last
-    iterations' outcome, the iterations, costs and notes it added, and how far its last
-    relinearisation moved the estimate (SI; None: none was made)."""
+    iterations' outcome, and the iterations, costs and notes it added."""
 
     likelihood: Likelihood
     it: Iterated
     iterations: int
     history: list[float]
     notes: list[str]
-    moved: np.ndarray | None
 
 
 @dataclass(frozen=True)
@@ -197,7 +195,7 @@ class OutputErrorLikelihood:
         return None  # the screen's own output-error normal equations
 
     def after_iterations(self, it: Iterated, st: Structure, opt: SolverOptions) -> Postlude:
-        return Postlude(self, it, 0, [], [], None)
+        return Postlude(self, it, 0, [], [])
 
     def at_estimate(self, theta: np.ndarray, st: Structure, ev: Evaluation, it: Iterated,
                     opt: SolverOptions) -> Fit:

@@ -26,8 +26,7 @@ SCOPES = ("global", "aircraft", "configuration", "recorder", "maneuver")
 #: What a parameter is, for reports and for the identifiability checks.
 KINDS = ("initial_condition", "imu_bias", "time_delay", "bias", "scale", "table", "other")
 #: The kinds that describe a maneuver's flight (its state equations), not the calibration: a
-#: parameter of any other kind is a calibration parameter (Table 2's calibration uncertainty, the
-#: filter-error method's unsettled estimates)
+#: parameter of any other kind is a calibration parameter (Table 2's calibration uncertainty)
 FLIGHT_KINDS = frozenset({"initial_condition", "imu_bias"})
 
 

@@ -62,7 +62,6 @@ from estimator.checks import (
     near_bounds,
     not_invertible,
     residual_stats,
-    unsettled,
     widened_said,
 )
 from estimator.filter_error import FilterErrorLikelihood
@@ -219,7 +218,7 @@ def _estimate(problem: Problem, opt: SolverOptions) -> EstimationResult:
         run.spent(post.iterations, post.history, post.notes)
     except IterationError as exc:  # cannot happen after a successful start: a safeguard
         return _failed(problem, exc.theta, t0, str(exc), "report this as a bug, with the data")
-    return _finish(run, post.likelihood, post.it, st, holds, post.moved)
+    return _finish(run, post.likelihood, post.it, st, holds)
 
 
 def _begin(run: _Run) -> tuple[np.ndarray, Structure, list, Evaluation | None] | EstimationResult:
@@ -356,10 +355,8 @@ def _failed(problem: Problem, theta: np.ndarray, t0: float, why: str, advice: st
     )
 
 
-def _finish(run: _Run, lik: Likelihood, it: Iterated, st: Structure, holds: list,
-            moved: np.ndarray | None) -> EstimationResult:
-    """Covariances, diagnostics, findings and verdict at the estimate ``it`` (``moved``: how far
-    the likelihood's last fresh linearisation moved it, SI)."""
+def _finish(run: _Run, lik: Likelihood, it: Iterated, st: Structure, holds: list) -> EstimationResult:
+    """Covariances, diagnostics, findings and verdict at the estimate ``it``."""
     problem, opt = run.problem, run.opt
     theta, evals = it.theta, it.evals
     keys = problem.parameters.keys
@@ -383,7 +380,7 @@ def _finish(run: _Run, lik: Likelihood, it: Iterated, st: Structure, holds: list
                 + imu_noise_note(dev, st, keys, opt) + iteration_findings(it, run.notes)
                 + near_bounds(problem, theta, st, state,
                               np.where(np.isfinite(dev.std_colored), dev.std_colored, dev.std_crb))
-                + own + unsettled(moved, dev.std_crb, problem, dev.std_colored)
+                + own
                 + not_invertible(problem, evals, st))
     # the delays the feedback check widened (the filter-error method's): their near-bound notes
     widened = {keys[f.parameter] for f in dev.feedback if math.isfinite(f.std_after_s)}

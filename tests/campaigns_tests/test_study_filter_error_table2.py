@@ -14,7 +14,7 @@ from campaigns.studies.filter_error_table2 import agreement, per_seed, summary
 
 def _cells() -> pd.DataFrame:
     base = {"model_sensor_deg": 0.1, "truth_sensor_deg": 0.1, "cal_expected_deg": 0.2,
-            "cal_realized_deg": 0.2, "said": "WARNING unsettled", "judged": True}
+            "cal_realized_deg": 0.2, "said": "WARNING on_bound", "judged": True}
     return pd.DataFrame([
         # 30 % or 0.05 deg: 0.20 against 0.16 is within 0.05 deg; 0.40 against 0.30 is not (0.09 allowed)
         {"seed": 1, "cell": "a", "model_deg": 0.20, "truth_deg": 0.16, "verdict": "SUCCESS", **base},

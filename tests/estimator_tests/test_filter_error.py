@@ -267,9 +267,10 @@ def test_a_scale_error_beside_turbulence_says_so():
 
 @pytest.mark.slow
 def test_noise_statistics_are_held_after_a_few_relaxations(turbulent):
-    """After HOLD_AFTER relaxations the noise statistics stay as they are whatever the residuals do
-    (the Gauss-Newton iterations then converge on a fixed cost), and noise_drift says how far a
-    new relaxation would move them, leaving the likelihood's state untouched."""
+    """After HOLD_AFTER relaxations the noise statistics (R, the intensities) stay as they are
+    whatever the residuals do (the Gauss-Newton iterations then converge), while the linearisation
+    (the wind sensitivities) is always the current evaluation's; noise_drift says how far a new
+    relaxation would move them, leaving the likelihood's state untouched."""
     from estimator.filter_error import HOLD_AFTER, FilterErrorLikelihood
 
     _, prob = turbulent
@@ -282,11 +283,16 @@ def test_noise_statistics_are_held_after_a_few_relaxations(turbulent):
         theta[tau] += 0.004  # residuals moving by far more than the hold thresholds
         ev = lik.evaluate(theta, True)
         new = lik.relax(ev, lik.stats(ev))
-        assert (new is not noise) == (step < HOLD_AFTER), f"relaxation {step + 1}"
+        kept = noise is not None and new.R is noise.R and new.sigma_mps is noise.sigma_mps
+        assert kept == (step >= HOLD_AFTER), f"relaxation {step + 1}"
         assert lik.held == (step >= HOLD_AFTER - 1)
+        if noise is not None:
+            assert new.maneuvers is not noise.maneuvers, "the linearisation is the evaluation's"
         noise = new
     drift = lik.noise_drift(ev)
-    assert lik.relax(ev, lik.stats(ev)) is noise, "noise_drift must not change what is held"
+    again = lik.relax(ev, lik.stats(ev))
+    assert again.R is noise.R and again.sigma_mps is noise.sigma_mps, \
+        "noise_drift must not change what is held"
     assert all(np.isfinite(drift)) and drift[1] > 0.0
     (air,) = [f for f in lik.turbulence_findings(noise, drift=drift) if f.code == "turbulence"]
     assert f"held after {HOLD_AFTER} relaxations" in air.message
@@ -385,17 +391,13 @@ def test_imu_noise_is_in_the_honest_deviations_of_turbulent_maneuvers(turbulent)
 
 
 @pytest.mark.slow
-def test_a_scale_error_the_wind_takes_up_leaves_the_estimate_unsettled(short_turbulent, turbulent_fit):
+def test_a_scale_error_the_wind_takes_up_is_not_a_clean_success(short_turbulent):
     """A vane scaled by 1.1 in turbulence: the wind states take up part of it (its innovations stay
-    near the noise), the noise statistics end held, and each fresh linearisation of the wind
-    sensitivities moves the estimate by several deviations: the result says so (a WARNING naming
-    the parameters), not a clean success. Without the scale error no such warning.
-
-    On the 30-s flight: the fit crawls through about a hundred iterations on either length (three
-    fresh linearisations, each iterated to convergence), each about half as dear here. The last
-    moves the estimate by 6.4 Cramér-Rao deviations (7.1 and 7.6 with the noise seeds 4 and 6),
-    9.5 on the 60-s flight: the same move counted in deviations sqrt(2) wider (half the samples),
-    still twice the bound of 3."""
+    near the noise) and drag other sensors' calibration 8-12 honest deviations off; the result says
+    so with WARNINGs naming calibration parameters the data push onto their bounds (a table of the
+    side probe's, both ends), not a clean success. The same flight without the scale error: no
+    parameter on a bound. (The noise seeds 3, 4 and 6 alike; the estimate is the fixed point of
+    the relinearised iterations, 26-41 iterations with the scale error, 11-12 without.)"""
     import dataclasses
 
     _, base = short_turbulent
@@ -407,14 +409,13 @@ def test_a_scale_error_the_wind_takes_up_leaves_the_estimate_unsettled(short_tur
         mans.append(dataclasses.replace(m, measurements=meas))
     opt = SolverOptions(method="filter_error", start="given", diagnose=False)
     res = estimate(dataclasses.replace(base, maneuvers=tuple(mans)), opt)
-    (w,) = [f for f in res.findings if f.code == "unsettled"]
-    assert w.severity.name == "WARNING" and w.value > 3.0 and w.parameters, w.message
-    # the same flight without the scale error: the noise statistics settle, nothing is held and
-    # refreshed (as on the 60-s flight)
+    assert res.status.converged, res.message
+    bound = [f for f in res.findings if f.code == "on_bound" and f.severity.name == "WARNING"]
+    kinds = {base.parameters[p].kind for f in bound for p in f.parameters}
+    assert bound and kinds & set(CALIBRATION_KINDS), [f.message for f in res.findings]
     clean = estimate(base, opt)
     assert clean.status.converged, clean.message
-    for fit in (clean, turbulent_fit):
-        assert not [f for f in fit.findings if f.code == "unsettled"]
+    assert not [f for f in clean.findings if f.code == "on_bound"], [f.message for f in clean.findings]
 
 
 @pytest.mark.slow
