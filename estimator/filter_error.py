@@ -168,8 +168,9 @@ SIGMA_STEP = 0.02
 #: 0.1 % cost the 70-maneuver benchmark 3.4 s more, R's EM updates converging only linearly)
 RELAX_ROUNDS = 12
 RELAX_TOL = 1e-2
-#: The noise model is held where the residuals moved by less than this fraction of each channel's
-#: noise (rms) since it was relaxed (FilterErrorLikelihood.relax)
+#: The noise statistics (R, the intensities; not the linearisation) are kept where the residuals
+#: moved by less than this fraction of each channel's noise (rms) since they were relaxed
+#: (FilterErrorLikelihood.relax)
 HOLD_NOISE_BELOW = 0.01
 #: ... and after SETTLE_AFTER relaxations, where they moved by less than SETTLED_BELOW
 SETTLE_AFTER = 4
