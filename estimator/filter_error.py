@@ -71,9 +71,7 @@ scaled to the measurement noise, ``nu sqrt(R / s)`` (:meth:`FilterErrorLikelihoo
 outliers, stuck channels, unit errors and gross misfits are found as in the output-error
 residuals, and air motion the wind states do not follow still reads as turbulence; what they
 cannot see is a moderate scale error the wind states partly take up (a vane scaled 1.1:
-innovations at the noise, where the output-error residuals are 1.5-1.9x it): it shows instead as
-a likelihood that climbs as the iterations relinearise (the "unsettled" warning,
-:meth:`FilterErrorLikelihood.relax`).
+innovations at the noise, where the output-error residuals are 1.5-1.9x it).
 
 **Table 2** (measurement minus model, :func:`estimator.workflow.stage_residuals`): the sensor saw
 the model's flow plus the turbulent wind, so each channel is compared with the model output plus
@@ -179,14 +177,6 @@ SETTLE_AFTER = 4
 SETTLED_BELOW = 0.1
 #: ... and after HOLD_AFTER relaxations, held whatever the residuals do
 HOLD_AFTER = 6
-#: With the noise held, a rise of the likelihood an iterate has with its own linearisation above the
-#: best iterate's that freezes the linearisation (relax; log-likelihood units): the cost's own
-#: convergence tolerance (SolverOptions.decrease_tol's default)
-CLIMB_TOL = 1e-3
-#: ... and the rise that is said (a WARNING, climb_findings): one log-likelihood unit, the edge of
-#: the joint one-sigma region of two parameters (a chi-square of 2 degrees of freedom rising by 2):
-#: beyond it the linearisation moves the likelihood by more than the data resolve
-CLIMB_WARN = 1.0
 #: Output-error iterations at most before the turbulence diagnosis that picks the maneuvers with
 #: wind states (FilterErrorLikelihood.before_iterations)
 PREFIT_ITERATIONS = 10
@@ -377,12 +367,6 @@ class FilterErrorLikelihood:
         self._relaxed = 0
         self._last_e: list[np.ndarray] = []
         self._fresh = np.zeros(len(ids), dtype=bool)
-        # with the noise held: the likelihood of the best iterate so far, each with its own
-        # linearisation; whether the linearisation is frozen, and by how much the likelihood of a
-        # fresh one had risen above that best when it froze (relax)
-        self._best_held = math.inf
-        self._frozen = False
-        self._climb = 0.0
         # the compiled filter is loaded (and compiled) only when the method is used
         from estimator.core import wind_filter
 
@@ -430,46 +414,12 @@ class FilterErrorLikelihood:
         the wind states take up part of a sensor's error, each fresh linearisation moves that
         optimum back and forth by several deviations, so the estimate is wherever the last run
         stopped.
-
-        But the iterations towards the fixed point are no descent on one cost (their gradient
-        leaves out how the linearisation moves with the parameters): with the noise held, the
-        likelihood each iterate has with its own linearisation can climb (a table node drifting to
-        its bound, 88 log-likelihood units over 20 iterations). Where it rises above the best
-        iterate's by more than :data:`CLIMB_TOL`, the linearisation is frozen where it was and the
-        iterations converge on that cost, a descent again; a rise beyond :data:`CLIMB_WARN` is
-        said (:meth:`climb_findings`).
         """
         if self._last is not None and (self._relaxed >= HOLD_AFTER or self._moved_little(
                 ev, self._last, HOLD_NOISE_BELOW if self._relaxed < SETTLE_AFTER else SETTLED_BELOW)):
-            if self._frozen:
-                return self._last
-            fresh = FilterNoise(self._last.R, self._last.sigma_mps, self._linearise(ev), self.dt_s)
-            if self._relaxed >= HOLD_AFTER:
-                own = self.cost(ev, fresh)
-                if own > self._best_held + CLIMB_TOL:
-                    self._frozen, self._climb = True, own - self._best_held
-                    return self._last
-                self._best_held = min(self._best_held, own)
-            self._last = fresh
-            return fresh
+            self._last = FilterNoise(self._last.R, self._last.sigma_mps, self._linearise(ev), self.dt_s)
+            return self._last
         return self._relax_now(ev)
-
-    def climb_findings(self) -> list[Finding]:
-        """A WARNING where the linearisation was frozen on a rise of the likelihood beyond
-        :data:`CLIMB_WARN` (:meth:`relax`): the estimate is the optimum of a linearisation the fixed
-        point is not at, uncertain beyond its deviations."""
-        if self._climb <= CLIMB_WARN:
-            return []
-        return [Finding(
-            "unsettled", Severity.WARNING,
-            f"filter-error method: with the noise statistics held, the likelihood with the wind "
-            f"sensitivities linearised afresh at each iterate rose by {self._climb:.3g} "
-            f"log-likelihood units above its best (more than {CLIMB_WARN:g}): the linearisation was "
-            "frozen there, and the estimate is the optimum of that one, not the iterations' fixed "
-            "point; it is uncertain beyond its deviations along what the linearisation moves",
-            "look for a model-structure error the wind states partly take up (a scale factor or "
-            "table the model set lacks): fit the calm maneuvers by output error and read its "
-            "diagnostics", value=float(self._climb))]
 
     def noise_drift(self, ev: Evaluation) -> tuple[float, float]:
         """How far the noise statistics would move if relaxed at ``ev`` once more: the largest
@@ -728,8 +678,7 @@ class FilterErrorLikelihood:
         cost = self.cost(ev, noise)
         N = self.normal(st, ev, noise)
         drift = self.noise_drift(ev) if self.held else None
-        wind_findings = (self.turbulence_findings(noise, opt.colored, drift) + self.answer_findings(ev, noise)
-                         + self.climb_findings())
+        wind_findings = self.turbulence_findings(noise, opt.colored, drift) + self.answer_findings(ev, noise)
         return FilterFit(theta, st, ev, noise, noise.R, cost, N, tuple(wind_findings),
                          self.wind_table(ev, noise), self.wind_model(noise))
 

@@ -107,8 +107,6 @@ KINDS: Mapping[str, Kind] = MappingProxyType({k.code: k for k in (
          "beyond its low-alpha channel's usable alpha range", by_channel=False),
     Kind("poor_model", "WARNING", _S, "the Gauss-Newton model is poor: some parameters barely determined",
          by_channel=False),
-    Kind("unsettled", "WARNING", _F, "filter error: relinearising climbed the likelihood; "
-         "the linearisation was frozen", by_channel=False),
     Kind("imu_noise_unknown", "WARNING", _U, "the IMU noise could not be estimated for the deviations",
          by_channel=False),
     Kind("delay_feedback", "NOTE", _F, "filter error: time delays biased by the aircraft's answer to gusts",

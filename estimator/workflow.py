@@ -695,7 +695,7 @@ def accuracy_misses(accuracy: pd.DataFrame, stages: Sequence[Stage]) -> list[Fin
 
 #: Findings about parameters (not the data): a later estimation that estimates them again says its own
 _PARAMETER_KINDS = frozenset({"on_bound", "near_bound", "correlated", "unidentifiable", "confounded",
-                              "crosswind_confounded", "poor_model", "unsettled"})
+                              "crosswind_confounded", "poor_model"})
 
 
 def _superseded(f: Finding, apportioned: set[str]) -> dict:

@@ -269,9 +269,8 @@ def test_a_scale_error_beside_turbulence_says_so():
 def test_noise_statistics_are_held_after_a_few_relaxations(turbulent):
     """After HOLD_AFTER relaxations the noise statistics (R, the intensities) stay as they are
     whatever the residuals do (the Gauss-Newton iterations then converge), while the linearisation
-    (the wind sensitivities) follows the evaluation until the likelihood it gives climbs above the
-    best one's: from there it is frozen. noise_drift says how far a new relaxation would move the
-    noise statistics, leaving the likelihood's state untouched."""
+    (the wind sensitivities) is always the current evaluation's; noise_drift says how far a new
+    relaxation would move them, leaving the likelihood's state untouched."""
     from estimator.filter_error import HOLD_AFTER, FilterErrorLikelihood
 
     _, prob = turbulent
@@ -279,22 +278,17 @@ def test_noise_statistics_are_held_after_a_few_relaxations(turbulent):
     lik = FilterErrorLikelihood(model)
     theta = prob.parameters.values.copy()
     tau = [i for i, k in enumerate(prob.parameters.keys) if prob.parameters[k].kind == "time_delay"]
-    noise, frozen_at = None, None
-    for step in range(HOLD_AFTER + 3):
-        theta[tau] += 0.004  # residuals moving by far more than the hold thresholds, away from the fit
+    noise = None
+    for step in range(HOLD_AFTER + 2):
+        theta[tau] += 0.004  # residuals moving by far more than the hold thresholds
         ev = lik.evaluate(theta, True)
         new = lik.relax(ev, lik.stats(ev))
         kept = noise is not None and new.R is noise.R and new.sigma_mps is noise.sigma_mps
         assert kept == (step >= HOLD_AFTER), f"relaxation {step + 1}"
         assert lik.held == (step >= HOLD_AFTER - 1)
-        if kept and new.maneuvers is noise.maneuvers and frozen_at is None:
-            frozen_at = step
-        if frozen_at is not None:
-            assert new.maneuvers is noise.maneuvers, "a frozen linearisation stays"
+        if noise is not None:
+            assert new.maneuvers is not noise.maneuvers, "the linearisation is the evaluation's"
         noise = new
-    # the first held step linearises afresh (nothing to compare with yet); moving the delays further
-    # off the fit climbs the likelihood: frozen at the next
-    assert frozen_at == HOLD_AFTER + 1, frozen_at
     drift = lik.noise_drift(ev)
     again = lik.relax(ev, lik.stats(ev))
     assert again.R is noise.R and again.sigma_mps is noise.sigma_mps, \
@@ -397,16 +391,14 @@ def test_imu_noise_is_in_the_honest_deviations_of_turbulent_maneuvers(turbulent)
 
 
 @pytest.mark.slow
-def test_a_scale_error_the_wind_takes_up_leaves_the_estimate_unsettled(short_turbulent):
+def test_a_scale_error_the_wind_takes_up_is_not_a_clean_success(short_turbulent):
     """A vane scaled by 1.1 in turbulence: the wind states take up part of it (its innovations stay
-    near the noise) and drag other sensors' calibration 8 honest deviations off. With the noise
-    held, relinearising at each iterate climbs the likelihood (3.05 log-likelihood units on this
-    flight; 8.9 and 3.05 with the noise seeds 4 and 6): the linearisation is frozen and the result
-    says so, a WARNING. The same flight without the scale error: no such warning (nor on the demo's
-    light-turbulence block: a rise of 0.49)."""
+    near the noise) and drag other sensors' calibration 8-12 honest deviations off; the result says
+    so with WARNINGs naming calibration parameters the data push onto their bounds (a table of the
+    side probe's, both ends), not a clean success. The same flight without the scale error: no
+    parameter on a bound. (The noise seeds 3, 4 and 6 alike; the estimate is the fixed point of
+    the relinearised iterations, 26-41 iterations with the scale error, 11-12 without.)"""
     import dataclasses
-
-    from estimator.filter_error import CLIMB_WARN
 
     _, base = short_turbulent
     col = next(c.column for c in base.channels if c.name == "alpha_zl")
@@ -418,11 +410,12 @@ def test_a_scale_error_the_wind_takes_up_leaves_the_estimate_unsettled(short_tur
     opt = SolverOptions(method="filter_error", start="given", diagnose=False)
     res = estimate(dataclasses.replace(base, maneuvers=tuple(mans)), opt)
     assert res.status.converged, res.message
-    (w,) = [f for f in res.findings if f.code == "unsettled"]
-    assert w.severity.name == "WARNING" and w.value > CLIMB_WARN, w.message
+    bound = [f for f in res.findings if f.code == "on_bound" and f.severity.name == "WARNING"]
+    kinds = {base.parameters[p].kind for f in bound for p in f.parameters}
+    assert bound and kinds & set(CALIBRATION_KINDS), [f.message for f in res.findings]
     clean = estimate(base, opt)
     assert clean.status.converged, clean.message
-    assert not [f for f in clean.findings if f.code == "unsettled"], clean.message
+    assert not [f for f in clean.findings if f.code == "on_bound"], [f.message for f in clean.findings]
 
 
 @pytest.mark.slow
