@@ -404,10 +404,12 @@ class FilterErrorLikelihood:
         (:data:`SETTLED_BELOW` after :data:`SETTLE_AFTER` relaxations), ``R`` and the intensities
         are kept: relaxing again there only moves them within their own tolerance, and the
         Gauss-Newton iterations would chase that (a two-cycle of the cost, 2 in 9e5, along a weakly
-        determined table node) instead of converging on a fixed cost. After :data:`HOLD_AFTER`
-        relaxations they are held for good, as in the alternating scheme of Jategaonkar (2006,
-        §5.5); :meth:`noise_drift` measures what the hold left. The estimate is then the fixed
-        point of the iterations: the optimum of the likelihood linearised at itself.
+        determined table node). After :data:`HOLD_AFTER` relaxations they are held for good, as
+        in the alternating scheme of Jategaonkar (2006, §5.5); :meth:`noise_drift` measures what
+        the hold left. The estimate is then the fixed point of the iterations: the optimum of the
+        likelihood linearised at itself. The iterations towards it are no descent on one cost
+        (their gradient leaves out how the linearisation moves with the parameters): where they
+        do not settle they end at the iteration limit, a failure the verdict says.
 
         Why not hold the linearisation with the noise statistics, relinearising only between whole
         runs of iterations: the optimum of a held linearisation is not the fixed point, and where
@@ -896,7 +898,8 @@ class FilterErrorLikelihood:
 
     @property
     def noise(self) -> FilterNoise | None:
-        """The noise statistics of the last relaxation (None before the first)."""
+        """The noise statistics of the last relaxation with the last linearisation (None before the
+        first relaxation)."""
         return self._last
 
     @property
@@ -950,7 +953,7 @@ class FilterErrorLikelihood:
                     "aircraft answers the gusts and the IMU that drives the state equations "
                     "measures that answer, which the wind model takes as independent of the motion "
                     "(JSBSim flying through a wind of exactly the filter's form: 12-14 ms long; "
-                    "the same gusts with the aircraft's answer removed: right; not the wind "
+                    "turbulence drawn apart from the flight: within 2.3 ms; not the wind "
                     "states' form nor the sampling rate; the gust_answer warnings name the "
                     "channels and maneuvers whose innovations show that answer"
                     + (", and the feedback check widens the delays' deviations to cover it: "
@@ -961,19 +964,19 @@ class FilterErrorLikelihood:
                     "sideslip offset (every sideslip channel's bias alike) only to 0.05-0.1 deg, so a "
                     "calibration model that sees the sideslip through an alpha-dependent shape with "
                     "no free reference offset of its own lets that shape fix it, wrongly wherever "
-                    "the shape is wrong, with small deviations and white innovations (the paper's "
-                    "vane model: an aircraft's offsets 0.15 deg off at 30 deviations; the shipped INS "
-                    "model set frees the vanes' sideslip reference offset for this, and on JSBSim's "
-                    "turbulence they came out 0.14-0.29 deg off at 1.9-2.2 deviations on a 40-Hz "
-                    "time base, 0.38 deg at 2.8 on a 120-Hz one, always the same way: one side "
+                    "the shape is wrong, with small Cramér-Rao deviations (the paper's vane model: "
+                    "an aircraft's offsets 0.19 deg off at 7 of them; the shipped INS model set "
+                    "frees the vanes' sideslip reference offset for this, and on JSBSim's "
+                    "turbulence they came out 0.14-0.30 deg off at 1.9-3.0 honest deviations on a "
+                    "40-Hz time base, 0.38-0.50 deg at 2.4-3.2 on a 120-Hz one, always the same "
+                    "way: one side "
                     "probe's installation bias, through the airdata computer's two-probe inversion, "
                     "is a small sideslip error the side probe's model cannot represent, and the "
                     "weakly fixed offset follows it); "
                     "check the estimates against a calm-air calibration before use",
                     "calibrate where the air is calm by the output-error method, or hold the sideslip "
-                    "biases and the flow delays together at calm-air values (not the delays alone: "
-                    "the bias then moves into the sideslip offsets); treat these deviations as "
-                    "lower bounds"),
+                    "biases and the flow delays together at calm-air values; treat these "
+                    "deviations as lower bounds"),
         ]
 
     def answer_findings(self, ev: Evaluation, noise: FilterNoise) -> list[Finding]:
@@ -1055,10 +1058,9 @@ class FilterErrorLikelihood:
                 "takes as independent of the motion (a sensor that responds to acceleration itself, "
                 f"vibration or a vane's mass unbalance, would show the same); {what}",
                 "calibrate in calm air (the output-error method), or hold the flow delays together "
-                "with the sideslip biases at calm-air values; not the delays alone: the bias then "
-                "moves into the sideslip offsets (what-if study: the sideslip sensors' 3 sigma "
-                "0.70-0.72 deg with everything free, 1.74-1.75 with the flow delays held, 0.07-0.18 "
-                "with the delays and sideslip offsets held)",
+                "with the sideslip biases at calm-air values (what-if study: the sideslip sensors' "
+                "3 sigma 0.69-0.71 deg with everything free, 0.47-0.50 with the flow delays held, "
+                "0.07-0.18 with the delays and sideslip offsets held)",
                 channel=ch.name, maneuver=worst.maneuver, t_s=worst.t_s, parameters=delays,
                 value=worst.r))
         return out

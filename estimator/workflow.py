@@ -1199,16 +1199,13 @@ def _wind_var_deg2(r: ChannelResiduals) -> np.ndarray | None:
 
 #: Table 2 does not judge a cell with at least this share of its calibration variance along a
 #: parameter the estimation put on or near its bound (:func:`bound_share`): there the deviation is
-#: truncated and the error can be several times it. Evidence (campaigns/studies/results/
-#: filter_error_table2.txt, the demo's light-turbulence block over 24 seeds, filter error): where
-#: the vanes' sideslip reference c_vb[PV1] ran to or near its bound, PV1's side-probe and
-#: nose-probe sideslip cells against the truth came out 2.3-5.1 times Table 2 from the data. Set on
-#: seeds 14001-14003: those cells' shares along c_vb[PV1] 0.50-0.86, every other cell's along any
-#: bound parameter at most 0.12 (the demo's seed: 0.02 along the nose table's f5[3]). Reported on
-#: the 16 converged seeds after them: 14 such cells 0.44-0.89 (not judged; c_vb[PT1]'s boom cells
-#: among them, 1.2 times), every other at most 0.18 (judged). Not caught: a cell optimistic for
-#: another reason (the boom's sideslip, 1.8-2.1 times on two seeds, no boom parameter on or near a
-#: bound).
+#: truncated and the error can be several times it. Set between the two groups of a filter-error
+#: study of the demo's light-turbulence block in which a vanes' sideslip reference ran to or near
+#: its bound: the cells along it held 0.44-0.89 of their calibration variance there and came out
+#: up to 5 times Table 2 from the data against the truth, every other cell at most 0.18. Not caught:
+#: a cell optimistic for another reason (the boom's sideslip cells of
+#: campaigns/studies/results/filter_error_table2.txt, 1.25 times over the seeds, no boom parameter
+#: on or near a bound).
 BOUND_SHARE = 0.25
 
 

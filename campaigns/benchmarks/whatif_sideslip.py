@@ -264,7 +264,8 @@ def main() -> None:
     lines = ["filter-error method (tejas_ins) on PT1-BOOM's maneuvers of the demo's light-turbulence",
              "block, JSBSim's flight, the wind the sensors see replaced: estimate - truth (honest "
              "deviations)", f"code: {code_version(__file__)}", ""]
-    header = f"{'case':20s} " + " ".join(f"{k:>15s}" for k in ROWS) + f" {'answer':>7s} {'widened':>8s}"
+    header = (f"{'case':20s} " + " ".join(f"{k:>15s}" for k in ROWS) + f" {'answer':>7s} {'widened':>8s}"
+              + "  verdict")
     lines += [header, "-" * len(header)]
     for case in a.cases:
         t0 = time.perf_counter()
@@ -279,8 +280,13 @@ def main() -> None:
         answered = sum(f.code == "gust_answer" for f in r.findings)
         widened = sum(len(f.parameters) for f in r.findings
                       if f.code in ("delay_feedback", "delay_weak_instrument"))
+        failed = dict.fromkeys(f.code for f in r.findings if f.severity.name == "FAILURE")
+        bound = [p for f in r.findings if f.code == "on_bound" and f.severity.name == "WARNING"
+                 for p in f.parameters]
+        said = (r.verdict.name + "".join(f" {c}" for c in failed)
+                + (f", on its bound: {', '.join(bound)}" if bound else ""))
         lines.append(f"{case:20s} " + " ".join(f"{c:>15s}" for c in cells) + f" {answered:>7d}"
-                     + f" {widened:>8d}")
+                     + f" {widened:>8d}  {said}")
         print(lines[-1], f"[{r.verdict.name}, {time.perf_counter() - t0:.0f} s]", flush=True)
     if "jsbsim" in a.cases:
         lines += fixing(a.out / "jsbsim")
@@ -294,7 +300,9 @@ def main() -> None:
               "the delay's sensitivity 50-100 ms earlier as its instrument, differs, or the "
               "instrument is too weak to tell:",
               "estimator.core.instrumental, delay_feedback and delay_weak_instrument); the "
-              "deviations in brackets are the widened ones."]
+              "deviations in brackets are the widened ones.",
+              "verdict: the estimation's, its FAILURE findings and the parameters on a bound it warns "
+              "of (on_bound)."]
     text = "\n".join(lines) + "\n"
     print(text)
     if a.write:

@@ -60,7 +60,7 @@ def test_the_vanes_sideslip_reference_keeps_the_sideslip_offsets_honest(dataset)
     assert abs(rt.loc["c_vb[PT1]", "z_colored"]) < 3.0, rt.loc["c_vb[PT1]"]
     # and it is told by the data, not merely covered by deviations that freeing it inflated: the
     # kinematics hold the common offset to about 0.1 deg here (measured 0.11; without c_vb the
-    # vanes held it to 0.018, wrongly)
+    # Cramér-Rao bound says 0.026, wrongly)
     assert rt.loc["c_vb[PT1]", "std_colored_display"] < 0.2, rt.loc["c_vb[PT1]"]
     for k in OFFSETS:
         assert rt.loc[k, "std_colored_display"] < 0.2, rt.loc[k]
@@ -69,7 +69,7 @@ def test_the_vanes_sideslip_reference_keeps_the_sideslip_offsets_honest(dataset)
             "deviations: the vanes' antisymmetric bias error moved the sideslip of every sensor")
 
 
-def test_without_it_the_offsets_are_wrong_and_only_the_honest_deviations_say_so(dataset):
+def test_without_it_the_offsets_are_wrong_and_only_the_honest_deviations_cover_it(dataset):
     # the paper's vane model (c_vb held at 0): the reason c_vb exists. Measured: every offset
     # 0.18-0.19 deg off, 7.1-7.4 Cramér-Rao deviations (0.026 deg); the honest deviations 0.14 deg
     # (1.3-1.35 of them), where c_vb free gives 0.01 deg off with deviations of 0.11 deg
