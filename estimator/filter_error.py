@@ -92,11 +92,12 @@ alone is 3-4.5 times it (``tests/estimator_tests/test_filter_error_table2.py``).
 measurement minus model shows is a calibration error the fit shares out consistently over the
 sensors: an aircraft's common sideslip offset, which the wind states leave weakly fixed
 (``filter_error_partial``), moves every sideslip channel's bias and the reconstructed sideslip
-alike (the demo's light-turbulence block: PT1's sideslip biases 0.10 deg off at one honest
-deviation; the residual's scatter in its sideslip cells 0.10-0.19 deg against 0.22-0.42 deg against
-the truth). Table 2 therefore adds the calibration's own uncertainty to the scatter
-(:mod:`estimator.accuracy`, :func:`estimator.workflow.calibration_deviations`): there 0.30-0.41 deg
-(``tests/estimator_tests/test_table2_uncertainty.py``).
+alike (the demo's light-turbulence block: PT1's sideslip biases 0.21-0.23 deg off at 2.3 honest
+deviations; the residual's scatter in its sideslip cells 0.07-0.19 deg against 0.28-0.58 deg
+against the truth). Table 2 therefore adds the calibration's own uncertainty to the scatter
+(:mod:`estimator.accuracy`, :func:`estimator.workflow.calibration_deviations`): there 0.37-0.40
+deg, still short of the boom's 0.58 (over seeds the boom's sideslip cells are 1.25 times optimistic:
+docs/validation.md; ``tests/estimator_tests/test_table2_uncertainty.py``).
 The filter reruns from the result alone: its values, ``R`` and
 :attr:`estimator.result.EstimationResult.wind_model` (the wind states' form, scale length and
 each maneuver's intensity); the observations are placed on the samples by the delays at the
