@@ -218,8 +218,8 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
                     c = col[np.broadcast_to(idx, y.shape)]
                     hit = c >= 0
                     A[samples[hit], c[hit]] += np.broadcast_to(coef, y.shape)[hit]
-        # no temporary of the design matrix's size where none is needed: on this virtual machine
-        # each fresh one costs seconds of page faults at the demo's 840,000 rows
+        # no temporary of the design matrix's size where none is needed: each fresh one is paged in
+        # by the operating system, seconds at the demo's 840,000 rows on a small virtual machine
         live = (A_all != 0.0).any(axis=0)
         step, *_ = np.linalg.lstsq(A_all if live.all() else A_all[:, live], b, rcond=None)
         moved = 0.0

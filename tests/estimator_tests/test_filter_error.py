@@ -268,7 +268,7 @@ def test_a_scale_error_beside_turbulence_says_so():
 @pytest.mark.slow
 def test_noise_statistics_are_held_after_a_few_relaxations(turbulent):
     """After HOLD_AFTER relaxations the noise statistics (R, the intensities) stay as they are
-    whatever the residuals do (the Gauss-Newton iterations then converge), while the linearisation
+    whatever the residuals do (the Gauss-Newton iterations can then settle), while the linearisation
     (the wind sensitivities) is always the current evaluation's; noise_drift says how far a new
     relaxation would move them, leaving the likelihood's state untouched."""
     from estimator.filter_error import HOLD_AFTER, FilterErrorLikelihood
