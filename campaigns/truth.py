@@ -154,18 +154,11 @@ def channel_values(problem: Problem, theta: np.ndarray, m, ch, tables: dict[str,
     return params, tabs
 
 
-def _project_calibration(problem: Problem, truths, values: dict, chan_col, free: np.ndarray
-                         ) -> dict[str, float]:
-    """Least-squares fit of the calibration parameters to the clean channels (module docstring).
-
-    Gauss-Newton from the problem's start values, projected onto the parameters' bounds: most
-    calibration models are affine in their parameters, some are not (``f5(alpha_t) * (beta_s +
-    b_n)``).
-    """
+def _cases(problem: Problem, truths, chan_col) -> list:
+    """Every (channel, maneuver) whose clean channel the truth has: ``(channel, maneuver, signals,
+    clean target)``, the signals the channel's model reads taken from the truth."""
     ps = problem.parameters
-    calib_kinds = ("table", "bias", "scale")
-    tables = problem_tables(problem)
-    cases = []  # (channel, maneuver, signals, clean target)
+    cases = []
     for ch in problem.channels:
         if not ch.expression.names & SENSOR_SIGNALS:  # no flow angle: attitude, air data, INS
             continue
@@ -187,41 +180,76 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
                 elif name in m.signals:
                     sig[name] = np.interp(t, m.t_s, m.signals[name])
             cases.append((ch, m, sig, y))
+    return cases
+
+
+def _case_block(problem: Problem, theta: np.ndarray, case, tables: dict[str, Table],
+                index: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One case's linearised fit at ``theta``: ``(columns, A, b)``, ``A`` (samples, columns) the
+    derivatives of the channel model along the free calibration parameters it depends on (their
+    ``index`` entries, sorted), ``b`` the clean channel minus the model."""
+    ps = problem.parameters
+    ch, m, sig, y = case
+    params, tabs = channel_values(problem, theta, m, ch, tables)
+    dual = ch.expression.evaluate(sig, params, tabs)
+    b = y - np.broadcast_to(dual.value, y.shape)
+    scalar = {n: index[ps.key_of(n, m, ch)] for n in dual.dparam if ps.key_of(n, m, ch) in index}
+    # each breakpoint's column, -1 where it is not a free calibration parameter
+    breaks = {n: np.array([index.get(ps.key_of(n, m, ch, e), -1)
+                           for e in range(tables[n].breakpoints.size)]) for n in dual.dtable}
+    columns = np.unique(np.concatenate([np.fromiter(scalar.values(), int, len(scalar))]
+                                       + [c[c >= 0] for c in breaks.values()]))
+    local = {int(c): j for j, c in enumerate(columns)}
+    A = np.zeros((y.size, columns.size))
+    for n, c in scalar.items():
+        A[:, local[c]] += np.broadcast_to(dual.dparam[n], y.shape)
+    samples = np.arange(y.size)
+    for n, terms in dual.dtable.items():
+        to_local = np.array([local.get(int(c), -1) for c in breaks[n]])
+        for idx, coef in terms:
+            # one breakpoint per sample and term: a sample's column gets its coefficient
+            c = to_local[np.broadcast_to(idx, y.shape)]
+            hit = c >= 0
+            A[samples[hit], c[hit]] += np.broadcast_to(coef, y.shape)[hit]
+    return columns, A, b
+
+
+def _project_calibration(problem: Problem, truths, values: dict, chan_col, free: np.ndarray
+                         ) -> dict[str, float]:
+    """Least-squares fit of the calibration parameters to the clean channels (module docstring).
+
+    Gauss-Newton from the problem's start values, projected onto the parameters' bounds: most
+    calibration models are affine in their parameters, some are not (``f5(alpha_t) * (beta_s +
+    b_n)``). Each step is the least-squares solution of every case's rows at once, solved from
+    the cases' triangular factors stacked (``A_c = Q_c R_c``: the stack of ``R_c`` has the
+    singular values of the stack of ``A_c``, so the same solution and the same rank cut): a case
+    touches a few of the parameters, and the whole design matrix (840,000 rows in the demo) is
+    never formed.
+    """
+    ps = problem.parameters
+    calib_kinds = ("table", "bias", "scale")
+    tables = problem_tables(problem)
+    cases = _cases(problem, truths, chan_col)
     theta = ps.values.copy()
     free_calib = [p.key for p, f in zip(ps, free, strict=True) if f and p.kind in calib_kinds]
     index = {k: i for i, k in enumerate(free_calib)}
     if not free_calib or not cases:
         return {}
-    # the design matrix of every case's samples, filled in place each iteration (one block of rows
-    # per case), and the right-hand side
-    starts = np.cumsum([0] + [y.size for *_, y in cases])
-    A_all = np.empty((int(starts[-1]), len(free_calib)))
-    b = np.empty(int(starts[-1]))
+    n_rows = sum(y.size for *_, y in cases)
     for _ in range(8):
-        A_all[:] = 0.0
-        for (ch, m, sig, y), r0, r1 in zip(cases, starts[:-1], starts[1:], strict=True):
-            params, tabs = channel_values(problem, theta, m, ch, tables)
-            dual = ch.expression.evaluate(sig, params, tabs)
-            b[r0:r1] = y - np.broadcast_to(dual.value, y.shape)
-            A = A_all[r0:r1]
-            for n, d in dual.dparam.items():
-                k = ps.key_of(n, m, ch)
-                if k in index:
-                    A[:, index[k]] += np.broadcast_to(d, y.shape)
-            samples = np.arange(y.size)
-            for n, terms in dual.dtable.items():
-                # each breakpoint's column, -1 where it is not a free calibration parameter
-                col = np.array([index.get(ps.key_of(n, m, ch, e), -1)
-                                for e in range(tables[n].breakpoints.size)])
-                for idx, coef in terms:
-                    # one breakpoint per sample and term: a sample's column gets its coefficient
-                    c = col[np.broadcast_to(idx, y.shape)]
-                    hit = c >= 0
-                    A[samples[hit], c[hit]] += np.broadcast_to(coef, y.shape)[hit]
-        # no temporary of the design matrix's size where none is needed: each fresh one is paged in
-        # by the operating system, seconds at the demo's 840,000 rows on a small virtual machine
-        live = (A_all != 0.0).any(axis=0)
-        step, *_ = np.linalg.lstsq(A_all if live.all() else A_all[:, live], b, rcond=None)
+        R_rows, rhs = [], []
+        live = np.zeros(len(free_calib), dtype=bool)
+        for case in cases:
+            columns, A, b = _case_block(problem, theta, case, tables, index)
+            live[columns[(A != 0.0).any(axis=0)]] = True
+            Q, R = np.linalg.qr(A)
+            R_full = np.zeros((R.shape[0], len(free_calib)))
+            R_full[:, columns] = R
+            R_rows.append(R_full)
+            rhs.append(Q.T @ b)
+        # lstsq's rank cut as if on the whole design matrix (its default scales with the rows)
+        rcond = np.finfo(float).eps * max(n_rows, int(live.sum()))
+        step, *_ = np.linalg.lstsq(np.vstack(R_rows)[:, live], np.concatenate(rhs), rcond=rcond)
         moved = 0.0
         for j, k in enumerate(np.array(free_calib)[live]):
             # within the parameter's bounds, as the estimator: a breakpoint the samples hardly
