@@ -185,10 +185,15 @@ def _fly_sortie(args: argparse.Namespace, campaign) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from synth.campaign import FlyInterrupted, fly_campaign, load_campaign, summarize
+    import contextlib
+    import os
+
+    from synth.campaign import load_campaign, summarize
+    from synth.workers import stop_pool, worker_pool
 
     t0 = time.perf_counter()
     campaign = load_campaign("demo")
+    turbulent = load_campaign("demo_turbulence")
     out = args.out
     report_dir = out.parent / f"{out.name}-report"
     turb_out = out.parent / f"{out.name}-turbulence"
@@ -197,51 +202,39 @@ def _demo(args: argparse.Namespace) -> int:
     # write there is refused at once (an earlier demo report is replaced; nothing else is touched)
     _prepare_out(report_dir, True, "fpr demo", [out], check_only=True)
     _prepare_out(turb_report, True, "fpr demo", [turb_out], check_only=True)
-    print(f"fpr demo: flying the demo campaign ({len(campaign.jobs)} maneuvers, seven fleet "
-          f"configurations) into {out}")
-    # replaces an earlier dataset fpr wrote at --out (its own files only); a directory holding
-    # anything else is refused, the message listing it
-    try:
-        result = fly_campaign(campaign, out, workers=args.workers, overwrite=True, progress=True)
-    except FlyInterrupted as exc:
-        print(f"fpr demo: interrupted: {exc.n_done} of {exc.n_jobs} maneuvers written to {out}; "
-              "`fpr demo` again starts over", file=sys.stderr)
+    # the blocks are independent: with a second core the light-turbulence block (small, mostly on
+    # one core) is flown and calibrated beside the calm one, in one worker process, its console
+    # text printed after the calm block's as if run after it; --workers 1: one after the other
+    beside = (args.workers or os.cpu_count() or 1) > 1
+    with contextlib.ExitStack() as stack:
+        pool = stack.enter_context(worker_pool(1)) if beside else None
+        # the campaign as its definition (a parsed one holds read-only mappings, which do not pickle)
+        block = (pool.submit(_turbulent_block, turbulent.raw, turbulent.source, turb_out, turb_report)
+                 if pool is not None else None)
+        print(f"fpr demo: flying the demo campaign ({len(campaign.jobs)} maneuvers, seven fleet "
+              f"configurations) into {out}")
+        result = _demo_fly(campaign, out, args.workers, progress=True)
+        if isinstance(result, int) or not result.ok:
+            if not isinstance(result, int):
+                print(summarize(result.manifest))
+            if pool is not None:  # the demo ends here, its other block with it
+                stop_pool(pool)
+            return result if isinstance(result, int) else 1
+        print(summarize(result.manifest))
+        print(f"\ndataset written to {out} ({time.perf_counter() - t0:.1f} s). "
+              "Load it with synth.dataset.load_dataset().")
+        code = _calm_calibration(out, report_dir)
+        print(f"\nfpr demo: the light-turbulence block: {len(turbulent.jobs)} maneuvers of two "
+              f"configurations in light turbulence into {turb_out}, calibrated by the filter-error "
+              "method (the wind as estimated states; experimental)")
+        if block is None:
+            tcode = _turbulent_run(turbulent, turb_out, turb_report, args.workers, progress=True)
+        else:
+            tcode, text, errors = block.result()
+            print(text, end="")
+            print(errors, end="", file=sys.stderr)
+    if tcode == 130:
         return 130
-    print(summarize(result.manifest))
-    print(f"\ndataset written to {out} ({time.perf_counter() - t0:.1f} s). "
-          "Load it with synth.dataset.load_dataset().")
-    if not result.ok:
-        return 1
-    import warnings
-
-    from estimator.io import problem_from_dataset
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        problem = problem_from_dataset(out)
-    # the workflow's defaults (the model set's reference Mach), as `fpr calibrate DATASET` runs it
-    code = _workflow(problem, report_dir, {}, overwrite=True, tool="fpr demo", source=out)
-    # the light-turbulence block: the filter-error method (the gusts as estimated states, which the
-    # output-error fit would take for sensor errors) with the INS velocities, as
-    # `fpr calibrate DATASET --method filter_error --model tejas_ins` runs it
-    turbulent = load_campaign("demo_turbulence")
-    print(f"\nfpr demo: the light-turbulence block: {len(turbulent.jobs)} maneuvers of two configurations "
-          f"in light turbulence into {turb_out}, calibrated by the filter-error method (the wind as "
-          "estimated states; experimental)")
-    try:
-        tres = fly_campaign(turbulent, turb_out, workers=args.workers, overwrite=True, progress=True)
-    except FlyInterrupted as exc:
-        print(f"fpr demo: interrupted: {exc.n_done} of {exc.n_jobs} maneuvers written to {turb_out}; "
-              "`fpr demo` again starts over", file=sys.stderr)
-        return 130
-    if not tres.ok:
-        print(summarize(tres.manifest))
-        return 1
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        tproblem = problem_from_dataset(turb_out, model="tejas_ins")
-    tcode = _workflow(tproblem, turb_report, {"method": "filter_error"}, overwrite=True, tool="fpr demo",
-                      source=turb_out)
     names = {v: k for k, v in EXIT_STATUS.items()}
     print(f"fpr demo: {time.perf_counter() - t0:.0f} s in all; the calm block (the paper's calibration, "
           f"the main job): {names.get(code, code)}; the light-turbulence block (the filter-error method, "
@@ -250,6 +243,78 @@ def _demo(args: argparse.Namespace) -> int:
     # the main job's verdict: the turbulent block demonstrates an experimental method, its verdict
     # printed above with its own findings; but a failure there is never passed over as a success
     return EXIT_STATUS["FAILURE"] if tcode == EXIT_STATUS["FAILURE"] else code
+
+
+def _demo_fly(campaign, out: Path, workers: int | None, progress: bool):
+    """Fly one of the demo's campaigns into ``out``: the :class:`~synth.campaign.FlyResult`, or 130
+    when interrupted (said on stderr). An earlier dataset fpr wrote at ``out`` is replaced (its own
+    files only); a directory holding anything else is refused, the message listing it."""
+    from synth.campaign import FlyInterrupted, fly_campaign
+
+    try:
+        return fly_campaign(campaign, out, workers=workers, overwrite=True, progress=progress)
+    except FlyInterrupted as exc:
+        print(f"fpr demo: interrupted: {exc.n_done} of {exc.n_jobs} maneuvers written to {out}; "
+              "`fpr demo` again starts over", file=sys.stderr)
+        return 130
+
+
+def _calm_calibration(out: Path, report: Path) -> int:
+    """The demo's calm block calibrated with the workflow's defaults (the model set's reference
+    Mach), as `fpr calibrate DATASET` runs it; the report written. The exit status."""
+    import warnings
+
+    from estimator.io import problem_from_dataset
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        problem = problem_from_dataset(out)
+    return _workflow(problem, report, {}, overwrite=True, tool="fpr demo", source=out)
+
+
+def _turbulent_calibration(out: Path, report: Path) -> int:
+    """The demo's light-turbulence block calibrated by the filter-error method (the gusts as
+    estimated states, which the output-error fit would take for sensor errors) with the INS
+    velocities, as `fpr calibrate DATASET --method filter_error --model tejas_ins` runs it; the
+    report written. The exit status."""
+    import warnings
+
+    from estimator.io import problem_from_dataset
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        problem = problem_from_dataset(out, model="tejas_ins")
+    return _workflow(problem, report, {"method": "filter_error"}, overwrite=True, tool="fpr demo",
+                     source=out)
+
+
+def _turbulent_run(campaign, out: Path, report: Path, workers: int | None, progress: bool) -> int:
+    """The demo's light-turbulence block flown and calibrated (:func:`_turbulent_calibration`): the
+    exit status, 130 when interrupted."""
+    from synth.campaign import summarize
+
+    result = _demo_fly(campaign, out, workers, progress)
+    if isinstance(result, int):
+        return result
+    if not result.ok:
+        print(summarize(result.manifest))
+        return EXIT_STATUS["FAILURE"]
+    return _turbulent_calibration(out, report)
+
+
+def _turbulent_block(raw: dict, source: str, out: Path, report: Path) -> tuple[int, str, str]:
+    """:func:`_turbulent_run` of the campaign defined by ``raw`` (read from ``source``) in a worker
+    process beside the calm block, in one process: ``(exit status, its console text, its error
+    text)``, printed after the calm block's."""
+    import contextlib
+    import io
+
+    from synth.campaign import parse_campaign
+
+    text, errors = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(text), contextlib.redirect_stderr(errors):
+        code = _turbulent_run(parse_campaign(raw, source=source), out, report, 1, progress=False)
+    return code, text.getvalue(), errors.getvalue()
 
 
 def _show(args: argparse.Namespace) -> int:
@@ -560,7 +625,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "<out>-report, the light-turbulence block's dataset and report to <out>-turbulence "
                    "and <out>-turbulence-report. An earlier demo's datasets and reports are replaced; a "
                    "folder holding anything else is refused")
-    d.add_argument("--workers", type=int, default=None, help="worker processes (default: all CPUs)")
+    d.add_argument("--workers", type=int, default=None,
+                   help="worker processes (default: all CPUs); with more than one the light-turbulence "
+                   "block runs beside the calm one, its output printed after it")
     show_help = ("summarise a dataset written by `fpr fly`: maneuvers per kind, Mach and "
                  "configuration, failures; an interrupted (incomplete) dataset is said to be one, with "
                  "the command that completes it (exit status 1)")

@@ -258,13 +258,22 @@ def test_demo_refuses_a_report_folder_holding_user_files_before_flying(tiny_demo
 
 @pytest.mark.slow
 def test_demo_replaces_its_own_earlier_report(tiny_demo, earlier_report, tmp_path, capsys):
+    """With two workers the light-turbulence block runs beside the calm one, in a worker process
+    (given the campaign it was handed, not the shipped one): its report is written and listed, and
+    its console text comes after the calm block's, whole."""
     data = tmp_path / "demo"
     report = _copy(earlier_report, tmp_path / "demo-report")
-    assert main(["demo", "--out", str(data), "--workers", "1"]) in (0, 1, 3)
-    capsys.readouterr()
-    doc = json.loads((report / LISTING_NAME).read_text())
-    assert doc["tool"] == "fpr demo" and doc["finished_utc"]
-    _assert_listing_is_the_folder(report)
+    assert main(["demo", "--out", str(data), "--workers", "2"]) in (0, 1, 3)
+    out = capsys.readouterr().out
+    for folder in (report, tmp_path / "demo-turbulence-report"):
+        doc = json.loads((folder / LISTING_NAME).read_text())
+        assert doc["tool"] == "fpr demo" and doc["finished_utc"]
+        _assert_listing_is_the_folder(folder)
+    assert len(list((tmp_path / "demo-turbulence" / "maneuvers").glob("*.parquet"))) == 3
+    calm = out.index(f"report: {report}")
+    turbulent = out.index("fpr demo: the light-turbulence block: 3 maneuvers")
+    assert calm < turbulent < out.index(f"report: {tmp_path / 'demo-turbulence-report'}") < out.index(
+        "s in all"), out
 
 
 # --------------------------------------------------------------------------------------------------
