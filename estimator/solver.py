@@ -19,31 +19,24 @@ still be wrong: the verdict (:mod:`estimator.verdict`) also weighs the fit-quali
 (:mod:`estimator.diagnostics`: residuals against each channel's own noise floor, stuck channels,
 unit errors, outliers, turbulence) and the identifiability checks.
 
-Start: by default a staged, data-driven start (:mod:`estimator.start`) fits the attitude, then
-speed and height, then the flow channels before the full estimation, so that large IMU biases
-from zero start values reach the right minimum.
+Start: by default staged (:mod:`estimator.start`: attitude, then speed and height, then the flow
+channels), so that large IMU biases from zero start values reach the right minimum.
 
-Identifiability is judged where it matters, at the solution (and, for what needs no residuals,
-before the iterations): parameters no sample depends on (a table breakpoint beyond the flown
-range) and combinations the data cannot separate (a free table offset beside free biases: one
-member of each such set is held, the fewest that restore the rank) are held at their start
-values; at the solution, a parameter whose Cramér-Rao deviation exceeds half its allowed range is
-held too, and the estimation iterates again. So it does where a round crawled to the iteration
-limit and the screen there holds a parameter it left free (a gain whose argument the iterations
-drove to zero, e.g. a sideslip gain in maneuvers without sideslip: Gauss-Newton crawls along the
-curved valley of the product); otherwise the iteration limit stays a failure. Each held parameter
-keeps its reason (:attr:`EstimationResult.state`).
+Identifiability (:mod:`estimator.identifiability`), before the iterations and at the solution:
+parameters no sample depends on, the fewest members of sets the data cannot separate, and at the
+solution a parameter whose Cramér-Rao deviation exceeds half its allowed range are held at their
+start values, and the estimation iterates again — also after a round that crawled to the iteration
+limit, if the screen there holds a parameter (a gain whose argument went to zero); otherwise the
+limit stays a failure. Each held parameter keeps its reason (:attr:`EstimationResult.state`).
 
 Standard deviations: Cramér-Rao, ``sqrt(diag(M^-1))``, with the correlations; and the honest ones
-(:mod:`estimator.uncertainty`): coloured and cross-correlated residuals with a modelled spectrum,
-and the IMU's noise as process noise.
+(:mod:`estimator.uncertainty`: coloured, cross-correlated residuals and the IMU noise).
 
 Where each part lives: this module orchestrates (starts, screening rounds, robust pass, result)
-and chooses the likelihood once, by ``method`` (:mod:`estimator.likelihood`: the output-error one,
-or :class:`estimator.filter_error.FilterErrorLikelihood`), whose hooks do what its method needs
-before and after the iterations; the iterations are :mod:`estimator.gauss_newton`, the
-identifiability screen, covariance and parameter states :mod:`estimator.identifiability`, the
-deviations :mod:`estimator.uncertainty`, the checks at the estimate :mod:`estimator.checks`.
+and chooses the likelihood once, by ``method`` (:mod:`estimator.likelihood`, or
+:class:`estimator.filter_error.FilterErrorLikelihood`), whose hooks do what its method needs
+around the iterations (:mod:`estimator.gauss_newton`); the screen, covariance and parameter states
+are :mod:`estimator.identifiability`, the checks at the estimate :mod:`estimator.checks`.
 """
 
 from __future__ import annotations
