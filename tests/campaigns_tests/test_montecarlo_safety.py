@@ -217,7 +217,9 @@ def test_an_interrupted_run_resumed_ends_byte_identical_to_an_uninterrupted_one(
         run_montecarlo(scenario, cut, replications=3, workers=1)
     assert sorted(runner.finished_replications(cut)) == [0]
     monkeypatch.setattr(runner, "replication_task", real)
-    report = run_montecarlo(scenario, cut, replications=3, workers=2)  # resumed, in worker processes
+    # resumed in this process: that a worker process's replication has the same bytes is
+    # test_montecarlo.py's interrupted-run test and, by the command line, the Ctrl-C test below
+    report = run_montecarlo(scenario, cut, replications=3, workers=1)
     assert report.ran == (1, 2) and report.flights_flown == 0 and not report.failed
     a, b = _files(whole), _files(cut)
     assert set(a) == set(b)
