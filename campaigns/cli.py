@@ -15,6 +15,10 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the command line imports what a command needs when it runs
+    from synth.campaign import FlyResult
 
 #: Exit status of ``fpr calibrate`` and ``fpr demo`` per verdict (2: bad input or usage).
 EXIT_STATUS = {"SUCCESS": 0, "SUCCESS_WITH_WARNINGS": 3, "FAILURE": 1}
@@ -185,55 +189,38 @@ def _fly_sortie(args: argparse.Namespace, campaign) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    import contextlib
     import os
 
-    from synth.campaign import load_campaign, summarize
-    from synth.workers import stop_pool, worker_pool
+    from synth.campaign import load_campaign
+    from synth.dataset import check_directory
 
     t0 = time.perf_counter()
     campaign = load_campaign("demo")
     turbulent = load_campaign("demo_turbulence")
     out = args.out
-    report_dir = out.parent / f"{out.name}-report"
-    turb_out = out.parent / f"{out.name}-turbulence"
-    turb_report = out.parent / f"{out.name}-turbulence-report"
-    # the report folders are checked before anything is flown: one holding anything fpr did not
-    # write there is refused at once (an earlier demo report is replaced; nothing else is touched)
+    report_dir, turb_out, turb_report = _demo_folders(out)
+    # every folder is checked before anything is flown or removed: one holding anything fpr did
+    # not write there is refused at once (an earlier demo's datasets and reports are replaced;
+    # nothing else is touched)
+    check_directory(out, overwrite=True)
+    check_directory(turb_out, overwrite=True)
     _prepare_out(report_dir, True, "fpr demo", [out], check_only=True)
     _prepare_out(turb_report, True, "fpr demo", [turb_out], check_only=True)
-    # the blocks are independent: with a second core the light-turbulence block (small, mostly on
-    # one core) is flown and calibrated beside the calm one, in one worker process, its console
-    # text printed after the calm block's as if run after it; --workers 1: one after the other
+    # the blocks are independent: with more than one worker the light-turbulence block (small,
+    # mostly on one core) is flown and calibrated beside the calm one, in one more worker process,
+    # its console text printed after the calm block's as if run after it; --workers 1: one after
+    # the other, in this process
     beside = (args.workers or os.cpu_count() or 1) > 1
-    with contextlib.ExitStack() as stack:
-        pool = stack.enter_context(worker_pool(1)) if beside else None
-        # the campaign as its definition (a parsed one holds read-only mappings, which do not pickle)
-        block = (pool.submit(_turbulent_block, turbulent.raw, turbulent.source, turb_out, turb_report)
-                 if pool is not None else None)
-        print(f"fpr demo: flying the demo campaign ({len(campaign.jobs)} maneuvers, seven fleet "
-              f"configurations) into {out}")
-        result = _demo_fly(campaign, out, args.workers, progress=True)
-        if isinstance(result, int) or not result.ok:
-            if not isinstance(result, int):
-                print(summarize(result.manifest))
-            if pool is not None:  # the demo ends here, its other block with it
-                stop_pool(pool)
-            return result if isinstance(result, int) else 1
-        print(summarize(result.manifest))
-        print(f"\ndataset written to {out} ({time.perf_counter() - t0:.1f} s). "
-              "Load it with synth.dataset.load_dataset().")
-        code = _calm_calibration(out, report_dir)
-        print(f"\nfpr demo: the light-turbulence block: {len(turbulent.jobs)} maneuvers of two "
-              f"configurations in light turbulence into {turb_out}, calibrated by the filter-error "
-              "method (the wind as estimated states; experimental)")
-        if block is None:
-            tcode = _turbulent_run(turbulent, turb_out, turb_report, args.workers, progress=True)
-        else:
-            tcode, text, errors = block.result()
-            print(text, end="")
-            print(errors, end="", file=sys.stderr)
-    if tcode == 130:
+    try:
+        codes = _demo_blocks(campaign, turbulent, out, args.workers, beside, t0)
+    except KeyboardInterrupt:
+        print(f"fpr demo: interrupted; {out} and {turb_out} may be incomplete, their reports not "
+              "written; `fpr demo` again starts over", file=sys.stderr)
+        return 130
+    if isinstance(codes, int):
+        return codes
+    code, tcode = codes
+    if tcode == 130:  # the turbulent flight interrupted (--workers 1), said on stderr
         return 130
     names = {v: k for k, v in EXIT_STATUS.items()}
     print(f"fpr demo: {time.perf_counter() - t0:.0f} s in all; the calm block (the paper's calibration, "
@@ -242,10 +229,66 @@ def _demo(args: argparse.Namespace) -> int:
           "a failure of either")
     # the main job's verdict: the turbulent block demonstrates an experimental method, its verdict
     # printed above with its own findings; but a failure there is never passed over as a success
-    return EXIT_STATUS["FAILURE"] if tcode == EXIT_STATUS["FAILURE"] else code
+    return EXIT_STATUS["FAILURE"] if tcode in (EXIT_STATUS["FAILURE"], 2) else code
 
 
-def _demo_fly(campaign, out: Path, workers: int | None, progress: bool):
+def _demo_folders(out: Path) -> tuple[Path, Path, Path]:
+    """The demo's folders beside its calm dataset ``out``: the calm report, the light-turbulence
+    dataset and its report."""
+    return (out.parent / f"{out.name}-report", out.parent / f"{out.name}-turbulence",
+            out.parent / f"{out.name}-turbulence-report")
+
+
+def _demo_blocks(campaign, turbulent, out: Path, workers: int | None, beside: bool,
+                 t0: float) -> tuple[int, int] | int:
+    """The demo's two blocks (:func:`_demo`), the calm one's dataset at ``out``: ``(calm exit
+    status, turbulent exit status)``, or the demo's exit status where it ends early (the calm
+    flight interrupted, 130, or failed, 1)."""
+    import contextlib
+    from concurrent.futures.process import BrokenProcessPool
+
+    from synth.campaign import summarize
+    from synth.workers import stop_pool, worker_pool
+
+    report_dir, turb_out, turb_report = _demo_folders(out)
+
+    with contextlib.ExitStack() as stack:
+        pool = stack.enter_context(worker_pool(1)) if beside else None
+        # the campaign as its definition (a parsed one holds read-only mappings, which do not pickle)
+        block = (pool.submit(_turbulent_block, turbulent.raw, turbulent.source, turb_out, turb_report)
+                 if pool is not None else None)
+        print(f"fpr demo: flying the demo campaign ({len(campaign.jobs)} maneuvers, seven fleet "
+              f"configurations) into {out}")
+        result = _demo_fly(campaign, out, workers, progress=True)
+        if isinstance(result, int) or not result.ok:
+            if not isinstance(result, int):
+                print(summarize(result.manifest))
+            if pool is not None:
+                stop_pool(pool)
+                print(f"fpr demo: the light-turbulence block stopped with it ({turb_out} may be "
+                      "incomplete)", file=sys.stderr)
+            return result if isinstance(result, int) else EXIT_STATUS["FAILURE"]
+        print(summarize(result.manifest))
+        print(f"\ndataset written to {out} ({time.perf_counter() - t0:.1f} s). "
+              "Load it with synth.dataset.load_dataset().")
+        code = _calm_calibration(out, report_dir)
+        print(f"\nfpr demo: the light-turbulence block: {len(turbulent.jobs)} maneuvers of two "
+              f"configurations in light turbulence into {turb_out}, calibrated by the filter-error "
+              "method (the wind as estimated states; experimental)")
+        if block is None:
+            return code, _turbulent_run(turbulent, turb_out, turb_report, workers, progress=True)
+        try:
+            tcode, text, errors = block.result()
+        except BrokenProcessPool:
+            tcode, text, errors = EXIT_STATUS["FAILURE"], "", (
+                "fpr demo: the light-turbulence block's process ended abruptly (out of memory, or "
+                "killed); `fpr demo --workers 1` runs it in this process\n")
+        print(text, end="")
+        print(errors, end="", file=sys.stderr)
+    return code, tcode
+
+
+def _demo_fly(campaign, out: Path, workers: int | None, progress: bool) -> FlyResult | int:
     """Fly one of the demo's campaigns into ``out``: the :class:`~synth.campaign.FlyResult`, or 130
     when interrupted (said on stderr). An earlier dataset fpr wrote at ``out`` is replaced (its own
     files only); a directory holding anything else is refused, the message listing it."""
@@ -304,16 +347,26 @@ def _turbulent_run(campaign, out: Path, report: Path, workers: int | None, progr
 
 def _turbulent_block(raw: dict, source: str, out: Path, report: Path) -> tuple[int, str, str]:
     """:func:`_turbulent_run` of the campaign defined by ``raw`` (read from ``source``) in a worker
-    process beside the calm block, in one process: ``(exit status, its console text, its error
-    text)``, printed after the calm block's."""
+    process beside the calm block: ``(exit status, its console text, its error text)``, printed
+    after the calm block's. An error ends the block, not the demo: said in the error text as the
+    command line says it (2: bad input), a traceback for anything else (1)."""
     import contextlib
     import io
+    import traceback
 
     from synth.campaign import parse_campaign
 
     text, errors = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(text), contextlib.redirect_stderr(errors):
-        code = _turbulent_run(parse_campaign(raw, source=source), out, report, 1, progress=False)
+        try:
+            code = _turbulent_run(parse_campaign(raw, source=source), out, report, 1, progress=False)
+        except (FileNotFoundError, FileExistsError, ValueError, KeyError) as exc:
+            print(f"fpr demo: error: {exc}", file=sys.stderr)
+            code = 2
+        except Exception:
+            print(f"fpr demo: the light-turbulence block failed:\n{traceback.format_exc()}",
+                  file=sys.stderr)
+            code = EXIT_STATUS["FAILURE"]
     return code, text.getvalue(), errors.getvalue()
 
 
@@ -626,8 +679,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "and <out>-turbulence-report. An earlier demo's datasets and reports are replaced; a "
                    "folder holding anything else is refused")
     d.add_argument("--workers", type=int, default=None,
-                   help="worker processes (default: all CPUs); with more than one the light-turbulence "
-                   "block runs beside the calm one, its output printed after it")
+                   help="worker processes flying the calm block (default: all CPUs); with more than one, "
+                   "one more process flies and calibrates the light-turbulence block beside it, its "
+                   "output printed after the calm block's; 1: both blocks in this process, one after "
+                   "the other")
     show_help = ("summarise a dataset written by `fpr fly`: maneuvers per kind, Mach and "
                  "configuration, failures; an interrupted (incomplete) dataset is said to be one, with "
                  "the command that completes it (exit status 1)")

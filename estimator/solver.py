@@ -22,12 +22,11 @@ unit errors, outliers, turbulence) and the identifiability checks.
 Start: by default staged (:mod:`estimator.start`: attitude, then speed and height, then the flow
 channels), so that large IMU biases from zero start values reach the right minimum.
 
-Identifiability (:mod:`estimator.identifiability`), before the iterations and at the solution:
-parameters no sample depends on, the fewest members of sets the data cannot separate, and at the
-solution a parameter whose Cramér-Rao deviation exceeds half its allowed range are held at their
-start values, and the estimation iterates again — also after a round that crawled to the iteration
-limit, if the screen there holds a parameter (a gain whose argument went to zero); otherwise the
-limit stays a failure. Each held parameter keeps its reason (:attr:`EstimationResult.state`).
+Identifiability (:mod:`estimator.identifiability`): held at their start values are parameters no
+sample depends on, the fewest members of sets the data cannot separate and, at the solution, one
+whose Cramér-Rao deviation exceeds half its allowed range. The estimation then iterates again, also
+after a round that crawled to the iteration limit if the screen there holds a parameter; otherwise
+the limit stays a failure. Each held parameter keeps its reason (:attr:`EstimationResult.state`).
 
 Standard deviations: Cramér-Rao, ``sqrt(diag(M^-1))``, with the correlations; and the honest ones
 (:mod:`estimator.uncertainty`: coloured, cross-correlated residuals and the IMU noise).

@@ -508,6 +508,48 @@ def remove_temp_files(directory: str | Path) -> None:
                     p.unlink()
 
 
+def check_directory(directory: Path, overwrite: bool = False) -> list[Path]:
+    """The refusals of :func:`prepare_directory`, with nothing changed: the files it would remove
+    (an earlier dataset's own, with ``overwrite``), so that a command writing several datasets can
+    refuse before it writes any.
+
+    Raises
+    ------
+    FileExistsError
+        As :func:`prepare_directory`.
+    """
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        raise FileExistsError(
+            f"{directory}: is a file, not a directory; --out names the dataset directory to create "
+            "(a new or empty one)")
+    if not (directory.is_dir() and any(directory.iterdir())):
+        return []
+    own, foreign = dataset_contents(directory)
+    manifest = read_manifest_if_dataset(directory)
+    if manifest is None:
+        if foreign:
+            raise FileExistsError(
+                f"{directory}: not an fpr dataset (no {MANIFEST} of format {FORMAT!r}) and not "
+                f"empty: it holds {_listing(foreign)}; refusing to write into it or delete "
+                "anything, even with --overwrite. Choose an empty or new directory.")
+    elif foreign:
+        raise FileExistsError(
+            f"{directory}: holds {len(foreign)} item(s) `fpr fly` did not write: "
+            f"{_listing(foreign)}; refusing to touch them (--overwrite removes only a dataset's "
+            "own files). Move them away or choose another --out.")
+    elif not overwrite:
+        status = dataset_status(directory, manifest)
+        what = "a complete dataset" if status.complete else \
+            f"an incomplete dataset ({status.n_done} of {status.n_jobs} maneuvers written)"
+        raise FileExistsError(
+            f"{directory}: holds {what}; pass --overwrite to replace it (only the dataset's own "
+            "files are removed)" + ("" if status.complete else
+                                     f", complete it with: {resume_command(directory)}")
+            + ", or choose another --out")
+    return own
+
+
 def prepare_directory(directory: Path, overwrite: bool = False) -> Path:
     """Create a dataset directory (and its ``maneuvers/``), never touching a file the tool did not
     write.
@@ -519,36 +561,12 @@ def prepare_directory(directory: Path, overwrite: bool = False) -> Path:
     ------
     FileExistsError
         If ``directory`` is a file; if it holds a dataset and ``overwrite`` is false; if it holds
-        anything the tool did not write (the message lists it), whatever ``overwrite``.
+        anything the tool did not write (the message lists it), whatever ``overwrite``
+        (:func:`check_directory`).
     """
     directory = Path(directory)
-    if directory.exists() and not directory.is_dir():
-        raise FileExistsError(
-            f"{directory}: is a file, not a directory; --out names the dataset directory to create "
-            "(a new or empty one)")
-    if directory.is_dir() and any(directory.iterdir()):
-        own, foreign = dataset_contents(directory)
-        manifest = read_manifest_if_dataset(directory)
-        if manifest is None:
-            if foreign:
-                raise FileExistsError(
-                    f"{directory}: not an fpr dataset (no {MANIFEST} of format {FORMAT!r}) and not "
-                    f"empty: it holds {_listing(foreign)}; refusing to write into it or delete "
-                    "anything, even with --overwrite. Choose an empty or new directory.")
-        elif foreign:
-            raise FileExistsError(
-                f"{directory}: holds {len(foreign)} item(s) `fpr fly` did not write: "
-                f"{_listing(foreign)}; refusing to touch them (--overwrite removes only a dataset's "
-                "own files). Move them away or choose another --out.")
-        elif not overwrite:
-            status = dataset_status(directory, manifest)
-            what = "a complete dataset" if status.complete else \
-                f"an incomplete dataset ({status.n_done} of {status.n_jobs} maneuvers written)"
-            raise FileExistsError(
-                f"{directory}: holds {what}; pass --overwrite to replace it (only the dataset's own "
-                "files are removed)" + ("" if status.complete else
-                                         f", complete it with: {resume_command(directory)}")
-                + ", or choose another --out")
+    own = check_directory(directory, overwrite)
+    if own:
         # the manifest last: until the end the directory stays recognisably a dataset
         for p in sorted(own, key=lambda p: p.name == MANIFEST):
             p.unlink()

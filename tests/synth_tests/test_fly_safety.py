@@ -17,7 +17,7 @@ from _processes import HAVE_PROC, descendants, left_after, patched_on_import_env
 from campaigns.cli import main
 from estimator.io.errors import DataError
 from estimator.io.fprdataset import read_manifest
-from synth.campaign import fly_campaign, parse_campaign
+from synth.campaign import fly_campaign, load_campaign, parse_campaign
 from synth.dataset import MANIFEST, IncompleteDatasetError, load_dataset, prepare_directory, write_manifest
 
 REPO = Path(__file__).resolve().parents[2]
@@ -114,6 +114,43 @@ def test_demo_replaces_only_its_own_dataset(tmp_path, monkeypatch, capsys):
     (out / "maneuvers" / "m0001.parquet").unlink()
     assert main(["demo", "--out", str(out), "--workers", "1"]) == 0
     assert _files(out) == before
+
+
+def test_demo_refuses_a_turbulent_dataset_folder_holding_user_files_before_flying(tmp_path, capsys):
+    """Every folder the demo writes is checked before anything is flown or removed: a user's file
+    in the light-turbulence block's dataset folder is named at once, the calm block not flown."""
+    out = tmp_path / "demo"
+    turbulent = tmp_path / "demo-turbulence"
+    turbulent.mkdir()
+    (turbulent / "my_notes.txt").write_text("keep me")
+    code = main(["demo", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "my_notes.txt" in err and "Traceback" not in err, err
+    assert not out.exists(), "the calm block was flown before the turbulent folder was checked"
+    assert [p.name for p in turbulent.iterdir()] == ["my_notes.txt"]
+
+
+def test_an_error_in_the_demos_turbulent_block_ends_that_block_said_not_the_demo(tmp_path, capsys,
+                                                                                 monkeypatch):
+    """The light-turbulence block beside the calm one returns what went wrong as its text: an input
+    error as the command line says one (status 2), anything else with its traceback (1)."""
+    import campaigns.cli as cli
+
+    code, text, errors = cli._turbulent_block({"flights": "not a list"}, "bad.toml", tmp_path / "d",
+                                              tmp_path / "r")
+    assert code == 2 and errors.startswith("fpr demo: error: ") and "bad.toml" in errors, errors
+    assert not (tmp_path / "d").exists()
+
+    def broken(*args, **kwargs):
+        print("flying")
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(cli, "_turbulent_run", broken)
+    shipped = load_campaign("demo_turbulence")
+    code, text, errors = cli._turbulent_block(shipped.raw, shipped.source, tmp_path / "d", tmp_path / "r")
+    assert code == 1 and text == "flying\n" and "RuntimeError: a bug" in errors
+    assert "the light-turbulence block failed" in errors and "Traceback" in errors
+    assert capsys.readouterr() == ("", "")  # all of it returned, nothing printed
 
 
 def test_out_naming_a_file_is_a_clear_error(tmp_path, capsys):
