@@ -214,17 +214,52 @@ def _case_block(problem: Problem, theta: np.ndarray, case, tables: dict[str, Tab
     return columns, A, b
 
 
+def solve_blocks(blocks, n_columns: int) -> tuple[np.ndarray, np.ndarray]:
+    """The least-squares solution of row blocks that each touch a few columns, as
+    ``np.linalg.lstsq`` (default rank cut) gives it for the whole matrix over its live columns.
+
+    Each block ``A_c = Q_c R_c`` is reduced to its triangular factor: the stack of the ``R_c`` has
+    the stack of the ``A_c``'s singular values, so the same solution and, with the rank cut set as
+    the whole matrix's (``eps x rows``), the same rank decision; the whole matrix is never formed.
+
+    Parameters
+    ----------
+    blocks : ``(columns, A, b)`` per block: ``columns`` (k,) int, the block's column indices,
+        sorted; ``A`` (n, k); ``b`` (n,).
+    n_columns : the whole matrix's columns.
+
+    Returns
+    -------
+    ``(x, live)``: ``live`` (n_columns,) bool, the columns with a nonzero entry; ``x`` the solution
+    over them (minimum norm where they are rank-deficient).
+    """
+    R_rows, rhs = [], []
+    live = np.zeros(n_columns, dtype=bool)
+    n_rows = 0
+    for columns, A, b in blocks:
+        n_rows += A.shape[0]
+        live[columns[(A != 0.0).any(axis=0)]] = True
+        Q, R = np.linalg.qr(A)
+        R_full = np.zeros((R.shape[0], n_columns))
+        R_full[:, columns] = R
+        R_rows.append(R_full)
+        rhs.append(Q.T @ b)
+    rcond = np.finfo(float).eps * max(n_rows, int(live.sum()))
+    R_all = np.vstack(R_rows) if R_rows else np.zeros((0, n_columns))
+    rhs_all = np.concatenate(rhs) if rhs else np.zeros(0)
+    x, *_ = np.linalg.lstsq(R_all[:, live], rhs_all, rcond=rcond)
+    return x, live
+
+
 def _project_calibration(problem: Problem, truths, values: dict, chan_col, free: np.ndarray
                          ) -> dict[str, float]:
     """Least-squares fit of the calibration parameters to the clean channels (module docstring).
 
     Gauss-Newton from the problem's start values, projected onto the parameters' bounds: most
     calibration models are affine in their parameters, some are not (``f5(alpha_t) * (beta_s +
-    b_n)``). Each step is the least-squares solution of every case's rows at once, solved from
-    the cases' triangular factors stacked (``A_c = Q_c R_c``: the stack of ``R_c`` has the
-    singular values of the stack of ``A_c``, so the same solution and the same rank cut): a case
-    touches a few of the parameters, and the whole design matrix (840,000 rows in the demo) is
-    never formed.
+    b_n)``). Each step is the least-squares solution of every case's rows at once
+    (:func:`solve_blocks`): a case touches a few of the parameters, and the whole design matrix
+    (840,000 rows in the demo) is never formed.
     """
     ps = problem.parameters
     calib_kinds = ("table", "bias", "scale")
@@ -235,21 +270,9 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
     index = {k: i for i, k in enumerate(free_calib)}
     if not free_calib or not cases:
         return {}
-    n_rows = sum(y.size for *_, y in cases)
     for _ in range(8):
-        R_rows, rhs = [], []
-        live = np.zeros(len(free_calib), dtype=bool)
-        for case in cases:
-            columns, A, b = _case_block(problem, theta, case, tables, index)
-            live[columns[(A != 0.0).any(axis=0)]] = True
-            Q, R = np.linalg.qr(A)
-            R_full = np.zeros((R.shape[0], len(free_calib)))
-            R_full[:, columns] = R
-            R_rows.append(R_full)
-            rhs.append(Q.T @ b)
-        # lstsq's rank cut as if on the whole design matrix (its default scales with the rows)
-        rcond = np.finfo(float).eps * max(n_rows, int(live.sum()))
-        step, *_ = np.linalg.lstsq(np.vstack(R_rows)[:, live], np.concatenate(rhs), rcond=rcond)
+        step, live = solve_blocks([_case_block(problem, theta, case, tables, index) for case in cases],
+                                  len(free_calib))
         moved = 0.0
         for j, k in enumerate(np.array(free_calib)[live]):
             # within the parameter's bounds, as the estimator: a breakpoint the samples hardly
