@@ -21,7 +21,7 @@ lives in ``campaigns/``. What "true" means, per kind:
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -154,9 +154,9 @@ def channel_values(problem: Problem, theta: np.ndarray, m, ch, tables: dict[str,
     return params, tabs
 
 
-def _cases(problem: Problem, truths, chan_col) -> list:
-    """Every (channel, maneuver) whose clean channel the truth has: ``(channel, maneuver, signals,
-    clean target)``, the signals the channel's model reads taken from the truth."""
+def _cases(problem: Problem, truths, chan_col) -> list[_Case]:
+    """Every (channel, maneuver) whose clean channel the truth has, with the signals the channel's
+    model reads taken from the truth."""
     ps = problem.parameters
     cases = []
     for ch in problem.channels:
@@ -179,42 +179,108 @@ def _cases(problem: Problem, truths, chan_col) -> list:
                     sig[name] = tr[clean_other].to_numpy()
                 elif name in m.signals:
                     sig[name] = np.interp(t, m.t_s, m.signals[name])
-            cases.append((ch, m, sig, y))
+            cases.append(_Case(ch, m, sig, y))
     return cases
 
 
-def _case_block(problem: Problem, theta: np.ndarray, case, tables: dict[str, Table],
-                index: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One case's linearised fit at ``theta``: ``(columns, A, b)``, ``A`` (samples, columns) the
-    derivatives of the channel model along the free calibration parameters it depends on (their
-    ``index`` entries, sorted), ``b`` the clean channel minus the model."""
+@dataclass
+class _Case:
+    """One (channel, maneuver) of the projection: the signals its model reads from the truth, its
+    clean channel, and what stays the same from one Gauss-Newton step to the next — where its
+    parameters sit in ``theta``, its block's columns and, for a model affine in its parameters,
+    the block itself."""
+
+    channel: object
+    maneuver: object
+    signals: dict
+    y: np.ndarray
+    param_at: dict = field(default_factory=dict)  # scalar parameter -> index in theta
+    table_at: dict = field(default_factory=dict)  # table -> indices in theta of its breakpoints
+    columns: np.ndarray | None = None  # the block's free calibration parameters (sorted)
+    scalar_local: dict = field(default_factory=dict)  # scalar parameter -> block column
+    table_local: dict = field(default_factory=dict)  # table -> block column per breakpoint, or -1
+    affine_A: np.ndarray | None = None  # the block, where it does not depend on the parameters
+    affine_qr: tuple | None = None  # and its QR factors
+
+    def values(self, theta: np.ndarray, tables: dict[str, Table]) -> tuple[dict, dict]:
+        """The model's parameters and tables at ``theta`` (as :func:`channel_values`)."""
+        return ({n: theta[i] for n, i in self.param_at.items()},
+                {n: (tables[n], theta[idx]) for n, idx in self.table_at.items()})
+
+
+def _case_layout(problem: Problem, case: _Case, tables: dict[str, Table], index: Mapping[str, int],
+                 dual) -> None:
+    """Where ``case``'s parameters sit in ``theta`` and in its block (``index``: a free
+    calibration parameter's column), from its model's first evaluation ``dual``."""
     ps = problem.parameters
-    ch, m, sig, y = case
-    params, tabs = channel_values(problem, theta, m, ch, tables)
-    dual = ch.expression.evaluate(sig, params, tabs)
-    b = y - np.broadcast_to(dual.value, y.shape)
+    ch, m = case.channel, case.maneuver
     scalar = {n: index[ps.key_of(n, m, ch)] for n in dual.dparam if ps.key_of(n, m, ch) in index}
     # each breakpoint's column, -1 where it is not a free calibration parameter
     breaks = {n: np.array([index.get(ps.key_of(n, m, ch, e), -1)
                            for e in range(tables[n].breakpoints.size)]) for n in dual.dtable}
-    columns = np.unique(np.concatenate([np.fromiter(scalar.values(), int, len(scalar))]
-                                       + [c[c >= 0] for c in breaks.values()]))
-    local = {int(c): j for j, c in enumerate(columns)}
-    A = np.zeros((y.size, columns.size))
-    for n, c in scalar.items():
-        A[:, local[c]] += np.broadcast_to(dual.dparam[n], y.shape)
+    case.columns = np.unique(np.concatenate([np.fromiter(scalar.values(), int, len(scalar))]
+                                            + [c[c >= 0] for c in breaks.values()]))
+    local = {int(c): j for j, c in enumerate(case.columns)}
+    case.scalar_local = {n: local[c] for n, c in scalar.items()}
+    case.table_local = {n: np.array([local.get(int(c), -1) for c in b]) for n, b in breaks.items()}
+
+
+def _fill_block(case: _Case, dual) -> np.ndarray:
+    """``case``'s block from its model's evaluation ``dual``: (samples, columns), the derivatives
+    along the free calibration parameters it depends on."""
+    y = case.y
+    A = np.zeros((y.size, case.columns.size))
+    for n, j in case.scalar_local.items():
+        A[:, j] += np.broadcast_to(dual.dparam[n], y.shape)
     samples = np.arange(y.size)
     for n, terms in dual.dtable.items():
-        to_local = np.array([local.get(int(c), -1) for c in breaks[n]])
+        to_local = case.table_local[n]
         for idx, coef in terms:
             # one breakpoint per sample and term: a sample's column gets its coefficient
             c = to_local[np.broadcast_to(idx, y.shape)]
             hit = c >= 0
             A[samples[hit], c[hit]] += np.broadcast_to(coef, y.shape)[hit]
-    return columns, A, b
+    return A
 
 
-def solve_blocks(blocks, n_columns: int) -> tuple[np.ndarray, np.ndarray]:
+def _case_block(problem: Problem, theta: np.ndarray, case: _Case, tables: dict[str, Table],
+                index: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One case's linearised fit at ``theta``: ``(columns, A, b)``, ``A`` (samples, columns) the
+    derivatives of the channel model along the free calibration parameters it depends on (their
+    ``index`` entries, sorted), ``b`` the clean channel minus the model.
+
+    At the first call the case's layout is found and whether its model is affine in its
+    parameters: its block the same, to the bit, at a second point (every parameter moved by 0.37).
+    An affine case's block is kept and only its value evaluated after that (``f5(alpha_t) *
+    (beta_s + b_n)`` is not affine: the column of ``b_n`` is ``f5``'s value).
+    """
+    expr, y = case.channel.expression, case.y
+    if case.columns is None:
+        ps = problem.parameters
+        case.param_at = {n: ps.index(ps.key_of(n, case.maneuver, case.channel))
+                         for n in expr.names if n in ps.specs}
+        case.table_at = {n: np.array([ps.index(ps.key_of(n, case.maneuver, case.channel, e))
+                                      for e in range(tables[n].breakpoints.size)])
+                         for n in expr.tables}
+    if case.affine_A is not None:
+        return case.columns, case.affine_A, y - np.broadcast_to(
+            expr.value(case.signals, *case.values(theta, tables)), y.shape)
+    dual = expr.evaluate(case.signals, *case.values(theta, tables))
+    first = case.columns is None
+    if first:
+        _case_layout(problem, case, tables, index, dual)
+    A = _fill_block(case, dual)
+    if first:
+        try:
+            other = _fill_block(case, expr.evaluate(case.signals, *case.values(theta + 0.37, tables)))
+        except (ArithmeticError, ValueError):  # the second point outside the model's domain
+            other = None
+        if other is not None and np.array_equal(A, other):
+            case.affine_A, case.affine_qr = A, np.linalg.qr(A)
+    return case.columns, A, y - np.broadcast_to(dual.value, y.shape)
+
+
+def solve_blocks(blocks, n_columns: int, factors=None) -> tuple[np.ndarray, np.ndarray]:
     """The least-squares solution of row blocks that each touch a few columns, as
     ``np.linalg.lstsq`` (default rank cut) gives it for the whole matrix over its live columns.
 
@@ -227,6 +293,7 @@ def solve_blocks(blocks, n_columns: int) -> tuple[np.ndarray, np.ndarray]:
     blocks : ``(columns, A, b)`` per block: ``columns`` (k,) int, the block's column indices,
         sorted; ``A`` (n, k); ``b`` (n,).
     n_columns : the whole matrix's columns.
+    factors : per block, its ``A``'s QR factors ``(Q, R)`` where the caller has them, or None.
 
     Returns
     -------
@@ -236,10 +303,10 @@ def solve_blocks(blocks, n_columns: int) -> tuple[np.ndarray, np.ndarray]:
     R_rows, rhs = [], []
     live = np.zeros(n_columns, dtype=bool)
     n_rows = 0
-    for columns, A, b in blocks:
+    for k, (columns, A, b) in enumerate(blocks):
         n_rows += A.shape[0]
         live[columns[(A != 0.0).any(axis=0)]] = True
-        Q, R = np.linalg.qr(A)
+        Q, R = factors[k] if factors is not None and factors[k] is not None else np.linalg.qr(A)
         R_full = np.zeros((R.shape[0], n_columns))
         R_full[:, columns] = R
         R_rows.append(R_full)
@@ -271,8 +338,8 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
     if not free_calib or not cases:
         return {}
     for _ in range(8):
-        step, live = solve_blocks([_case_block(problem, theta, case, tables, index) for case in cases],
-                                  len(free_calib))
+        blocks = [_case_block(problem, theta, case, tables, index) for case in cases]
+        step, live = solve_blocks(blocks, len(free_calib), [case.affine_qr for case in cases])
         moved = 0.0
         for j, k in enumerate(np.array(free_calib)[live]):
             # within the parameter's bounds, as the estimator: a breakpoint the samples hardly
@@ -291,10 +358,10 @@ def _project_calibration(problem: Problem, truths, values: dict, chan_col, free:
             values[k] = float(theta[ps.index(k)])
     # structure error: what the best fit leaves, per channel
     out: dict[str, list[np.ndarray]] = {}
-    for ch, m, sig, y in cases:
-        params, tabs = channel_values(problem, theta, m, ch, tables)
-        fit = np.broadcast_to(ch.expression.value(sig, params, tabs), y.shape)
-        out.setdefault(ch.name, []).append(y - fit)
+    for case in cases:
+        fit = np.broadcast_to(case.channel.expression.value(case.signals, *case.values(theta, tables)),
+                              case.y.shape)
+        out.setdefault(case.channel.name, []).append(case.y - fit)
     return {c: float(np.sqrt(np.mean(np.concatenate(v) ** 2))) for c, v in out.items()}
 
 
