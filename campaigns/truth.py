@@ -57,7 +57,27 @@ def _interp_truth(tr: pd.DataFrame, col: str, t: np.ndarray) -> np.ndarray:
     return np.interp(t, tr["t_s"].to_numpy(), tr[col].to_numpy())
 
 
-def true_parameters(problem: Problem, estimated: np.ndarray | None = None) -> TruthProjection:
+def truths_of(problem: Problem, cache: dict | None = None) -> dict[str, pd.DataFrame]:
+    """Maneuver id -> its truth (:func:`estimator.io.load_truth`) for every maneuver of
+    ``problem``; with ``cache`` (a dict the caller keeps, keyed by dataset and maneuver) each
+    maneuver's truth is read once for all the problems of one run (a report's stages, a
+    replication's projection and error table). The frames are shared: read them, never change them.
+    """
+    out = {}
+    for m in problem.maneuvers:
+        key = (m.meta.get("dataset"), m.id)
+        if cache is None or key not in cache:
+            truth = load_truth(problem, m.id)
+            if cache is None:
+                out[m.id] = truth
+                continue
+            cache[key] = truth
+        out[m.id] = cache[key]
+    return out
+
+
+def true_parameters(problem: Problem, estimated: np.ndarray | None = None,
+                    truths: dict | None = None) -> TruthProjection:
     """True values of the problem's parameters (see the module docstring).
 
     Parameters
@@ -67,11 +87,12 @@ def true_parameters(problem: Problem, estimated: np.ndarray | None = None) -> Tr
         the projection frees the same calibration parameters, so that where the estimator held one
         member of a confounded set (a table value anchoring the biases) the truth is anchored
         there too. None: the problem's free parameters.
+    truths : a cache of the maneuvers' truth shared with other callers (:func:`truths_of`).
     """
     ps = problem.parameters
     specs = ps.specs
     values: dict[str, float] = {}
-    truths = {m.id: load_truth(problem, m.id) for m in problem.maneuvers}
+    truths = truths_of(problem, truths)
     chan_col = {c.name: c.column for c in problem.channels}
 
     def lag(inj: Mapping, column: str) -> float | None:

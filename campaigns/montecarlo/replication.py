@@ -310,7 +310,8 @@ def residual_accuracy(problem: Problem, result: EstimationResult) -> pd.DataFram
     return pd.DataFrame(rows, columns=_ACCURACY_COLUMNS)
 
 
-def calibrated_accuracy(problem: Problem, result: EstimationResult) -> tuple[pd.DataFrame, tuple[str, ...]]:
+def calibrated_accuracy(problem: Problem, result: EstimationResult,
+                        truths: dict | None = None) -> tuple[pd.DataFrame, tuple[str, ...]]:
     """Per flow channel, the calibrated channel minus the true flow angle at its sensor.
 
     The errors are the workflow report's (:func:`campaigns.workflow_truth.calibrated_errors`): the
@@ -324,6 +325,8 @@ def calibrated_accuracy(problem: Problem, result: EstimationResult) -> tuple[pd.
     ----------
     problem : the estimated problem (from a synthetic dataset).
     result : its estimate.
+    truths : a cache of the maneuvers' truth shared with the projection
+        (:func:`campaigns.truth.truths_of`).
 
     Returns
     -------
@@ -334,7 +337,7 @@ def calibrated_accuracy(problem: Problem, result: EstimationResult) -> tuple[pd.
     """
     display = {c.name: (c.display_scale, c.display_unit) for c in problem.channels}
     try:
-        errors = calibrated_errors(problem, result)
+        errors = calibrated_errors(problem, result, truths)
     except ValueError as exc:
         return pd.DataFrame(columns=_ACCURACY_COLUMNS), (f"calibrated channels not computed: {exc}",)
     rows = []
@@ -374,9 +377,10 @@ def verdict_of(result: EstimationResult) -> tuple[int, int, int, tuple[tuple[str
     return int(result.verdict.code), len(shown) - n_fail, n_fail, tuple(shown)
 
 
-def _truth_of(problem: Problem, result: EstimationResult) -> TruthProjection:
-    """The truth of the problem's parameters, anchored where the estimator held a parameter."""
-    return true_parameters(problem, result.free_estimated)
+def _truth_of(problem: Problem, result: EstimationResult, truths: dict | None = None) -> TruthProjection:
+    """The truth of the problem's parameters, anchored where the estimator held a parameter
+    (``truths``: :func:`campaigns.truth.truths_of`'s cache)."""
+    return true_parameters(problem, result.free_estimated, truths)
 
 
 # ---------------------------------------------------------------------------- the replication
@@ -472,7 +476,9 @@ def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequen
             problem = est.problem(tmp)
             # every [estimator.solver] option (the shipped scenarios: max_iterations 40, colored)
             result = estimate(problem, est.solver)
-            truth = _truth_of(problem, result) if result.success else None
+            # each maneuver's truth read once, for the projection and the calibrated channels
+            truth_frames: dict = {}
+            truth = _truth_of(problem, result, truth_frames) if result.success else None
         notes = tuple(dict.fromkeys(str(w.message) for w in caught))  # scrubbed by run_replication
         status = int(result.status)
         code, n_warn, n_fail, findings = verdict_of(result)
@@ -488,7 +494,7 @@ def _run_replication(scenario: Scenario, index: int, truths: Mapping[int, Sequen
                 elapsed_s=time.perf_counter() - t0, draws=pd.DataFrame(draws_table(draw)), warnings=notes,
                 **judged)
         rec = recovery_table(result, truth)
-        calibrated, not_computed = calibrated_accuracy(problem, result)
+        calibrated, not_computed = calibrated_accuracy(problem, result, truth_frames)
         channels = pd.concat([residual_accuracy(problem, result), calibrated], ignore_index=True)
     params = pd.DataFrame({
         "name": rec.index.astype(str), "family": [family_of(k) for k in rec.index],
