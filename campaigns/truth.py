@@ -58,26 +58,34 @@ def _interp_truth(tr: pd.DataFrame, col: str, t: np.ndarray) -> np.ndarray:
 
 
 def truths_of(problem: Problem, cache: dict | None = None) -> dict[str, pd.DataFrame]:
-    """Maneuver id -> its truth (:func:`estimator.io.load_truth`) for every maneuver of
-    ``problem``; with ``cache`` (a dict the caller keeps, keyed by dataset and maneuver) each
-    maneuver's truth is read once for all the problems of one run (a report's stages, a
-    replication's projection and error table). The frames are shared: read them, never change them.
+    """Every maneuver's truth (:func:`estimator.io.load_truth`), each read once per ``cache``.
+
+    Parameters
+    ----------
+    problem : a problem built from a synthetic dataset.
+    cache : a dict the caller keeps for one run (a report's stages, a replication's projection and
+        error table), keyed by the maneuver's dataset, file, sortie window and id; None: read
+        here. The frames are shared: read them, never change them.
+
+    Returns
+    -------
+    maneuver id -> its truth (``t_s`` and every ``true_*`` column).
     """
     out = {}
     for m in problem.maneuvers:
-        key = (m.meta.get("dataset"), m.id)
-        if cache is None or key not in cache:
-            truth = load_truth(problem, m.id)
-            if cache is None:
-                out[m.id] = truth
-                continue
-            cache[key] = truth
+        meta = m.meta
+        key = (meta.get("dataset"), meta.get("file"), tuple(meta.get("sortie_window_s", ())), m.id)
+        if cache is None:
+            out[m.id] = load_truth(problem, m.id)
+            continue
+        if key not in cache:
+            cache[key] = load_truth(problem, m.id)
         out[m.id] = cache[key]
     return out
 
 
 def true_parameters(problem: Problem, estimated: np.ndarray | None = None,
-                    truths: dict | None = None) -> TruthProjection:
+                    truth_cache: dict | None = None) -> TruthProjection:
     """True values of the problem's parameters (see the module docstring).
 
     Parameters
@@ -87,12 +95,12 @@ def true_parameters(problem: Problem, estimated: np.ndarray | None = None,
         the projection frees the same calibration parameters, so that where the estimator held one
         member of a confounded set (a table value anchoring the biases) the truth is anchored
         there too. None: the problem's free parameters.
-    truths : a cache of the maneuvers' truth shared with other callers (:func:`truths_of`).
+    truth_cache : the maneuvers' truth, read once for several callers (:func:`truths_of`).
     """
     ps = problem.parameters
     specs = ps.specs
     values: dict[str, float] = {}
-    truths = truths_of(problem, truths)
+    truths = truths_of(problem, truth_cache)
     chan_col = {c.name: c.column for c in problem.channels}
 
     def lag(inj: Mapping, column: str) -> float | None:
@@ -270,10 +278,11 @@ def _case_block(problem: Problem, theta: np.ndarray, case: _Case, tables: dict[s
     derivatives of the channel model along the free calibration parameters it depends on (their
     ``index`` entries, sorted), ``b`` the clean channel minus the model.
 
-    At the first call the case's layout is found and whether its model is affine in its
-    parameters: its block the same, to the bit, at a second point (every parameter moved by 0.37).
-    An affine case's block is kept and only its value evaluated after that (``f5(alpha_t) *
-    (beta_s + b_n)`` is not affine: the column of ``b_n`` is ``f5``'s value).
+    At the first call the case's layout is found and whether its model is affine in its free
+    parameters (:meth:`~estimator.core.expressions.Expression.affine_in`, read off the model's
+    tree): then its block does not depend on them, and it is kept with its QR factors, only its
+    value evaluated after that (``f5(alpha_t) * (beta_s + b_n)`` with both free is not affine: the
+    column of ``b_n`` is ``f5``'s value).
     """
     expr, y = case.channel.expression, case.y
     if case.columns is None:
@@ -292,11 +301,8 @@ def _case_block(problem: Problem, theta: np.ndarray, case: _Case, tables: dict[s
         _case_layout(problem, case, tables, index, dual)
     A = _fill_block(case, dual)
     if first:
-        try:
-            other = _fill_block(case, expr.evaluate(case.signals, *case.values(theta + 0.37, tables)))
-        except (ArithmeticError, ValueError):  # the second point outside the model's domain
-            other = None
-        if other is not None and np.array_equal(A, other):
+        free = set(case.scalar_local) | {n for n, c in case.table_local.items() if (c >= 0).any()}
+        if expr.affine_in(free):
             case.affine_A, case.affine_qr = A, np.linalg.qr(A)
     return case.columns, A, y - np.broadcast_to(dual.value, y.shape)
 

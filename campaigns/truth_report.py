@@ -27,11 +27,11 @@ def truth_sections(wf: WorkflowResult) -> TruthSections | None:
         return None
     from campaigns.workflow_truth import installation_recovery, recovery, true_accuracy
 
-    truths: dict = {}  # each maneuver's truth read once for the three tables
-    tacc, samples = true_accuracy(wf, truths)
-    inst = installation_recovery(wf, truths)
-    rec = recovery(wf, truths)
-    truths.clear()
+    truth_cache: dict = {}  # each maneuver's truth read once for the three tables
+    tacc, samples = true_accuracy(wf, truth_cache)
+    inst = installation_recovery(wf, truth_cache)
+    rec = recovery(wf, truth_cache)
+    truth_cache.clear()
     after = (Section(
         "Table 2 against the truth: calibrated channel minus true flow angle at the sensor",
         "What the paper could not measure: each measurement run back through its estimated "

@@ -42,15 +42,15 @@ from estimator.workflow import RAD2DEG, WorkflowResult, apportion_biases, three_
 
 
 def calibrated_errors(problem: Problem, result: EstimationResult,
-                      truths: dict | None = None) -> dict[str, pd.DataFrame]:
+                      truth_cache: dict | None = None) -> dict[str, pd.DataFrame]:
     """Channel -> samples of (calibrated - true flow angle at the sensor): maneuver, t_s,
-    true_rad, error_rad, alpha_t_rad (true angle of attack at the CG). ``truths``: a cache of the
-    maneuvers' truth shared with other callers (:func:`campaigns.truth.truths_of`)."""
+    true_rad, error_rad, alpha_t_rad (true angle of attack at the CG). ``truth_cache``: the
+    maneuvers' truth read once for several callers (:func:`campaigns.truth.truths_of`)."""
     values = result.values
     tables = problem_tables(problem)
     chan_col = {c.name: c.column for c in problem.channels}
     out: dict[str, list[pd.DataFrame]] = {}
-    truth_of = truths_of(problem, truths)
+    truth_of = truths_of(problem, truth_cache)
     for m in problem.maneuvers:
         tr = truth_of[m.id]
         t_tr = tr["t_s"].to_numpy()
@@ -85,14 +85,14 @@ def calibrated_errors(problem: Problem, result: EstimationResult,
     return {c: pd.concat(v, ignore_index=True) for c, v in out.items()}
 
 
-def true_accuracy(wf: WorkflowResult, truths: dict | None = None
+def true_accuracy(wf: WorkflowResult, truth_cache: dict | None = None
                   ) -> tuple[pd.DataFrame, dict[tuple[float, str], dict]]:
     """Table 2 against the truth, and the error samples per (Mach, gear) stage for plots
-    (``truths``: :func:`campaigns.truth.truths_of`'s cache)."""
+    (``truth_cache``: :func:`campaigns.truth.truths_of`'s)."""
     rows, samples = [], {}
     limit = wf.alpha_limit_deg
     for st in wf.usable:
-        errs = calibrated_errors(st.problem, st.result, truths)
+        errs = calibrated_errors(st.problem, st.result, truth_cache)
         samples[(st.mach, "down" if st.gear_down else "up")] = errs
         for name, df in errs.items():
             req = wf.declarations.requirements.get(name)
@@ -112,9 +112,9 @@ def true_accuracy(wf: WorkflowResult, truths: dict | None = None
     return pd.DataFrame(rows), samples
 
 
-def installation_recovery(wf: WorkflowResult, truths: dict | None = None) -> pd.DataFrame:
-    """Apportioned installation biases against their truth, deg (``truths``:
-    :func:`campaigns.truth.truths_of`'s cache).
+def installation_recovery(wf: WorkflowResult, truth_cache: dict | None = None) -> pd.DataFrame:
+    """Apportioned installation biases against their truth, deg (``truth_cache``:
+    :func:`campaigns.truth.truths_of`'s).
 
     The truth is the same apportionment applied to the *true* vane biases of the reference bin's
     first estimation (the projection of :mod:`campaigns.truth`): a vane's installation bias reaches
@@ -128,7 +128,7 @@ def installation_recovery(wf: WorkflowResult, truths: dict | None = None) -> pd.
     rows = []
     for mach, g in wf.installation.groupby("mach"):
         st = next(s for s in wf.first if s.mach == mach)
-        truth = true_parameters(st.problem, st.result.free_estimated, truths).values
+        truth = true_parameters(st.problem, st.result.free_estimated, truth_cache).values
         ac = [a for a in sorted({m.aircraft for m in st.problem.maneuvers})
               if all(make_key(fam, a) in truth for fam in families.values())]
         if not ac:
@@ -160,13 +160,13 @@ def _sensor_of(problem: Problem, family: str) -> str | None:
     return next((c.sensor for c in problem.channels if family in c.expression.names), None)
 
 
-def recovery(wf: WorkflowResult, truths: dict | None = None) -> pd.DataFrame:
+def recovery(wf: WorkflowResult, truth_cache: dict | None = None) -> pd.DataFrame:
     """Every final estimate with a truth (calibration parameters, time delays, IMU biases, and the
-    steady wind of a model set with the INS velocities; ``truths``:
-    :func:`campaigns.truth.truths_of`'s cache)."""
+    steady wind of a model set with the INS velocities; ``truth_cache``:
+    :func:`campaigns.truth.truths_of`'s)."""
     frames = []
     for st in wf.usable:
-        t = recovery_table(st.result, true_parameters(st.problem, st.result.free_estimated, truths))
+        t = recovery_table(st.result, true_parameters(st.problem, st.result.free_estimated, truth_cache))
         wind = t.index.str.startswith(("wind_n[", "wind_e[", "wind_d["))
         t = t[t["kind"].isin(["imu_bias", "time_delay", "bias", "scale", "table"]) | wind].copy()
         t.insert(0, "gear", "down" if st.gear_down else "up")

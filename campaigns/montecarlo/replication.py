@@ -311,7 +311,7 @@ def residual_accuracy(problem: Problem, result: EstimationResult) -> pd.DataFram
 
 
 def calibrated_accuracy(problem: Problem, result: EstimationResult,
-                        truths: dict | None = None) -> tuple[pd.DataFrame, tuple[str, ...]]:
+                        truth_cache: dict | None = None) -> tuple[pd.DataFrame, tuple[str, ...]]:
     """Per flow channel, the calibrated channel minus the true flow angle at its sensor.
 
     The errors are the workflow report's (:func:`campaigns.workflow_truth.calibrated_errors`): the
@@ -325,7 +325,7 @@ def calibrated_accuracy(problem: Problem, result: EstimationResult,
     ----------
     problem : the estimated problem (from a synthetic dataset).
     result : its estimate.
-    truths : a cache of the maneuvers' truth shared with the projection
+    truth_cache : the maneuvers' truth, read once with the projection
         (:func:`campaigns.truth.truths_of`).
 
     Returns
@@ -337,7 +337,7 @@ def calibrated_accuracy(problem: Problem, result: EstimationResult,
     """
     display = {c.name: (c.display_scale, c.display_unit) for c in problem.channels}
     try:
-        errors = calibrated_errors(problem, result, truths)
+        errors = calibrated_errors(problem, result, truth_cache)
     except ValueError as exc:
         return pd.DataFrame(columns=_ACCURACY_COLUMNS), (f"calibrated channels not computed: {exc}",)
     rows = []
@@ -377,10 +377,11 @@ def verdict_of(result: EstimationResult) -> tuple[int, int, int, tuple[tuple[str
     return int(result.verdict.code), len(shown) - n_fail, n_fail, tuple(shown)
 
 
-def _truth_of(problem: Problem, result: EstimationResult, truths: dict | None = None) -> TruthProjection:
+def _truth_of(problem: Problem, result: EstimationResult,
+              truth_cache: dict | None = None) -> TruthProjection:
     """The truth of the problem's parameters, anchored where the estimator held a parameter
-    (``truths``: :func:`campaigns.truth.truths_of`'s cache)."""
-    return true_parameters(problem, result.free_estimated, truths)
+    (``truth_cache``: :func:`campaigns.truth.truths_of`'s)."""
+    return true_parameters(problem, result.free_estimated, truth_cache)
 
 
 # ---------------------------------------------------------------------------- the replication

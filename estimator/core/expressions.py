@@ -178,6 +178,16 @@ class Expression:
         """
         return _Evaluator(self, signals, params, tables, state_signals, by_parameters).visit(self.tree)
 
+    def affine_in(self, free: frozenset[str] | set[str]) -> bool:
+        """Is the model affine in ``free`` (parameter and table names), whatever the signals?
+
+        Read off the tree, exactly: sums and negations of affine terms; a product with at most one
+        factor that depends on ``free``; a quotient whose denominator does not; a function or a
+        table whose argument does not (a table is linear in its own values). Then every
+        derivative with respect to ``free`` is independent of their values, to the bit.
+        """
+        return _affine(self.tree, frozenset(free))
+
     def value(
         self,
         signals: Mapping[str, np.ndarray],
@@ -186,6 +196,32 @@ class Expression:
     ) -> np.ndarray:
         """The value alone: what ``evaluate(...).value`` gives, operation for operation."""
         return _Evaluator(self, signals, params, tables, frozenset()).value(self.tree)
+
+
+def _uses(node, free: frozenset[str]) -> bool:
+    """Does the subtree name anything in ``free`` (a name, or a table called)?"""
+    return any((isinstance(n, ast.Name) and n.id in free)
+               or (isinstance(n, ast.Call) and n.func.id in free) for n in ast.walk(node))
+
+
+def _affine(node, free: frozenset[str]) -> bool:
+    """:meth:`Expression.affine_in` of a subtree."""
+    if isinstance(node, (ast.Constant, ast.Name)):
+        return True
+    if isinstance(node, ast.UnaryOp):
+        return _affine(node.operand, free)
+    if isinstance(node, ast.Call):
+        return not _uses(node.args[0], free)
+    if isinstance(node, ast.BinOp):
+        left, right = node.left, node.right
+        if isinstance(node.op, (ast.Add, ast.Sub)):
+            return _affine(left, free) and _affine(right, free)
+        if isinstance(node.op, ast.Mult):
+            return (_affine(left, free) and _affine(right, free)
+                    and not (_uses(left, free) and _uses(right, free)))
+        if isinstance(node.op, ast.Div):
+            return _affine(left, free) and not _uses(right, free)
+    return False
 
 
 def parse(text: str, where: str = "model") -> Expression:

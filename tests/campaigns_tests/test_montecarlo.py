@@ -444,8 +444,8 @@ def test_calibrated_channels_are_the_workflow_reports_and_a_flat_segment_is_a_no
     truths = {j: read_flight(flight_file(out / "flights", j)) for j in (0, 1)}
     seen = {}
 
-    def recorded(problem, result, truths=None):  # the truths the projection read, shared
-        seen.update(workflow_truth.calibrated_errors(problem, result, truths))
+    def recorded(problem, result, truth_cache=None):  # the truths the projection read, shared
+        seen.update(workflow_truth.calibrated_errors(problem, result, truth_cache))
         return seen
 
     monkeypatch.setattr(replication_module, "calibrated_errors", recorded)
@@ -460,7 +460,7 @@ def test_calibrated_channels_are_the_workflow_reports_and_a_flat_segment_is_a_no
         assert cal.loc[name, "three_sigma"] == pytest.approx(workflow.three_sigma(e_deg), rel=1e-12)
         assert cal.loc[name, "n"] == e_deg.size
 
-    def flat(problem, result, truths=None):
+    def flat(problem, result, truth_cache=None):
         raise ValueError("channel alpha_zl: its model does not depend on alpha_s at some samples")
 
     monkeypatch.setattr(replication_module, "calibrated_errors", flat)

@@ -6,6 +6,7 @@ columns, rank-deficient inside a block, columns no block touches, an all-zero co
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -91,3 +92,43 @@ def test_the_rank_cut_is_the_whole_matrixs(delta):
     _check(blocks, 2)
     x, _ = solve_blocks(blocks, 2)
     assert (np.abs(x).max() < 10.0) == (delta < 1e-13), x  # merged: a minimum-norm, small solution
+
+
+def test_factors_a_caller_has_give_the_same_solution():
+    rng = np.random.default_rng(8)
+    blocks = [(np.array([0, 2]), rng.normal(size=(30, 2)), rng.normal(size=30)),
+              (np.array([1, 2]), rng.normal(size=(20, 2)), rng.normal(size=20))]
+    plain = solve_blocks(blocks, 3)
+    kept = solve_blocks(blocks, 3, [np.linalg.qr(blocks[0][1]), None])
+    np.testing.assert_array_equal(plain[0], kept[0])
+    np.testing.assert_array_equal(plain[1], kept[1])
+
+
+def test_each_maneuvers_truth_is_read_once_per_cache(tiny_dataset, monkeypatch):
+    """truths_of: one read per maneuver for every problem sharing a cache (a report's stages),
+    the same frames as read directly; without a cache, a read each time."""
+    import warnings
+
+    import campaigns.truth as truth_module
+    from estimator.io import load_truth, problem_from_dataset
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        problem = problem_from_dataset(tiny_dataset)
+    reads = []
+
+    def counted(p, mid):
+        reads.append(mid)
+        return load_truth(p, mid)
+
+    monkeypatch.setattr(truth_module, "load_truth", counted)
+    cache: dict = {}
+    first = truth_module.truths_of(problem, cache)
+    again = truth_module.truths_of(problem, cache)
+    ids = [m.id for m in problem.maneuvers]
+    assert reads == ids and list(first) == ids
+    assert all(again[i] is first[i] for i in ids)
+    for i in ids:
+        pd.testing.assert_frame_equal(first[i], load_truth(problem, i))
+    truth_module.truths_of(problem)
+    assert reads == ids + ids

@@ -111,3 +111,42 @@ def test_unknown_name_is_named():
     signals, params, tables = _setup()
     with pytest.raises(ExpressionError, match="b_r"):
         parse("alpha_s + b_r").evaluate(signals, params, tables)
+
+
+@pytest.mark.parametrize(("text", "free", "affine"), [
+    ("f1(alpha_s) + f2(alpha_t) * beta_s + b_l", {"f1", "f2", "b_l"}, True),
+    ("alpha_s + k_ba * alpha_s + b_ba", {"k_ba", "b_ba"}, True),
+    ("f5(alpha_t) * (beta_s + b_n)", {"f5", "b_n"}, False),  # bilinear: b_n's column is f5's value
+    ("f5(alpha_t) * (beta_s + b_n)", {"f5"}, True),  # b_n held: linear in the table
+    ("f5(alpha_t) * (beta_s + b_n)", {"b_n"}, True),
+    ("(b1 - b2) * (c1 - c2) * alpha_s + b1", {"b1", "b2", "c1", "c2"}, False),
+    ("f(alpha_s + b)", {"b"}, False),  # a parameter inside a table's argument: a kink moves
+    ("f(alpha_s + b)", {"f"}, True),
+    ("z / k + b", {"b"}, True),
+    ("z / k + b", {"k"}, False),
+    ("(z + b) / 2", {"b"}, True),
+    ("-sin(alpha_s) * k", {"k"}, True),
+    ("sin(alpha_s * k)", {"k"}, False),
+])
+def test_affinity_is_read_off_the_tree(text, free, affine):
+    assert parse(text).affine_in(free) is affine
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_an_affine_models_derivatives_do_not_move_with_its_parameters(seed):
+    """What affine_in promises, to the bit: the derivatives at two random points are the same."""
+    rng = np.random.default_rng(seed)
+    expr = parse("f1(alpha_s) + f2(alpha_t) * beta_s + k * alpha_s + b")
+    tab = Table("f", np.linspace(-0.2, 0.4, 6))
+    sig = {n: rng.uniform(-0.3, 0.5, 50) for n in ("alpha_s", "alpha_t", "beta_s")}
+    assert expr.affine_in({"f1", "f2", "k", "b"})
+    duals = [expr.evaluate(sig, {"k": rng.normal(), "b": rng.normal()},
+                           {n: (tab, rng.normal(size=6)) for n in ("f1", "f2")}) for _ in range(2)]
+    for name in ("k", "b"):
+        np.testing.assert_array_equal(np.broadcast_to(duals[0].dparam[name], 50),
+                                      np.broadcast_to(duals[1].dparam[name], 50))
+    for name in ("f1", "f2"):
+        for (i0, c0), (i1, c1) in zip(duals[0].dtable[name], duals[1].dtable[name], strict=True):
+            np.testing.assert_array_equal(i0, i1)
+            np.testing.assert_array_equal(c0, c1)
