@@ -23,6 +23,9 @@ if TYPE_CHECKING:  # the command line imports what a command needs when it runs
 #: Exit status of ``fpr calibrate`` and ``fpr demo`` per verdict (2: bad input or usage).
 EXIT_STATUS = {"SUCCESS": 0, "SUCCESS_WITH_WARNINGS": 3, "FAILURE": 1}
 
+#: The errors a command reports as bad input (exit status 2, the message alone, no traceback)
+INPUT_ERRORS = (FileNotFoundError, FileExistsError, ValueError, KeyError)
+
 
 def exit_status(verdict) -> int:
     """The exit status that carries a verdict (:data:`EXIT_STATUS`)."""
@@ -271,7 +274,7 @@ def _demo_blocks(campaign, turbulent, out: Path, workers: int | None, beside: bo
         print(summarize(result.manifest))
         print(f"\ndataset written to {out} ({time.perf_counter() - t0:.1f} s). "
               "Load it with synth.dataset.load_dataset().")
-        code = _calm_calibration(out, report_dir)
+        code = _block_calibration(out, report_dir, {})
         print(f"\nfpr demo: the light-turbulence block: {len(turbulent.jobs)} maneuvers of two "
               f"configurations in light turbulence into {turb_out}, calibrated by the filter-error "
               "method (the wind as estimated states; experimental)")
@@ -302,37 +305,24 @@ def _demo_fly(campaign, out: Path, workers: int | None, progress: bool) -> FlyRe
         return 130
 
 
-def _calm_calibration(out: Path, report: Path) -> int:
-    """The demo's calm block calibrated with the workflow's defaults (the model set's reference
-    Mach), as `fpr calibrate DATASET` runs it; the report written. The exit status."""
+def _block_calibration(out: Path, report: Path, options: dict, model: str | None = None) -> int:
+    """One of the demo's blocks calibrated as `fpr calibrate DATASET` runs it with ``options``
+    (and ``--model``): the calm block with the workflow's defaults (the model set's reference
+    Mach); the light-turbulence block by the filter-error method (the gusts as estimated states,
+    which the output-error fit would take for sensor errors) with the INS velocities
+    (``tejas_ins``). The report written; the exit status."""
     import warnings
 
     from estimator.io import problem_from_dataset
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        problem = problem_from_dataset(out)
-    return _workflow(problem, report, {}, overwrite=True, tool="fpr demo", source=out)
-
-
-def _turbulent_calibration(out: Path, report: Path) -> int:
-    """The demo's light-turbulence block calibrated by the filter-error method (the gusts as
-    estimated states, which the output-error fit would take for sensor errors) with the INS
-    velocities, as `fpr calibrate DATASET --method filter_error --model tejas_ins` runs it; the
-    report written. The exit status."""
-    import warnings
-
-    from estimator.io import problem_from_dataset
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        problem = problem_from_dataset(out, model="tejas_ins")
-    return _workflow(problem, report, {"method": "filter_error"}, overwrite=True, tool="fpr demo",
-                     source=out)
+        problem = problem_from_dataset(out, **({"model": model} if model else {}))
+    return _workflow(problem, report, options, overwrite=True, tool="fpr demo", source=out)
 
 
 def _turbulent_run(campaign, out: Path, report: Path, workers: int | None, progress: bool) -> int:
-    """The demo's light-turbulence block flown and calibrated (:func:`_turbulent_calibration`): the
+    """The demo's light-turbulence block flown and calibrated (:func:`_block_calibration`): the
     exit status, 130 when interrupted."""
     from synth.campaign import summarize
 
@@ -342,7 +332,7 @@ def _turbulent_run(campaign, out: Path, report: Path, workers: int | None, progr
     if not result.ok:
         print(summarize(result.manifest))
         return EXIT_STATUS["FAILURE"]
-    return _turbulent_calibration(out, report)
+    return _block_calibration(out, report, {"method": "filter_error"}, model="tejas_ins")
 
 
 def _turbulent_block(raw: dict, source: str, out: Path, report: Path) -> tuple[int, str, str]:
@@ -360,7 +350,7 @@ def _turbulent_block(raw: dict, source: str, out: Path, report: Path) -> tuple[i
     with contextlib.redirect_stdout(text), contextlib.redirect_stderr(errors):
         try:
             code = _turbulent_run(parse_campaign(raw, source=source), out, report, 1, progress=False)
-        except (FileNotFoundError, FileExistsError, ValueError, KeyError) as exc:
+        except INPUT_ERRORS as exc:
             print(f"fpr demo: error: {exc}", file=sys.stderr)
             code = 2
         except Exception:
@@ -867,7 +857,7 @@ def main(argv: list[str] | None = None) -> int:
         code = handlers[args.command](args)
         sys.stdout.flush()  # a reader that has gone is found here, not at exit
         return code
-    except (FileNotFoundError, FileExistsError, ValueError, KeyError) as exc:
+    except INPUT_ERRORS as exc:
         print(f"fpr {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except BrokenPipeError:

@@ -28,7 +28,7 @@ import pandas as pd
 
 from estimator.core.expressions import Table
 from estimator.io import dataset_column, load_truth
-from estimator.problem import SENSOR_SIGNALS, Problem
+from estimator.problem import SENSOR_SIGNALS, ChannelSpec, ManeuverData, Problem
 from estimator.result import EstimationResult
 
 IMU_REFERENCE = "ax_imu_mps2"
@@ -170,17 +170,31 @@ def problem_tables(problem: Problem) -> dict[str, Table]:
             if s.breakpoints}
 
 
+def parameter_indices(problem: Problem, m, ch, tables: dict[str, Table]
+                      ) -> tuple[dict[str, int], dict[str, np.ndarray]]:
+    """Where a channel model's parameters and table values for maneuver ``m`` sit in the
+    parameter vector: ``(scalar name -> index, table name -> (K,) indices)``. KeyError if an
+    instance is missing (an aircraft without that parameter)."""
+    ps = problem.parameters
+    expr = ch.expression
+    return ({n: ps.index(ps.key_of(n, m, ch)) for n in expr.names if n in ps.specs},
+            {n: np.array([ps.index(ps.key_of(n, m, ch, e)) for e in range(tables[n].breakpoints.size)])
+             for n in expr.tables})
+
+
+def values_at(theta: np.ndarray, tables: dict[str, Table], param_at: Mapping[str, int],
+              table_at: Mapping[str, np.ndarray]) -> tuple[dict, dict]:
+    """``(params, tabs)`` as :meth:`Expression.evaluate` takes them, at the values ``theta`` (SI),
+    from :func:`parameter_indices`."""
+    return ({n: theta[i] for n, i in param_at.items()},
+            {n: (tables[n], theta[idx]) for n, idx in table_at.items()})
+
+
 def channel_values(problem: Problem, theta: np.ndarray, m, ch, tables: dict[str, Table]):
     """A channel model's parameters and tables for maneuver ``m`` at the values ``theta`` (SI):
     ``(params, tabs)`` as :meth:`Expression.evaluate` takes them. KeyError if an instance is
     missing (an aircraft without that parameter)."""
-    ps = problem.parameters
-    expr = ch.expression
-    params = {n: theta[ps.index(ps.key_of(n, m, ch))] for n in expr.names if n in ps.specs}
-    tabs = {n: (tables[n], theta[[ps.index(ps.key_of(n, m, ch, e))
-                                  for e in range(tables[n].breakpoints.size)]])
-            for n in expr.tables}
-    return params, tabs
+    return values_at(theta, tables, *parameter_indices(problem, m, ch, tables))
 
 
 def _cases(problem: Problem, truths, chan_col) -> list[_Case]:
@@ -219,8 +233,8 @@ class _Case:
     parameters sit in ``theta``, its block's columns and, for a model affine in its parameters,
     the block itself."""
 
-    channel: object
-    maneuver: object
+    channel: ChannelSpec
+    maneuver: ManeuverData
     signals: dict
     y: np.ndarray
     param_at: dict = field(default_factory=dict)  # scalar parameter -> index in theta
@@ -232,9 +246,8 @@ class _Case:
     affine_qr: tuple | None = None  # and its QR factors
 
     def values(self, theta: np.ndarray, tables: dict[str, Table]) -> tuple[dict, dict]:
-        """The model's parameters and tables at ``theta`` (as :func:`channel_values`)."""
-        return ({n: theta[i] for n, i in self.param_at.items()},
-                {n: (tables[n], theta[idx]) for n, idx in self.table_at.items()})
+        """The model's parameters and tables at ``theta`` (:func:`values_at`)."""
+        return values_at(theta, tables, self.param_at, self.table_at)
 
 
 def _case_layout(problem: Problem, case: _Case, tables: dict[str, Table], index: Mapping[str, int],
@@ -285,18 +298,13 @@ def _case_block(problem: Problem, theta: np.ndarray, case: _Case, tables: dict[s
     column of ``b_n`` is ``f5``'s value).
     """
     expr, y = case.channel.expression, case.y
-    if case.columns is None:
-        ps = problem.parameters
-        case.param_at = {n: ps.index(ps.key_of(n, case.maneuver, case.channel))
-                         for n in expr.names if n in ps.specs}
-        case.table_at = {n: np.array([ps.index(ps.key_of(n, case.maneuver, case.channel, e))
-                                      for e in range(tables[n].breakpoints.size)])
-                         for n in expr.tables}
     if case.affine_A is not None:
         return case.columns, case.affine_A, y - np.broadcast_to(
             expr.value(case.signals, *case.values(theta, tables)), y.shape)
-    dual = expr.evaluate(case.signals, *case.values(theta, tables))
     first = case.columns is None
+    if first:
+        case.param_at, case.table_at = parameter_indices(problem, case.maneuver, case.channel, tables)
+    dual = expr.evaluate(case.signals, *case.values(theta, tables))
     if first:
         _case_layout(problem, case, tables, index, dual)
     A = _fill_block(case, dual)
