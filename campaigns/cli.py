@@ -89,7 +89,9 @@ def _add_fly(sub: argparse._SubParsersAction) -> None:
                       help="complete the interrupted dataset at --out: fly only its missing "
                       "maneuvers (the campaign is read from its manifest; a campaign given too "
                       "must be the same)")
-    p.add_argument("--workers", type=int, default=None, help="worker processes (default: all CPUs)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="worker processes (default: all CPUs, fewer for a small campaign, whose "
+                   "maneuvers fly as fast in this process as a worker takes to start)")
     p.add_argument("--sortie", nargs="?", const="", default=None, metavar="CONFIG",
                    help="fly the maneuvers of one configuration (default: the campaign's first) as "
                    "one continuous sortie with transitions between them, one stream per recorder "

@@ -40,20 +40,21 @@ def pytest_collection_modifyitems(session, config, items) -> None:
 
 @pytest.fixture(scope="session")
 def fly_once(tmp_path_factory) -> Callable[..., Path]:
-    """``fly_once(campaign, source, workers=1) -> Path``: the campaign dict flown once per session.
+    """``fly_once(campaign, source) -> Path``: the campaign dict flown once per session.
 
     ``source`` is the label the manifest records (as ``parse_campaign``'s). Every maneuver must fly
     (asserted). The folder is shared between modules: copy it before editing anything in it.
+    Flown in this process: the suite keeps every core busy (pytest-xdist), and a pool of workers
+    would only add its start (imports, JSBSim models) to the CPU time (the bytes are the same).
     """
     flown: dict[str, Path] = {}
 
-    def fly(campaign: Mapping, source: str, workers: int | None = 1) -> Path:
-        # workers change only how fast it flies, never the bytes: not part of the key
+    def fly(campaign: Mapping, source: str) -> Path:
         key = json.dumps({"campaign": campaign, "source": source}, sort_keys=True)
         if key not in flown:
             out = tmp_path_factory.mktemp(f"flown-{campaign.get('name', 'campaign')}") / "data"
             res = fly_campaign(parse_campaign(copy.deepcopy(dict(campaign)), source=source), out,
-                               workers=workers)
+                               workers=1)
             assert res.ok, res.failures
             flown[key] = out
         return flown[key]

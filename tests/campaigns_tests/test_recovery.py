@@ -69,7 +69,7 @@ _KNOWN: tuple[str, ...] = ()
 @pytest.fixture(scope="module")
 def recovery(fly_once) -> pd.DataFrame:
     t0 = time.perf_counter()
-    out = fly_once(CAMPAIGN, "test_recovery", workers=None)
+    out = fly_once(CAMPAIGN, "test_recovery")
     t_fly = time.perf_counter() - t0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -35,7 +35,7 @@ CAMPAIGN = {
 
 @pytest.mark.slow
 def test_a_good_flight_at_the_realism_level_is_not_a_failure(fly_once):
-    path = fly_once(CAMPAIGN, "test_verdict_realism", workers=None)
+    path = fly_once(CAMPAIGN, "test_verdict_realism")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the held GNSS velocity and the boom's missing channels
         problem = problem_from_dataset(path)

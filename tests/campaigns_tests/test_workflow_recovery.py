@@ -54,7 +54,7 @@ MAX_OUTSIDE = 0.05
 
 @pytest.fixture(scope="module")
 def workflow(fly_once):
-    out = fly_once(CAMPAIGN, "test_workflow_recovery", workers=None)
+    out = fly_once(CAMPAIGN, "test_workflow_recovery")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         problem = problem_from_dataset(out, overrides={"h0": {"free": True}})

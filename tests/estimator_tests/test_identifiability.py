@@ -150,7 +150,7 @@ def test_single_wind_up_turn_sideslip_biases_are_honest_and_the_weak_points_flag
     from campaigns.truth import recovery_table, true_parameters
     from estimator.io import problem_from_dataset
 
-    data = fly_once(WUT_CAMPAIGN, "test_identifiability", workers=None)
+    data = fly_once(WUT_CAMPAIGN, "test_identifiability")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         prob = problem_from_dataset(data)

@@ -3,11 +3,19 @@
 from __future__ import annotations
 
 import copy
+import os
 
 import pytest
 
 from campaigns.cli import main
-from synth.campaign import CampaignError, fly_campaign, load_campaign, parse_campaign
+from synth.campaign import (
+    MANEUVERS_PER_DEFAULT_WORKER,
+    CampaignError,
+    fly_campaign,
+    load_campaign,
+    parse_campaign,
+    pool_size,
+)
 from synth.dataset import load_dataset, maneuver_file, maneuver_id, maneuver_key, manifest_entry
 
 SMALL = {
@@ -68,6 +76,18 @@ def test_manifest_records_what_was_flown(twin_runs):
     df = ds.load("m0000")
     assert {"alpha_zb_rad", "beta_zbu_rad", "beta_zbl_rad"} <= set(df.columns)
     assert "beta_znp_rad" not in df.columns, "the boom replaces the nose probe"
+
+
+def test_the_default_pool_starts_one_worker_per_dozen_maneuvers(monkeypatch):
+    """A small campaign flies in this process (a worker's start costs about as much as flying a
+    few maneuvers); a large one on every CPU; a number given is kept, never above the maneuvers."""
+    n = MANEUVERS_PER_DEFAULT_WORKER
+    monkeypatch.setattr(os, "cpu_count", lambda: 8)
+    assert [pool_size(None, k) for k in (0, 1, n - 1, n, 2 * n - 1, 2 * n, 3 * n + 5, 100 * n)] == [
+        1, 1, 1, 1, 1, 2, 3, 8]
+    assert [pool_size(w, k) for w, k in ((1, 100), (4, 2), (4, 40), (3, 0))] == [1, 2, 4, 1]
+    monkeypatch.setattr(os, "cpu_count", lambda: None)  # unknown: one
+    assert pool_size(None, 100 * n) == 1
 
 
 def test_seed_key_and_maneuver_id_layout():
