@@ -14,9 +14,11 @@ and calibrates, or a run of estimations; ``python -m pytest -m "not slow"`` is t
 
 from __future__ import annotations
 
+import compileall
 import copy
 import json
 import shutil
+import sys
 import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -25,6 +27,29 @@ import pytest
 from _campaigns import TINY_CAMPAIGN, TINY_SOURCE
 
 from synth.campaign import fly_campaign, parse_campaign
+
+#: The project's packages, which the suite's processes import
+_PACKAGES = ("estimator", "synth", "campaigns", "aircraft_models", "tests")
+
+
+def pytest_configure(config) -> None:
+    """With ``PYTHONDONTWRITEBYTECODE`` set, keep the bytecode of the project's modules beside their
+    sources all the same (``__pycache__``, ignored by git, where numba keeps its kernels too).
+
+    Otherwise every process of the suite compiles from source each module it imports, every run:
+    each pytest-xdist worker its ~300 modules and pytest's rewrite of every test module (about 5 s
+    of CPU time), each command line, fork server and dask worker a test starts its imports (about
+    0.6 s for the command line's), in a suite that keeps both cores busy. So pytest's processes
+    write bytecode, and the controller compiles every module once before the workers start, for
+    the processes the tests start (which still only read it: seconds on a fresh clone, a check of
+    the files' times after that)."""
+    if not sys.dont_write_bytecode:
+        return
+    sys.dont_write_bytecode = False
+    if not hasattr(config, "workerinput"):
+        root = Path(__file__).resolve().parent.parent
+        for package in _PACKAGES:
+            compileall.compile_dir(root / package, quiet=1, workers=0)
 
 
 def pytest_collection_modifyitems(session, config, items) -> None:
