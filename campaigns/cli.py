@@ -90,8 +90,8 @@ def _add_fly(sub: argparse._SubParsersAction) -> None:
                       "maneuvers (the campaign is read from its manifest; a campaign given too "
                       "must be the same)")
     p.add_argument("--workers", type=int, default=None,
-                   help="worker processes (default: all CPUs, fewer for a small campaign, whose "
-                   "maneuvers fly as fast in this process as a worker takes to start)")
+                   help="worker processes (default: all CPUs, fewer for a small campaign, which "
+                   "flies faster in this process or a few workers than a pool takes to start)")
     p.add_argument("--sortie", nargs="?", const="", default=None, metavar="CONFIG",
                    help="fly the maneuvers of one configuration (default: the campaign's first) as "
                    "one continuous sortie with transitions between them, one stream per recorder "
@@ -671,7 +671,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "and <out>-turbulence-report. An earlier demo's datasets and reports are replaced; a "
                    "folder holding anything else is refused")
     d.add_argument("--workers", type=int, default=None,
-                   help="worker processes flying the calm block (default: all CPUs); with more than one, "
+                   help="worker processes flying the calm block (default: as fpr fly's); with more than one, "
                    "one more process flies and calibrates the light-turbulence block beside it, its "
                    "output printed after the calm block's; 1: both blocks in this process, one after "
                    "the other")

@@ -506,20 +506,20 @@ class _Progress:
             self.bar.close()
 
 
-#: The default pool (``workers=None``) has at most one worker per this many maneuvers to fly: a
-#: worker's start (the fork server's imports, each worker's JSBSim model) costs about the CPU time
-#: of flying three or four maneuvers, which a small campaign does not win back. Measured on 2 cores:
-#: 10 maneuvers fly in 4.0 s in this process, in 3.8-5.1 s and twice the CPU time with two workers;
-#: 30 maneuvers in 12 s in this process, in 7.5-8.0 s with two workers.
+#: The default pool (``workers`` None or 0) has one worker per this many maneuvers to fly, or part
+#: of it, at most one per CPU: a worker's start (the fork server's imports, each worker's JSBSim
+#: model) costs about the CPU time of flying three or four maneuvers, which a small campaign does
+#: not win back. Measured on 2 cores: 10 maneuvers fly in 4.0 s in this process, in 3.8-5.1 s and
+#: twice the CPU time with two workers; 30 maneuvers in 12 s in this process, 7.5-8.0 s with two.
 MANEUVERS_PER_DEFAULT_WORKER = 12
 
 
 def pool_size(workers: int | None, n_jobs: int) -> int:
-    """Worker processes that fly ``n_jobs`` maneuvers: ``workers`` (None: the CPUs, at most one per
-    :data:`MANEUVERS_PER_DEFAULT_WORKER` maneuvers), never more than the maneuvers; 1 flies them in
-    this process."""
-    if workers is None:
-        workers = min(os.cpu_count() or 1, n_jobs // MANEUVERS_PER_DEFAULT_WORKER)
+    """Worker processes that fly ``n_jobs`` maneuvers: ``workers`` (None or 0: the default pool,
+    :data:`MANEUVERS_PER_DEFAULT_WORKER`), never more than the maneuvers; 1 flies them in this
+    process."""
+    if not workers:
+        workers = min(os.cpu_count() or 1, -(-n_jobs // MANEUVERS_PER_DEFAULT_WORKER))
     return max(1, min(workers, n_jobs))
 
 
@@ -598,8 +598,8 @@ def fly_campaign(
     ----------
     campaign : from :func:`load_campaign` (to resume: :func:`campaign_of_dataset`).
     out_dir : the dataset directory to create.
-    workers : worker processes (default: the number of CPUs, at most one per
-        :data:`MANEUVERS_PER_DEFAULT_WORKER` maneuvers; 1 flies in this process).
+    workers : worker processes (default: one per :data:`MANEUVERS_PER_DEFAULT_WORKER`
+        maneuvers, at most one per CPU; 1 flies in this process).
     overwrite : replace a dataset at ``out_dir`` (only the files it wrote are removed; a directory
         holding anything else is refused).
     resume : complete the interrupted dataset at ``out_dir``: fly only the jobs whose files are

@@ -14,11 +14,9 @@ and calibrates, or a run of estimations; ``python -m pytest -m "not slow"`` is t
 
 from __future__ import annotations
 
-import compileall
 import copy
 import json
 import shutil
-import sys
 import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -27,29 +25,6 @@ import pytest
 from _campaigns import TINY_CAMPAIGN, TINY_SOURCE
 
 from synth.campaign import fly_campaign, parse_campaign
-
-#: The project's packages, which the suite's processes import
-_PACKAGES = ("estimator", "synth", "campaigns", "aircraft_models", "tests")
-
-
-def pytest_configure(config) -> None:
-    """With ``PYTHONDONTWRITEBYTECODE`` set, keep the bytecode of the project's modules beside their
-    sources all the same (``__pycache__``, ignored by git, where numba keeps its kernels too).
-
-    Otherwise every process of the suite compiles from source each module it imports, every run:
-    each pytest-xdist worker its ~300 modules and pytest's rewrite of every test module (about 5 s
-    of CPU time), each command line, fork server and dask worker a test starts its imports (about
-    0.6 s for the command line's), in a suite that keeps both cores busy. So pytest's processes
-    write bytecode, and the controller compiles every module once before the workers start, for
-    the processes the tests start (which still only read it: seconds on a fresh clone, a check of
-    the files' times after that)."""
-    if not sys.dont_write_bytecode:
-        return
-    sys.dont_write_bytecode = False
-    if not hasattr(config, "workerinput"):
-        root = Path(__file__).resolve().parent.parent
-        for package in _PACKAGES:
-            compileall.compile_dir(root / package, quiet=1, workers=0)
 
 
 def pytest_collection_modifyitems(session, config, items) -> None:
@@ -69,8 +44,8 @@ def fly_once(tmp_path_factory) -> Callable[..., Path]:
 
     ``source`` is the label the manifest records (as ``parse_campaign``'s). Every maneuver must fly
     (asserted). The folder is shared between modules: copy it before editing anything in it.
-    Flown in this process: the suite keeps every core busy (pytest-xdist), and a pool of workers
-    would only add its start (imports, JSBSim models) to the CPU time (the bytes are the same).
+    Flown in this process: the suite keeps every core busy (pytest-xdist), where a pool would only
+    add its start to the CPU time (:data:`synth.campaign.MANEUVERS_PER_DEFAULT_WORKER`).
     """
     flown: dict[str, Path] = {}
 

@@ -78,13 +78,14 @@ def test_manifest_records_what_was_flown(twin_runs):
     assert "beta_znp_rad" not in df.columns, "the boom replaces the nose probe"
 
 
-def test_the_default_pool_starts_one_worker_per_dozen_maneuvers(monkeypatch):
+def test_the_default_pool_grows_with_the_campaign(monkeypatch):
     """A small campaign flies in this process (a worker's start costs about as much as flying a
-    few maneuvers); a large one on every CPU; a number given is kept, never above the maneuvers."""
+    few maneuvers), a large one on every CPU; a number given is kept, never above the maneuvers."""
     n = MANEUVERS_PER_DEFAULT_WORKER
     monkeypatch.setattr(os, "cpu_count", lambda: 8)
-    assert [pool_size(None, k) for k in (0, 1, n - 1, n, 2 * n - 1, 2 * n, 3 * n + 5, 100 * n)] == [
-        1, 1, 1, 1, 1, 2, 3, 8]
+    for default in (None, 0):
+        assert [pool_size(default, k) for k in (0, 1, n, n + 1, 2 * n, 2 * n + 1, 100 * n)] == [
+            1, 1, 1, 2, 2, 3, 8]
     assert [pool_size(w, k) for w, k in ((1, 100), (4, 2), (4, 40), (3, 0))] == [1, 2, 4, 1]
     monkeypatch.setattr(os, "cpu_count", lambda: None)  # unknown: one
     assert pool_size(None, 100 * n) == 1
