@@ -204,6 +204,7 @@ def tree():
     return modules, _graph(modules)
 
 
+@pytest.mark.slow
 def test_every_module_keeps_the_boundaries(tree):
     problems = violations(*tree)
     assert not problems, "package boundaries broken:\n" + "\n".join(problems)
@@ -509,6 +510,7 @@ def test_no_estimator_module_imports_from_a_layer_above(tree, edges):
                           + ", ".join(n for n, _ in ESTIMATOR_LAYERS) + "):\n" + "\n".join(problems))
 
 
+@pytest.mark.slow
 def test_no_estimator_module_imports_a_private_name_of_another(tree):
     modules, graph = tree
     problems = private_imports(modules, graph)

@@ -133,6 +133,7 @@ def offenders() -> dict[str, Function]:
     return found
 
 
+@pytest.mark.slow
 def test_no_function_is_too_long_or_takes_too_many_parameters(offenders):
     new = sorted(str(fn) for name, fn in offenders.items() if name not in KNOWN)
     assert not new, (

@@ -65,6 +65,9 @@ DOUBLET, RUDDER = "m0000", "m0001"
 #: attribution"); their consequences (misfit, scale_error, noise_floor, ...) may appear anywhere.
 DATA_FAULTS = {"stuck_channel", "dead_channel", "dead_input", "accel_sign", "unit_error"}
 
+#: every test here flies (the module's two flights) or estimates for a second or more
+pytestmark = pytest.mark.slow
+
 
 # ----------------------------------------------------------------------------------------------
 # data and helpers

@@ -223,6 +223,7 @@ def test_failed_replication_is_recorded_and_others_continue(tmp_path, monkeypatc
     assert sorted(p.name for p in (out / "replications").iterdir()) == [f"r{k:05d}.parquet" for k in range(2)]
 
 
+@pytest.mark.slow
 def test_non_converged_estimation_is_a_failure_with_the_estimators_message(tmp_path):
     raw_est = dict(RAW["estimator"], max_iterations=1)
     report = run_montecarlo(_scenario(estimator=raw_est), tmp_path / "nc", replications=1, workers=1)

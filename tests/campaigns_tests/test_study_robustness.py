@@ -32,6 +32,7 @@ def tiny_run(tmp_path_factory):
     return out, args
 
 
+@pytest.mark.slow
 def test_tiny_run_writes_table_plot_csv_and_conclusions(tiny_run):
     out, _ = tiny_run
     text = (out / "results" / "robustness.txt").read_text()

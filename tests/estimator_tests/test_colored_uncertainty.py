@@ -107,6 +107,7 @@ def _direct_sandwich(blocks, R, n_of, cross):
     return np.sqrt(np.diag(Minv)), np.sqrt(np.diag(Minv @ C @ Minv))
 
 
+@pytest.mark.slow
 def test_colored_std_equals_direct_sandwich():
     """The solver's coloured deviations, both forms, against the definition evaluated directly.
 

@@ -53,6 +53,7 @@ def test_truth_reproduces_noise_free_data(flight, lever_arm):
             assert err < tol, f"{ch.name} in {prob.maneuvers[k].id}: |z - y| up to {err:.2e} > {tol}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("lever_arm", LEVER_ARMS)
 def test_jacobian_matches_finite_differences(flight, lever_arm):
     rng = np.random.default_rng(2)

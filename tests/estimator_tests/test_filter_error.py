@@ -242,6 +242,7 @@ def test_options_are_checked():
         SolverOptions(method="filter_error", wind={"scale": 300.0})
 
 
+@pytest.mark.slow
 def test_output_error_verdict_points_to_the_filter_error_method(turbulent_oem):
     """The output-error fit of the turbulent flight fails with a turbulence finding whose advice
     names the filter-error method (issue 14: the turbulence diagnosis suggests it)."""

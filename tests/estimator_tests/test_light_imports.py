@@ -12,6 +12,7 @@ import json
 import subprocess
 import sys
 
+import pytest
 from _problem_files import si_problem
 
 #: modules reading a problem file must not load (the estimation, its workflow and the report's plots)
@@ -68,6 +69,7 @@ def test_the_options_keep_their_old_homes():
         declarations.Declarations, declarations.InitialConditionSources, declarations.Requirement)
 
 
+@pytest.mark.slow
 def test_the_calibration_front_loads_matplotlib_only_to_draw():
     """``calibrate`` and the report's tables need no matplotlib: a run without plots (``--no-plots``,
     ``[report] plots = false``, a Monte Carlo worker) does not pay for importing it; drawing a

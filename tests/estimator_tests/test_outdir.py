@@ -179,6 +179,7 @@ def test_out_naming_the_input_dataset_is_refused(dataset, capsys):
 # fpr calibrate --single
 
 
+@pytest.mark.slow
 def test_single_overwrite_refuses_user_files_and_edited_files(dataset, earlier_single, tmp_path, capsys):
     out = _copy(earlier_single, tmp_path / "single")
     (out / "summary.csv").write_text("mine\n")
@@ -194,6 +195,7 @@ def test_single_overwrite_refuses_user_files_and_edited_files(dataset, earlier_s
     assert _snapshot(out) == before
 
 
+@pytest.mark.slow
 def test_single_input_file_inside_the_results_folder_survives(dataset, earlier_single, tmp_path, capsys):
     out = _copy(earlier_single, tmp_path / "single")
     problem, csv = _user_csv_problem(dataset, out, tmp_path)
@@ -203,6 +205,7 @@ def test_single_input_file_inside_the_results_folder_survives(dataset, earlier_s
     assert csv.read_bytes() == data
 
 
+@pytest.mark.slow
 def test_single_earlier_results_refused_without_overwrite_and_replaced_with_it(dataset, earlier_single,
                                                                               tmp_path, capsys):
     out = _copy(earlier_single, tmp_path / "single")

@@ -115,6 +115,7 @@ _ids = st.text("abcXYZ019_-.", min_size=1, max_size=6)  # aircraft, configuratio
 _names = st.from_regex(r"[a-z][a-z0-9_]{0,5}", fullmatch=True)  # family names are identifiers
 
 
+@pytest.mark.slow
 @given(data=st.data(), names=st.tuples(_names, _names), tables=st.tuples(st.booleans(), st.booleans()))
 @settings(max_examples=300, deadline=None)
 def test_make_key_is_one_to_one(data, names, tables):

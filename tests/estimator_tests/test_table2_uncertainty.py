@@ -122,6 +122,7 @@ def test_propagation_matches_finite_differences(turbulent):
     assert checked >= len(FLOW), f"only {checked} channels with calibration parameters checked"
 
 
+@pytest.mark.slow
 def test_a_bias_only_channel_adds_the_bias_variance(turbulent):
     """A channel whose only estimated calibration parameter is its bias (its tables and delay held:
     ``free_estimated`` off) has ``J_c = 1`` at every sample, so ``s_cal^2 = var(b)`` there, and its
@@ -154,6 +155,7 @@ def test_a_bias_only_channel_adds_the_bias_variance(turbulent):
     assert row["scatter_three_sigma_deg"] == three_sigma(e), "the scatter is the old Table 2, to the bit"
 
 
+@pytest.mark.slow
 def test_no_calibration_uncertainty_gives_the_scatter_to_the_bit(turbulent):
     """Nothing of the channels' calibration estimated (all held): s_cal = 0 and Table 2 is the
     residual's scatter less the wind response's variance, bit for bit as before the calibration
@@ -188,6 +190,7 @@ def test_no_calibration_uncertainty_gives_the_scatter_to_the_bit(turbulent):
         "the honest deviations are never below the Cramér-Rao bound")
 
 
+@pytest.mark.slow
 def test_table2_against_the_truth(turbulent):
     """Each flow channel's Table 2 against 3 sigma of its true error: the measurement noise plus
     the calibration's own error at the true flight (the calibrated channel's error in the
@@ -226,6 +229,7 @@ def test_table2_against_the_truth(turbulent):
         assert table2 > three_sigma(e), f"{name}: the calibration term added nothing"
 
 
+@pytest.mark.slow
 def test_a_cell_whose_deviation_lies_along_a_bound_parameter_is_not_judged(turbulent):
     """A parameter on or near its bound (an ``on_bound`` / ``near_bound`` WARNING) truncates what its
     deviation describes: the part of a channel's calibration deviation along it,

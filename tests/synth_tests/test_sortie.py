@@ -88,6 +88,7 @@ def test_written_and_loadable_with_boundaries(sortie, capsys):
         load_dataset(s.path)
 
 
+@pytest.mark.slow
 def test_streams_are_continuous(sortie):
     _, _, s = sortie
     rate = s.manifest["sortie"]["sample_rate_hz"]
@@ -113,6 +114,7 @@ def test_streams_are_continuous(sortie):
     assert abs(lags[0] - shift) < 0.005, (lags, shift)
 
 
+@pytest.mark.slow
 def test_cut_maneuver_is_at_its_test_point(sortie):
     _, _, s = sortie
     data = s.load()
@@ -133,6 +135,7 @@ def test_cut_maneuver_is_at_its_test_point(sortie):
         assert ins["t_s"].iloc[0] >= row["t_start_s"] - 1e-9 and ins["t_s"].iloc[-1] <= row["t_end_s"] + 1e-9
 
 
+@pytest.mark.slow
 def test_first_maneuver_flies_as_alone(sortie):
     """The sortie starts as a per-maneuver run does (same trim, same controller): its first
     maneuver matches `fly_maneuver`'s up to the fuel it does not burn."""
@@ -147,6 +150,7 @@ def test_first_maneuver_flies_as_alone(sortie):
     assert np.max(np.abs(np.degrees(alpha - cut["true_alpha_cg_rad"]))) < 0.05
 
 
+@pytest.mark.slow
 def test_directory_rules(sortie, tmp_path):
     campaign, _, s = sortie
     with pytest.raises(FileExistsError, match="--overwrite"):

@@ -50,6 +50,7 @@ if __name__ == "__main__":
 @linux_only
 @pytest.mark.parametrize("method", [m for m in ("fork", "spawn", "forkserver")
                                     if m in multiprocessing.get_all_start_methods()])
+@pytest.mark.slow
 def test_workers_end_within_5_s_of_a_sigkill_of_the_pools_process(tmp_path, short_tmp, method):
     held = tmp_path / "held"
     held.mkdir()
