@@ -261,7 +261,6 @@ def test_robust_option_excludes_the_spike(spiked, clean):
     assert back < 3.0 * sigma and back < 0.5 * sigma, (back / sigma, moved / sigma)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("maneuver", [DOUBLET, RUDDER])
 def test_sign_flipped_accelerometer(base, tmp_path_factory, maneuver):
     """The body-z accelerometer recorded with the wrong sign in one maneuver. The fault drags the
@@ -280,7 +279,6 @@ def _dead_gyros(df):
     return df.assign(p_rps=0.0, q_rps=0.0, r_rps=0.0)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("maneuver", [
     DOUBLET,
     # the rudder doublets: the staged start leaves f3 at its +-0.2 bounds, and putting the parameters
@@ -302,7 +300,6 @@ def test_zero_gyros(base, tmp_path_factory, maneuver):
         assert f.t_s == pytest.approx((t[0], t[-1]), abs=0.0126), f.message  # the whole maneuver
 
 
-@pytest.mark.slow
 def test_light_turbulence(flights):
     """The calibration maneuvers flown in light turbulence: each maneuver is reported, once, as
     turbulence (the output-error method models no air motion), not as a sensor fault."""
@@ -357,7 +354,6 @@ def test_the_base_user_file_is_a_success_with_only_its_own_warning(base, tmp_pat
     # side-probe AOA written in radians, declared deg: a few hundredths of a degree pass any range check
     (("alpha_zsp", 1.0, "deg"), "recorded in radians but declared as degrees", None),
 ], ids=["beta_deg_declared_rad", "h_ft_declared_m", "alpha_rad_declared_deg"])
-@pytest.mark.slow
 def test_unit_mistake_in_the_problem_file(base, tmp_path, wrong, phrase, maneuver):
     problem = load_problem(_write_user_files(base, tmp_path / "user", wrong))  # the import lets it pass
     res = estimate(problem)
@@ -372,7 +368,6 @@ def test_unit_mistake_in_the_problem_file(base, tmp_path, wrong, phrase, maneuve
 # the command line
 
 
-@pytest.mark.slow
 def test_cli_exit_status_and_findings_name_the_stuck_vane(stuck, tmp_path, capsys):
     path, _, _ = stuck
     out = tmp_path / "res"
